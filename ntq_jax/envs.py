@@ -1,0 +1,181 @@
+"""Environments: a robot in a world of obstacles, with a data-generation padding.
+
+``make_env("point/0")`` builds a preset (see :mod:`ntq_jax.presets`);
+``make_env("my_map.json")`` loads a user's map in the JSON format of DESIGN.md::
+
+    {"name": "my_map",
+     "robot": {"kind": "point" | "rigid_body" | "nlink", ...robot parameters},
+     "bounds": [[xmin, xmax], [ymin, ymax]],
+     "boxes": [[cx, cy, half_w, half_h], ...],
+     "discs": [[cx, cy, r], ...],
+     "padding": 0.8}
+
+Every method that touches geometry takes ``padding=``: ``None`` (default) is
+the environment's own padding, the data-generation geometry of the paper;
+``padding=0`` is the evaluation geometry.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import os
+from pathlib import Path
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ntq_jax import geometry, queries as Q
+from ntq_jax.geometry import World
+from ntq_jax.robots import Robot, robot_from_json
+from ntq_jax.robots.batch import distance_batch, is_valid_batch, steer_to_batch
+
+Array = jax.Array
+
+_JSON_KEYS = {"name", "robot", "bounds", "boxes", "discs", "padding"}
+
+
+class EnvError(ValueError):
+    """A bad environment name or file."""
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Env:
+    """A planning environment.
+
+    Attributes:
+        name: preset name (``"point/0"``) or the JSON ``name``.
+        robot: the robot description (static, hashable).
+        world: workspace bounds and obstacles (a pytree of arrays).
+        padding: clearance used for data generation (``>= 0``).
+    """
+
+    name: str
+    robot: Robot
+    world: World
+    padding: float
+
+    # -- geometry -----------------------------------------------------------
+    @property
+    def dim(self) -> int:
+        return self.robot.dim
+
+    def _pad(self, padding) -> float:
+        p = self.padding if padding is None else float(padding)
+        if not (math.isfinite(p) and p >= 0):
+            raise ValueError(f"padding must be a finite number >= 0, got {padding!r}")
+        return p
+
+    def _states(self, x, what: str) -> Array:
+        x = jnp.asarray(x, jnp.float32)
+        if x.ndim != 2 or x.shape[1] != self.dim:
+            raise ValueError(f"{what} must have shape (N, {self.dim}) for {self.name} "
+                             f"({self.robot.kind}), got {tuple(x.shape)}")
+        return x
+
+    def is_valid(self, states, padding: float | None = None) -> Array:
+        """``(N, d) -> (N,)`` bool: in bounds and clear of obstacles (False for NaN/inf)."""
+        return is_valid_batch(self.robot, self.world, self._states(states, "states"),
+                              self._pad(padding))
+
+    def steer_to(self, a, b, padding: float | None = None) -> Array:
+        """``(N, d), (N, d) -> (N,)`` bool: True where the straight connection is collision-free."""
+        a, b = self._states(a, "a"), self._states(b, "b")
+        if a.shape != b.shape:
+            raise ValueError(f"a and b must have the same shape, got {a.shape} and {b.shape}")
+        return steer_to_batch(self.robot, self.world, a, b, self._pad(padding))
+
+    def distance(self, a, b) -> Array:
+        """``(N, d), (N, d) -> (N,)``: the robot's cost metric."""
+        return distance_batch(self.robot, self._states(a, "a"), self._states(b, "b"))
+
+    def rasterize(self, resolution: float, padding: float | None = None) -> np.ndarray:
+        """Occupancy grid ``(H, W)`` bool of the workspace (point robot geometry)."""
+        return geometry.rasterize(self.world, resolution, self._pad(padding))
+
+    # -- sampling ------------------------------------------------------------
+    def sample_states(self, key: Array, n: int, padding: float | None = None) -> np.ndarray:
+        """``n`` uniform valid states ``(n, d)``."""
+        return Q.sample_states(self.robot, self.world, key, n, self._pad(padding))
+
+    def sample_queries(self, key: Array, n: int, p_nt: float = 0.0,
+                       padding: float | None = None, n_max: int = Q.DEFAULT_N_MAX):
+        """``n`` queries of Alg. 2 ``((n, 2, d), kind (n,) int8)``; see :mod:`ntq_jax.queries`."""
+        return Q.sample_queries(self.robot, self.world, key, n, p_nt, self._pad(padding), n_max)
+
+    def gamma_nt(self, key: Array, n: int, padding: float | None = None,
+                 chunk: int | None = None, progress=None) -> Q.GammaEstimate:
+        """gamma_nt over ``n`` uniform queries, with its Wilson 95% interval."""
+        return Q.gamma_nt(self.robot, self.world, key, n, self._pad(padding), chunk, progress)
+
+    # -- JSON ------------------------------------------------------------------
+    def to_json(self) -> dict[str, Any]:
+        """The environment in the JSON format of DESIGN.md (a dict)."""
+        return {
+            "name": self.name,
+            "robot": self.robot.to_json(),
+            "bounds": np.asarray(self.world.bounds, np.float64).round(6).tolist(),
+            "boxes": np.asarray(self.world.boxes, np.float64).round(6).tolist(),
+            "discs": np.asarray(self.world.discs, np.float64).round(6).tolist(),
+            "padding": self.padding,
+        }
+
+    def save_json(self, path: str | os.PathLike) -> Path:
+        """Writes :meth:`to_json` atomically (temporary file, then rename)."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(path.name + ".tmp")
+        tmp.write_text(json.dumps(self.to_json(), indent=1))
+        os.replace(tmp, path)
+        return path
+
+    @staticmethod
+    def from_json(spec: dict[str, Any], where: str = "environment") -> "Env":
+        """Builds an Env from a JSON dict; every problem is one :class:`EnvError` naming the key."""
+        if not isinstance(spec, dict):
+            raise EnvError(f"{where}: expected a JSON object, got {type(spec).__name__}")
+        unknown = sorted(set(spec) - _JSON_KEYS)
+        if unknown:
+            raise EnvError(f"{where}: unknown key(s) {unknown}; allowed: {sorted(_JSON_KEYS)}")
+        for key in ("robot", "bounds"):
+            if key not in spec:
+                raise EnvError(f"{where}: missing required key {key!r}")
+        try:
+            robot = robot_from_json(spec["robot"], where=f"{where}: robot")
+        except (TypeError, ValueError) as e:
+            raise EnvError(str(e)) from None
+        try:
+            world = World.create(spec["bounds"], spec.get("boxes", []), spec.get("discs", []))
+        except (TypeError, ValueError) as e:
+            raise EnvError(f"{where}: {e}") from None
+        padding = spec.get("padding", 0.0)
+        if not isinstance(padding, (int, float)) or not math.isfinite(padding) or padding < 0:
+            raise EnvError(f"{where}: padding must be a number >= 0, got {padding!r}")
+        return Env(str(spec.get("name", "custom")), robot, world, float(padding))
+
+
+def make_env(name_or_path: str | os.PathLike) -> Env:
+    """A preset by name (``point/0..3``, ``rigid/0..3``, ``nlink/2|4|6``) or a JSON map file.
+
+    Raises:
+        EnvError: unknown preset (listing the presets), unreadable or invalid file.
+    """
+    from ntq_jax.presets import PRESETS
+
+    name = str(name_or_path)
+    if name in PRESETS:
+        return Env.from_json(PRESETS[name], where=f"preset {name}")
+    path = Path(name)
+    if path.suffix.lower() == ".json" or path.exists():
+        if not path.is_file():
+            raise EnvError(f"environment file {name!r} does not exist")
+        try:
+            spec = json.loads(path.read_text())
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+            raise EnvError(f"environment file {name!r} is not valid JSON: {e}") from None
+        return Env.from_json(spec, where=f"environment file {name!r}")
+    raise EnvError(f"unknown environment {name!r}: use a preset ({', '.join(PRESETS)}) "
+                   "or the path of a JSON map file")

@@ -1,0 +1,316 @@
+"""Exact 2D geometry: obstacles as arrays, and distance/intersection kernels.
+
+Obstacles are axis-aligned boxes ``[cx, cy, half_w, half_h]`` and discs
+``[cx, cy, r]`` inside a rectangular workspace ``[[xmin, xmax], [ymin, ymax]]``.
+
+*Padding means clearance*: a shape is in collision with an obstacle when its
+Euclidean distance to the obstacle is ``<= padding``. With ``padding = 0`` this
+is the closed-set intersection test (touching counts as a collision).
+
+Every kernel here is written for ONE item (scalars or ``(2,)`` vectors) and is
+batched by the caller with ``jax.vmap``. Callers batch over the minor axis of
+coordinate-major ``(d, N)`` arrays (``jax.vmap(f, in_axes=1)``), which makes the
+vmapped code purely elementwise over contiguous ``(N,)`` rows: that layout is
+~30x faster on CPU than ``(N, d)`` rows (see BENCHMARKS.md).
+
+The obstacle loop is unrolled at trace time (one fused elementwise expression
+per obstacle), so the number of boxes and discs is part of the compiled shape
+while their values are traced: a map with the same obstacle counts never
+recompiles. ``padding`` is a static Python float, so the common ``padding=0``
+case compiles to the cheaper closed-set test.
+
+None of the kernels divides, so tangent and degenerate cases never produce NaN.
+NaN or infinite coordinates make every predicate here report a collision
+(the ``free`` kernels return False).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+from typing import Sequence
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+Array = jax.Array
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class World:
+    """A planar workspace with obstacles (a pytree of arrays).
+
+    Attributes:
+        bounds: ``(2, 2)`` float32, ``[[xmin, xmax], [ymin, ymax]]``.
+        boxes: ``(B, 4)`` float32, ``[cx, cy, half_w, half_h]`` per row.
+        discs: ``(C, 3)`` float32, ``[cx, cy, r]`` per row.
+    """
+
+    bounds: Array
+    boxes: Array
+    discs: Array
+
+    @staticmethod
+    def create(bounds, boxes=(), discs=()) -> "World":
+        """Builds a World from nested sequences, validating shapes and values."""
+        b = np.asarray(bounds, dtype=np.float64)
+        if b.shape != (2, 2) or not np.all(np.isfinite(b)) or np.any(b[:, 1] <= b[:, 0]):
+            raise ValueError(
+                f"bounds must be [[xmin, xmax], [ymin, ymax]] with min < max, got {bounds!r}")
+        bx = np.asarray(boxes, dtype=np.float64).reshape(-1, 4) if len(boxes) else np.zeros((0, 4))
+        dc = np.asarray(discs, dtype=np.float64).reshape(-1, 3) if len(discs) else np.zeros((0, 3))
+        if not (np.all(np.isfinite(bx)) and np.all(np.isfinite(dc))):
+            raise ValueError("obstacle coordinates must be finite numbers")
+        if np.any(bx[:, 2:] <= 0):
+            raise ValueError("box half sizes must be > 0 (rows are [cx, cy, half_w, half_h])")
+        if np.any(dc[:, 2] <= 0):
+            raise ValueError("disc radii must be > 0 (rows are [cx, cy, r])")
+        return World(jnp.asarray(b, jnp.float32), jnp.asarray(bx, jnp.float32),
+                     jnp.asarray(dc, jnp.float32))
+
+    @property
+    def num_boxes(self) -> int:
+        return int(self.boxes.shape[0])
+
+    @property
+    def num_discs(self) -> int:
+        return int(self.discs.shape[0])
+
+
+# ---------------------------------------------------------------------------
+# Point kernels
+# ---------------------------------------------------------------------------
+
+def in_bounds(x: Array, y: Array, bounds: Array) -> Array:
+    """True when ``(x, y)`` lies in the closed workspace rectangle (False for NaN)."""
+    return (x >= bounds[0, 0]) & (x <= bounds[0, 1]) & (y >= bounds[1, 0]) & (y <= bounds[1, 1])
+
+
+def _point_box_dist2(x, y, box):
+    dx = jnp.maximum(jnp.abs(x - box[0]) - box[2], 0.0)
+    dy = jnp.maximum(jnp.abs(y - box[1]) - box[3], 0.0)
+    return dx * dx + dy * dy
+
+
+def point_hits_box(x: Array, y: Array, box: Array, padding: float) -> Array:
+    """True when the point's distance to the closed box is ``<= padding``."""
+    if padding == 0.0:
+        return (jnp.abs(x - box[0]) <= box[2]) & (jnp.abs(y - box[1]) <= box[3])
+    return _point_box_dist2(x, y, box) <= padding * padding
+
+
+def point_hits_disc(x: Array, y: Array, disc: Array, padding: float) -> Array:
+    """True when the point's distance to the closed disc is ``<= padding``."""
+    dx, dy = x - disc[0], y - disc[1]
+    r = disc[2] + padding
+    return dx * dx + dy * dy <= r * r
+
+
+def point_free(p: Array, world: World, padding: float) -> Array:
+    """True when point ``p`` ``(2,)`` is in bounds and farther than ``padding`` from every obstacle."""
+    x, y = p[0], p[1]
+    free = in_bounds(x, y, world.bounds)
+    for i in range(world.boxes.shape[0]):
+        free = free & ~point_hits_box(x, y, world.boxes[i], padding)
+    for i in range(world.discs.shape[0]):
+        free = free & ~point_hits_disc(x, y, world.discs[i], padding)
+    return free
+
+
+# ---------------------------------------------------------------------------
+# Segment kernels
+# ---------------------------------------------------------------------------
+
+def _seg_point_interior_close(x0, y0, dx, dy, dd, px, py, r2):
+    """Distance from point to the segment's interior (projection in [0, 1]) <= sqrt(r2).
+
+    Division-free: with ``t* = dot / dd`` the squared distance is ``cross^2 / dd``.
+    """
+    wx, wy = px - x0, py - y0
+    dot = wx * dx + wy * dy
+    cross = wx * dy - wy * dx
+    return (dot >= 0.0) & (dot <= dd) & (cross * cross <= r2 * dd)
+
+
+def segment_hits_box(x0, y0, x1, y1, box: Array, padding: float) -> Array:
+    """Exact test: distance between segment ``[(x0,y0),(x1,y1)]`` and the box ``<= padding``.
+
+    Intersection is the separating-axis test on the axes x, y and the segment
+    normal. For ``padding > 0`` the distance of two disjoint convex polygons is
+    attained between a vertex of one and an edge of the other, so it adds the
+    two endpoint-to-box distances and the four corner-to-segment distances.
+    """
+    cx, cy, hw, hh = box[0], box[1], box[2], box[3]
+    dx, dy = x1 - x0, y1 - y0
+    mx, my = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
+    # Separating axis theorem (closed sets): overlap on x, y, and segment normal.
+    sat = ((jnp.abs(mx - cx) <= hw + 0.5 * jnp.abs(dx))
+           & (jnp.abs(my - cy) <= hh + 0.5 * jnp.abs(dy))
+           & (jnp.abs((cx - mx) * dy - (cy - my) * dx) <= hw * jnp.abs(dy) + hh * jnp.abs(dx)))
+    if padding == 0.0:
+        return sat
+    p2 = padding * padding
+    hit = sat | (_point_box_dist2(x0, y0, box) <= p2) | (_point_box_dist2(x1, y1, box) <= p2)
+    dd = dx * dx + dy * dy
+    for sx in (-1.0, 1.0):
+        for sy in (-1.0, 1.0):
+            hit = hit | _seg_point_interior_close(x0, y0, dx, dy, dd, cx + sx * hw, cy + sy * hh, p2)
+    return hit
+
+
+def segment_hits_disc(x0, y0, x1, y1, disc: Array, padding: float) -> Array:
+    """Exact test: distance between the segment and the closed disc ``<= padding``."""
+    r = disc[2] + padding
+    r2 = r * r
+    dx, dy = x1 - x0, y1 - y0
+    dd = dx * dx + dy * dy
+    e0 = (x0 - disc[0]) ** 2 + (y0 - disc[1]) ** 2 <= r2
+    e1 = (x1 - disc[0]) ** 2 + (y1 - disc[1]) ** 2 <= r2
+    return e0 | e1 | _seg_point_interior_close(x0, y0, dx, dy, dd, disc[0], disc[1], r2)
+
+
+def segment_free(p0: Array, p1: Array, world: World, padding: float,
+                 check_bounds: bool = True) -> Array:
+    """True when the whole closed segment ``p0 -> p1`` is collision-free (exact, continuous).
+
+    The workspace rectangle is convex, so the segment is inside it iff both
+    endpoints are.
+    """
+    x0, y0, x1, y1 = p0[0], p0[1], p1[0], p1[1]
+    free = jnp.isfinite(x0 + y0 + x1 + y1)
+    if check_bounds:
+        free = free & in_bounds(x0, y0, world.bounds) & in_bounds(x1, y1, world.bounds)
+    for i in range(world.boxes.shape[0]):
+        free = free & ~segment_hits_box(x0, y0, x1, y1, world.boxes[i], padding)
+    for i in range(world.discs.shape[0]):
+        free = free & ~segment_hits_disc(x0, y0, x1, y1, world.discs[i], padding)
+    return free
+
+
+# ---------------------------------------------------------------------------
+# Oriented rectangle kernels (rigid body footprint)
+# ---------------------------------------------------------------------------
+
+def rect_corners(x, y, theta, half_l: float, half_w: float):
+    """The 4 corners of the oriented rectangle, as two tuples of x and y scalars."""
+    c, s = jnp.cos(theta), jnp.sin(theta)
+    xs, ys = [], []
+    for sl, sw in ((1.0, 1.0), (-1.0, 1.0), (-1.0, -1.0), (1.0, -1.0)):
+        xs.append(x + sl * half_l * c - sw * half_w * s)
+        ys.append(y + sl * half_l * s + sw * half_w * c)
+    return xs, ys
+
+
+def _point_obb_dist2(px, py, x, y, c, s, half_l, half_w):
+    """Squared distance from a point to the oriented rectangle (0 inside)."""
+    rx, ry = px - x, py - y
+    u = rx * c + ry * s
+    v = -rx * s + ry * c
+    du = jnp.maximum(jnp.abs(u) - half_l, 0.0)
+    dv = jnp.maximum(jnp.abs(v) - half_w, 0.0)
+    return du * du + dv * dv
+
+
+def rect_hits_box(x, y, theta, half_l: float, half_w: float, box: Array, padding: float) -> Array:
+    """Exact test: distance between the oriented rectangle and the box ``<= padding``.
+
+    Intersection: separating-axis theorem over all four candidate axes (box x, y;
+    rectangle u, v). For ``padding > 0``: the distance between disjoint convex
+    polygons is attained vertex-to-polygon, so also test the rectangle's corners
+    against the box and the box's corners against the rectangle.
+    """
+    cx, cy, hw, hh = box[0], box[1], box[2], box[3]
+    c, s = jnp.cos(theta), jnp.sin(theta)
+    ac, as_ = jnp.abs(c), jnp.abs(s)
+    tx, ty = cx - x, cy - y
+    # Projections of the rectangle's half extents on the world axes and vice versa.
+    sat = ((jnp.abs(tx) <= hw + half_l * ac + half_w * as_)
+           & (jnp.abs(ty) <= hh + half_l * as_ + half_w * ac)
+           & (jnp.abs(tx * c + ty * s) <= half_l + hw * ac + hh * as_)
+           & (jnp.abs(-tx * s + ty * c) <= half_w + hw * as_ + hh * ac))
+    if padding == 0.0:
+        return sat
+    p2 = padding * padding
+    hit = sat
+    xs, ys = rect_corners(x, y, theta, half_l, half_w)
+    for px, py in zip(xs, ys):
+        hit = hit | (_point_box_dist2(px, py, box) <= p2)
+    for sx in (-1.0, 1.0):
+        for sy in (-1.0, 1.0):
+            hit = hit | (_point_obb_dist2(cx + sx * hw, cy + sy * hh, x, y, c, s, half_l, half_w) <= p2)
+    return hit
+
+
+def rect_hits_disc(x, y, theta, half_l: float, half_w: float, disc: Array, padding: float) -> Array:
+    """Exact test: distance between the oriented rectangle and the disc ``<= padding``."""
+    r = disc[2] + padding
+    c, s = jnp.cos(theta), jnp.sin(theta)
+    return _point_obb_dist2(disc[0], disc[1], x, y, c, s, half_l, half_w) <= r * r
+
+
+def rect_free(pose: Array, half_l: float, half_w: float, world: World, padding: float) -> Array:
+    """True when the rectangle at ``pose = (x, y, theta)`` is inside the workspace and clear."""
+    x, y, th = pose[0], pose[1], pose[2]
+    free = jnp.isfinite(x + y + th)
+    xs, ys = rect_corners(x, y, th, half_l, half_w)
+    for px, py in zip(xs, ys):
+        free = free & in_bounds(px, py, world.bounds)
+    for i in range(world.boxes.shape[0]):
+        free = free & ~rect_hits_box(x, y, th, half_l, half_w, world.boxes[i], padding)
+    for i in range(world.discs.shape[0]):
+        free = free & ~rect_hits_disc(x, y, th, half_l, half_w, world.discs[i], padding)
+    return free
+
+
+# ---------------------------------------------------------------------------
+# Rasterisation
+# ---------------------------------------------------------------------------
+
+def rasterize(world: World, resolution: float, padding: float = 0.0) -> np.ndarray:
+    """Occupancy grid of the workspace: cell ``[i, j]`` covers ``y`` row ``i``, ``x`` column ``j``.
+
+    A cell is occupied when its centre is in collision (``point_free`` is False)
+    at the given padding. Returns a NumPy bool array of shape ``(H, W)`` with
+    ``W = round((xmax - xmin) / resolution)``; cell ``(i, j)`` has centre
+    ``(xmin + (j + 0.5) * resolution, ymin + (i + 0.5) * resolution)``.
+    """
+    if not resolution > 0:
+        raise ValueError(f"resolution must be > 0, got {resolution}")
+    b = np.asarray(world.bounds, dtype=np.float64)
+    w = int(round((b[0, 1] - b[0, 0]) / resolution))
+    h = int(round((b[1, 1] - b[1, 0]) / resolution))
+    xs = b[0, 0] + (np.arange(w) + 0.5) * resolution
+    ys = b[1, 0] + (np.arange(h) + 0.5) * resolution
+    gx, gy = np.meshgrid(xs, ys)
+    pts = jnp.asarray(np.stack([gx.ravel(), gy.ravel()]), jnp.float32)
+    free = _points_free_cm(pts, world, float(padding))
+    return ~np.asarray(free).reshape(h, w)
+
+
+def cell_centers(world: World, resolution: float, cells: np.ndarray) -> np.ndarray:
+    """Maps integer cells ``(..., 2)`` as ``(row, col)`` to workspace points ``(..., 2)`` as ``(x, y)``."""
+    b = np.asarray(world.bounds, dtype=np.float64)
+    cells = np.asarray(cells)
+    x = b[0, 0] + (cells[..., 1] + 0.5) * resolution
+    y = b[1, 0] + (cells[..., 0] + 0.5) * resolution
+    return np.stack([x, y], axis=-1)
+
+
+def point_to_cell(world: World, resolution: float, points: np.ndarray) -> np.ndarray:
+    """Maps workspace points ``(..., 2)`` to integer cells ``(..., 2)`` as ``(row, col)``."""
+    b = np.asarray(world.bounds, dtype=np.float64)
+    p = np.asarray(points, dtype=np.float64)
+    col = np.floor((p[..., 0] - b[0, 0]) / resolution).astype(np.int32)
+    row = np.floor((p[..., 1] - b[1, 0]) / resolution).astype(np.int32)
+    return np.stack([row, col], axis=-1)
+
+
+@functools.partial(jax.jit, static_argnames=("padding",))
+def _points_free_cm(pts: Array, world: World, padding: float) -> Array:
+    return jax.vmap(point_free, in_axes=(1, None, None))(pts, world, padding)
+
+
+def as_sequence_of_floats(x) -> Sequence[float]:
+    return [float(v) for v in np.asarray(x).ravel()]

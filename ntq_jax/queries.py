@@ -1,0 +1,336 @@
+"""Query sampling (uniform, non-trivial = Alg. 3, the p_nt mixture of Alg. 2) and gamma_nt.
+
+Everything here is deterministic for a ``jax.random`` key and independent of
+how many items are requested: candidates are drawn in fixed-size blocks, block
+``i`` from ``fold_in(key, i)``, so asking for more queries extends the same
+stream (the first ``k`` queries never change).
+
+* Uniform valid states: vectorised rejection from the robot's configuration box.
+* Uniform queries: consecutive pairs of the valid-state stream (start and goal
+  independent and uniform on the free space).
+* Non-trivial queries (Alg. 3): the paper's sequential sampler draws a uniform
+  query, returns it if ``steer_to`` fails, and after ``n_max`` trivial attempts
+  returns the last (trivial) one. Here the candidate stream is checked
+  thousands at a time with the shared ``steer_to`` kernel and the sequential
+  bookkeeping is replayed with array operations, so the output is exactly what
+  the sequential sampler returns on the same candidate stream.
+* Kinds: ``UNIFORM = 0``, ``NON_TRIVIAL = 1``, and ``NT_EXHAUSTED = 2`` for a
+  query the non-trivial sampler returned after ``n_max`` trivial attempts.
+* gamma_nt: fused, streaming estimator (sampling, validity, steer_to and
+  counting in one compiled chunk) with a Wilson 95% interval.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import time
+from typing import Callable, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ntq_jax import prng
+from ntq_jax.geometry import World
+from ntq_jax.robots.batch import is_valid_cm, steer_to_cm
+
+Array = jax.Array
+
+UNIFORM, NON_TRIVIAL, NT_EXHAUSTED = 0, 1, 2
+
+STATE_BLOCK = 8192  # candidate states drawn per block (fixed: results do not depend on n)
+QUERY_BLOCK = 4096  # candidate queries checked per block by the non-trivial sampler
+DEFAULT_N_MAX = 10_000
+MAX_STATE_BLOCKS = 100_000  # ~8e8 candidates before giving up on a nearly-full map
+
+
+class FreeSpaceTooSmall(ValueError):
+    """Raised when rejection sampling finds (almost) no valid state."""
+
+
+# ---------------------------------------------------------------------------
+# Uniform valid states
+# ---------------------------------------------------------------------------
+
+@functools.partial(jax.jit, static_argnames=("robot", "padding", "size"))
+def _state_block(robot, world: World, key: Array, padding: float, size: int):
+    lo, hi = robot.config_bounds(world)
+    u = jax.random.uniform(key, (robot.dim, size), jnp.float32)
+    cand = lo[:, None] + u * (hi - lo)[:, None]
+    return cand.T, is_valid_cm(robot, world, cand, padding)
+
+
+def valid_state_stream(robot, world: World, key: Array, padding: float):
+    """Yields blocks of uniform valid states ``(m, d)`` (NumPy float32), forever.
+
+    Raises:
+        FreeSpaceTooSmall: when the first 64 blocks hold no valid state, or the
+            acceptance rate makes further sampling hopeless.
+    """
+    accepted = drawn = 0
+    for i in range(MAX_STATE_BLOCKS):
+        cand, ok = _state_block(robot, world, jax.random.fold_in(key, i), padding, STATE_BLOCK)
+        ok = np.asarray(ok)
+        drawn += ok.size
+        accepted += int(ok.sum())
+        if i == 63 and accepted == 0:
+            raise FreeSpaceTooSmall(
+                f"no valid state among {drawn} uniform samples (padding={padding}): the free "
+                "space is empty or too small to sample; reduce the padding or the obstacles")
+        if ok.any():
+            yield np.asarray(cand)[ok]
+    raise FreeSpaceTooSmall(f"only {accepted} valid states among {drawn} samples "
+                            f"(padding={padding}); the free space is too small to sample")
+
+
+def _take(stream, n: int, d: int) -> np.ndarray:
+    out, have = [], 0
+    while have < n:
+        blk = next(stream)
+        out.append(blk)
+        have += len(blk)
+    return np.concatenate(out)[:n] if out else np.zeros((0, d), np.float32)
+
+
+def sample_states(robot, world: World, key: Array, n: int, padding: float) -> np.ndarray:
+    """``n`` uniform valid states, ``(n, d)`` float32."""
+    return _take(valid_state_stream(robot, world, key, padding), n, robot.dim)
+
+
+def sample_uniform_queries(robot, world: World, key: Array, n: int, padding: float) -> np.ndarray:
+    """``n`` uniform queries ``(n, 2, d)``: independent uniform valid start and goal."""
+    s = sample_states(robot, world, key, 2 * n, padding)
+    return s.reshape(n, 2, robot.dim)
+
+
+# ---------------------------------------------------------------------------
+# Non-trivial queries (Alg. 3)
+# ---------------------------------------------------------------------------
+
+def replay_nontrivial(blocked: np.ndarray, n_max: int, attempts0: int = 0):
+    """Replays the sequential sampler of Alg. 3 over a stream of candidate queries.
+
+    The sequential sampler counts attempts; candidate ``k`` is returned when it
+    is blocked (non-trivial), or when it is the ``n_max``-th attempt of the
+    current call (returned trivial, flagged). This computes, with array
+    operations, which candidates are returned.
+
+    Args:
+        blocked: ``(m,)`` bool, ``True`` where ``steer_to`` failed.
+        n_max: the attempt limit ``N_max`` (>= 1).
+        attempts0: attempts already made in the current call before this block.
+
+    Returns:
+        ``(emit_index, exhausted, attempts_after)``: indices into the block of the
+        returned candidates in order, whether each was returned after ``n_max``
+        trivial attempts, and the attempt count carried into the next block.
+    """
+    blocked = np.asarray(blocked, bool)
+    m = blocked.size
+    if m == 0:
+        return np.zeros(0, np.int64), np.zeros(0, bool), attempts0
+    run = np.concatenate([[0], np.cumsum(blocked)[:-1]])  # run id: blocked ones end their run
+    pos = np.arange(m)
+    run_start = np.zeros(int(run[-1]) + 1, np.int64)
+    starts = np.flatnonzero(np.concatenate([[True], blocked[:-1]]))
+    run_start[: len(starts)] = starts
+    # attempt number of candidate k within the current call (1-based), before emission resets
+    base = np.where(run == 0, attempts0, 0)
+    attempt = base + pos - run_start[run] + 1
+    exhausted = ~blocked & (attempt % n_max == 0)
+    emit = blocked | exhausted
+    idx = np.flatnonzero(emit)
+    # attempts carried over: those after the last emission in the final run
+    if blocked[-1]:
+        after = 0
+    else:
+        after = int(attempt[-1] % n_max)
+    return idx, exhausted[idx], after
+
+
+@functools.partial(jax.jit, static_argnames=("robot", "padding"))
+def _blocked(robot, world, q: Array, padding: float) -> Array:
+    return ~steer_to_cm(robot, world, q[:, 0].T, q[:, 1].T, padding)
+
+
+def sample_nontrivial_queries(robot, world: World, key: Array, n: int, padding: float,
+                              n_max: int = DEFAULT_N_MAX):
+    """``n`` queries from Alg. 3, ``((n, 2, d), exhausted (n,) bool)``.
+
+    Exactly the sequential rejection sampler applied to the stream of uniform
+    candidate queries; ``exhausted[i]`` marks a trivial query returned after
+    ``n_max`` failed attempts.
+    """
+    if n_max < 1:
+        raise ValueError(f"n_max must be >= 1, got {n_max}")
+    stream = valid_state_stream(robot, world, key, padding)
+    buf = np.zeros((0, robot.dim), np.float32)
+    out_q, out_x, have, attempts = [], [], 0, 0
+    while have < n:
+        while len(buf) < 2 * QUERY_BLOCK:
+            buf = np.concatenate([buf, next(stream)])
+        cand = buf[: 2 * QUERY_BLOCK].reshape(QUERY_BLOCK, 2, robot.dim)
+        buf = buf[2 * QUERY_BLOCK:]
+        blocked = np.asarray(_blocked(robot, world, jnp.asarray(cand), padding))
+        idx, exh, attempts = replay_nontrivial(blocked, n_max, attempts)
+        out_q.append(cand[idx])
+        out_x.append(exh)
+        have += len(idx)
+    q = np.concatenate(out_q)[:n]
+    x = np.concatenate(out_x)[:n]
+    return q, x
+
+
+# ---------------------------------------------------------------------------
+# The p_nt mixture (Alg. 2)
+# ---------------------------------------------------------------------------
+
+def sample_queries(robot, world: World, key: Array, n: int, p_nt: float, padding: float,
+                   n_max: int = DEFAULT_N_MAX):
+    """``n`` queries of Alg. 2: each non-trivial with probability ``p_nt``, else uniform.
+
+    Returns:
+        ``(queries (n, 2, d) float32, kind (n,) int8)`` with kind ``UNIFORM``,
+        ``NON_TRIVIAL`` or ``NT_EXHAUSTED``.
+    """
+    if not (0.0 <= p_nt <= 1.0):
+        raise ValueError(f"p_nt must be in [0, 1], got {p_nt}")
+    k_mix, k_uni, k_nt = jax.random.split(key, 3)
+    use_nt = np.asarray(jax.random.uniform(k_mix, (n,))) < p_nt
+    n_nt = int(use_nt.sum())
+    queries = np.zeros((n, 2, robot.dim), np.float32)
+    kind = np.zeros(n, np.int8)
+    if n - n_nt:
+        queries[~use_nt] = sample_uniform_queries(robot, world, k_uni, n - n_nt, padding)
+    if n_nt:
+        q, exh = sample_nontrivial_queries(robot, world, k_nt, n_nt, padding, n_max)
+        queries[use_nt] = q
+        kind[use_nt] = np.where(exh, NT_EXHAUSTED, NON_TRIVIAL)
+    return queries, kind
+
+
+# ---------------------------------------------------------------------------
+# gamma_nt
+# ---------------------------------------------------------------------------
+
+class GammaEstimate(NamedTuple):
+    """Result of :func:`gamma_nt`.
+
+    Attributes:
+        gamma: non-trivial fraction of uniform valid queries.
+        ci95: Wilson 95% interval ``(lo, hi)``.
+        queries: uniform valid queries examined (the denominator).
+        non_trivial: how many of them ``steer_to`` rejected.
+        candidates: raw candidate pairs drawn (valid or not).
+        seconds: wall time.
+    """
+
+    gamma: float
+    ci95: tuple[float, float]
+    queries: int
+    non_trivial: int
+    candidates: int
+    seconds: float
+
+    @property
+    def queries_per_second(self) -> float:
+        return self.queries / self.seconds if self.seconds > 0 else float("inf")
+
+    @property
+    def candidates_per_second(self) -> float:
+        return self.candidates / self.seconds if self.seconds > 0 else float("inf")
+
+
+def wilson_interval(k: int, n: int, z: float = 1.959963984540054) -> tuple[float, float]:
+    """Wilson score interval for a binomial proportion ``k / n``."""
+    if n <= 0:
+        return (0.0, 1.0)
+    p = k / n
+    denom = 1.0 + z * z / n
+    centre = (p + z * z / (2 * n)) / denom
+    half = z / denom * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n))
+    return (max(0.0, centre - half), min(1.0, centre + half))
+
+
+def _lane_outcomes(robot, world: World, seeds: Array, lane0: Array, size: int, padding: float):
+    """Per-lane (both endpoints valid, blocked) for ``size`` candidate pairs of one chunk."""
+    d = robot.dim
+    lo, hi = robot.config_bounds(world)
+    lane = lane0 + jnp.arange(size, dtype=jnp.uint32)
+    u = jnp.stack([prng.uniform(seeds, lane * jnp.uint32(2 * d) + jnp.uint32(j))
+                   for j in range(2 * d)])
+    lo2, hi2 = jnp.concatenate([lo, lo]), jnp.concatenate([hi, hi])
+    q = lo2[:, None] + u * (hi2 - lo2)[:, None]
+    a, b = q[:d], q[d:]
+    both = is_valid_cm(robot, world, a, padding) & is_valid_cm(robot, world, b, padding)
+    blocked = both & ~steer_to_cm(robot, world, a, b, padding)
+    return both, blocked
+
+
+@functools.partial(jax.jit, static_argnames=("robot", "padding", "size"))
+def _gamma_chunk_counts(robot, world, seeds, padding: float, size: int):
+    both, blocked = _lane_outcomes(robot, world, seeds, jnp.uint32(0), size, padding)
+    return jnp.sum(both, dtype=jnp.int32), jnp.sum(blocked, dtype=jnp.int32)
+
+
+@functools.partial(jax.jit, static_argnames=("robot", "padding", "size"))
+def _gamma_chunk_lanes(robot, world, seeds, padding: float, size: int):
+    return _lane_outcomes(robot, world, seeds, jnp.uint32(0), size, padding)
+
+
+def default_chunk(robot) -> int:
+    return 1 << 22 if robot.kind == "point" else 1 << 15
+
+
+def gamma_nt(robot, world: World, key: Array, n: int, padding: float, chunk: int | None = None,
+             progress: Callable[[int], None] | None = None) -> GammaEstimate:
+    """Estimates gamma_nt over exactly ``n`` uniform valid queries, streaming in chunks.
+
+    Each chunk of ``chunk`` candidate pairs is generated, checked and counted in
+    one compiled call (its uniforms come from :mod:`ntq_jax.prng`, seeded per
+    chunk from ``key``), so memory does not grow with ``n``. The last chunk
+    counts only the valid queries needed to reach exactly ``n``. Two chunks are
+    kept in flight so dispatch overlaps compute.
+
+    Args:
+        progress: called with the number of valid queries counted so far.
+    """
+    if n < 1:
+        raise ValueError(f"the number of queries must be >= 1, got {n}")
+    chunk = int(chunk or default_chunk(robot))
+    t0 = time.perf_counter()
+
+    def seeds(i):
+        return prng.stream_seeds(key, i)
+
+    queries = blocked = cands = 0
+    i = 0
+    pending = _gamma_chunk_counts(robot, world, seeds(0), padding, chunk)
+    while True:
+        nxt = _gamma_chunk_counts(robot, world, seeds(i + 1), padding, chunk)
+        v, b = (int(x) for x in pending)
+        if queries + v >= n:
+            both, blk = _gamma_chunk_lanes(robot, world, seeds(i), padding, chunk)
+            both, blk = np.asarray(both), np.asarray(blk)
+            need = n - queries
+            last = int(np.flatnonzero(both)[need - 1])
+            blocked += int(blk[: last + 1].sum())
+            queries += need
+            cands += last + 1
+            break
+        queries += v
+        blocked += b
+        cands += chunk
+        if progress is not None:
+            progress(queries)
+        pending = nxt
+        i += 1
+        if i > 64 and queries == 0:
+            raise FreeSpaceTooSmall(f"no valid query among {cands} candidates (padding={padding})")
+    jax.block_until_ready(nxt)
+    if progress is not None:
+        progress(queries)
+    secs = time.perf_counter() - t0
+    return GammaEstimate(blocked / queries, wilson_interval(blocked, queries), queries, blocked,
+                         cands, secs)

@@ -1,0 +1,94 @@
+"""Planar n-link arm: the state is the joint angles, each in ``[-pi, pi]`` (no wrap-around).
+
+* Forward kinematics: link ``k`` starts where link ``k - 1`` ends, at absolute
+  angle ``q_1 + ... + q_k`` from the x axis, from ``base``.
+* Valid when every joint is in ``[-pi, pi]``, every joint position is inside
+  the workspace and every link segment is farther than ``padding`` from every
+  obstacle (exact segment tests). Self-collision is not checked (as in the paper).
+* Steering: straight line in joint space; cost metric: Euclidean joint distance
+  (OMPL's RealVector metric, which BIT* minimises).
+* ``steer_to`` checks states at most ``resolution`` apart (Euclidean, radians).
+  Between two checked states a point at distance ``r`` from the base moves at
+  most ``r * sqrt(n) * resolution <= reach * sqrt(n) * resolution`` in the
+  workspace, so penetrations deeper than that are always found.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import jax
+import jax.numpy as jnp
+
+from ntq_jax import geometry
+from ntq_jax.geometry import World
+from ntq_jax.robots.base import discretized_steer_to
+
+Array = jax.Array
+
+
+@dataclasses.dataclass(frozen=True)
+class NLinkArm:
+    """Planar serial arm with revolute joints."""
+
+    link_lengths: tuple[float, ...] = (3.0, 3.0)
+    base: tuple[float, float] = (0.0, 0.0)
+    resolution: float = 0.02
+    kind: str = dataclasses.field(default="nlink", init=False)
+
+    def __post_init__(self):
+        object.__setattr__(self, "link_lengths", tuple(float(v) for v in self.link_lengths))
+        object.__setattr__(self, "base", tuple(float(v) for v in self.base))
+        if len(self.link_lengths) < 1 or any(not (math.isfinite(v) and v > 0) for v in self.link_lengths):
+            raise ValueError(f"nlink.link_lengths must be numbers > 0, got {self.link_lengths!r}")
+        if len(self.base) != 2 or not all(math.isfinite(v) for v in self.base):
+            raise ValueError(f"nlink.base must be [x, y], got {self.base!r}")
+        if not (math.isfinite(self.resolution) and self.resolution > 0):
+            raise ValueError(f"nlink.resolution must be > 0, got {self.resolution!r}")
+
+    @property
+    def dim(self) -> int:
+        return len(self.link_lengths)
+
+    @property
+    def reach(self) -> float:
+        return float(sum(self.link_lengths))
+
+    def config_bounds(self, world: World):
+        n = self.dim
+        return jnp.full((n,), -jnp.pi, jnp.float32), jnp.full((n,), jnp.pi, jnp.float32)
+
+    def forward_kinematics(self, q: Array) -> Array:
+        """Joint positions ``(n + 1, 2)``: the base, then the end of each link."""
+        x, y = jnp.float32(self.base[0]), jnp.float32(self.base[1])
+        pts = [jnp.stack([x, y])]
+        phi = jnp.float32(0.0)
+        for k, length in enumerate(self.link_lengths):
+            phi = phi + q[k]
+            x = x + length * jnp.cos(phi)
+            y = y + length * jnp.sin(phi)
+            pts.append(jnp.stack([x, y]))
+        return jnp.stack(pts)
+
+    def is_valid(self, q: Array, world: World, padding: float) -> Array:
+        ok = jnp.all(jnp.isfinite(q)) & jnp.all(jnp.abs(q) <= jnp.pi)
+        pts = self.forward_kinematics(q)
+        ok = ok & geometry.in_bounds(pts[0, 0], pts[0, 1], world.bounds)
+        for k in range(self.dim):
+            ok = ok & geometry.segment_free(pts[k], pts[k + 1], world, padding, check_bounds=False)
+            ok = ok & geometry.in_bounds(pts[k + 1, 0], pts[k + 1, 1], world.bounds)
+        return ok
+
+    def interpolate(self, a: Array, b: Array, t: Array) -> Array:
+        return a + t * (b - a)
+
+    def distance(self, a: Array, b: Array) -> Array:
+        return jnp.sqrt(jnp.sum((b - a) ** 2))
+
+    def steer_to(self, a: Array, b: Array, world: World, padding: float) -> Array:
+        return discretized_steer_to(self, a, b, world, padding, self.resolution)
+
+    def to_json(self) -> dict:
+        return {"kind": "nlink", "link_lengths": list(self.link_lengths), "base": list(self.base),
+                "resolution": self.resolution}

@@ -1,0 +1,372 @@
+"""Typed, frozen configuration loaded from YAML, with command-line overrides.
+
+A config file is a YAML mapping whose sections mirror the dataclasses below
+(``sampling``, ``data``, ``planner``, ``model``, ``train``, ``eval``). Every key
+is checked: an unknown or misspelled key, a wrong type or an impossible value
+raises one :class:`ConfigError` naming the key and the file, e.g.::
+
+    ConfigError: configs/point.yaml: data.k_trian: unknown key; did you mean 'k_train'?
+
+Overrides use dotted keys with YAML values: ``--set data.k_train=100 --set
+eval.steer=[true,false]`` (see :func:`apply_overrides`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import hashlib
+import json
+import math
+import types
+import typing
+from pathlib import Path
+from typing import Any, Optional
+
+import yaml
+
+
+class ConfigError(ValueError):
+    """A configuration problem, naming the file and the key."""
+
+
+def _check(cond: bool, key: str, msg: str):
+    if not cond:
+        raise ConfigError(f"{key}: {msg}")
+
+
+@dataclasses.dataclass(frozen=True)
+class SamplingConfig:
+    """Query sampling (Alg. 3).
+
+    Attributes:
+        n_max: attempts of the non-trivial sampler before it returns a trivial query.
+    """
+
+    n_max: int = 10_000
+
+    def validate(self, p: str):
+        _check(self.n_max >= 1, f"{p}.n_max", f"must be >= 1, got {self.n_max}")
+
+
+@dataclasses.dataclass(frozen=True)
+class DatasetSpec:
+    """One dataset of Alg. 2: the non-trivial probability and the pruning flag."""
+
+    p_nt: float
+    prune: bool = False
+
+    def validate(self, p: str):
+        _check(0.0 <= self.p_nt <= 1.0, f"{p}.p_nt", f"must be in [0, 1], got {self.p_nt}")
+
+
+def _paper_datasets() -> tuple[DatasetSpec, ...]:
+    return (DatasetSpec(0.0, False), DatasetSpec(0.5, False), DatasetSpec(1.0, False),
+            DatasetSpec(1.0, True))
+
+
+@dataclasses.dataclass(frozen=True)
+class DataConfig:
+    """Dataset generation (Alg. 2 and 4).
+
+    Attributes:
+        k_train: queries per dataset.
+        datasets: D0..D3 (the paper's four by default).
+        prune_padding: padding of the pruning steer_to; ``None`` = the environment's
+            (the paper prunes on the data-generation geometry).
+        chunk: queries per chunk written to disk (resumable unit).
+    """
+
+    k_train: int = 3000
+    datasets: tuple[DatasetSpec, ...] = dataclasses.field(default_factory=_paper_datasets)
+    prune_padding: Optional[float] = None
+    chunk: int = 500
+
+    def validate(self, p: str):
+        _check(self.k_train >= 1, f"{p}.k_train", f"must be >= 1, got {self.k_train}")
+        _check(len(self.datasets) >= 1, f"{p}.datasets", "must list at least one dataset")
+        for i, d in enumerate(self.datasets):
+            d.validate(f"{p}.datasets[{i}]")
+        _check(self.prune_padding is None or self.prune_padding >= 0, f"{p}.prune_padding",
+               f"must be >= 0 or null, got {self.prune_padding}")
+        _check(self.chunk >= 1, f"{p}.chunk", f"must be >= 1, got {self.chunk}")
+
+
+@dataclasses.dataclass(frozen=True)
+class PlannerConfig:
+    """Classical planner used to solve training queries and as the evaluation reference.
+
+    Attributes:
+        name: ``astar`` (grid A* + smoothing), ``visgraph`` or ``bitstar``.
+        resolution: grid resolution of A* (workspace units per cell).
+        time_budget: BIT* seconds per query during data generation.
+        eval_time_budget: BIT* seconds per query at evaluation.
+        workers: BIT* worker processes (0 = number of cores).
+    """
+
+    name: str = "astar"
+    resolution: float = 0.1
+    time_budget: float = 3.0
+    eval_time_budget: float = 2.0
+    workers: int = 0
+
+    def validate(self, p: str):
+        _check(self.name in ("astar", "visgraph", "bitstar"), f"{p}.name",
+               f"must be one of astar, visgraph, bitstar; got {self.name!r}")
+        _check(self.resolution > 0, f"{p}.resolution", f"must be > 0, got {self.resolution}")
+        _check(self.time_budget > 0, f"{p}.time_budget", f"must be > 0, got {self.time_budget}")
+        _check(self.eval_time_budget > 0, f"{p}.eval_time_budget",
+               f"must be > 0, got {self.eval_time_budget}")
+        _check(self.workers >= 0, f"{p}.workers", f"must be >= 0, got {self.workers}")
+
+
+@dataclasses.dataclass(frozen=True)
+class ModelConfig:
+    """PNet (MPNet's MLP).
+
+    Attributes:
+        hidden: hidden layer widths.
+        dropout: dropout rate after the first ``dropout_layers`` hidden layers.
+        dropout_layers: how many hidden layers are followed by dropout.
+    """
+
+    hidden: tuple[int, ...] = (256, 256, 128, 64)
+    dropout: float = 0.5
+    dropout_layers: int = 2
+
+    def validate(self, p: str):
+        _check(len(self.hidden) >= 1 and all(h >= 1 for h in self.hidden), f"{p}.hidden",
+               f"must be a non-empty list of positive widths, got {list(self.hidden)}")
+        _check(0.0 <= self.dropout < 1.0, f"{p}.dropout", f"must be in [0, 1), got {self.dropout}")
+        _check(0 <= self.dropout_layers <= len(self.hidden), f"{p}.dropout_layers",
+               f"must be in [0, {len(self.hidden)}], got {self.dropout_layers}")
+
+
+@dataclasses.dataclass(frozen=True)
+class TrainConfig:
+    """Ensemble training.
+
+    Attributes:
+        epochs: passes over each member's dataset.
+        batch_size: minibatch size (same for every member).
+        optimizer: ``adagrad`` (MPNet's), ``adam`` or ``sgd``.
+        learning_rate: step size.
+        val_fraction: held-out fraction of each dataset's paths for validation.
+        checkpoint_every: steps between checkpoints.
+    """
+
+    epochs: int = 50
+    batch_size: int = 100
+    optimizer: str = "adagrad"
+    learning_rate: float = 0.01
+    val_fraction: float = 0.1
+    checkpoint_every: int = 500
+
+    def validate(self, p: str):
+        _check(self.epochs >= 1, f"{p}.epochs", f"must be >= 1, got {self.epochs}")
+        _check(self.batch_size >= 1, f"{p}.batch_size", f"must be >= 1, got {self.batch_size}")
+        _check(self.optimizer in ("adagrad", "adam", "sgd"), f"{p}.optimizer",
+               f"must be adagrad, adam or sgd; got {self.optimizer!r}")
+        _check(self.learning_rate > 0, f"{p}.learning_rate",
+               f"must be > 0, got {self.learning_rate}")
+        _check(0.0 <= self.val_fraction < 1.0, f"{p}.val_fraction",
+               f"must be in [0, 1), got {self.val_fraction}")
+        _check(self.checkpoint_every >= 1, f"{p}.checkpoint_every",
+               f"must be >= 1, got {self.checkpoint_every}")
+
+
+@dataclasses.dataclass(frozen=True)
+class EvalConfig:
+    """Neural planner evaluation.
+
+    Attributes:
+        k_test: test queries of each kind (uniform and non-trivial).
+        n_plan: PNet steps per plan (Alg. 1).
+        steer: evaluate with steerTo (True) and/or without (False).
+        delta: goal tolerance of the variant without steerTo.
+        replan_rounds: neural replanning rounds.
+    """
+
+    k_test: int = 500
+    n_plan: int = 50
+    steer: tuple[bool, ...] = (True,)
+    delta: float = 1.0
+    replan_rounds: int = 5
+
+    def validate(self, p: str):
+        _check(self.k_test >= 1, f"{p}.k_test", f"must be >= 1, got {self.k_test}")
+        _check(self.n_plan >= 1, f"{p}.n_plan", f"must be >= 1, got {self.n_plan}")
+        _check(len(self.steer) >= 1, f"{p}.steer", "must list at least one of true, false")
+        _check(self.delta > 0, f"{p}.delta", f"must be > 0, got {self.delta}")
+        _check(self.replan_rounds >= 0, f"{p}.replan_rounds",
+               f"must be >= 0, got {self.replan_rounds}")
+
+
+@dataclasses.dataclass(frozen=True)
+class Config:
+    """A whole experiment: environments, then every stage of the pipeline.
+
+    Attributes:
+        task: ``point``, ``rigid`` or ``nlink`` (informational; the robot comes
+            from each environment).
+        envs: preset names or JSON map paths.
+        seed: master seed; every stage derives its keys from it.
+        out_dir: where run folders are written.
+    """
+
+    task: str = "point"
+    envs: tuple[str, ...] = ("point/0", "point/1", "point/2", "point/3")
+    seed: int = 0
+    out_dir: str = "runs"
+    sampling: SamplingConfig = dataclasses.field(default_factory=SamplingConfig)
+    data: DataConfig = dataclasses.field(default_factory=DataConfig)
+    planner: PlannerConfig = dataclasses.field(default_factory=PlannerConfig)
+    model: ModelConfig = dataclasses.field(default_factory=ModelConfig)
+    train: TrainConfig = dataclasses.field(default_factory=TrainConfig)
+    eval: EvalConfig = dataclasses.field(default_factory=EvalConfig)
+
+    def validate(self, p: str = ""):
+        pre = f"{p}." if p else ""
+        _check(self.task in ("point", "rigid", "nlink"), f"{pre}task",
+               f"must be point, rigid or nlink; got {self.task!r}")
+        _check(len(self.envs) >= 1, f"{pre}envs", "must list at least one environment")
+        _check(self.seed >= 0, f"{pre}seed", f"must be >= 0, got {self.seed}")
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            if dataclasses.is_dataclass(v):
+                v.validate(f"{pre}{f.name}")
+
+    def to_dict(self) -> dict:
+        return _to_plain(self)
+
+    def hash(self) -> str:
+        """A short stable hash of the resolved config (for metadata and resume checks)."""
+        blob = json.dumps(self.to_dict(), sort_keys=True).encode()
+        return hashlib.sha256(blob).hexdigest()[:16]
+
+
+# ---------------------------------------------------------------------------
+# Generic typed loading
+# ---------------------------------------------------------------------------
+
+def _to_plain(obj):
+    if dataclasses.is_dataclass(obj):
+        return {f.name: _to_plain(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
+    if isinstance(obj, tuple):
+        return [_to_plain(v) for v in obj]
+    return obj
+
+
+def _type_name(tp) -> str:
+    origin = typing.get_origin(tp)
+    if origin in (typing.Union, types.UnionType):
+        args = [a for a in typing.get_args(tp) if a is not type(None)]
+        return f"{_type_name(args[0])} or null"
+    if origin is tuple:
+        return f"list of {_type_name(typing.get_args(tp)[0])}"
+    return getattr(tp, "__name__", str(tp))
+
+
+def _coerce(value, tp, key: str):
+    origin = typing.get_origin(tp)
+    if origin in (typing.Union, types.UnionType):
+        args = [a for a in typing.get_args(tp) if a is not type(None)]
+        if value is None:
+            return None
+        return _coerce(value, args[0], key)
+    if origin is tuple:
+        (item,) = [a for a in typing.get_args(tp) if a is not Ellipsis]
+        if not isinstance(value, (list, tuple)):
+            raise ConfigError(f"{key}: expected a list of {_type_name(item)}, got {value!r}")
+        return tuple(_coerce(v, item, f"{key}[{i}]") for i, v in enumerate(value))
+    if dataclasses.is_dataclass(tp):
+        return _from_dict(tp, value, key)
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise ConfigError(f"{key}: expected true or false, got {value!r}")
+        return value
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(f"{key}: expected an integer, got {value!r}")
+        return value
+    if tp is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise ConfigError(f"{key}: expected a finite number, got {value!r}")
+        return float(value)
+    if tp is str:
+        if not isinstance(value, str):
+            raise ConfigError(f"{key}: expected a string, got {value!r}")
+        return value
+    raise TypeError(f"unsupported config type {tp}")  # pragma: no cover (programming error)
+
+
+def _from_dict(cls, data, prefix: str):
+    if not isinstance(data, dict):
+        raise ConfigError(f"{prefix or 'config'}: expected a mapping, got {data!r}")
+    hints = typing.get_type_hints(cls)
+    names = [f.name for f in dataclasses.fields(cls)]
+    kwargs = {}
+    for k, v in data.items():
+        key = f"{prefix}.{k}" if prefix else str(k)
+        if k not in names:
+            close = difflib.get_close_matches(str(k), names, n=1)
+            hint = f"; did you mean {close[0]!r}?" if close else f"; allowed keys: {', '.join(names)}"
+            raise ConfigError(f"{key}: unknown key{hint}")
+        kwargs[k] = _coerce(v, hints[k], key)
+    return cls(**kwargs)
+
+
+def from_dict(data: dict, where: str = "config") -> Config:
+    """Builds and validates a :class:`Config` from a plain dict."""
+    try:
+        cfg = _from_dict(Config, data or {}, "")
+        cfg.validate()
+    except ConfigError as e:
+        raise ConfigError(f"{where}: {e}") from None
+    return cfg
+
+
+def _set_dotted(data: dict, dotted: str, value):
+    parts = dotted.split(".")
+    cur = data
+    for p in parts[:-1]:
+        nxt = cur.get(p)
+        if nxt is None:
+            nxt = cur[p] = {}
+        if not isinstance(nxt, dict):
+            raise ConfigError(f"override {dotted}: {p} is not a section")
+        cur = nxt
+    cur[parts[-1]] = value
+
+
+def apply_overrides(data: dict, overrides: list[str] | None) -> dict:
+    """Applies ``key.sub=value`` overrides (values parsed as YAML) to a plain dict."""
+    data = json.loads(json.dumps(data or {}))
+    for ov in overrides or []:
+        if "=" not in ov:
+            raise ConfigError(f"override {ov!r}: expected KEY=VALUE, e.g. data.k_train=100")
+        k, v = ov.split("=", 1)
+        _set_dotted(data, k.strip(), yaml.safe_load(v))
+    return data
+
+
+def load(path: str | Path | None = None, overrides: list[str] | None = None) -> Config:
+    """Loads a YAML config (or the defaults when ``path`` is None) and applies overrides.
+
+    Raises:
+        ConfigError: missing or unparsable file, unknown key, wrong type or
+            impossible value; the message names the file and the key.
+    """
+    where = str(path) if path is not None else "defaults"
+    data: dict = {}
+    if path is not None:
+        p = Path(path)
+        if not p.is_file():
+            raise ConfigError(f"{where}: config file not found")
+        try:
+            data = yaml.safe_load(p.read_text()) or {}
+        except yaml.YAMLError as e:
+            raise ConfigError(f"{where}: not valid YAML: {e}") from None
+    if overrides:
+        where += " (with overrides " + ", ".join(overrides) + ")"
+    return from_dict(apply_overrides(data, overrides), where)

@@ -1,0 +1,79 @@
+"""Configuration: typed loading, overrides, and one clear error per bad input."""
+
+from pathlib import Path
+
+import pytest
+
+from ntq_jax import config
+from ntq_jax.config import ConfigError
+
+CONFIGS = sorted(Path(__file__).resolve().parents[1].joinpath("configs").glob("*.yaml"))
+
+
+def test_every_shipped_config_loads():
+    assert len(CONFIGS) >= 6
+    for path in CONFIGS:
+        cfg = config.load(path)
+        assert cfg.envs and cfg.data.k_train >= 1
+
+
+def test_defaults_are_the_papers_datasets():
+    cfg = config.load()
+    assert [(d.p_nt, d.prune) for d in cfg.data.datasets] == [
+        (0.0, False), (0.5, False), (1.0, False), (1.0, True)]
+    assert cfg.train.optimizer == "adagrad" and cfg.train.learning_rate == 0.01
+
+
+def test_config_is_frozen_and_hash_is_stable():
+    a, b = config.load(CONFIGS[0]), config.load(CONFIGS[0])
+    assert a == b and a.hash() == b.hash()
+    with pytest.raises(Exception):
+        a.seed = 3  # type: ignore[misc]
+    c = config.load(CONFIGS[0], ["seed=1"])
+    assert c.hash() != a.hash() and c.seed == 1
+
+
+def test_overrides_parse_yaml_values():
+    cfg = config.load(None, ["data.k_train=7", "eval.steer=[true, false]", "model.hidden=[8, 4]"])
+    assert cfg.data.k_train == 7 and cfg.eval.steer == (True, False) and cfg.model.hidden == (8, 4)
+
+
+@pytest.mark.parametrize("text, key", [
+    ("data:\n  k_trian: 5\n", "data.k_trian"),
+    ("smapling: {}\n", "smapling"),
+    ("data:\n  k_train: -3\n", "data.k_train"),
+    ("data:\n  k_train: 2.5\n", "data.k_train"),
+    ("data:\n  datasets: [{p_nt: 1.5}]\n", "data.datasets[0].p_nt"),
+    ("data:\n  datasets: [{p_nt: -0.1, prune: true}]\n", "data.datasets[0].p_nt"),
+    ("data:\n  datasets: [{p_nt: 0.5, prune: 3}]\n", "data.datasets[0].prune"),
+    ("planner:\n  name: rrt\n", "planner.name"),
+    ("train:\n  learning_rate: '0.1'\n", "train.learning_rate"),
+    ("model:\n  hidden: []\n", "model.hidden"),
+    ("eval:\n  k_test: 0\n", "eval.k_test"),
+    ("envs: point/0\n", "envs"),
+])
+def test_bad_values_name_the_key_and_the_file(tmp_path, text, key):
+    f = tmp_path / "bad.yaml"
+    f.write_text(text)
+    with pytest.raises(ConfigError) as e:
+        config.load(f)
+    msg = str(e.value)
+    assert str(f) in msg and key in msg
+
+
+def test_misspelled_key_suggests_the_right_one(tmp_path):
+    f = tmp_path / "typo.yaml"
+    f.write_text("train:\n  batch_sise: 10\n")
+    with pytest.raises(ConfigError, match="did you mean 'batch_size'"):
+        config.load(f)
+
+
+def test_missing_and_unparsable_files(tmp_path):
+    with pytest.raises(ConfigError, match="not found"):
+        config.load(tmp_path / "nope.yaml")
+    f = tmp_path / "broken.yaml"
+    f.write_text("data: [unclosed\n")
+    with pytest.raises(ConfigError, match="not valid YAML"):
+        config.load(f)
+    with pytest.raises(ConfigError, match="KEY=VALUE"):
+        config.load(None, ["data.k_train"])

@@ -1,0 +1,145 @@
+"""Statistical quality of the fast counter-based generator in ``ntq_jax.prng``.
+
+All seeds are fixed, so every test is deterministic. Each test keeps a family-wise
+significance threshold of p > 0.001: a test of ``m`` correlations (z-scores) or bits
+requires every |z| below the Bonferroni bound ``z_max(m)`` (3.29 for one, 3.9 for 8
+lags, 4.4 for the 66 row pairs of a 6-link query).
+"""
+
+from __future__ import annotations
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from scipy import stats
+
+import ntq_jax as nj
+from ntq_jax import prng, queries as Q
+
+P_MIN = 1e-3
+N = 1_000_000
+
+_uniform = jax.jit(prng.uniform)
+
+
+def z_max(m):
+    """Two-sided Bonferroni bound on |z| for ``m`` simultaneous tests at family-wise P_MIN."""
+    return float(stats.norm.isf(P_MIN / (2 * m)))
+
+
+def draws(seeds, counters):
+    return np.asarray(_uniform(seeds, jnp.asarray(counters, jnp.uint32)))
+
+
+def seeds_of(key_seed, index):
+    return prng.stream_seeds(jax.random.PRNGKey(key_seed), index)
+
+
+STREAMS = [seeds_of(0, 0), seeds_of(0, 1), seeds_of(123, 7)]
+
+
+def test_range_and_dtype():
+    u = draws(STREAMS[0], np.arange(N, dtype=np.uint32))
+    assert u.dtype == np.float32 and u.shape == (N,)
+    assert u.min() >= 0.0 and u.max() < 1.0
+    # the extreme counters too (the counter wraps as uint32)
+    v = draws(STREAMS[0], np.array([0, 1, 2**31, 2**32 - 2, 2**32 - 1], np.uint32))
+    assert ((v >= 0) & (v < 1)).all()
+    # deterministic: same seeds and counters, same values
+    assert np.array_equal(u[:1000], draws(STREAMS[0], np.arange(1000, dtype=np.uint32)))
+
+
+@pytest.mark.parametrize("s", range(len(STREAMS)))
+def test_chi_square_uniformity_256_bins(s):
+    u = draws(STREAMS[s], np.arange(N, dtype=np.uint32))
+    counts = np.bincount((u * 256).astype(np.int64), minlength=256)
+    assert stats.chisquare(counts).pvalue > P_MIN
+    # every one of the 24 kept bits is fair
+    bits = (u * (1 << 24)).astype(np.int64)
+    ones = np.array([((bits >> b) & 1).sum() for b in range(24)])
+    z = (ones - N / 2) / math.sqrt(N / 4)
+    assert np.abs(z).max() < z_max(24), z
+
+
+@pytest.mark.parametrize("s", range(len(STREAMS)))
+def test_chi_square_pairs_64x64(s):
+    """Consecutive counters as (x, y) pairs: exactly how the estimator places a point state."""
+    u = draws(STREAMS[s], np.arange(2 * N, dtype=np.uint32)).reshape(N, 2)
+    cell = (u[:, 0] * 64).astype(np.int64) * 64 + (u[:, 1] * 64).astype(np.int64)
+    counts = np.bincount(cell, minlength=64 * 64)
+    assert stats.chisquare(counts).pvalue > P_MIN
+
+
+def _corr(a, b):
+    a = a.astype(np.float64) - a.mean()
+    b = b.astype(np.float64) - b.mean()
+    return float((a * b).sum() / math.sqrt((a * a).sum() * (b * b).sum()))
+
+
+@pytest.mark.parametrize("s", range(len(STREAMS)))
+def test_serial_correlation_lags_1_to_8(s):
+    u = draws(STREAMS[s], np.arange(N, dtype=np.uint32))
+    for lag in range(1, 9):
+        r = _corr(u[:-lag], u[lag:])
+        assert abs(r) * math.sqrt(N - lag) < z_max(8), (lag, r)
+
+
+@pytest.mark.parametrize("k", [4, 6, 12])
+def test_rows_of_the_estimator_layout_are_uncorrelated(k):
+    """The estimator draws row j of lane l from counter l * k + j (k = 2 * dim): every pair of
+    rows (the coordinates of one candidate query) must be independent."""
+    lanes = N // k
+    u = draws(STREAMS[0], np.arange(lanes * k, dtype=np.uint32)).reshape(lanes, k)
+    pairs = [(i, j) for i in range(k) for j in range(i + 1, k)]
+    for i, j in pairs:
+        assert abs(_corr(u[:, i], u[:, j])) * math.sqrt(lanes) < z_max(len(pairs)), (i, j)
+    # the start (rows 0, 1) and goal (rows k/2, k/2 + 1) of a point query: joint histogram
+    cell = (u[:, 0] * 16).astype(np.int64) * 16 + (u[:, k // 2] * 16).astype(np.int64)
+    assert stats.chisquare(np.bincount(cell, minlength=256)).pvalue > P_MIN
+
+
+@pytest.mark.parametrize("a, b", [(0, 1), (0, 2), (1, 2)])
+def test_different_streams_are_uncorrelated(a, b):
+    c = np.arange(N, dtype=np.uint32)
+    u, v = draws(STREAMS[a], c), draws(STREAMS[b], c)
+    assert not np.array_equal(u[:100], v[:100])
+    assert abs(_corr(u, v)) * math.sqrt(N) < z_max(2)
+    # also shifted by one counter (chunks of the estimator use the same counters)
+    assert abs(_corr(u[1:], v[:-1])) * math.sqrt(N - 1) < z_max(2)
+    cell = (u * 64).astype(np.int64) * 64 + (v * 64).astype(np.int64)
+    assert stats.chisquare(np.bincount(cell, minlength=4096)).pvalue > P_MIN
+
+
+def _threefry_gamma(env, key, n, padding):
+    """gamma_nt from jax.random (threefry) candidates, checked with the public Env API."""
+    lo, hi = (np.asarray(v) for v in env.robot.config_bounds(env.world))
+    d = env.dim
+    blocked, total, i = [], 0, 0
+    while total < n:
+        u = np.asarray(jax.random.uniform(jax.random.fold_in(key, i), (1 << 20, 2 * d)))
+        a = (lo + u[:, :d] * (hi - lo)).astype(np.float32)
+        b = (lo + u[:, d:] * (hi - lo)).astype(np.float32)
+        ok = np.asarray(env.is_valid(a, padding=padding)) & np.asarray(env.is_valid(b, padding=padding))
+        free = np.asarray(env.steer_to(a[ok], b[ok], padding=padding))
+        blocked.append(~free)
+        total += len(free)
+        i += 1
+    blocked = np.concatenate(blocked)[:n]
+    return int(blocked.sum())
+
+
+@pytest.mark.parametrize("name, n", [("point/3", 1_000_000), ("point/1", 300_000)])
+def test_fused_gamma_agrees_with_threefry(name, n):
+    env = nj.make_env(name)
+    est = env.gamma_nt(jax.random.PRNGKey(2024), n, padding=0.0)
+    k = _threefry_gamma(env, jax.random.PRNGKey(99), n, 0.0)
+    assert est.queries == n
+    g1, g2 = est.gamma, k / n
+    se = math.sqrt(g1 * (1 - g1) / n + g2 * (1 - g2) / n)
+    assert abs(g1 - g2) < 4 * se, (g1, g2, se)
+    lo1, hi1 = est.ci95
+    lo2, hi2 = Q.wilson_interval(k, n)
+    assert lo1 <= hi2 and lo2 <= hi1  # the two 95% intervals overlap

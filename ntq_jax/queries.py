@@ -32,7 +32,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ntq_jax import prng
-from ntq_jax.geometry import World
+from ntq_jax.geometry import KERNEL_COMPILER_OPTIONS, World
 from ntq_jax.robots.batch import is_valid_cm, steer_to_cm
 
 Array = jax.Array
@@ -253,28 +253,64 @@ def wilson_interval(k: int, n: int, z: float = 1.959963984540054) -> tuple[float
     return (max(0.0, centre - half), min(1.0, centre + half))
 
 
-def _lane_outcomes(robot, world: World, seeds: Array, lane0: Array, size: int, padding: float):
-    """Per-lane (both endpoints valid, blocked) for ``size`` candidate pairs of one chunk."""
+def _chunk_uniforms(seeds: Array, lane0: Array, size: int, k: int) -> list[Array]:
+    """``k`` rows of ``size`` uniforms; row ``j`` of lane ``l`` uses counter ``l * k + j``."""
+    lane = lane0 + jnp.arange(size, dtype=jnp.uint32)
+    return [prng.uniform(seeds, lane * jnp.uint32(k) + jnp.uint32(j)) for j in range(k)]
+
+
+def _outcomes_from_uniforms(robot, world: World, u, padding: float):
+    """Per-lane (both endpoints valid, blocked) of the candidate pairs drawn from uniforms.
+
+    ``u`` holds ``2 d`` rows (a list of ``(size,)`` arrays, or a ``(2 d, size)``
+    array) of uniforms in ``[0, 1)``: rows ``0..d-1`` place the start, rows
+    ``d..2d-1`` the goal in the robot's configuration box. Each row is scaled on
+    its own and the states are assembled coordinate-major, so XLA fuses the
+    generator, the validity and ``steer_to`` tests and the counting into one loop.
+    """
     d = robot.dim
     lo, hi = robot.config_bounds(world)
-    lane = lane0 + jnp.arange(size, dtype=jnp.uint32)
-    u = jnp.stack([prng.uniform(seeds, lane * jnp.uint32(2 * d) + jnp.uint32(j))
-                   for j in range(2 * d)])
-    lo2, hi2 = jnp.concatenate([lo, lo]), jnp.concatenate([hi, hi])
-    q = lo2[:, None] + u * (hi2 - lo2)[:, None]
-    a, b = q[:d], q[d:]
+    rows = [lo[j % d] + u[j] * (hi[j % d] - lo[j % d]) for j in range(2 * d)]
+    a, b = jnp.stack(rows[:d]), jnp.stack(rows[d:])
     both = is_valid_cm(robot, world, a, padding) & is_valid_cm(robot, world, b, padding)
     blocked = both & ~steer_to_cm(robot, world, a, b, padding)
     return both, blocked
 
 
-@functools.partial(jax.jit, static_argnames=("robot", "padding", "size"))
+def _lane_outcomes(robot, world: World, seeds: Array, lane0: Array, size: int, padding: float):
+    """Per-lane (both endpoints valid, blocked) for ``size`` candidate pairs of one chunk."""
+    u = _chunk_uniforms(seeds, lane0, size, 2 * robot.dim)
+    return _outcomes_from_uniforms(robot, world, u, padding)
+
+
+COUNT_ROWS = 64  # lanes are counted as (COUNT_ROWS, size / COUNT_ROWS) so XLA splits them over cores
+
+
+def count_outcomes(both: Array, blocked: Array) -> tuple[Array, Array]:
+    """``(sum(both), sum(blocked))`` as int32, in ONE pass over the lanes.
+
+    A variadic reduction lets XLA fuse the per-lane work into the reduction loop
+    (two separate ``jnp.sum`` calls recompute or materialise every lane); the
+    row split gives the loop an outer dimension that XLA runs on all CPU cores.
+    """
+    rows = math.gcd(both.shape[0], COUNT_ROWS)
+    v = both.astype(jnp.int32).reshape(rows, -1)
+    b = blocked.astype(jnp.int32).reshape(rows, -1)
+    zero = jnp.int32(0)
+    v, b = jax.lax.reduce((v, b), (zero, zero), lambda x, y: (x[0] + y[0], x[1] + y[1]), (1,))
+    return jnp.sum(v), jnp.sum(b)
+
+
+_gamma_jit = functools.partial(jax.jit, static_argnames=("robot", "padding", "size"),
+                               compiler_options=KERNEL_COMPILER_OPTIONS)
+
+
+@_gamma_jit
 def _gamma_chunk_counts(robot, world, seeds, padding: float, size: int):
-    both, blocked = _lane_outcomes(robot, world, seeds, jnp.uint32(0), size, padding)
-    return jnp.sum(both, dtype=jnp.int32), jnp.sum(blocked, dtype=jnp.int32)
+    return count_outcomes(*_lane_outcomes(robot, world, seeds, jnp.uint32(0), size, padding))
 
 
-@functools.partial(jax.jit, static_argnames=("robot", "padding", "size"))
+@_gamma_jit
 def _gamma_chunk_lanes(robot, world, seeds, padding: float, size: int):
     return _lane_outcomes(robot, world, seeds, jnp.uint32(0), size, padding)
 

@@ -6,7 +6,8 @@ kernels are vmapped over the minor axis, so XLA emits one fused elementwise loop
 over contiguous rows (the layout the kernels are fast in).
 
 The robot and the padding are static (hashable) arguments; the world is traced,
-so a different map with the same obstacle counts reuses the compiled code.
+so a different map with the same obstacle counts reuses the compiled code. The
+entry points compile with :data:`ntq_jax.geometry.KERNEL_COMPILER_OPTIONS`.
 """
 
 from __future__ import annotations
@@ -16,24 +17,26 @@ import functools
 import jax
 import jax.numpy as jnp
 
-from ntq_jax.geometry import World
+from ntq_jax.geometry import KERNEL_COMPILER_OPTIONS, World
 
 Array = jax.Array
 
+_kernel_jit = functools.partial(jax.jit, compiler_options=KERNEL_COMPILER_OPTIONS)
 
-@functools.partial(jax.jit, static_argnames=("robot", "padding"))
+
+@functools.partial(_kernel_jit, static_argnames=("robot", "padding"))
 def is_valid_batch(robot, world: World, states: Array, padding: float) -> Array:
     """``(N, d) -> (N,)`` bool."""
     return jax.vmap(robot.is_valid, in_axes=(1, None, None))(states.T, world, padding)
 
 
-@functools.partial(jax.jit, static_argnames=("robot", "padding"))
+@functools.partial(_kernel_jit, static_argnames=("robot", "padding"))
 def steer_to_batch(robot, world: World, a: Array, b: Array, padding: float) -> Array:
     """``(N, d), (N, d) -> (N,)`` bool, True where the connection is collision-free."""
     return jax.vmap(robot.steer_to, in_axes=(1, 1, None, None))(a.T, b.T, world, padding)
 
 
-@functools.partial(jax.jit, static_argnames=("robot",))
+@functools.partial(_kernel_jit, static_argnames=("robot",))
 def distance_batch(robot, a: Array, b: Array) -> Array:
     """``(N, d), (N, d) -> (N,)`` cost-metric distances."""
     return jax.vmap(robot.distance, in_axes=(1, 1))(a.T, b.T)

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 import ntq_jax as nj
-from ntq_jax.planners.ompl_bridge import (CRASHED, INVALID, NO_PATH, SOLVED, NumpyChecker,
-                                          plan_bitstar, query_seeds)
+from ntq_jax.planners.ompl_bridge import (CHECK_CHUNK, CRASHED, INVALID, NO_PATH, SOLVED,
+                                          NumpyChecker, plan_bitstar, query_seeds)
 
 needs_ompl = pytest.mark.skipif(importlib.util.find_spec("ompl") is None,
                                 reason="the PyPI package ompl is not installed")
@@ -128,8 +128,9 @@ def test_query_seeds_are_deterministic_and_positive():
 def _easy_queries(env, n_trivial, n_short, seed):
     """Random valid queries: ``n_trivial`` with a feasible straight connection, then the
     ``n_short`` shortest others (easy for BIT*, whatever the preset's obstacle layout)."""
-    q = np.stack([_valid_states(env, 64, seed), _valid_states(env, 64, seed + 100)], axis=1)
-    straight = np.asarray(env.steer_to(q[:, 0], q[:, 1]))  # 64 rows: plan_bitstar's bucket
+    q = np.stack([_valid_states(env, CHECK_CHUNK, seed),
+                  _valid_states(env, CHECK_CHUNK, seed + 100)], axis=1)
+    straight = np.asarray(env.steer_to(q[:, 0], q[:, 1]))  # the shape plan_bitstar compiles
     dist = np.asarray(env.distance(q[:, 0], q[:, 1]))
     trivial = np.flatnonzero(straight)[:n_trivial]
     others = np.flatnonzero(~straight)
@@ -157,7 +158,7 @@ def _check_result(env, queries, res, padding=None):
     a = np.concatenate([res.paths[i][:-1] for i in solved])
     b = np.concatenate([res.paths[i][1:] for i in solved])
     m = len(a)
-    fill = np.repeat(a[:1], max(64, m) - m, 0)  # the shapes plan_bitstar compiled already
+    fill = np.repeat(a[:1], max(CHECK_CHUNK, m) - m, 0)  # the shapes plan_bitstar compiled
     ok = np.asarray(env.steer_to(np.concatenate([a, fill]), np.concatenate([b, fill]),
                                  padding=pad))[:m]
     assert ok.all()
@@ -170,7 +171,8 @@ def _check_result(env, queries, res, padding=None):
     # BIT*'s own float64 length in OMPL's metric: the same metric as env.distance
     np.testing.assert_allclose(res.planner_costs[solved], costs, rtol=1e-5)
     # never shorter than the straight connection
-    direct = np.asarray(env.distance(queries[solved, 0], queries[solved, 1]), np.float64)
+    ch = NumpyChecker.from_env(env)
+    direct = np.array([ch.distance(queries[i, 0], queries[i, 1]) for i in solved])
     assert (costs >= direct - 1e-4).all()
 
 

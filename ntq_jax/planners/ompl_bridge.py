@@ -932,9 +932,7 @@ def plan_bitstar(env, queries, *, time_budget: float, padding: float | None = No
                             "n_valid_calls": 0, "n_motion_calls": 0, "errors": {}}
 
     # Invalid queries are decided here, with the package's own kernel (OMPL only warns).
-    states = q.reshape(2 * n, d)
-    filler = np.zeros((_bucket(2 * n) - 2 * n, d), np.float32)  # fixed shapes: no recompiles
-    ok = np.asarray(env.is_valid(np.concatenate([states, filler]), padding=pad))[:2 * n]
+    ok = _chunked(lambda x: env.is_valid(x, padding=pad), q.reshape(2 * n, d)).astype(bool)
     ok = ok.reshape(n, 2).all(axis=1)
     status[~ok] = INVALID
     todo = collections.deque(int(i) for i in np.flatnonzero(ok))
@@ -1093,9 +1091,21 @@ def _handle(w, msg, finish, paths, planner_costs, solve_times, info) -> None:
         info["errors"].setdefault("worker", msg[1])
 
 
-def _bucket(n: int) -> int:
-    """Pads batch sizes to powers of two (>= 64) so repeated calls reuse compiled kernels."""
-    return max(64, 1 << (max(n, 1) - 1).bit_length())
+#: Rows per call of the parent's jitted checks: every call has this shape, so each
+#: environment and padding compiles ``is_valid``, ``steer_to`` and ``distance`` once.
+CHECK_CHUNK = 256
+
+
+def _chunked(fn, *arrays) -> np.ndarray:
+    """``fn(*arrays)`` over rows in fixed-size chunks (the last one padded with row 0)."""
+    m = arrays[0].shape[0]
+    out = []
+    for lo in range(0, m, CHECK_CHUNK):
+        part = [x[lo:lo + CHECK_CHUNK] for x in arrays]
+        k = part[0].shape[0]
+        part = [np.concatenate([x, np.repeat(x[:1], CHECK_CHUNK - k, 0)]) for x in part]
+        out.append(np.asarray(fn(*part))[:k])
+    return np.concatenate(out) if out else np.zeros(0)
 
 
 def _check_paths(env, pad, q, status, paths, costs) -> None:
@@ -1109,11 +1119,8 @@ def _check_paths(env, pad, q, status, paths, costs) -> None:
         paths[i] = p
     a = np.concatenate([paths[i][:-1] for i in idx])
     b = np.concatenate([paths[i][1:] for i in idx])
-    m = a.shape[0]
-    filler = np.repeat(a[:1], _bucket(m) - m, 0)  # zero-length segments at a valid state
-    a, b = np.concatenate([a, filler]), np.concatenate([b, filler])
-    ok = np.asarray(env.steer_to(a, b, padding=pad))[:m]
-    dist = np.asarray(env.distance(a, b), np.float64)[:m]
+    ok = _chunked(lambda x, y: env.steer_to(x, y, padding=pad), a, b)
+    dist = _chunked(env.distance, a, b).astype(np.float64)
     pos = 0
     for i in idx:
         k = paths[i].shape[0] - 1

@@ -20,8 +20,8 @@ Geometry: BIT*'s notion of a valid state and a valid edge is the package's.
   kernels of :mod:`ntq_jax.geometry` (oriented rectangle, arm links and points
   against boxes and discs, with clearance ``padding``). The tests prove it
   equal to :meth:`ntq_jax.Env.is_valid` on random states (disagreements only at
-  float32 tangency). A jitted JAX call per state costs ~170-480 us from Python;
-  the port costs ~2-5 us.
+  float32 tangency). A jitted JAX call per state costs ~0.2-0.6 ms from Python;
+  the port ~2-8 us (``scripts/bench_bitstar.py``).
 * **Edges.** A Python ``ompl.base.MotionValidator`` subclass checks an edge with
   the discretised ``steer_to`` of :mod:`ntq_jax.robots.base` (states at
   ``t = k / n``, ``n = ceil(distance / robot.resolution)``, endpoints included;

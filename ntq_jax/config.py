@@ -153,6 +153,11 @@ class TrainConfig:
         learning_rate: step size.
         val_fraction: held-out fraction of each dataset's paths for validation.
         checkpoint_every: steps between checkpoints.
+        eval_every: steps between validation passes (0 = once per epoch of the
+            largest dataset).
+        steps_per_call: training steps fused into one compiled call (``lax.scan``);
+            checkpoints and validation happen between calls.
+        keep_checkpoints: how many recent checkpoints to keep.
     """
 
     epochs: int = 50
@@ -161,6 +166,9 @@ class TrainConfig:
     learning_rate: float = 0.01
     val_fraction: float = 0.1
     checkpoint_every: int = 500
+    eval_every: int = 0
+    steps_per_call: int = 20
+    keep_checkpoints: int = 2
 
     def validate(self, p: str):
         _check(self.epochs >= 1, f"{p}.epochs", f"must be >= 1, got {self.epochs}")
@@ -173,6 +181,11 @@ class TrainConfig:
                f"must be in [0, 1), got {self.val_fraction}")
         _check(self.checkpoint_every >= 1, f"{p}.checkpoint_every",
                f"must be >= 1, got {self.checkpoint_every}")
+        _check(self.eval_every >= 0, f"{p}.eval_every", f"must be >= 0, got {self.eval_every}")
+        _check(self.steps_per_call >= 1, f"{p}.steps_per_call",
+               f"must be >= 1, got {self.steps_per_call}")
+        _check(self.keep_checkpoints >= 1, f"{p}.keep_checkpoints",
+               f"must be >= 1, got {self.keep_checkpoints}")
 
 
 @dataclasses.dataclass(frozen=True)

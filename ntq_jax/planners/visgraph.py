@@ -1,0 +1,512 @@
+"""Visibility-graph shortest paths for a point robot: the point-robot cost reference.
+
+Usage::
+
+    graph = VisGraph.build(env, padding=0.0)   # once per environment and padding
+    res = graph.plan(queries)                  # queries (N, 2, 2): start, goal
+    res.costs, res.status, res.paths, res.path_lengths
+
+How it works
+------------
+*Per environment* (:meth:`VisGraph.build`): the graph nodes are the vertices
+of the obstacles (below), each pushed out by a tiny ``eps``, kept when they are
+valid states; every pair of nodes is tested for visibility with the package's
+one exact segment kernel (:func:`ntq_jax.robots.batch.steer_to_cm`, the kernel
+behind ``env.steer_to``, in both directions); all-pairs shortest paths and
+their node sequences (``routes``) are computed with scipy.
+
+*Per batch of queries* (:meth:`VisGraph.plan`, one jitted call per chunk):
+start and goal validity, start -> goal, start -> node and node -> goal
+visibility (``N x V`` segment checks, the same kernel), then
+
+    cost = min(|s - g| if s sees g,  min_i (|s - n_i| + min_j (D[i, j] + |n_j - g|)))
+
+with the inner minimum as one broadcast reduction ``(N, V, V)``; the path is
+``s, routes[i*, j*], g``. The selection runs in float32 (ties within ~1e-6
+relative may pick either path); the reported cost is the float64 sum of the
+returned path's segment lengths. Every segment of a returned path was checked
+by the exact kernel in the direction it is travelled, at the planning padding,
+with the very float32 coordinates that are returned, so
+``env.steer_to(path[:-1], path[1:], padding)`` holds on every solved path.
+
+What is exact and what is approximated
+--------------------------------------
+Let ``L*(p)`` be the true shortest length (infimum) among paths whose every
+point is farther than ``p`` from every obstacle (the package's collision
+definition) and ``L`` the returned cost. Always (every returned path is
+feasible): ``L >= L*(p)`` up to float rounding.
+
+* **Boxes at padding 0 (the evaluation geometry): exact up to eps.** The free
+  space is the workspace minus closed boxes; a shortest path bends only at box
+  corners. The nodes are the corners moved diagonally outwards by ``eps`` in
+  x and y (a path through a true corner touches the box, a collision under
+  the closed-set test). Each bend then moves by ``sqrt(2) eps``, so, with
+  ``k`` the number of bends of the optimal path,
+
+      L*(0) <= L <= L*(0) + 2 sqrt(2) eps k
+
+  (the first-order excess is at most ``2 eps`` per bend since a path turns by
+  at most 90 degrees at a box corner). This assumes general position at the
+  ``eps`` scale: gaps between obstacles wider than ``~2 eps`` and no visibility
+  decided within float32 rounding (``~1e-5`` on a 20 x 20 map); a gap narrower
+  than ``eps`` may be missed (then ``L`` is larger, or the query is reported
+  as having no path). Default ``eps = 5e-5 x`` the workspace extent (1e-3 on
+  the 20 x 20 presets: at most 0.0028 per bend).
+* **Curved boundaries (discs, and box corners when padding p > 0):
+  circumscribed polygons.** The free-space boundary there is a circular arc of
+  radius ``R`` (``R = p`` around a box corner, ``r + p`` around a disc), which
+  the true shortest path wraps. Each arc is replaced by its circumscribed
+  polygon: tangent lines every ``beta <= arc_step`` radians (a box corner's
+  quarter turn is split into ``ceil((pi/2) / arc_step)`` equal steps, a disc
+  into ``m = ceil(2 pi / arc_step)``), whose vertices at radius
+  ``R / cos(beta / 2)`` (plus ``eps``) are the nodes. Visibility is still
+  decided against the TRUE padded obstacles, so paths stay feasible. The
+  polygons lie inside the obstacles grown by ``delta = R (1 / cos(beta/2) - 1)``
+  (``graph.delta``; 0.0157 for p = 0.8 and the default ``arc_step = pi/8``),
+  so
+
+      L*(p) <= L <= L*_delta + 2 sqrt(2) eps k
+
+  where ``L*_delta`` is the exact optimum with the box corners rounded at
+  radius ``p / cos(beta/2)`` and the disc radii ``(r + p) / cos(pi/m) - p``.
+  The excess is small unless ``delta`` closes a passage (then the query may
+  come back longer, or as having no path). Smaller ``arc_step`` tightens the
+  bound at the price of more nodes (``4 ceil(pi/2 / arc_step)`` per box).
+
+Statuses: ``SOLVED = 0``, ``NO_PATH = 1`` (no path in the graph: unreachable,
+see above for approximations), ``INVALID = 2`` (start or goal not a valid
+state at the planning padding, or not finite). Unsolved queries have
+``cost = inf``, ``path_length = 0`` and an all-NaN path row.
+
+Cost per query: ``2 V`` segment checks (each against every obstacle) and a
+``V x V`` min-plus reduction; ``V`` = number of nodes (4 per box at padding 0).
+:func:`benchmark_visgraph` measures the throughput.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from scipy.sparse.csgraph import shortest_path
+
+from ntq_jax.geometry import KERNEL_COMPILER_OPTIONS, World
+from ntq_jax.robots.batch import is_valid_cm, steer_to_cm
+
+Array = jax.Array
+
+SOLVED, NO_PATH, INVALID = 0, 1, 2
+STATUS_NAMES = {SOLVED: "solved", NO_PATH: "no_path", INVALID: "invalid"}
+
+#: Default node offset, relative to the workspace's larger side.
+DEFAULT_EPS_REL = 5e-5
+#: Default largest angle (radians) between consecutive tangents of an arc's circumscribed polygon.
+DEFAULT_ARC_STEP = math.pi / 8
+#: The node count is padded to a multiple of this in :meth:`VisGraph.plan` (fewer recompilations).
+NODE_PAD = 8
+
+
+# ---------------------------------------------------------------------------
+# Graph construction (once per environment)
+# ---------------------------------------------------------------------------
+
+def obstacle_vertices(world: World, padding: float, eps: float,
+                      arc_step: float = DEFAULT_ARC_STEP) -> np.ndarray:
+    """Candidate graph nodes: obstacle vertices pushed outwards by ``eps`` (float64 ``(M, 2)``).
+
+    Box corners at ``padding == 0``: ``corner + eps (sx, sy)`` with ``(sx, sy)``
+    the corner's outward diagonal signs. With ``padding > 0`` each box corner
+    is a quarter arc of radius ``padding``; discs are full arcs of radius
+    ``r + padding``. An arc becomes the vertices of its circumscribed polygon
+    (see the module docstring), each moved radially outwards by ``eps``. No
+    validity filtering is done here.
+
+    Args:
+        world: the obstacles.
+        padding: clearance (``>= 0``).
+        eps: outward offset of every node (``> 0``).
+        arc_step: largest angle between consecutive tangent lines of an arc.
+
+    Returns:
+        ``(M, 2)`` float64 candidate nodes, boxes first (corner by corner), then discs.
+    """
+    boxes = np.asarray(world.boxes, np.float64).reshape(-1, 4)
+    discs = np.asarray(world.discs, np.float64).reshape(-1, 3)
+    out = []
+    corner_signs = np.array([(1, 1), (-1, 1), (-1, -1), (1, -1)], np.float64)  # quadrants 0..3
+    for cx, cy, hw, hh in boxes:
+        for q, (sx, sy) in enumerate(corner_signs):
+            corner = np.array([cx + sx * hw, cy + sy * hh])
+            if padding == 0.0:
+                out.append(corner[None] + eps * np.array([[sx, sy]]))
+            else:
+                m = max(1, math.ceil((math.pi / 2) / arc_step - 1e-9))
+                beta = (math.pi / 2) / m
+                ang = q * (math.pi / 2) + (np.arange(m) + 0.5) * beta
+                rad = padding / math.cos(beta / 2) + eps
+                out.append(corner[None] + rad * np.stack([np.cos(ang), np.sin(ang)], 1))
+    for cx, cy, r in discs:
+        m = max(3, math.ceil(2 * math.pi / arc_step - 1e-9))
+        beta = 2 * math.pi / m
+        ang = (np.arange(m) + 0.5) * beta
+        rad = (r + padding) / math.cos(beta / 2) + eps
+        out.append(np.array([[cx, cy]]) + rad * np.stack([np.cos(ang), np.sin(ang)], 1))
+    return np.concatenate(out, 0) if out else np.zeros((0, 2))
+
+
+def _routes(pred: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Node sequences of all shortest paths from a scipy predecessor matrix.
+
+    Args:
+        pred: ``(V, V)`` int, ``pred[i, j]`` = node before ``j`` on the path from
+            ``i`` (``-9999`` when none, as scipy returns).
+
+    Returns:
+        ``routes (V, V, R)`` int32: ``routes[i, j, :route_len[i, j]]`` is ``i, ..., j``
+        (padded by repeating ``j``), and ``route_len (V, V)`` int32 (0 if unreachable).
+    """
+    v = pred.shape[0]
+    ii, jj = np.meshgrid(np.arange(v), np.arange(v), indexing="ij")
+    reach = (pred >= 0) | (ii == jj)
+    back = [jj.copy()]  # walk j -> i backwards along the predecessors
+    cur = jj.copy()
+    for _ in range(v):
+        active = reach & (cur != ii)
+        if not active.any():
+            break
+        cur = np.where(active, pred[ii, np.maximum(cur, 0)], cur)
+        back.append(cur.copy())
+    back = np.stack(back, -1)  # (V, V, S): j, pred(j), ..., i, i, ...
+    length = np.where(reach, 1 + np.sum(back[..., 1:] != back[..., :-1], -1), 0)
+    r = max(int(length.max(initial=1)), 1)
+    routes = np.empty((v, v, r), np.int32)
+    k = np.arange(r)
+    # routes[..., k] = back[..., length - 1 - k] for k < length, else j
+    src = np.clip(length[..., None] - 1 - k, 0, back.shape[-1] - 1)
+    routes[:] = np.where(k < length[..., None], np.take_along_axis(back, src, -1), jj[..., None])
+    return routes, length.astype(np.int32)
+
+
+@functools.partial(jax.jit, static_argnames=("robot", "padding"),
+                   compiler_options=KERNEL_COMPILER_OPTIONS)
+def _pair_visibility(robot, world: World, a_cm: Array, b_cm: Array, padding: float) -> Array:
+    return steer_to_cm(robot, world, a_cm, b_cm, padding)
+
+
+@functools.partial(jax.jit, static_argnames=("robot", "padding"),
+                   compiler_options=KERNEL_COMPILER_OPTIONS)
+def _points_valid(robot, world: World, p_cm: Array, padding: float) -> Array:
+    return is_valid_cm(robot, world, p_cm, padding)
+
+
+def _bucket(n: int) -> int:
+    """Pads batch sizes to powers of two (>= 64) so repeated calls reuse compiled kernels."""
+    return max(64, 1 << (max(n, 1) - 1).bit_length())
+
+
+def _padded_call(fn, env, padding: float, *points: np.ndarray) -> np.ndarray:
+    """Calls a jitted ``fn(robot, world, *points_cm, padding)`` on ``(M, 2)`` arrays padded to a bucket."""
+    m = len(points[0])
+    size = _bucket(m)
+    cms = []
+    for p in points:
+        buf = np.zeros((2, size), np.float32)
+        buf[:, :m] = p.T
+        cms.append(jnp.asarray(buf))
+    return np.asarray(fn(env.robot, env.world, *cms, padding))[:m]
+
+
+# ---------------------------------------------------------------------------
+# Queries (jitted, one call per chunk)
+# ---------------------------------------------------------------------------
+
+@functools.partial(jax.jit, static_argnames=("robot", "padding"),
+                   compiler_options=KERNEL_COMPILER_OPTIONS)
+def _solve(robot, world: World, nodes_cm: Array, dist: Array, routes: Array, route_len: Array,
+           s_cm: Array, g_cm: Array, padding: float):
+    """Plans a chunk of queries: statuses, first / last graph nodes and the assembled paths.
+
+    Args:
+        robot, world, padding: the geometry (``padding`` static).
+        nodes_cm: ``(2, V)`` float32 nodes (NaN padding nodes are never visible).
+        dist: ``(V, V)`` float32 all-pairs lengths; ``routes (V, V, R)`` int32 and
+            ``route_len (V, V)`` int32 as in :class:`VisGraph`.
+        s_cm, g_cm: ``(2, N)`` float32 starts and goals.
+
+    Returns:
+        ``status (N,)`` int8, ``via (N,)`` bool (the path uses graph nodes),
+        ``first, last (N,)`` int32 its first and last node, ``length (N,)`` int32
+        waypoint counts and ``paths (N, R + 2, 2)`` float32 NaN-padded.
+    """
+    n, v = s_cm.shape[1], nodes_cm.shape[1]
+    valid = is_valid_cm(robot, world, s_cm, padding) & is_valid_cm(robot, world, g_cm, padding)
+    direct = steer_to_cm(robot, world, s_cm, g_cm, padding)
+    # every (query, node) pair as one flat coordinate-major batch for the shared kernel
+    nodes_b = jnp.broadcast_to(nodes_cm[:, None, :], (2, n, v)).reshape(2, n * v)
+    s_b = jnp.broadcast_to(s_cm[:, :, None], (2, n, v)).reshape(2, n * v)
+    g_b = jnp.broadcast_to(g_cm[:, :, None], (2, n, v)).reshape(2, n * v)
+    see_s = steer_to_cm(robot, world, s_b, nodes_b, padding).reshape(n, v)  # s -> node
+    see_g = steer_to_cm(robot, world, nodes_b, g_b, padding).reshape(n, v)  # node -> g
+    dsx, dsy = nodes_cm[0][None] - s_cm[0][:, None], nodes_cm[1][None] - s_cm[1][:, None]
+    dgx, dgy = nodes_cm[0][None] - g_cm[0][:, None], nodes_cm[1][None] - g_cm[1][:, None]
+    ds = jnp.where(see_s, jnp.sqrt(dsx * dsx + dsy * dsy), jnp.inf)  # (N, V)
+    dg = jnp.where(see_g, jnp.sqrt(dgx * dgx + dgy * dgy), jnp.inf)
+    # materialise: otherwise XLA fuses the segment kernel into the (N, V, V) reduction below
+    # and evaluates it V times per pair (measured 10x slower at padding 0.8)
+    ds, dg = jax.lax.optimization_barrier((ds, dg))
+    to_goal = jnp.min(dist[None, :, :] + dg[:, None, :], axis=2)  # (N, V): node i -> g
+    total = ds + to_goal
+    first = jnp.argmin(total, axis=1).astype(jnp.int32)
+    last = jnp.argmin(dist[first] + dg, axis=1).astype(jnp.int32)
+    via = valid & ~direct & jnp.isfinite(jnp.min(total, axis=1))
+    solved = valid & (direct | via)
+    status = jnp.where(~valid, INVALID, jnp.where(solved, SOLVED, NO_PATH)).astype(jnp.int8)
+    inner = jnp.where(via, route_len[first, last], 0)
+    length = jnp.where(solved, inner + 2, 0)
+    # waypoint k: 0 -> start, 1..inner -> route nodes, inner + 1 -> goal, then NaN
+    seq = routes[first, last]  # (N, R)
+    k = jnp.arange(routes.shape[-1] + 2)[None, :]
+    coords = []
+    for d in range(2):
+        pts = nodes_cm[d][seq]
+        pts = jnp.concatenate([pts[:, :1], pts, pts[:, :1]], axis=1)  # aligned with k
+        c = jnp.where(k == 0, s_cm[d][:, None],
+                      jnp.where(k <= inner[:, None], pts,
+                                jnp.where(k == inner[:, None] + 1, g_cm[d][:, None], jnp.nan)))
+        coords.append(jnp.where(solved[:, None], c, jnp.nan))
+    return status, via, first, last, length, jnp.stack(coords, axis=-1)
+
+
+# ---------------------------------------------------------------------------
+# Public API
+# ---------------------------------------------------------------------------
+
+@dataclasses.dataclass(frozen=True)
+class VisGraphResult:
+    """Per-query results of :meth:`VisGraph.plan` (N queries).
+
+    Attributes:
+        paths: ``(N, L, 2)`` float32 waypoints, start first and goal last (exactly
+            the query's float32 start and goal), NaN after ``path_lengths[i]`` rows.
+        path_lengths: ``(N,)`` int32 number of waypoints (``>= 2`` if solved, else 0).
+        costs: ``(N,)`` float64 sum of the path's segment lengths; ``inf`` unless solved.
+        status: ``(N,)`` int8: :data:`SOLVED` 0, :data:`NO_PATH` 1, :data:`INVALID` 2.
+    """
+
+    paths: np.ndarray
+    path_lengths: np.ndarray
+    costs: np.ndarray
+    status: np.ndarray
+
+    @property
+    def solved(self) -> np.ndarray:
+        return self.status == SOLVED
+
+    def path(self, i: int) -> np.ndarray | None:
+        """Query ``i``'s path ``(L_i, 2)``, or None unless solved."""
+        return self.paths[i, :self.path_lengths[i]] if self.status[i] == SOLVED else None
+
+    def path_list(self) -> list:
+        """All paths as a list of ``(L_i, 2)`` arrays (None for unsolved queries)."""
+        return [self.path(i) for i in range(len(self.status))]
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class VisGraph:
+    """A visibility graph of one environment at one padding (build with :meth:`build`).
+
+    Attributes:
+        robot: the (point) robot, ``world``: the obstacles, ``padding``: the planning clearance.
+        eps: the outward node offset; ``arc_step``: the arc polygon step (radians).
+        delta: largest distance by which the circumscribed arc polygons stick out
+            of the true padded obstacles (0 when the graph is exact up to ``eps``).
+        nodes: ``(V, 2)`` float32 valid nodes (the coordinates every check used).
+        visible: ``(V, V)`` bool, the segment between two nodes is free (both directions).
+        dist: ``(V, V)`` float64 all-pairs shortest lengths (``inf`` if disconnected).
+        routes: ``(V, V, R)`` int32 node sequences ``i .. j`` (padded with ``j``);
+            ``route_len``: ``(V, V)`` int32 their lengths (0 if disconnected).
+    """
+
+    robot: object
+    world: World
+    padding: float
+    eps: float
+    arc_step: float
+    delta: float
+    nodes: np.ndarray
+    visible: np.ndarray
+    dist: np.ndarray
+    routes: np.ndarray
+    route_len: np.ndarray
+
+    @property
+    def exact(self) -> bool:
+        """True when the graph is exact up to the ``eps`` node offset (boxes only, padding 0)."""
+        return self.delta == 0.0
+
+    @property
+    def num_nodes(self) -> int:
+        return int(self.nodes.shape[0])
+
+    @staticmethod
+    def build(env, padding: float | None = None, *, eps: float | None = None,
+              arc_step: float = DEFAULT_ARC_STEP) -> "VisGraph":
+        """Builds the graph of ``env`` (a point-robot :class:`ntq_jax.Env`).
+
+        Args:
+            env: the environment; its robot must be a point robot.
+            padding: clearance; ``None`` is the environment's own padding (the
+                data-generation geometry), ``0.0`` the evaluation geometry (exact).
+            eps: node offset (default ``5e-5 x`` the workspace's larger side).
+            arc_step: largest tangent step (radians) of the arc polygons.
+
+        Raises:
+            ValueError: not a point robot, or bad ``eps`` / ``arc_step``.
+        """
+        if env.robot.kind != "point":
+            raise ValueError(f"the visibility graph plans for a point robot, got {env.robot.kind!r}")
+        pad = env._pad(padding)
+        bounds = np.asarray(env.world.bounds, np.float64)
+        if eps is None:
+            eps = DEFAULT_EPS_REL * float(np.max(bounds[:, 1] - bounds[:, 0]))
+        if not (math.isfinite(eps) and eps > 0):
+            raise ValueError(f"eps must be > 0, got {eps!r}")
+        if not (0 < arc_step <= math.pi / 2):
+            raise ValueError(f"arc_step must be in (0, pi/2], got {arc_step!r}")
+        cand = obstacle_vertices(env.world, pad, eps, arc_step).astype(np.float32)
+        if len(cand):
+            keep = _padded_call(_points_valid, env, pad, cand)
+            cand = np.unique(cand[keep], axis=0)  # coincident corners: one node
+        nodes = np.ascontiguousarray(cand)
+        v = len(nodes)
+        ii, jj = np.triu_indices(v, 1)
+        visible = np.zeros((v, v), bool)
+        if len(ii):
+            vis = (_padded_call(_pair_visibility, env, pad, nodes[ii], nodes[jj])
+                   & _padded_call(_pair_visibility, env, pad, nodes[jj], nodes[ii]))
+            visible[ii, jj] = visible[jj, ii] = vis
+        n64 = nodes.astype(np.float64)
+        edge = np.linalg.norm(n64[:, None] - n64[None], axis=-1)
+        weights = np.where(visible, edge, 0.0)  # 0 = no edge for scipy's dense input
+        if v:
+            dist, pred = shortest_path(weights, method="D", directed=False,
+                                       return_predecessors=True)
+        else:
+            dist, pred = np.zeros((0, 0)), np.zeros((0, 0), np.int32)
+        routes, route_len = _routes(pred)
+        delta = 0.0
+        if pad > 0 and env.world.num_boxes:
+            m = max(1, math.ceil((math.pi / 2) / arc_step - 1e-9))
+            delta = pad * (1 / math.cos((math.pi / 2) / m / 2) - 1)
+        if env.world.num_discs:
+            m = max(3, math.ceil(2 * math.pi / arc_step - 1e-9))
+            r_max = float(np.max(np.asarray(env.world.discs)[:, 2])) + pad
+            delta = max(delta, r_max * (1 / math.cos(math.pi / m) - 1))
+        return VisGraph(env.robot, env.world, pad, float(eps), float(arc_step), float(delta),
+                        nodes, visible, dist, routes, route_len)
+
+    def plan(self, queries, *, chunk_size: int = 8192) -> VisGraphResult:
+        """Shortest paths for a batch of queries.
+
+        Args:
+            queries: ``(N, 2, 2)`` (start, goal) points; cast to float32.
+            chunk_size: queries per jitted call (batches are padded to a power
+                of two up to this size, so repeated calls reuse the compiled code).
+
+        Returns:
+            A :class:`VisGraphResult`.
+        """
+        q = np.asarray(queries, np.float32)
+        if q.ndim != 3 or q.shape[1:] != (2, 2):
+            raise ValueError(f"queries must have shape (N, 2, 2), got {q.shape}")
+        n = q.shape[0]
+        v = self.num_nodes
+        # Pad the node set to a multiple of NODE_PAD with NaN nodes (never visible), so maps
+        # with similar node counts share the compiled code.
+        vp = max(NODE_PAD, -(-v // NODE_PAD) * NODE_PAD)
+        r = self.routes.shape[-1] if v else 1
+        nodes_cm = np.full((2, vp), np.nan, np.float32)
+        nodes_cm[:, :v] = self.nodes.T
+        dist32 = np.full((vp, vp), np.inf, np.float32)
+        dist32[:v, :v] = self.dist
+        routes = np.zeros((vp, vp, r), np.int32)
+        routes[:v, :v] = self.routes
+        route_len = np.zeros((vp, vp), np.int32)
+        route_len[:v, :v] = self.route_len
+        graph = [jnp.asarray(a) for a in (nodes_cm, dist32, routes, route_len)]
+        status = np.zeros(n, np.int8)
+        via = np.zeros(n, bool)
+        first = np.zeros(n, np.int32)
+        last = np.zeros(n, np.int32)
+        length = np.zeros(n, np.int32)
+        paths = np.empty((n, r + 2, 2), np.float32)
+        size = _bucket(min(n, chunk_size))
+        for lo in range(0, n, size):
+            hi = min(lo + size, n)
+            part = np.zeros((size, 2, 2), np.float32)
+            part[: hi - lo] = q[lo:hi]
+            out = _solve(self.robot, self.world, *graph, jnp.asarray(part[:, 0].T),
+                         jnp.asarray(part[:, 1].T), self.padding)
+            for dst, src in zip((status, via, first, last, length, paths), out):
+                dst[lo:hi] = np.asarray(src)[: hi - lo]
+        # float64 costs: |s - n_first| + dist[first, last] + |n_last - g|, or |s - g|
+        s64, g64 = q[:, 0].astype(np.float64), q[:, 1].astype(np.float64)
+        costs = np.linalg.norm(g64 - s64, axis=1)
+        if v:
+            nodes64 = self.nodes.astype(np.float64)
+            f, l = np.where(via, first, 0), np.where(via, last, 0)
+            graph_cost = (np.linalg.norm(nodes64[f] - s64, axis=1) + self.dist[f, l]
+                          + np.linalg.norm(g64 - nodes64[l], axis=1))
+            costs = np.where(via, graph_cost, costs)
+        costs = np.where(status == SOLVED, costs, np.inf)
+        return VisGraphResult(paths, length, costs, status)
+
+
+def plan_visgraph(env, queries, *, padding: float | None = None, **build_options) -> VisGraphResult:
+    """One-shot helper: ``VisGraph.build(env, padding, **build_options).plan(queries)``."""
+    return VisGraph.build(env, padding, **build_options).plan(queries)
+
+
+# ---------------------------------------------------------------------------
+# Throughput measurement
+# ---------------------------------------------------------------------------
+
+def benchmark_visgraph(env, n: int = 100_000, *, padding: float = 0.0, seed: int = 0,
+                       repeats: int = 3, **build_options) -> dict:
+    """Measures build time and planning throughput (costs and paths) on ``n`` uniform queries.
+
+    Starts and goals are drawn uniformly among valid states (``env.sample_states``).
+    The first :meth:`VisGraph.plan` call (compilation) is not timed; the best of
+    ``repeats`` timed calls is reported.
+
+    Returns:
+        A dict: ``env``, ``padding``, ``nodes``, ``build_s``, ``n``, ``plan_s``,
+        ``queries_per_s``, ``solved`` (fraction), ``direct`` (fraction of 2-point paths),
+        ``devices`` (JAX CPU device count).
+    """
+    key = jax.random.PRNGKey(seed)
+    k1, k2 = jax.random.split(key)
+    pad = env._pad(padding)
+    q = np.stack([env.sample_states(k1, n, pad), env.sample_states(k2, n, pad)], 1)
+    t0 = time.perf_counter()
+    graph = VisGraph.build(env, pad, **build_options)
+    build_s = time.perf_counter() - t0
+    res = graph.plan(q)  # compile
+    best = math.inf
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        res = graph.plan(q)
+        best = min(best, time.perf_counter() - t0)
+    return {"env": env.name, "padding": pad, "nodes": graph.num_nodes, "build_s": build_s,
+            "n": n, "plan_s": best, "queries_per_s": n / best,
+            "solved": float(np.mean(res.solved)),
+            "direct": float(np.mean(res.path_lengths == 2)), "devices": jax.device_count()}
+
+
+__all__ = ["VisGraph", "VisGraphResult", "plan_visgraph", "obstacle_vertices",
+           "benchmark_visgraph", "SOLVED", "NO_PATH", "INVALID", "STATUS_NAMES"]

@@ -66,6 +66,24 @@ def _paper_datasets() -> tuple[DatasetSpec, ...]:
 
 
 @dataclasses.dataclass(frozen=True)
+class DataEnvOverride:
+    """Per-environment data settings (e.g. the paper's 3000/4000/5000 queries for 2/4/6 links).
+
+    Attributes:
+        env: the environment name exactly as listed in ``envs``.
+        k_train: queries per dataset for this environment (``None`` = ``data.k_train``).
+    """
+
+    env: str
+    k_train: Optional[int] = None
+
+    def validate(self, p: str):
+        _check(bool(self.env), f"{p}.env", "must name an environment")
+        _check(self.k_train is None or self.k_train >= 1, f"{p}.k_train",
+               f"must be >= 1 or null, got {self.k_train}")
+
+
+@dataclasses.dataclass(frozen=True)
 class DataConfig:
     """Dataset generation (Alg. 2 and 4).
 
@@ -75,12 +93,17 @@ class DataConfig:
         prune_padding: padding of the pruning steer_to; ``None`` = the environment's
             (the paper prunes on the data-generation geometry).
         chunk: queries per chunk written to disk (resumable unit).
+        gamma_queries: uniform queries used to estimate gamma_nt for the metadata
+            (at the data-generation padding and at padding 0).
+        per_env: per-environment overrides (:class:`DataEnvOverride`).
     """
 
     k_train: int = 3000
     datasets: tuple[DatasetSpec, ...] = dataclasses.field(default_factory=_paper_datasets)
     prune_padding: Optional[float] = None
     chunk: int = 500
+    gamma_queries: int = 1_000_000
+    per_env: tuple[DataEnvOverride, ...] = ()
 
     def validate(self, p: str):
         _check(self.k_train >= 1, f"{p}.k_train", f"must be >= 1, got {self.k_train}")
@@ -90,6 +113,40 @@ class DataConfig:
         _check(self.prune_padding is None or self.prune_padding >= 0, f"{p}.prune_padding",
                f"must be >= 0 or null, got {self.prune_padding}")
         _check(self.chunk >= 1, f"{p}.chunk", f"must be >= 1, got {self.chunk}")
+        _check(self.gamma_queries >= 1, f"{p}.gamma_queries",
+               f"must be >= 1, got {self.gamma_queries}")
+        for i, o in enumerate(self.per_env):
+            o.validate(f"{p}.per_env[{i}]")
+        names = [o.env for o in self.per_env]
+        _check(len(set(names)) == len(names), f"{p}.per_env", f"lists an environment twice: {names}")
+
+    def k_train_for(self, env: str) -> int:
+        """Queries per dataset for ``env`` (its override, else ``k_train``)."""
+        for o in self.per_env:
+            if o.env == env and o.k_train is not None:
+                return o.k_train
+        return self.k_train
+
+
+@dataclasses.dataclass(frozen=True)
+class PlannerEnvOverride:
+    """Per-environment planner budgets (the paper: BIT* 2/4/6 s data, 1/2/4 s eval for 2/4/6 links).
+
+    Attributes:
+        env: the environment name exactly as listed in ``envs``.
+        time_budget: BIT* seconds per query for data (``None`` = ``planner.time_budget``).
+        eval_time_budget: BIT* seconds at evaluation (``None`` = ``planner.eval_time_budget``).
+    """
+
+    env: str
+    time_budget: Optional[float] = None
+    eval_time_budget: Optional[float] = None
+
+    def validate(self, p: str):
+        _check(bool(self.env), f"{p}.env", "must name an environment")
+        for k in ("time_budget", "eval_time_budget"):
+            v = getattr(self, k)
+            _check(v is None or v > 0, f"{p}.{k}", f"must be > 0 or null, got {v}")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -102,6 +159,8 @@ class PlannerConfig:
         time_budget: BIT* seconds per query during data generation.
         eval_time_budget: BIT* seconds per query at evaluation.
         workers: BIT* worker processes (0 = number of cores).
+        per_env: per-environment budgets (:class:`PlannerEnvOverride`); read them
+            with :meth:`time_budget_for` / :meth:`eval_time_budget_for`.
     """
 
     name: str = "astar"
@@ -109,6 +168,7 @@ class PlannerConfig:
     time_budget: float = 3.0
     eval_time_budget: float = 2.0
     workers: int = 0
+    per_env: tuple[PlannerEnvOverride, ...] = ()
 
     def validate(self, p: str):
         _check(self.name in ("astar", "visgraph", "bitstar"), f"{p}.name",
@@ -118,6 +178,24 @@ class PlannerConfig:
         _check(self.eval_time_budget > 0, f"{p}.eval_time_budget",
                f"must be > 0, got {self.eval_time_budget}")
         _check(self.workers >= 0, f"{p}.workers", f"must be >= 0, got {self.workers}")
+        for i, o in enumerate(self.per_env):
+            o.validate(f"{p}.per_env[{i}]")
+        names = [o.env for o in self.per_env]
+        _check(len(set(names)) == len(names), f"{p}.per_env", f"lists an environment twice: {names}")
+
+    def _for(self, env: str, key: str) -> float:
+        for o in self.per_env:
+            if o.env == env and getattr(o, key) is not None:
+                return getattr(o, key)
+        return getattr(self, key)
+
+    def time_budget_for(self, env: str) -> float:
+        """BIT* data-generation seconds per query for ``env``."""
+        return self._for(env, "time_budget")
+
+    def eval_time_budget_for(self, env: str) -> float:
+        """BIT* evaluation seconds per query for ``env``."""
+        return self._for(env, "eval_time_budget")
 
 
 @dataclasses.dataclass(frozen=True)

@@ -1,0 +1,481 @@
+"""The neural planner of the paper (Alg. 1, after MPNet), batched over queries.
+
+One implementation serves every robot: it only needs the robot's kernels
+(:func:`ntq_jax.robots.batch.steer_to_cm`, ``is_valid_cm``, ``distance``) and a
+generic planning network::
+
+    pnet(key, current (N, d), goal (N, d)) -> next (N, d)
+
+(pure and jittable; ``key`` drives dropout, MPNet's source of randomness).
+
+Usage::
+
+    opts = PlannerOptions(n_plan=50, replan_rounds=5)
+    res = plan_batch(env, pnet, queries, jax.random.key(0), opts)
+    res.paths, res.lengths, res.success, res.costs, res.cause
+
+How a batch is planned
+----------------------
+All N queries step together inside one jitted call (``lax.while_loop`` over
+steps with per-query masks, fixed shapes; the loop exits early once every query
+is decided). Batches are padded to a power of two so repeated calls reuse the
+compiled code; ``pnet`` is passed as a pytree (:class:`jax.tree_util.Partial`),
+so two PNets that share the same apply function and parameter shapes share one
+compilation.
+
+1. **Coarse plan** (Alg. 1, lines 2-9): for ``n_plan`` iterations, if
+   ``steerTo(pi_end, goal)`` append the goal and stop, else append
+   ``PNet(pi_end, goal)``. With ``bidirectional=True`` (MPNet's variant) two
+   paths grow alternately from the start and from the goal, each predicting
+   towards the other's end, until their ends connect by ``steerTo``
+   (``n_plan`` predictions in all).
+   **Without steerTo** (``steer=False``, Section V): only PNet steps; stop as
+   soon as ``||pi_end - goal||_2 <= delta``. The goal is not appended (no
+   steering function to connect it), so the path ends within ``delta`` of it.
+2. **Lazy states contraction** (MPNet): from each kept state jump to the
+   farthest later state it can ``steerTo``; greedy farthest-first, which is
+   what MPNet's recursive contraction computes.
+3. **Feasibility** on the evaluation geometry (``eval_padding``, 0 by
+   default): every segment checked by the exact / discretised ``steer_to``.
+4. **Neural replanning** (MPNet), at most ``replan_rounds`` rounds while a path
+   is infeasible: take the first blocked segment ``(p_k, p_k+1)``, widened to
+   the nearest states that are not in collision (MPNet drops the states in
+   collision first), connect its ends with the bidirectional neural connection
+   (at most ``replan_steps`` predictions), splice the new states in, contract,
+   re-check. MPNet repairs every blocked segment in one pass; here one segment
+   per path per round keeps the shapes fixed (the round count bounds the
+   repairs). A connection that fails leaves the path unchanged; the next round
+   draws new dropout masks.
+
+The variant without steerTo has no contraction and no replanning (both need
+the steering function); its paths are still checked for collisions, and only
+collision-free ones count as successes.
+
+The ``plan_padding`` (default 0) is the clearance of the planner's own
+``steerTo`` calls; feasibility is always judged at ``eval_padding``.
+
+Failure causes (:data:`CAUSES`): ``SUCCESS`` 0; ``NO_PATH`` 1 (goal not
+reached within ``n_plan``; Alg. 1 returns the empty path); ``INFEASIBLE`` 2
+(reached but still in collision after replanning); ``INVALID_QUERY`` 3 (start
+or goal not a valid state on the evaluation geometry, or not finite).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from typing import Callable
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.tree_util import Partial
+
+from ntq_jax.robots.batch import is_valid_cm, steer_to_cm
+
+Array = jax.Array
+
+SUCCESS, NO_PATH, INFEASIBLE, INVALID_QUERY = 0, 1, 2, 3
+CAUSES = {SUCCESS: "success", NO_PATH: "no_path", INFEASIBLE: "infeasible",
+          INVALID_QUERY: "invalid_query"}
+
+
+@dataclasses.dataclass(frozen=True)
+class PlannerOptions:
+    """Static settings of the neural planner (hashable: part of the compile key).
+
+    Attributes:
+        n_plan: PNet iterations of the coarse plan (``N_plan`` of Alg. 1).
+        steer: use ``steerTo`` (Alg. 1); False is the paper's variant without it.
+        delta: goal tolerance of the variant without steerTo (``||.||_2`` in state space).
+        replan_rounds: neural replanning rounds (0 disables replanning).
+        replan_steps: PNet predictions per repaired segment.
+        bidirectional: MPNet's bidirectional coarse plan instead of Alg. 1's forward one.
+        contract: lazy states contraction after the coarse plan and after each repair.
+        plan_padding: clearance of the planner's own steerTo calls.
+        eval_padding: clearance of the feasibility check (0 = the evaluation geometry).
+    """
+
+    n_plan: int = 50
+    steer: bool = True
+    delta: float = 1.0
+    replan_rounds: int = 5
+    replan_steps: int = 20
+    bidirectional: bool = False
+    contract: bool = True
+    plan_padding: float = 0.0
+    eval_padding: float = 0.0
+
+    def __post_init__(self):
+        if self.n_plan < 1:
+            raise ValueError(f"n_plan must be >= 1, got {self.n_plan}")
+        if not (self.delta > 0 and math.isfinite(self.delta)):
+            raise ValueError(f"delta must be > 0, got {self.delta}")
+        if self.replan_rounds < 0 or self.replan_steps < 1:
+            raise ValueError("replan_rounds must be >= 0 and replan_steps >= 1, got "
+                             f"{self.replan_rounds}, {self.replan_steps}")
+        for name in ("plan_padding", "eval_padding"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0):
+                raise ValueError(f"{name} must be a finite number >= 0, got {v}")
+
+    @property
+    def max_len(self) -> int:
+        """Rows of the path buffer: coarse plan plus what replanning can add."""
+        rounds = self.replan_rounds if self.steer else 0
+        return self.n_plan + 2 + rounds * self.replan_steps
+
+    @staticmethod
+    def from_config(ev, steer: bool | None = None) -> "PlannerOptions":
+        """Options from an :class:`ntq_jax.config.EvalConfig` (``steer`` overrides its first entry)."""
+        return PlannerOptions(
+            n_plan=ev.n_plan, steer=ev.steer[0] if steer is None else bool(steer),
+            delta=ev.delta, replan_rounds=ev.replan_rounds,
+            replan_steps=getattr(ev, "replan_steps", 20),
+            bidirectional=getattr(ev, "bidirectional", False))
+
+
+@dataclasses.dataclass(frozen=True)
+class NeuralPlanResult:
+    """Per-query results of :func:`plan_batch` (N queries, host NumPy arrays).
+
+    Attributes:
+        paths: ``(N, L, d)`` float32 states, start first; NaN after ``lengths[i]`` rows.
+            Failed queries keep their last (coarse or partly repaired) path for inspection.
+        lengths: ``(N,)`` int32 number of states.
+        success: ``(N,)`` bool: reached the goal and collision-free on the evaluation geometry.
+        costs: ``(N,)`` float64 path cost (the robot's metric); ``inf`` unless success.
+        cause: ``(N,)`` int8 failure cause (:data:`CAUSES`).
+        pnet_calls: ``(N,)`` int32 PNet predictions spent on the query.
+        replans: ``(N,)`` int32 replanning rounds the query went through.
+        seconds: wall time of the batch (compiled call only); ``compile_seconds``:
+            time spent compiling for this call (0 when the compiled code was reused).
+    """
+
+    paths: np.ndarray
+    lengths: np.ndarray
+    success: np.ndarray
+    costs: np.ndarray
+    cause: np.ndarray
+    pnet_calls: np.ndarray
+    replans: np.ndarray
+    seconds: float = 0.0
+    compile_seconds: float = 0.0
+
+    def path(self, i: int) -> np.ndarray:
+        """Query ``i``'s path ``(lengths[i], d)``."""
+        return self.paths[i, : self.lengths[i]]
+
+
+# ---------------------------------------------------------------------------
+# Building blocks (all inside jit; row-major (N, ...) arrays)
+# ---------------------------------------------------------------------------
+
+def _steer(robot, world, a: Array, b: Array, padding: float, mask: Array) -> Array:
+    """``(M, d), (M, d) -> (M,)`` via the package's one steer_to kernel; unmasked = False."""
+    return steer_to_cm(robot, world, a.T, b.T, padding, mask)
+
+
+def _rows(x: Array, idx: Array) -> Array:
+    """``x[n, idx[n]]`` for ``x (N, L, d)``, ``idx (N,)``."""
+    return jnp.take_along_axis(x, idx[:, None, None], axis=1)[:, 0]
+
+
+def _join(a: Array, na: Array, b: Array, nb: Array, length: int) -> tuple[Array, Array]:
+    """``a[:na] + reversed(b[:nb])`` into ``(N, length, d)`` (NaN padded), and its length."""
+    t = jnp.arange(length)[None, :]
+    ia = jnp.clip(t, 0, a.shape[1] - 1)
+    ib = jnp.clip(na[:, None] + nb[:, None] - 1 - t, 0, b.shape[1] - 1)
+    ga = jnp.take_along_axis(a, ia[..., None], axis=1)
+    gb = jnp.take_along_axis(b, ib[..., None], axis=1)
+    out = jnp.where((t < na[:, None])[..., None], ga,
+                    jnp.where((t < (na + nb)[:, None])[..., None], gb, jnp.nan))
+    return out, na + nb
+
+
+def _segments(robot, world, p: Array, n: Array, padding: float, mask: Array):
+    """Per-segment freedom ``(N, L-1)`` and the segment mask (existing segments of masked rows)."""
+    num, length, d = p.shape
+    seg = (jnp.arange(length - 1)[None, :] < (n - 1)[:, None]) & mask[:, None]
+    free = _steer(robot, world, p[:, :-1].reshape(-1, d), p[:, 1:].reshape(-1, d), padding,
+                  seg.reshape(-1)).reshape(num, length - 1)
+    return free, seg
+
+
+def _contract(robot, world, p: Array, n: Array, padding: float, mask: Array):
+    """Lazy states contraction: keep start, then greedily the farthest steerable later state."""
+    num, length, d = p.shape
+    j = jnp.arange(length)[None, :]
+    flat = p.reshape(-1, d)
+    out = jnp.full_like(p, jnp.nan).at[:, 0].set(p[:, 0])
+
+    def cond(c):
+        return jnp.any(c[3])
+
+    def body(c):
+        i, q, m, active = c
+        cur = _rows(p, i)
+        cand = active[:, None] & (j > (i + 1)[:, None]) & (j < n[:, None])
+        free = _steer(robot, world, jnp.repeat(cur, length, axis=0), flat, padding,
+                      cand.reshape(-1)).reshape(num, length)
+        best = jnp.max(jnp.where(free & cand, j, (i + 1)[:, None]), axis=1)
+        q = q.at[jnp.arange(num), jnp.where(active, m, length)].set(_rows(p, best), mode="drop")
+        m = m + active
+        i = jnp.where(active, best, i)
+        return i, q, m, active & (best < n - 1)
+
+    init = (jnp.zeros(num, jnp.int32), out, jnp.ones(num, jnp.int32), mask & (n >= 2))
+    _, q, m, _ = jax.lax.while_loop(cond, body, init)
+    keep = mask & (n >= 2)
+    return jnp.where(keep[:, None, None], q, p), jnp.where(keep, m, n)
+
+
+def _connect(robot, world, pnet, key, a: Array, b: Array, active: Array, steps: int,
+             padding: float):
+    """Bidirectional neural connection of ``a`` and ``b`` (MPNet), at most ``steps`` predictions.
+
+    Returns ``(A, nA, B, nB, connected, calls)``: the two growing paths (``A[0] = a``,
+    ``B[0] = b``) with their lengths; ``A[:nA] + reversed(B[:nB])`` joins them.
+    """
+    num, d = a.shape
+    buf = jnp.full((num, steps + 1, d), jnp.nan, a.dtype)
+    rows = jnp.arange(num)
+
+    def cond(c):
+        return (c[0] <= steps) & jnp.any(c[1] & ~c[2])
+
+    def body(c):
+        s, act, conn, pa, na, pb, nb, calls = c
+        ea, eb = _rows(pa, na - 1), _rows(pb, nb - 1)
+        live = act & ~conn
+        joined = _steer(robot, world, ea, eb, padding, live)
+        conn = conn | joined
+        grow = live & ~joined & (s < steps)
+        from_a = (s % 2) == 0
+        cur, tgt = jnp.where(from_a, ea, eb), jnp.where(from_a, eb, ea)
+        new = pnet(jax.random.fold_in(key, s), cur, tgt)
+        pa = pa.at[rows, jnp.where(grow & from_a, na, steps + 1)].set(new, mode="drop")
+        pb = pb.at[rows, jnp.where(grow & ~from_a, nb, steps + 1)].set(new, mode="drop")
+        na = na + (grow & from_a)
+        nb = nb + (grow & ~from_a)
+        return s + 1, act, conn, pa, na, pb, nb, calls + grow
+
+    one = jnp.ones(num, jnp.int32)
+    init = (jnp.int32(0), active, jnp.zeros(num, bool), buf.at[:, 0].set(a), one,
+            buf.at[:, 0].set(b), one, jnp.zeros(num, jnp.int32))
+    _, _, conn, pa, na, pb, nb, calls = jax.lax.while_loop(cond, body, init)
+    return pa, na, pb, nb, conn & active, calls
+
+
+def _forward(pnet, key, starts, goals, active, opts: PlannerOptions, robot, world, length):
+    """Alg. 1's coarse plan (with or without steerTo), all queries stepping together."""
+    num, d = starts.shape
+    rows = jnp.arange(num)
+    p = jnp.full((num, length, d), jnp.nan, starts.dtype).at[:, 0].set(starts)
+
+    def near(x):
+        return jnp.sqrt(jnp.sum((x - goals) ** 2, axis=1)) <= opts.delta
+
+    def cond(c):
+        return (c[0] < opts.n_plan) & jnp.any(~c[4])
+
+    def body(c):
+        i, p, n, end, done, reached, calls = c
+        live = ~done
+        if opts.steer:
+            hit = _steer(robot, world, end, goals, opts.plan_padding, live)
+        else:
+            hit = live & near(end)
+        nxt = pnet(jax.random.fold_in(key, i), end, goals)
+        new = jnp.where(hit[:, None], goals, nxt) if opts.steer else nxt
+        append = live & (~hit | opts.steer)
+        p = p.at[rows, jnp.where(append, n, length)].set(new, mode="drop")
+        n = n + append
+        end = jnp.where(append[:, None], new, end)
+        reached = reached | hit
+        done = done | hit
+        calls = calls + (live & ~hit)
+        return i + 1, p, n, end, done, reached, calls
+
+    init = (jnp.int32(0), p, jnp.ones(num, jnp.int32), starts, ~active, jnp.zeros(num, bool),
+            jnp.zeros(num, jnp.int32))
+    _, p, n, end, done, reached, calls = jax.lax.while_loop(cond, body, init)
+    if not opts.steer:  # the state appended last is checked too
+        reached = reached | (active & ~done & near(end))
+    return p, n, reached, calls
+
+
+def _plan_core(robot, opts: PlannerOptions, world, pnet, key, starts, goals, active):
+    num, d = starts.shape
+    length = opts.max_len
+    k_main, k_rep = jax.random.split(key)
+    valid = (active & is_valid_cm(robot, world, starts.T, opts.eval_padding)
+             & is_valid_cm(robot, world, goals.T, opts.eval_padding))
+
+    if opts.bidirectional:
+        pa, na, pb, nb, reached, calls = _connect(robot, world, pnet, k_main, starts, goals, valid,
+                                                  opts.n_plan, opts.plan_padding)
+        p, n = _join(pa, na, pb, nb, length)
+    else:
+        p, n, reached, calls = _forward(pnet, k_main, starts, goals, valid, opts, robot, world,
+                                        length)
+    rounds = opts.replan_rounds if opts.steer else 0
+    contract = opts.contract and opts.steer
+    steps = opts.replan_steps
+    t = jnp.arange(length)[None, :]
+
+    # One loop does contraction, the feasibility check and the repairs: round r contracts
+    # the paths still pending, checks them, and repairs the infeasible ones (r < rounds);
+    # each kernel call site is compiled once.
+    def cond(c):
+        return jnp.any(c[4])
+
+    def body(c):
+        r, p, n, feasible, pending, calls, replans = c
+        if contract:
+            p, n = _contract(robot, world, p, n, opts.plan_padding, pending)
+        free, seg = _segments(robot, world, p, n, opts.eval_padding, pending)
+        blocked = seg & ~free
+        feasible = feasible | (pending & (n >= 2) & ~jnp.any(blocked, axis=1))
+        todo = pending & ~feasible & (r < rounds)
+        if rounds > 0:
+            # the first blocked segment, widened to the nearest valid states around it
+            # (MPNet drops the states in collision before repairing)
+            ok = is_valid_cm(robot, world, p.reshape(-1, d).T,
+                             opts.eval_padding).reshape(num, length) & (t < n[:, None])
+            k = jnp.argmax(blocked, axis=1).astype(jnp.int32)[:, None]
+            ia = jnp.max(jnp.where(ok & (t <= k), t, 0), axis=1)
+            ib = jnp.min(jnp.where(ok & (t > k), t, length), axis=1)
+            ib = jnp.minimum(ib, n - 1)
+            pa, na, pb, nb, conn, used = _connect(robot, world, pnet, jax.random.fold_in(k_rep, r),
+                                                  _rows(p, ia), _rows(p, ib), todo, steps,
+                                                  opts.plan_padding)
+            sub, ns = _join(pa, na, pb, nb, steps + 2)
+            # splice: p[:ia] + sub[:ns] + p[ib+1:n]
+            lo, hi = ia[:, None], (ia + ns)[:, None]
+            src = jnp.where(t < lo, t, t - hi + ib[:, None] + 1)
+            gp = jnp.take_along_axis(p, jnp.clip(src, 0, length - 1)[..., None], axis=1)
+            gs = jnp.take_along_axis(sub, jnp.clip(t - lo, 0, steps + 1)[..., None], axis=1)
+            nn = n - (ib - ia + 1) + ns
+            spliced = jnp.where(((t >= lo) & (t < hi))[..., None], gs, gp)
+            spliced = jnp.where((t < nn[:, None])[..., None], spliced, jnp.nan)
+            put = conn & (nn <= length)
+            p = jnp.where(put[:, None, None], spliced, p)
+            n = jnp.where(put, nn, n)
+            calls = calls + used
+        return r + 1, p, n, feasible, todo, calls, replans + todo
+
+    init = (jnp.int32(0), p, n, jnp.zeros(num, bool), reached, calls, jnp.zeros(num, jnp.int32))
+    _, p, n, feasible, _, calls, replans = jax.lax.while_loop(cond, body, init)
+
+    success = reached & feasible
+    seg_cost = jax.vmap(robot.distance, in_axes=(1, 1))(
+        p[:, :-1].reshape(-1, d).T, p[:, 1:].reshape(-1, d).T).reshape(num, length - 1)
+    seg = jnp.arange(length - 1)[None, :] < (n - 1)[:, None]
+    cost = jnp.where(success, jnp.sum(jnp.where(seg, seg_cost, 0.0), axis=1), jnp.inf)
+    cause = jnp.where(~valid, INVALID_QUERY,
+                      jnp.where(~reached, NO_PATH, jnp.where(success, SUCCESS, INFEASIBLE)))
+    return p, n, success, cost, cause.astype(jnp.int8), calls, replans
+
+
+_jit_core = jax.jit(_plan_core, static_argnames=("robot", "opts"))
+_COMPILED: dict = {}
+
+
+def _signature(args) -> tuple:
+    robot, opts = args[:2]
+    leaves, tree = jax.tree_util.tree_flatten(args[2:])
+    return (robot, opts, tree, tuple((x.shape, str(x.dtype)) for x in map(jnp.asarray, leaves)))
+
+
+def _compiled(args):
+    """The compiled planner for these static settings and shapes (compiled once per process)."""
+    sig = _signature(args)
+    if sig not in _COMPILED:
+        _COMPILED[sig] = _jit_core.lower(*args).compile()
+    return _COMPILED[sig]
+
+
+# ---------------------------------------------------------------------------
+# Public entry points
+# ---------------------------------------------------------------------------
+
+def as_pnet(pnet: Callable) -> Partial:
+    """Wraps a ``pnet(key, current, goal)`` callable as a pytree for the jitted planner.
+
+    A :class:`jax.tree_util.Partial` is passed through unchanged (its bound
+    arguments, e.g. the parameters, are traced; only the function is part of the
+    compile key), so build PNets as ``Partial(apply_fn, params)`` to share one
+    compilation across ensemble members.
+    """
+    return pnet if isinstance(pnet, Partial) else Partial(pnet)
+
+
+def bucket_size(n: int) -> int:
+    """The padded batch size for ``n`` queries (next power of two)."""
+    return 1 << max(0, (int(n) - 1).bit_length())
+
+
+def plan_batch(env, pnet: Callable, queries, key: Array,
+               opts: PlannerOptions = PlannerOptions(), *, chunk: int = 1024) -> NeuralPlanResult:
+    """Plans every query with the neural planner (all of a chunk in one jitted call).
+
+    Args:
+        env: a :class:`ntq_jax.Env` (any robot).
+        pnet: ``pnet(key, current (N, d), goal (N, d)) -> next (N, d)`` (see :func:`as_pnet`).
+        queries: ``(K, 2, d)`` start and goal states.
+        key: PRNG key (dropout); the result is deterministic given the key.
+        opts: :class:`PlannerOptions`.
+        chunk: largest batch per jitted call (batches are padded to a power of two).
+
+    Returns:
+        A :class:`NeuralPlanResult` with paths trimmed to the longest one.
+
+    Raises:
+        ValueError: ``queries`` has the wrong shape.
+    """
+    q = np.asarray(queries, np.float32)
+    if q.ndim != 3 or q.shape[1:] != (2, env.dim):
+        raise ValueError(f"queries must have shape (K, 2, {env.dim}), got {q.shape}")
+    if opts.bidirectional and not opts.steer:
+        raise ValueError("the bidirectional planner needs steerTo (steer=True)")
+    k = q.shape[0]
+    fn = as_pnet(pnet)
+    size = bucket_size(min(max(k, 1), chunk))
+    outs, secs, comp = [], 0.0, 0.0
+    for ci, lo in enumerate(range(0, k, size)):
+        hi = min(lo + size, k)
+        part = np.zeros((size, 2, env.dim), np.float32)
+        part[: hi - lo] = q[lo:hi]
+        act = np.zeros(size, bool)
+        act[: hi - lo] = True
+        args = (env.robot, opts, env.world, fn, jax.random.fold_in(key, ci),
+                jnp.asarray(part[:, 0]), jnp.asarray(part[:, 1]), jnp.asarray(act))
+        t0 = time.perf_counter()
+        compiled = _compiled(args)
+        t1 = time.perf_counter()
+        comp += t1 - t0
+        out = jax.block_until_ready(compiled(*args[2:]))
+        secs += time.perf_counter() - t1
+        outs.append([np.asarray(o)[: hi - lo] for o in out])
+    if not outs:
+        d = env.dim
+        return NeuralPlanResult(np.zeros((0, 1, d), np.float32), *(np.zeros(0, t) for t in
+                                (np.int32, bool, np.float64, np.int8, np.int32, np.int32)))
+    cat = [np.concatenate(c) for c in zip(*outs)]
+    paths, lengths = cat[0], cat[1].astype(np.int32)
+    width = max(1, int(lengths.max()))
+    return NeuralPlanResult(paths[:, :width].astype(np.float32), lengths, cat[2].astype(bool),
+                            cat[3].astype(np.float64), cat[4].astype(np.int8),
+                            cat[5].astype(np.int32), cat[6].astype(np.int32), secs, comp)
+
+
+def path_costs(env, paths: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+    """Float64 cost of NaN-padded paths under the robot's metric (host side, for re-checks)."""
+    paths = np.asarray(paths, np.float64)
+    out = np.zeros(len(paths))
+    for i, (p, n) in enumerate(zip(paths, lengths)):
+        if n >= 2:
+            out[i] = float(np.sum(np.asarray(env.distance(p[: n - 1], p[1:n]), np.float64)))
+    return out

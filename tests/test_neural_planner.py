@@ -1,0 +1,230 @@
+"""Neural planner (Alg. 1) on hand-made maps with known answers, using stand-in PNets.
+
+The stand-ins share one jittable function (a traced ``mode`` picks the behaviour),
+so the planner compiles once per option set:
+
+* ``ORACLE``: the first waypoint of the exact shortest path from ``current`` to
+  ``goal`` (visibility graph of the padding-0 map), or the goal when visible.
+* ``SEEKER``: a unit step straight at the goal, through obstacles (plus optional noise).
+* ``CAUTIOUS``: the seeker, but it stays put when that step is blocked.
+* ``BROKEN``: the oracle, except from the query start towards the query goal it
+  jumps straight through the wall (a deliberately broken coarse path).
+* ``STAY``: returns ``current`` (a model that never moves).
+
+Every path counted as a success is re-checked by shapely (float64 segment
+against the closed boxes, and the bounds), never by the planner's own flag.
+"""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+import shapely
+from jax.tree_util import Partial
+from shapely.geometry import LineString, Point, box as shapely_box
+from shapely.ops import unary_union
+
+from ntq_jax import Env
+from ntq_jax.neural_planner import (INFEASIBLE, INVALID_QUERY, NO_PATH, SUCCESS, PlannerOptions,
+                                    _contract, plan_batch)
+from ntq_jax.planners.visgraph import VisGraph
+from ntq_jax.robots.batch import steer_to_cm
+
+ORACLE, SEEKER, CAUTIOUS, BROKEN, STAY = range(5)
+BOUNDS = [[0.0, 10.0], [0.0, 10.0]]
+DUMMY = [[0.3, 9.7, 0.1, 0.1], [9.7, 0.3, 0.1, 0.1]]  # tiny corner boxes: every map has 3 boxes
+MAPS = {
+    "straight": [[0.3, 0.3, 0.1, 0.1]] + DUMMY,
+    "wall": [[5.0, 5.0, 0.5, 3.0]] + DUMMY,  # x 4.5..5.5, y 2..8
+    # a cup open downwards around (5, 4): top wall y 6..6.5, sides x 3..3.5 and 6.5..7
+    "deadend": [[5.0, 6.25, 2.0, 0.25], [3.25, 4.25, 0.25, 2.25], [6.75, 4.25, 0.25, 2.25]],
+}
+V_PAD = 32
+BATCH = 4
+OPTS = PlannerOptions(n_plan=12, replan_rounds=2, replan_steps=8)
+
+
+def make(name):
+    return Env.from_json({"name": name, "robot": {"kind": "point"}, "bounds": BOUNDS,
+                          "boxes": MAPS[name], "padding": 0.0})
+
+
+def _stand_in(mode, nodes, dist, world, jump, sigma, key, cur, goal):
+    robot = ENV_ROBOT
+    n, v = cur.shape[0], nodes.shape[0]
+    tile = jnp.tile(nodes, (n, 1))
+    vis_c = steer_to_cm(robot, world, jnp.repeat(cur, v, 0).T, tile.T, 0.0).reshape(n, v)
+    vis_g = steer_to_cm(robot, world, tile.T, jnp.repeat(goal, v, 0).T, 0.0).reshape(n, v)
+    dg = jnp.where(vis_g, jnp.linalg.norm(nodes[None] - goal[:, None], axis=-1), jnp.inf)
+    h = jnp.min(dist[None] + dg[:, None, :], axis=-1)
+    dc = jnp.linalg.norm(nodes[None] - cur[:, None], axis=-1)
+    score = jnp.where(vis_c & (dc > 1e-6), dc + h, jnp.inf)
+    direct = steer_to_cm(robot, world, cur.T, goal.T, 0.0)
+    oracle = jnp.where(direct[:, None], goal, nodes[jnp.argmin(score, axis=1)])
+    d = goal - cur
+    dn = jnp.linalg.norm(d, axis=1, keepdims=True)
+    seek = cur + d / jnp.maximum(dn, 1e-9) * jnp.minimum(dn, 1.0)
+    seek_noisy = seek + sigma * jax.random.normal(key, cur.shape)
+    ok = steer_to_cm(robot, world, cur.T, seek.T, 0.0)
+    cautious = jnp.where(ok[:, None], seek, cur)
+    at_start = (jnp.linalg.norm(cur - jump[0], axis=1) < 1e-6) & (
+        jnp.linalg.norm(goal - jump[1], axis=1) < 1e-6)
+    broken = jnp.where(at_start[:, None], jump[2], oracle)
+    return jnp.select([mode == ORACLE, mode == SEEKER, mode == CAUTIOUS, mode == BROKEN],
+                      [oracle, seek_noisy, cautious, broken], cur)
+
+
+ENV_ROBOT = make("straight").robot
+_GRAPHS = {}
+
+
+def pnet(name, mode, jump=((0, 0), (0, 0), (0, 0)), sigma=0.0):
+    env = make(name)
+    if name not in _GRAPHS:
+        g = VisGraph.build(env, 0.0)
+        nodes = np.full((V_PAD, 2), np.nan, np.float32)
+        dist = np.full((V_PAD, V_PAD), np.inf, np.float32)
+        nodes[: g.num_nodes], dist[: g.num_nodes, : g.num_nodes] = g.nodes, g.dist
+        _GRAPHS[name] = (g, jnp.asarray(nodes), jnp.asarray(dist))
+    _, nodes, dist = _GRAPHS[name]
+    return Partial(_stand_in, jnp.int32(mode), nodes, dist, env.world,
+                   jnp.asarray(jump, jnp.float32), jnp.float32(sigma))
+
+
+def optimum(name, queries):
+    make(name)
+    pnet(name, ORACLE)
+    return _GRAPHS[name][0].plan(np.asarray(queries, np.float32)).costs
+
+
+def shapely_free(name, path):
+    """Independent float64 check: in bounds and no segment touches a (closed) box."""
+    obst = unary_union([shapely_box(cx - hw, cy - hh, cx + hw, cy + hh)
+                        for cx, cy, hw, hh in MAPS[name]])
+    p = np.asarray(path, np.float64)
+    if not (np.all(np.isfinite(p)) and np.all((p >= 0) & (p <= 10))):
+        return False
+    for a, b in zip(p[:-1], p[1:]):
+        geom = Point(a) if np.allclose(a, b) else LineString([a, b])
+        if geom.intersects(obst):
+            return False
+    return True
+
+
+def run(name, mode, queries, opts=OPTS, key=0, **kw):
+    q = np.asarray(queries, np.float32)
+    reps = -(-BATCH // len(q))
+    q = np.concatenate([q] * reps)[:BATCH]
+    res = plan_batch(make(name), pnet(name, mode, **kw), q, jax.random.key(key), opts)
+    for i in np.flatnonzero(res.success):  # every success re-checked independently
+        p = res.path(i)
+        assert shapely_free(name, p), (name, i, p)
+        np.testing.assert_allclose(p[0], q[i, 0], atol=1e-6)
+        if opts.steer:
+            np.testing.assert_allclose(p[-1], q[i, 1], atol=1e-6)
+        seg = np.linalg.norm(np.diff(p.astype(np.float64), axis=0), axis=1).sum()
+        assert res.costs[i] == pytest.approx(seg, rel=1e-4)
+    assert np.all(np.isinf(res.costs[~res.success]))
+    return q, res
+
+
+def test_straight_shot_needs_no_pnet():
+    q, res = run("straight", STAY, [[[1, 2], [9, 8]], [[2, 8], [8, 2]]])
+    assert np.all(res.success) and np.all(res.cause == SUCCESS)
+    assert np.all(res.lengths == 2) and np.all(res.pnet_calls == 0)
+    np.testing.assert_allclose(res.costs, np.linalg.norm(q[:, 1] - q[:, 0], axis=1), rtol=1e-5)
+
+
+def test_one_wall_oracle_finds_the_optimum():
+    q, res = run("wall", ORACLE, [[[2, 5], [8, 5]], [[1, 1], [9, 6]], [[4, 9], [6, 1]]])
+    assert np.all(res.success)
+    np.testing.assert_allclose(res.costs, optimum("wall", q), rtol=1e-4)
+    assert res.pnet_calls[0] == 2 and res.lengths[0] == 4  # around the top or bottom corners
+
+
+def test_one_wall_seeker_walks_through_and_is_infeasible():
+    q, res = run("wall", SEEKER, [[[2, 5], [8, 5]]])
+    assert not np.any(res.success)
+    assert np.all(res.cause == INFEASIBLE)  # reached the goal, through the wall; no repair
+    assert np.all(res.replans == OPTS.replan_rounds)
+
+
+def test_dead_end():
+    queries = [[[5, 4], [5, 9]], [[4, 3], [6, 8]]]
+    _, res = run("deadend", CAUTIOUS, queries)
+    assert np.all(res.cause == NO_PATH) and not np.any(res.success)
+    assert np.all(res.pnet_calls == OPTS.n_plan)
+    q, res = run("deadend", ORACLE, queries)
+    assert np.all(res.success)
+    np.testing.assert_allclose(res.costs, optimum("deadend", q), rtol=1e-4)
+
+
+def test_replanning_repairs_a_broken_path():
+    s, g, jump = (2.0, 5.0), (8.0, 5.0), (7.0, 5.0)  # s -> jump crosses the wall
+    kw = dict(jump=(s, g, jump))
+    no_replan = PlannerOptions(n_plan=12, replan_rounds=0, replan_steps=8)
+    _, res = run("wall", BROKEN, [[s, g]], opts=no_replan, **kw)
+    assert np.all(res.cause == INFEASIBLE)
+    np.testing.assert_allclose(res.paths[0, :3], [s, jump, g])  # the broken coarse path
+    q, res = run("wall", BROKEN, [[s, g]], **kw)
+    assert np.all(res.success) and np.all(res.replans == 1)
+    np.testing.assert_allclose(res.costs, optimum("wall", q), rtol=1e-4)  # contracted to optimum
+
+
+def test_without_steer_to():
+    nosteer = PlannerOptions(n_plan=12, steer=False, delta=1.0)
+    _, res = run("straight", SEEKER, [[[1, 1], [9, 1]]], opts=nosteer)
+    assert np.all(res.success) and np.all(res.lengths == 8)  # 1, 2, ..., 8: within delta of 9
+    np.testing.assert_allclose(res.costs, 7.0, rtol=1e-5)
+    np.testing.assert_allclose(res.paths[0, 7], [8, 1], atol=1e-5)
+    # a trivial query a non-moving model cannot solve without steerTo (the paper's Fig. 5)
+    _, res = run("straight", STAY, [[[1, 1], [9, 1]]], opts=nosteer)
+    assert np.all(res.cause == NO_PATH) and np.all(res.pnet_calls == 12)
+    # reaching the goal through a wall is not a success
+    _, res = run("wall", SEEKER, [[[2, 5], [8, 5]]], opts=nosteer)
+    assert np.all(res.cause == INFEASIBLE)
+
+
+def test_bidirectional_and_invalid_queries():
+    bi = PlannerOptions(n_plan=12, replan_rounds=2, replan_steps=8, bidirectional=True)
+    q, res = run("deadend", ORACLE, [[[5, 4], [5, 9]], [[4, 3], [6, 8]], [[5, 6.2], [1, 1]]],
+                 opts=bi)
+    assert res.success[0] and res.success[1]
+    assert np.all(res.costs[:2] >= optimum("deadend", q[:2]) * (1 - 1e-4))
+    assert res.cause[2] == INVALID_QUERY  # the start is inside the cup's top wall
+
+
+def test_batched_equals_one_by_one_and_noise_is_keyed():
+    queries = [[[5, 4], [5, 9]], [[2, 5], [8, 2]], [[9, 9], [1, 1]], [[4, 3], [6, 8]]]
+    env = make("deadend")
+    net = pnet("deadend", ORACLE)
+    full = plan_batch(env, net, np.asarray(queries, np.float32), jax.random.key(0), OPTS)
+    single = plan_batch(env, net, np.asarray(queries, np.float32), jax.random.key(0), OPTS,
+                        chunk=1)
+    np.testing.assert_array_equal(full.success, single.success)
+    np.testing.assert_allclose(full.costs, single.costs, rtol=1e-6)
+    # a noisy model: same key -> same paths, another key -> different paths
+    noisy = [[[5, 4], [5, 9]]] * BATCH
+    _, a = run("deadend", SEEKER, noisy, key=1, sigma=0.5)
+    _, b = run("deadend", SEEKER, noisy, key=1, sigma=0.5)
+    _, c = run("deadend", SEEKER, noisy, key=2, sigma=0.5)
+    np.testing.assert_array_equal(a.paths, b.paths)
+    assert a.paths.shape != c.paths.shape or not np.array_equal(a.paths, c.paths, equal_nan=True)
+
+
+def test_lazy_states_contraction():
+    env = make("wall")
+    p = np.full((2, 8, 2), np.nan, np.float32)
+    zig = [[1, 1], [2, 3], [3, 1], [4, 1.5], [3, 0.5], [9, 1]]  # all below the wall: one segment
+    p[0, :6] = zig
+    # around the wall's top with redundant states: the corners must survive
+    top = [[2, 5], [3, 8.5], [4, 8.6], [4.4, 8.2], [5.6, 8.2], [7, 7], [8, 5]]
+    p[1, :7] = top
+    n = np.array([6, 7], np.int32)
+    fn = jax.jit(_contract, static_argnames=("robot", "padding"))
+    q, m = fn(env.robot, env.world, jnp.asarray(p), jnp.asarray(n), 0.0, jnp.ones(2, bool))
+    q, m = np.asarray(q), np.asarray(m)
+    assert m[0] == 2
+    np.testing.assert_allclose(q[0, :2], [[1, 1], [9, 1]])
+    assert 3 <= m[1] < 7 and shapely_free("wall", q[1, : m[1]])
+    np.testing.assert_allclose(q[1, [0, m[1] - 1]], [[2, 5], [8, 5]])

@@ -46,6 +46,7 @@ returns a pure, jittable function.
 from __future__ import annotations
 
 import dataclasses
+import functools
 from typing import Any, Callable, Sequence
 
 import jax
@@ -263,6 +264,18 @@ def member_key(seed_or_key, member_id: int) -> Array:
     return jax.random.fold_in(key, member_id)
 
 
+@functools.lru_cache(maxsize=32)
+def _graph_and_init(spec: ModelSpec):
+    """The (cached) graph definition of ``spec`` and a jitted ``keys (M,) -> stacked params``."""
+    graphdef, _ = nnx.split(nnx.eval_shape(lambda: init_pnet(spec, jax.random.key(0))),
+                            nnx.Param)
+
+    def init_one(key):
+        return nnx.split(init_pnet(spec, key), nnx.Param)[1]
+
+    return graphdef, jax.jit(jax.vmap(init_one))
+
+
 def init_ensemble(spec: ModelSpec, seed_or_key, num_members: int = 4,
                   member_ids: Sequence[int] | None = None) -> Ensemble:
     """An ensemble of freshly initialised PNets.
@@ -272,15 +285,14 @@ def init_ensemble(spec: ModelSpec, seed_or_key, num_members: int = 4,
         seed_or_key: an int seed or a PRNG key.
         num_members: ``M`` (ignored when ``member_ids`` is given).
         member_ids: ids of the members (default ``0..M-1``); member ``i`` is
-            initialised from :func:`member_key` ``(seed_or_key, i)``.
+            initialised from :func:`member_key` ``(seed_or_key, i)``, whatever ``M``.
     """
     ids = list(range(num_members)) if member_ids is None else list(member_ids)
-    graphdef, states = None, []
-    for i in ids:
-        g, s = nnx.split(init_pnet(spec, member_key(seed_or_key, i)), nnx.Param)
-        graphdef = g
-        states.append(s)
-    return Ensemble(graphdef=graphdef, params=stack_states(states), spec=spec)
+    if not ids:
+        raise ValueError("init_ensemble: at least one member")
+    graphdef, init = _graph_and_init(spec)
+    keys = jnp.stack([member_key(seed_or_key, i) for i in ids])
+    return Ensemble(graphdef=graphdef, params=init(keys), spec=spec)
 
 
 def member(ens: Ensemble, m: int) -> PNet:

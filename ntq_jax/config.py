@@ -94,7 +94,8 @@ class DataConfig:
             (the paper prunes on the data-generation geometry).
         chunk: queries per chunk written to disk (resumable unit).
         gamma_queries: uniform queries used to estimate gamma_nt for the metadata
-            (at the data-generation padding and at padding 0).
+            (at the data-generation padding, and at padding 0 when ``gamma_eval``).
+        gamma_eval: also estimate gamma_nt on the evaluation geometry (padding 0).
         per_env: per-environment overrides (:class:`DataEnvOverride`).
     """
 
@@ -103,6 +104,7 @@ class DataConfig:
     prune_padding: Optional[float] = None
     chunk: int = 500
     gamma_queries: int = 1_000_000
+    gamma_eval: bool = True
     per_env: tuple[DataEnvOverride, ...] = ()
 
     def validate(self, p: str):
@@ -276,6 +278,13 @@ class EvalConfig:
         steer: evaluate with steerTo (True) and/or without (False).
         delta: goal tolerance of the variant without steerTo.
         replan_rounds: neural replanning rounds.
+        replan_steps: PNet predictions per repaired segment in a replanning round.
+        bidirectional: MPNet's bidirectional coarse plan instead of Alg. 1's forward one.
+        query_padding: padding at which test queries are sampled (valid and
+            non-trivial); 0 = the evaluation geometry, null = the environment's.
+        gamma_queries: uniform queries for gamma_nt (padding 0) in the table
+            headings when the dataset metadata has none.
+        chunk: test queries per jitted planner call.
     """
 
     k_test: int = 500
@@ -283,6 +292,11 @@ class EvalConfig:
     steer: tuple[bool, ...] = (True,)
     delta: float = 1.0
     replan_rounds: int = 5
+    replan_steps: int = 20
+    bidirectional: bool = False
+    query_padding: Optional[float] = 0.0
+    gamma_queries: int = 200_000
+    chunk: int = 1024
 
     def validate(self, p: str):
         _check(self.k_test >= 1, f"{p}.k_test", f"must be >= 1, got {self.k_test}")
@@ -291,6 +305,15 @@ class EvalConfig:
         _check(self.delta > 0, f"{p}.delta", f"must be > 0, got {self.delta}")
         _check(self.replan_rounds >= 0, f"{p}.replan_rounds",
                f"must be >= 0, got {self.replan_rounds}")
+        _check(self.replan_steps >= 1, f"{p}.replan_steps",
+               f"must be >= 1, got {self.replan_steps}")
+        _check(not (self.bidirectional and False in self.steer), f"{p}.bidirectional",
+               "the bidirectional planner needs steerTo; remove false from eval.steer")
+        _check(self.query_padding is None or self.query_padding >= 0, f"{p}.query_padding",
+               f"must be >= 0 or null, got {self.query_padding}")
+        _check(self.gamma_queries >= 1, f"{p}.gamma_queries",
+               f"must be >= 1, got {self.gamma_queries}")
+        _check(self.chunk >= 1, f"{p}.chunk", f"must be >= 1, got {self.chunk}")
 
 
 @dataclasses.dataclass(frozen=True)

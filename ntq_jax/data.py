@@ -533,7 +533,7 @@ def _fingerprint(env, config, env_name, pad, prune_pad, planner_name, options, n
         "n_max": config.sampling.n_max, "n_u": n_u, "n_nt": n_nt,
         "k": config.data.k_train_for(env_name),
         "datasets": [[s.p_nt, s.prune] for s in config.data.datasets],
-        "gamma_queries": config.data.gamma_queries,
+        "gamma_queries": config.data.gamma_queries, "gamma_eval": config.data.gamma_eval,
     }, sort_keys=True, default=_json_default).encode()
     return hashlib.sha256(blob).hexdigest()[:16]
 
@@ -660,8 +660,9 @@ def generate_datasets(env, config, out_dir, *, env_name: str | None = None, plan
         g_data = _estimate_gamma(env, jax.random.fold_in(k_gam, 0), dc.gamma_queries, pad,
                                  work, "data")
         bar.update(1)
-        g_eval = _estimate_gamma(env, jax.random.fold_in(k_gam, 1), dc.gamma_queries, 0.0,
-                                 work, "eval")
+        g_eval = (_estimate_gamma(env, jax.random.fold_in(k_gam, 1), dc.gamma_queries, 0.0,
+                                  work, "eval") if dc.gamma_eval else
+                  {"padding": 0.0, "gamma": None, "ci95": None, "queries": 0})
         bar.update(1)
     timings["gamma"] = time.perf_counter() - t0
 

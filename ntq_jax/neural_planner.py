@@ -412,6 +412,25 @@ def as_pnet(pnet: Callable) -> Partial:
     return pnet if isinstance(pnet, Partial) else Partial(pnet)
 
 
+def padded_world(world, multiple: int = 16):
+    """``world`` with its box and disc lists padded to a multiple of ``multiple``.
+
+    The extra obstacles are tiny and far outside any workspace (at ``1e6``), so
+    no state or motion inside the bounds can touch them; maps with similar
+    obstacle counts then share one compilation of the planner.
+    """
+    from ntq_jax.geometry import World
+
+    def pad(a, row):
+        n = a.shape[0]
+        m = max(multiple, -(-n // multiple) * multiple)
+        extra = jnp.tile(jnp.asarray(row, a.dtype)[None], (m - n, 1))
+        return jnp.concatenate([a, extra]) if m > n else a
+
+    return World(world.bounds, pad(world.boxes, [1e6, 1e6, 1.0, 1.0]),
+                 pad(world.discs, [1e6, 1e6, 1.0]))
+
+
 def bucket_size(n: int) -> int:
     """The padded batch size for ``n`` queries (next power of two)."""
     return 1 << max(0, (int(n) - 1).bit_length())
@@ -442,6 +461,7 @@ def plan_batch(env, pnet: Callable, queries, key: Array,
         raise ValueError("the bidirectional planner needs steerTo (steer=True)")
     k = q.shape[0]
     fn = as_pnet(pnet)
+    world = padded_world(env.world)
     size = bucket_size(min(max(k, 1), chunk))
     outs, secs, comp = [], 0.0, 0.0
     for ci, lo in enumerate(range(0, k, size)):
@@ -450,7 +470,7 @@ def plan_batch(env, pnet: Callable, queries, key: Array,
         part[: hi - lo] = q[lo:hi]
         act = np.zeros(size, bool)
         act[: hi - lo] = True
-        args = (env.robot, opts, env.world, fn, jax.random.fold_in(key, ci),
+        args = (env.robot, opts, world, fn, jax.random.fold_in(key, ci),
                 jnp.asarray(part[:, 0]), jnp.asarray(part[:, 1]), jnp.asarray(act))
         t0 = time.perf_counter()
         compiled = _compiled(args)

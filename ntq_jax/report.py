@@ -1,0 +1,337 @@
+"""Reports of an evaluation: results files, the paper's tables and figures.
+
+:func:`write_report` takes the result rows of :func:`ntq_jax.evaluate.evaluate_env`
+and writes, into the run folder (atomically):
+
+* ``results.json`` (rows plus run metadata) and ``results.csv`` (one row per
+  environment, model, test query kind and steerTo variant);
+* ``tables.md`` and ``tables.tex``: one table per task and steerTo variant laid
+  out as the paper's Tables I-IV (model rows PNet_0..PNet_3; uniform and
+  non-trivial columns; success ratio and cost ratio), one block per
+  environment with gamma_nt in its heading; the Markdown adds the 95% intervals,
+  the cost ratio to the exact optimum (point robots), timings and failures;
+* ``figures/success_ratio[_nosteer].png`` (bars with 95% intervals),
+  ``figures/examples_<env>.png`` (neural paths beside the reference on the map)
+  and ``figures/queries_<env>.png`` (the test query distributions).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from ntq_jax.evaluate import KINDS, load_npz, write_text
+
+TITLES = {"point": "Point robot planning", "rigid": "Rigid body planning",
+          "nlink": "n-link manipulator planning"}
+KIND_TITLE = {"uniform": "Uniform Query", "nontrivial": "Non-trivial Query"}
+CSV_FIELDS = ["task", "env", "model", "query_kind", "steer", "k_test", "successes",
+              "success_ratio", "success_ci95_lo", "success_ci95_hi", "cost_ratio", "cost_ratio_n",
+              "cost_ratio_opt", "seconds_per_query", "compile_seconds",
+              "reference_seconds_per_query", "failures_no_path", "failures_infeasible",
+              "failures_invalid_query", "reference_failed", "reference_planner", "gamma_nt",
+              "paths_file"]
+
+
+def _f(x, nd=3) -> str:
+    return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{x:.{nd}f}"
+
+
+def _groups(rows):
+    """``{(task, steer): {env: {(model, kind): row}}}`` in first-seen order."""
+    out: dict = {}
+    for r in rows:
+        g = out.setdefault((r["task"], r["steer"]), {})
+        g.setdefault(r["env"], {})[(r["model"], r["query_kind"])] = r
+    return out
+
+
+def _title(task, steer):
+    t = TITLES.get(task, task)
+    return t if steer else f"{t} without steerTo"
+
+
+def _models(block):
+    return sorted({m for m, _ in block}, key=lambda s: int(s.split("_")[-1]))
+
+
+def _gamma_heading(env, block) -> tuple[str, str]:
+    from ntq_jax.presets import PAPER_GAMMA
+    r = next(iter(block.values()))
+    g = r.get("gamma_nt")
+    paper = PAPER_GAMMA.get(env)
+    md = f"Environment {env}, gamma_nt = {_f(g)}"
+    if r.get("gamma_nt_ci95"):
+        lo, hi = r["gamma_nt_ci95"]
+        md += f" [{lo:.3f}, {hi:.3f}]"
+    if paper is not None:
+        md += f" (paper {paper:.3f})"
+    tex = f"Environment {env.replace('_', '-')}, $\\gamma_\\mathrm{{nt}}={_f(g)}$"
+    return md, tex
+
+
+def tables_md(rows) -> str:
+    out = ["# Results", ""]
+    for (task, steer), envs in _groups(rows).items():
+        out += [f"## {_title(task, steer)}", ""]
+        for env, block in envs.items():
+            md, _ = _gamma_heading(env, block)
+            any_row = next(iter(block.values()))
+            out += [f"### {md}", "",
+                    f"K_test = {any_row['k_test']} per query kind; reference planner: "
+                    f"{any_row['reference_planner']}; success ratio with its 95% Wilson interval.", "",
+                    "| Model | Uniform success ratio | Uniform cost ratio | Non-trivial success ratio "
+                    "| Non-trivial cost ratio |",
+                    "|---|---|---|---|---|"]
+            for m in _models(block):
+                cells = []
+                for kind in KINDS:
+                    r = block.get((m, kind))
+                    if r is None:
+                        cells += ["-", "-"]
+                        continue
+                    lo, hi = r["success_ci95"]
+                    cells += [f"{_f(r['success_ratio'])} [{lo:.3f}, {hi:.3f}]", _f(r["cost_ratio"])]
+                out.append(f"| {m} | " + " | ".join(cells) + " |")
+            out.append("")
+            # extras: optimum ratio, timings, failures
+            out += ["| Model | kind | cost ratio to optimum | ms / query | compile s | no path | "
+                    "infeasible | invalid | reference failed |", "|---|---|---|---|---|---|---|---|---|"]
+            for m in _models(block):
+                for kind in KINDS:
+                    r = block.get((m, kind))
+                    if r is None:
+                        continue
+                    fl = r["failures"]
+                    out.append(f"| {m} | {kind} | {_f(r.get('cost_ratio_opt'))} | "
+                               f"{r['seconds_per_query'] * 1e3:.2f} | {r['compile_seconds']:.1f} | "
+                               f"{fl.get('no_path', 0)} | {fl.get('infeasible', 0)} | "
+                               f"{fl.get('invalid_query', 0)} | {r['reference_failed']} |")
+            out.append("")
+    return "\n".join(out)
+
+
+def tables_tex(rows) -> str:
+    out = ["% Generated by ntq_jax.report; needs \\usepackage{booktabs}", ""]
+    for (task, steer), envs in _groups(rows).items():
+        cap = _title(task, steer).replace("steerTo", "$\\mathsf{steerTo}$")
+        out += ["\\begin{table}", "\t\\caption{" + cap + "}", "\t\\centering"]
+        for i, (env, block) in enumerate(envs.items()):
+            _, tex = _gamma_heading(env, block)
+            if i:
+                out += ["\t\\vspace{0.5em}", f"\t\\\\{tex} \\\\"]
+            else:
+                out += [f"\t{tex} \\\\"]
+            out += ["\t\\vspace{0.2em}", "\t\\begin{tabular}{lcccc}", "\t\t\\toprule",
+                    "\t\t\\multirow{2}{*}{Model} & \\multicolumn{2}{c}{Uniform Query} & "
+                    "\\multicolumn{2}{c}{Non-trivial Query} \\\\",
+                    "\t\t& {success ratio} & {cost ratio} & {success ratio} & {cost ratio} \\\\",
+                    "\t\t\\midrule"]
+            for m in _models(block):
+                cells = []
+                for kind in KINDS:
+                    r = block.get((m, kind))
+                    cells += ["-", "-"] if r is None else [_f(r["success_ratio"]), _f(r["cost_ratio"])]
+                idx = m.split("_")[-1]
+                out.append(f"\t\t$\\mathsf{{PNet}}_{idx}$ & " + " & ".join(cells) + " \\\\")
+            out += ["\t\t\\bottomrule", "\t\\end{tabular}"]
+        out += ["\\end{table}", ""]
+    return "\n".join(out)
+
+
+def results_csv(rows) -> str:
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=CSV_FIELDS, extrasaction="ignore")
+    w.writeheader()
+    for r in rows:
+        flat = dict(r)
+        flat["success_ci95_lo"], flat["success_ci95_hi"] = r["success_ci95"]
+        for k, v in r["failures"].items():
+            flat[f"failures_{k}"] = v
+        w.writerow(flat)
+    return buf.getvalue()
+
+
+# ---------------------------------------------------------------------------
+# Figures
+# ---------------------------------------------------------------------------
+
+def _plt():
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    return plt
+
+
+def _save(fig, path: Path):
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.stem + ".tmp.png")
+    fig.savefig(tmp, dpi=110, bbox_inches="tight")
+    tmp.replace(path)
+
+
+def success_figure(rows, path: Path, steer: bool = True):
+    """Grouped bars: success ratio per environment and model, with 95% intervals."""
+    plt = _plt()
+    rows = [r for r in rows if r["steer"] == steer]
+    if not rows:
+        return None
+    envs = list(dict.fromkeys(r["env"] for r in rows))
+    models = sorted({r["model"] for r in rows}, key=lambda s: int(s.split("_")[-1]))
+    fig, axes = plt.subplots(1, 2, figsize=(11, 3.8), sharey=True)
+    width = 0.8 / max(len(models), 1)
+    for ax, kind in zip(axes, KINDS):
+        for j, m in enumerate(models):
+            ys, lo, hi = [], [], []
+            for e in envs:
+                r = next((r for r in rows if r["env"] == e and r["model"] == m
+                          and r["query_kind"] == kind), None)
+                y = r["success_ratio"] if r else np.nan
+                ci = r["success_ci95"] if r else (np.nan, np.nan)
+                ys.append(y)
+                lo.append(max(y - ci[0], 0.0))
+                hi.append(max(ci[1] - y, 0.0))
+            x = np.arange(len(envs)) + (j - (len(models) - 1) / 2) * width
+            ax.bar(x, ys, width, yerr=[lo, hi], capsize=2, label=m)
+        gam = {r["env"]: r.get("gamma_nt") for r in rows}
+        ax.set_xticks(np.arange(len(envs)),
+                      [f"{e}\n$\\gamma_{{nt}}$={_f(gam[e], 2)}" for e in envs])
+        ax.set_title(KIND_TITLE[kind] + ("" if steer else " (no steerTo)"))
+        ax.set_ylim(0, 1.05)
+        ax.grid(axis="y", alpha=0.3)
+    axes[0].set_ylabel("success ratio (95% interval)")
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="upper center", ncol=len(models), fontsize=8,
+               bbox_to_anchor=(0.5, 1.06))
+    _save(fig, path)
+    plt.close(fig)
+    return path
+
+
+def _draw_map(ax, env_json: dict):
+    import matplotlib.patches as mp
+    kind = env_json["robot"]["kind"]
+    if kind == "nlink":  # joint space: no obstacle drawing
+        ax.set_xlim(-math.pi, math.pi)
+        ax.set_ylim(-math.pi, math.pi)
+        ax.set_xlabel("joint 1 (rad)")
+        ax.set_ylabel("joint 2 (rad)")
+        return
+    (x0, x1), (y0, y1) = env_json["bounds"]
+    for cx, cy, hw, hh in env_json.get("boxes", []):
+        ax.add_patch(mp.Rectangle((cx - hw, cy - hh), 2 * hw, 2 * hh, color="0.35"))
+    for cx, cy, r in env_json.get("discs", []):
+        ax.add_patch(mp.Circle((cx, cy), r, color="0.35"))
+    ax.set_xlim(x0, x1)
+    ax.set_ylim(y0, y1)
+    ax.set_aspect("equal")
+
+
+def examples_figure(run_dir: Path, env, slug: str, models: Sequence[str], path: Path,
+                    steer: bool = True, n_examples: int = 4):
+    """Neural paths (each model) beside the reference paths on non-trivial test queries."""
+    plt = _plt()
+    run_dir = Path(run_dir)
+    ref = load_npz(run_dir / "eval" / slug / "reference.npz")
+    files = {m: load_npz(run_dir / "paths" / slug / f"{m}_nontrivial{'' if steer else '_nosteer'}.npz")
+             for m in models}
+    files = {m: z for m, z in files.items() if z is not None}
+    if ref is None or not files:
+        return None
+    ok = ref["nontrivial_status"] == 0
+    pick = np.flatnonzero(ok)[:n_examples]
+    ej = env.to_json()
+    fig, axes = plt.subplots(1, max(len(pick), 1), figsize=(3.6 * max(len(pick), 1), 3.8))
+    axes = np.atleast_1d(axes)
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for ax, i in zip(axes, pick):
+        _draw_map(ax, ej)
+        rp = ref["nontrivial_paths"][i, : ref["nontrivial_lengths"][i]]
+        ax.plot(rp[:, 0], rp[:, 1], "k--", lw=2, label=f"reference ({ref['nontrivial_costs'][i]:.2f})")
+        for j, (m, z) in enumerate(files.items()):
+            p = z["paths"][i, : z["lengths"][i]]
+            good = bool(z["success"][i])
+            lab = f"{m} ({z['costs'][i]:.2f})" if good else f"{m} (failed)"
+            ax.plot(p[:, 0], p[:, 1], "-" if good else ":", color=colors[j % len(colors)], lw=1.3,
+                    marker=".", ms=4, label=lab)
+        s, g = ref["nontrivial_paths"][i, 0], rp[-1]
+        ax.plot(*s[:2], "o", color="green", ms=7)
+        ax.plot(*g[:2], "*", color="blue", ms=10)
+        ax.legend(fontsize=6, loc="best")
+        ax.set_title(f"{env.name}: non-trivial query {i}", fontsize=9)
+    _save(fig, path)
+    plt.close(fig)
+    return path
+
+
+def queries_figure(run_dir: Path, env, slug: str, path: Path):
+    """The test query distributions: starts (green) and goals (blue), per kind."""
+    plt = _plt()
+    q = load_npz(Path(run_dir) / "eval" / slug / "queries.npz")
+    if q is None:
+        return None
+    ej = env.to_json()
+    fig, axes = plt.subplots(1, 2, figsize=(8, 4))
+    for ax, kind in zip(axes, KINDS):
+        _draw_map(ax, ej)
+        qq = q[kind]
+        ax.scatter(qq[:, 0, 0], qq[:, 0, 1], s=4, c="green", label="start")
+        ax.scatter(qq[:, 1, 0], qq[:, 1, 1], s=4, c="blue", label="goal")
+        ax.set_title(f"{env.name}: {KIND_TITLE[kind].lower()} test queries", fontsize=9)
+    axes[0].legend(fontsize=7, loc="upper right")
+    _save(fig, path)
+    plt.close(fig)
+    return path
+
+
+# ---------------------------------------------------------------------------
+# Everything
+# ---------------------------------------------------------------------------
+
+def write_report(run_dir, rows: list[dict], envs: dict | None = None, meta: dict | None = None,
+                 figures: bool = True) -> dict:
+    """Writes results.json/csv, tables.md/tex and the figures; returns their paths.
+
+    Args:
+        run_dir: the run folder.
+        rows: result rows (see :func:`ntq_jax.evaluate.evaluate_env`).
+        envs: ``{env_name: Env}`` for the map figures (optional).
+        meta: run metadata stored in ``results.json``.
+        figures: write the PNG figures.
+    """
+    from ntq_jax.evaluate import env_slug
+    run_dir = Path(run_dir)
+    out = {}
+    out["results.json"] = run_dir / "results.json"
+    write_text(out["results.json"], json.dumps({"meta": meta or {}, "rows": rows}, indent=1,
+                                               default=str))
+    out["results.csv"] = run_dir / "results.csv"
+    write_text(out["results.csv"], results_csv(rows))
+    out["tables.md"] = run_dir / "tables.md"
+    write_text(out["tables.md"], tables_md(rows))
+    out["tables.tex"] = run_dir / "tables.tex"
+    write_text(out["tables.tex"], tables_tex(rows))
+    if figures:
+        figs = run_dir / "figures"
+        for steer in sorted({r["steer"] for r in rows}, reverse=True):
+            p = success_figure(rows, figs / f"success_ratio{'' if steer else '_nosteer'}.png", steer)
+            if p:
+                out[p.name] = p
+        for name, env in (envs or {}).items():
+            slug = env_slug(name)
+            models = sorted({r["model"] for r in rows if r["env"] == name},
+                            key=lambda s: int(s.split("_")[-1]))
+            steer = any(r["steer"] for r in rows if r["env"] == name)
+            p = examples_figure(run_dir, env, slug, models, figs / f"examples_{slug}.png", steer)
+            if p:
+                out[p.name] = p
+            p = queries_figure(run_dir, env, slug, figs / f"queries_{slug}.png")
+            if p:
+                out[p.name] = p
+    return out

@@ -1,0 +1,138 @@
+"""Evaluation metrics, cached test queries / references, and the report files.
+
+No neural planning here (the end-to-end test in test_train_all.py runs
+evaluate_env with a trained ensemble); these tests are fast and exact.
+"""
+
+import json
+import math
+
+import jax
+import numpy as np
+import pytest
+
+from ntq_jax import config, make_env
+from ntq_jax import evaluate as E
+from ntq_jax import report as R
+from ntq_jax.neural_planner import INFEASIBLE, NO_PATH, SUCCESS
+from ntq_jax.queries import wilson_interval
+
+
+def test_metrics_by_hand():
+    success = np.array([True, True, True, False, False])
+    costs = np.array([2.0, 3.0, 5.0, np.inf, np.inf])
+    cause = np.array([SUCCESS, SUCCESS, SUCCESS, NO_PATH, INFEASIBLE], np.int8)
+    ref = np.array([1.0, 2.0, np.inf, 1.0, 1.0])
+    status = np.array([0, 0, 2, 0, 0], np.int8)  # the reference timed out on query 2
+    opt = np.array([1.0, 1.5, 4.0, 1.0, 1.0])
+    m = E.metrics(success, costs, cause, ref, status, opt)
+    assert m["successes"] == 3 and m["success_ratio"] == pytest.approx(0.6)
+    assert m["success_ci95"] == pytest.approx(list(wilson_interval(3, 5)))
+    assert m["cost_ratio"] == pytest.approx((2.0 + 1.5) / 2)  # only queries both solved
+    assert m["cost_ratio_n"] == 2
+    assert m["cost_ratio_opt"] == pytest.approx((2.0 + 2.0 + 1.25) / 3)
+    assert m["failures"] == {"no_path": 1, "infeasible": 1, "invalid_query": 0}
+    assert m["reference_failed"] == 1
+
+
+def test_wilson_interval_contains_truth_at_nominal_rate():
+    rng = np.random.default_rng(0)
+    p, n = 0.9, 200
+    hits = sum(lo <= p <= hi for lo, hi in
+               (wilson_interval(int(k), n) for k in rng.binomial(n, p, size=2000)))
+    assert 0.93 <= hits / 2000 <= 0.97
+
+
+class FakeReference:
+    """Straight-line 'planner': solves every query with cost |s - g|; counts its calls."""
+
+    __name__ = "fake"
+
+    def __init__(self):
+        self.calls = 0
+
+    def __call__(self, env, q, *, padding, seed):
+        self.calls += 1
+        k = len(q)
+
+        class Res:
+            paths = np.asarray(q, np.float32)
+            lengths = np.full(k, 2, np.int32)
+            costs = np.linalg.norm(q[:, 1] - q[:, 0], axis=1).astype(np.float64)
+            status = np.zeros(k, np.int8)
+        return Res()
+
+
+@pytest.fixture(scope="module")
+def cfg():
+    return config.load(None, ["envs=[point/1]", "eval.k_test=40", "eval.gamma_queries=20000"])
+
+
+def test_test_queries_are_fresh_cached_and_nontrivial(tmp_path, cfg):
+    env = make_env("point/1")
+    q = E.test_queries(env, cfg, "point_1", tmp_path)
+    assert q["uniform"].shape == q["nontrivial"].shape == (40, 2, 2)
+    assert np.all(np.asarray(env.is_valid(q["uniform"].reshape(-1, 2), padding=0.0)))
+    free = np.asarray(env.steer_to(q["nontrivial"][:, 0], q["nontrivial"][:, 1], padding=0.0))
+    assert not free.any()  # non-trivial on the evaluation geometry
+    again = E.test_queries(env, cfg, "point_1", tmp_path)
+    np.testing.assert_array_equal(q["nontrivial"], again["nontrivial"])
+    other = E.test_queries(env, config.load(None, ["eval.k_test=40", "seed=1"]), "point_1",
+                           tmp_path / "b")
+    assert not np.allclose(other["uniform"], q["uniform"])
+    # disjoint from the training stream: the data stage's uniform pool of the same seed
+    train_q, _ = env.sample_queries(jax.random.key(cfg.seed), 40, 0.0)
+    assert not np.any(np.all(np.isclose(train_q[:, None], q["uniform"][None]), axis=(2, 3)))
+
+
+def test_reference_is_cached_and_has_the_optimum(tmp_path, cfg):
+    env = make_env("point/1")
+    q = E.test_queries(env, cfg, "point_1", tmp_path)
+    fake = FakeReference()
+    ref = E.reference_plans(env, cfg, "point/1", "point_1", q, tmp_path, fake)
+    assert fake.calls == 2
+    again = E.reference_plans(env, cfg, "point/1", "point_1", q, tmp_path, fake)
+    assert fake.calls == 2 and str(again["planner"]) == "fake"
+    # the visibility-graph optimum: never longer than the straight line on trivial queries,
+    # strictly longer on the non-trivial ones
+    assert np.all(ref["uniform_opt_costs"] >= ref["uniform_costs"] - 1e-4)
+    assert np.all(ref["nontrivial_opt_costs"] > ref["nontrivial_costs"])
+
+
+def _row(env, model, kind, steer, s, k=50, cost=1.05):
+    return {"task": "point", "env": env, "env_slug": env.replace("/", "_"), "model": model,
+            "member": int(model[-1]), "query_kind": kind, "steer": steer, "gamma_nt": 0.4,
+            "gamma_nt_ci95": [0.39, 0.41], "reference_planner": "astar",
+            "seconds_per_query": 1e-3, "compile_seconds": 2.0, "reference_seconds_per_query": 1e-2,
+            "paths_file": "x", **E.metrics(np.arange(k) < s, np.full(k, cost), np.zeros(k, np.int8),
+                                           np.ones(k), np.zeros(k, np.int8), np.ones(k))}
+
+
+def test_report_layout(tmp_path):
+    rows = [_row(e, f"PNet_{m}", kind, steer, 40 + m)
+            for steer in (True, False) for e in ("point/0", "point/3")
+            for m in range(4) for kind in E.KINDS]
+    out = R.write_report(tmp_path, rows, envs=None, meta={"seed": 0})
+    md = (tmp_path / "tables.md").read_text()
+    assert "## Point robot planning" in md and "## Point robot planning without steerTo" in md
+    assert "Environment point/3, gamma_nt = 0.400 [0.390, 0.410] (paper 0.628)" in md
+    assert md.count("| PNet_3 | 0.860 [") == 4  # 43/50 in both kinds, both variants, 2 envs: 4 rows
+    tex = (tmp_path / "tables.tex").read_text()
+    assert tex.count("\\begin{tabular}") == 4 and "$\\mathsf{PNet}_0$ & 0.800 & 1.050" in tex
+    assert "without $\\mathsf{steerTo}$" in tex
+    csv_lines = (tmp_path / "results.csv").read_text().strip().splitlines()
+    assert len(csv_lines) == 1 + len(rows)
+    back = json.loads((tmp_path / "results.json").read_text())
+    assert back["meta"] == {"seed": 0} and len(back["rows"]) == len(rows)
+    assert (tmp_path / "figures" / "success_ratio.png").stat().st_size > 1000
+    assert (tmp_path / "figures" / "success_ratio_nosteer.png").is_file()
+    assert not list(tmp_path.rglob("*.tmp*"))
+
+
+def test_npz_roundtrip_rejects_other_fingerprints(tmp_path):
+    f = tmp_path / "a.npz"
+    E.save_npz(f, fingerprint="abc", x=np.arange(3))
+    assert E.load_npz(f, "abc")["x"].tolist() == [0, 1, 2]
+    assert E.load_npz(f, "other") is None
+    f.write_bytes(b"truncated")
+    assert E.load_npz(f) is None

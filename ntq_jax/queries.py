@@ -273,7 +273,7 @@ def _outcomes_from_uniforms(robot, world: World, u, padding: float):
     rows = [lo[j % d] + u[j] * (hi[j % d] - lo[j % d]) for j in range(2 * d)]
     a, b = jnp.stack(rows[:d]), jnp.stack(rows[d:])
     both = is_valid_cm(robot, world, a, padding) & is_valid_cm(robot, world, b, padding)
-    blocked = both & ~steer_to_cm(robot, world, a, b, padding)
+    blocked = both & ~steer_to_cm(robot, world, a, b, padding, mask=both)
     return both, blocked
 
 

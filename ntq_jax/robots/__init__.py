@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from ntq_jax.robots.base import Robot, discretized_steer_to, wrap_angle
+from ntq_jax.robots.base import Robot, discretized_steer_to, discretized_steer_to_batch, wrap_angle
 from ntq_jax.robots.nlink import NLinkArm
 from ntq_jax.robots.point import PointRobot
 from ntq_jax.robots.rigid_body import RigidBody
@@ -34,4 +34,4 @@ def robot_from_json(spec: dict, where: str = "robot") -> Robot:
 
 
 __all__ = ["Robot", "PointRobot", "RigidBody", "NLinkArm", "robot_from_json",
-           "discretized_steer_to", "wrap_angle"]
+           "discretized_steer_to", "discretized_steer_to_batch", "wrap_angle"]

@@ -6,7 +6,10 @@ Its methods are pure functions written for ONE state ``q`` of shape ``(d,)``;
 :mod:`ntq_jax.robots.batch` vmaps them over coordinate-major batches.
 
 Required methods (see :class:`Robot`): ``config_bounds``, ``is_valid``,
-``interpolate``, ``distance`` (the cost metric), ``steer_to``.
+``interpolate``, ``distance`` (the cost metric), ``steer_to``, and its batched
+form ``steer_to_batch`` (for the discretised robots a work queue,
+:func:`discretized_steer_to_batch`, that gives the same answers much faster
+than ``jax.vmap(steer_to)``).
 """
 
 from __future__ import annotations
@@ -40,6 +43,10 @@ class Robot(Protocol):
     def steer_to(self, a: Array, b: Array, world: World, padding: float) -> Array:
         """True when the steering curve from ``a`` to ``b`` is collision-free."""
 
+    def steer_to_batch(self, a: Array, b: Array, world: World, padding: float,
+                       mask: Array | None = None) -> Array:
+        """``steer_to`` over coordinate-major ``(d, N)`` batches; ``mask`` False: blocked, unchecked."""
+
     def to_json(self) -> dict:
         """The robot's parameters in the environment JSON format."""
 
@@ -49,18 +56,49 @@ def wrap_angle(a: Array) -> Array:
     return jnp.mod(a + jnp.pi, 2.0 * jnp.pi) - jnp.pi
 
 
+CHECK_STRIDE = 16  # coarse-to-fine order: every 16th state first, then the offsets 1..15
+QUEUE_LANES = 512  # lanes of the batched work queue (see discretized_steer_to_batch)
+CHECKS_PER_STEP = 8  # states each lane checks per iteration of the work queue
+
+
+def _steps(robot, a: Array, b: Array, resolution: float) -> Array:
+    """``n = ceil(distance / resolution)`` (>= 1) intervals; 0 for non-finite input."""
+    dist = robot.distance(a, b)
+    return jnp.where(jnp.isfinite(dist), jnp.maximum(jnp.ceil(dist / resolution), 1.0),
+                     0.0).astype(jnp.int32)
+
+
+def _check_index(c: Array, n: Array) -> Array:
+    """The state checked ``c``-th (0-based) in the coarse-to-fine order of ``0..n``.
+
+    The order visits ``o, o + S, o + 2 S, ...`` for ``o = 0, 1, ..., S - 1``
+    (``S = CHECK_STRIDE``): a permutation of ``0..n``, so every state is checked
+    exactly once, but a collision that spans ``S`` or more consecutive states is
+    found within the first ``n / S + 1`` checks instead of wherever it lies along
+    the path. Closed form, so any number of checks can be indexed at once: the
+    pass ``o`` holds ``q + 1`` states for ``o <= n mod S`` and ``q = n // S``
+    for the others, hence starts at ``o q + min(o, n mod S + 1)``.
+    """
+    q, r1 = n // CHECK_STRIDE, n % CHECK_STRIDE + 1
+    o = jnp.zeros_like(c)
+    for k in range(1, CHECK_STRIDE):
+        o = o + (k * q + jnp.minimum(k, r1) <= c).astype(c.dtype)
+    return o + CHECK_STRIDE * (c - (o * q + jnp.minimum(o, r1)))
+
+
 def discretized_steer_to(robot, a: Array, b: Array, world: World, padding: float,
                          resolution: float) -> Array:
     """Checks the states at ``t = k / n``, ``k = 0..n``, ``n = ceil(distance(a, b) / resolution)``.
 
     Consecutive checked states are at most ``resolution`` apart in the robot's
-    cost metric, endpoints included. The loop stops at the first invalid state
-    (under ``vmap`` it runs until every lane is done). Non-finite input is
-    reported as blocked without looping.
+    cost metric, endpoints included; the motion is free iff all of them are
+    valid. They are checked in the coarse-to-fine order of :func:`_check_index`,
+    and the loop stops at the first invalid one. Non-finite input is reported as
+    blocked without looping. This is the one-query kernel (``jax.vmap`` runs
+    every lane until the longest is done); batches go through
+    :func:`discretized_steer_to_batch`, which gives the same answers.
     """
-    dist = robot.distance(a, b)
-    finite = jnp.isfinite(dist)
-    n = jnp.where(finite, jnp.maximum(jnp.ceil(dist / resolution), 1.0), 0.0).astype(jnp.int32)
+    n = _steps(robot, a, b, resolution)
 
     def cond(carry):
         k, ok = carry
@@ -68,8 +106,93 @@ def discretized_steer_to(robot, a: Array, b: Array, world: World, padding: float
 
     def body(carry):
         k, _ = carry
-        t = k.astype(a.dtype) / n.astype(a.dtype)
+        t = _check_index(k, n).astype(a.dtype) / n.astype(a.dtype)
         return k + 1, robot.is_valid(robot.interpolate(a, b, t), world, padding)
 
-    _, ok = jax.lax.while_loop(cond, body, (jnp.int32(0), finite))
-    return ok
+    return jax.lax.while_loop(cond, body, (jnp.int32(0), n > 0))[1]
+
+
+def _longest_first(n: Array) -> Array:
+    """Indices ordering ``n`` (``(N,)`` int32, >= 0) from largest to smallest, approximately.
+
+    One sort of packed int32 keys ``(n, index)`` (about 5x faster than
+    ``argsort`` on CPU): the index takes ``ceil(log2 N)`` bits and ``n`` the rest,
+    shifted right as far as needed to fit, so huge ``n`` (or huge ``N``) group into
+    equal-key runs ordered by index. The work queue only needs roughly
+    longest-first, to keep the tail short.
+    """
+    num = n.shape[0]
+    idx_bits = max(1, (num - 1).bit_length())
+    key_bits = 31 - idx_bits
+    top_bits = 32 - jax.lax.clz(jnp.max(n))
+    coarse = n >> jnp.maximum(top_bits - key_bits, 0)
+    key = (((1 << key_bits) - 1 - coarse) << idx_bits) | jnp.arange(num, dtype=jnp.int32)
+    return jax.lax.sort(key) & ((1 << idx_bits) - 1)
+
+
+def discretized_steer_to_batch(robot, a: Array, b: Array, world: World, padding: float,
+                               resolution: float, mask: Array | None = None,
+                               lanes: int = QUEUE_LANES, per_step: int = CHECKS_PER_STEP) -> Array:
+    """:func:`discretized_steer_to` for a coordinate-major batch ``(d, N), (d, N) -> (N,)``.
+
+    Same states, same answers, scheduled as a work queue: ``lanes`` lanes each
+    check the next ``per_step`` states (in the coarse-to-fine order) of their
+    motion per iteration; a lane whose motion is decided (an invalid state, or
+    all ``n + 1`` states valid) stores the answer and takes the next motion
+    from the queue. A vmapped ``while_loop`` instead runs every lane as long as
+    the slowest one, mostly checking nothing. Motions are queued longest first,
+    which keeps the tail short. ``mask`` (optional, ``(N,)`` bool) selects the
+    motions to check; the others, like non-finite ones, are reported blocked
+    without any check. The compiled shape depends only on ``N``, ``lanes`` and
+    ``per_step``.
+    """
+    d, num = a.shape
+    if num == 0:
+        return jnp.zeros((0,), bool)
+    lanes = min(lanes, num)
+    n = jax.vmap(_steps, in_axes=(None, 1, 1, None))(robot, a, b, resolution)
+    if mask is not None:
+        n = jnp.where(mask, n, 0)
+    order = _longest_first(n)  # the queue, longest motions first; the n = 0 ones (not checked) last
+    work = jnp.sum(n > 0, dtype=jnp.int32)  # queue positions >= work hold nothing to check
+    interpolate = jax.vmap(jax.vmap(robot.interpolate, in_axes=(None, None, 0), out_axes=1),
+                           in_axes=(1, 1, 1), out_axes=2)
+    is_valid = jax.vmap(jax.vmap(robot.is_valid, in_axes=(1, None, None)), in_axes=(1, None, None))
+    ahead = jnp.arange(per_step, dtype=jnp.int32)[:, None]
+
+    def check(pos, k):
+        """Validity ``(per_step, lanes)`` of the next ``per_step`` states of each lane's motion."""
+        i = order[jnp.minimum(pos, num - 1)]
+        nq = jnp.maximum(n[i], 1)
+        t = _check_index(k + ahead, nq).astype(a.dtype) / nq.astype(a.dtype)  # (per_step, lanes)
+        # gathered one coordinate row at a time and broadcast over the checks, the
+        # states stay coordinate-major with the lanes as the minor axis (d, per_step,
+        # lanes): a flat (d, per_step * lanes) layout stops XLA from vectorising
+        ap = jnp.stack([a[j][i] for j in range(d)])
+        bp = jnp.stack([b[j][i] for j in range(d)])
+        return is_valid(interpolate(ap, bp, t), world, padding)
+
+    def cond(carry):
+        return jnp.any(carry[1] < work)  # some lane still holds a motion
+
+    def body(carry):
+        # ``valid`` comes from the end of the previous iteration: as a loop-carried
+        # value it is computed once, in one elementwise loop, where XLA would
+        # otherwise fuse the validity test into each of its consumers below
+        # (computing it twice, or inside the reduction)
+        head, pos, k, valid, out = carry
+        i = order[jnp.minimum(pos, num - 1)]
+        nq = n[i]
+        ok = jnp.all(valid | (k + ahead > nq), axis=0)  # checks past the last state do not count
+        done = (pos < work) & (~ok | (k + per_step > nq))
+        out = out.at[jnp.where(done, i, num)].set(ok, mode="drop")
+        # decided lanes take the next motions of the queue
+        pos = jnp.where(done, head + jnp.cumsum(done, dtype=jnp.int32) - 1, pos)
+        head = head + jnp.sum(done, dtype=jnp.int32)
+        k = jnp.where(done, 0, k + per_step)
+        return head, pos, k, check(pos, k), out
+
+    pos = jnp.arange(lanes, dtype=jnp.int32)
+    k = jnp.zeros_like(pos)
+    init = (jnp.int32(lanes), pos, k, check(pos, k), jnp.zeros((num,), bool))
+    return jax.lax.while_loop(cond, body, init)[4]

@@ -33,7 +33,7 @@ def is_valid_batch(robot, world: World, states: Array, padding: float) -> Array:
 @functools.partial(_kernel_jit, static_argnames=("robot", "padding"))
 def steer_to_batch(robot, world: World, a: Array, b: Array, padding: float) -> Array:
     """``(N, d), (N, d) -> (N,)`` bool, True where the connection is collision-free."""
-    return jax.vmap(robot.steer_to, in_axes=(1, 1, None, None))(a.T, b.T, world, padding)
+    return robot.steer_to_batch(a.T, b.T, world, padding)
 
 
 @functools.partial(_kernel_jit, static_argnames=("robot",))
@@ -47,6 +47,11 @@ def is_valid_cm(robot, world: World, states_cm: Array, padding: float) -> Array:
     return jax.vmap(robot.is_valid, in_axes=(1, None, None))(states_cm, world, padding)
 
 
-def steer_to_cm(robot, world: World, a_cm: Array, b_cm: Array, padding: float) -> Array:
-    """Coordinate-major ``(d, N), (d, N) -> (N,)``, for use inside other jitted code."""
-    return jax.vmap(robot.steer_to, in_axes=(1, 1, None, None))(a_cm, b_cm, world, padding)
+def steer_to_cm(robot, world: World, a_cm: Array, b_cm: Array, padding: float,
+                mask: Array | None = None) -> Array:
+    """Coordinate-major ``(d, N), (d, N) -> (N,)``, for use inside other jitted code.
+
+    ``mask`` (optional, ``(N,)`` bool): only these connections are checked, the
+    others are reported blocked (False) without any work.
+    """
+    return robot.steer_to_batch(a_cm, b_cm, world, padding, mask)

@@ -37,5 +37,11 @@ class PointRobot:
         """Exact: the closed segment ``a -> b`` is farther than ``padding`` from every obstacle."""
         return geometry.segment_free(a, b, world, padding)
 
+    def steer_to_batch(self, a: Array, b: Array, world: World, padding: float,
+                       mask: Array | None = None) -> Array:
+        """Coordinate-major ``(2, N), (2, N) -> (N,)``; ``mask`` False reports blocked."""
+        free = jax.vmap(self.steer_to, in_axes=(1, 1, None, None))(a, b, world, padding)
+        return free if mask is None else free & mask
+
     def to_json(self) -> dict:
         return {"kind": "point"}

@@ -26,7 +26,7 @@ import jax.numpy as jnp
 
 from ntq_jax import geometry
 from ntq_jax.geometry import World
-from ntq_jax.robots.base import discretized_steer_to, wrap_angle
+from ntq_jax.robots.base import discretized_steer_to, discretized_steer_to_batch, wrap_angle
 
 Array = jax.Array
 
@@ -71,6 +71,11 @@ class RigidBody:
 
     def steer_to(self, a: Array, b: Array, world: World, padding: float) -> Array:
         return discretized_steer_to(self, a, b, world, padding, self.resolution)
+
+    def steer_to_batch(self, a: Array, b: Array, world: World, padding: float,
+                       mask: Array | None = None) -> Array:
+        """Coordinate-major ``(d, N), (d, N) -> (N,)``: the same answers as ``steer_to``, batched."""
+        return discretized_steer_to_batch(self, a, b, world, padding, self.resolution, mask)
 
     def to_json(self) -> dict:
         return {"kind": "rigid_body", "length": self.length, "width": self.width,

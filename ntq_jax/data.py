@@ -85,6 +85,7 @@ import shutil
 import time
 import warnings
 import zlib
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any, Callable, NamedTuple, Optional
 
@@ -637,6 +638,28 @@ def generate_datasets(env, config, out_dir, *, env_name: str | None = None, plan
                                 np.where(exh, Q.NT_EXHAUSTED, Q.NON_TRIVIAL).astype(np.int8)])
     timings["sample"] = time.perf_counter() - t0
 
+    # gamma_nt: independent of everything else, overlapped with planning
+    gamma_seconds = [0.0]
+
+    def _gammas():
+        tg = time.perf_counter()
+        gd = _estimate_gamma(env, jax.random.fold_in(k_gam, 0), dc.gamma_queries, pad, work,
+                             "data")
+        ge = (_estimate_gamma(env, jax.random.fold_in(k_gam, 1), dc.gamma_queries, 0.0, work,
+                              "eval") if dc.gamma_eval else
+              {"padding": 0.0, "gamma": None, "ci95": None, "queries": 0})
+        gamma_seconds[0] = time.perf_counter() - tg
+        return gd, ge
+
+    with ThreadPoolExecutor(1, thread_name_prefix="ntq_jax-gamma") as pool_ex:
+        gamma_future = pool_ex.submit(_gammas)
+        return_value = _generate_rest(**locals())
+    return return_value
+
+
+def _generate_rest(*, env, config, env_name, env_dir, slug, dc, specs, names, K, pad, prune_pad,
+                   options, plan_fn, planner_name, bits, n_u, n_nt, fp, work, pool, pool_kind,
+                   timings, t_all, progress, figure, gamma_future, gamma_seconds, **_):
     # 2. planning (chunked, resumable)
     t0 = time.perf_counter()
     res, reused = _plan_pool(env, pool, plan_fn, pad, config.seed, dc.chunk, work, progress,
@@ -654,17 +677,14 @@ def generate_datasets(env, config, out_dir, *, env_name: str | None = None, plan
     blocked = ~steer_to_chunked(env, pool[:, 0], pool[:, 1], padding=pad)
     timings["check"] = time.perf_counter() - t0
 
-    # 4. gamma_nt of the map
+    # 4. gamma_nt of the map (computed in a background thread while the planner runs)
     t0 = time.perf_counter()
-    with _bar(progress, f"{slug}: gamma_nt", 2, "estimate") as bar:
-        g_data = _estimate_gamma(env, jax.random.fold_in(k_gam, 0), dc.gamma_queries, pad,
-                                 work, "data")
-        bar.update(1)
-        g_eval = (_estimate_gamma(env, jax.random.fold_in(k_gam, 1), dc.gamma_queries, 0.0,
-                                  work, "eval") if dc.gamma_eval else
-                  {"padding": 0.0, "gamma": None, "ci95": None, "queries": 0})
-        bar.update(1)
-    timings["gamma"] = time.perf_counter() - t0
+    g_data, g_eval = gamma_future.result()
+    timings["gamma"] = gamma_seconds[0]
+    timings["gamma_wait"] = time.perf_counter() - t0
+    bar = _bar(progress, f"{slug}: gamma_nt", 1, "estimate")
+    bar.update(1)
+    bar.close()
 
     # 5. includeData per dataset, write
     t_inc = t_write = 0.0

@@ -20,8 +20,11 @@ recompiles. ``padding`` is a static Python float, so the common ``padding=0``
 case compiles to the cheaper closed-set test.
 
 None of the kernels divides, so tangent and degenerate cases never produce NaN.
-NaN or infinite coordinates make every predicate here report a collision
-(the ``free`` kernels return False).
+NaN or infinite coordinates make the ``*_free`` kernels (``point_free``,
+``segment_free``, ``rect_free``) and ``in_bounds`` return False: a documented
+"invalid / blocked", never an exception. The lower-level ``*_hits_*`` tests
+give no guarantee for non-finite input; call them through the ``*_free``
+kernels.
 
 Every jitted batch entry point compiles with :data:`KERNEL_COMPILER_OPTIONS`
 (512-bit vectors on CPUs that have them): the kernels are long chains of

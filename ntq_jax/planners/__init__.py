@@ -155,26 +155,27 @@ def plan(env, queries, planner: str = "astar", *, padding: float | None = None, 
 # Shared helpers
 # ---------------------------------------------------------------------------
 
-def _pow2(n: int, lo: int = 64) -> int:
-    return max(lo, 1 << (max(int(n), 1) - 1).bit_length())
+_CHECK_CHUNK = 2048
 
 
-def _bucketed(fn, *arrays: np.ndarray, chunk: int = 1 << 16) -> np.ndarray:
-    """Calls a jitted row-wise ``fn`` on ``(N, ...)`` arrays padded to power-of-two sizes."""
+def _bucketed(fn, *arrays: np.ndarray, chunk: int = _CHECK_CHUNK) -> np.ndarray:
+    """Calls a jitted row-wise ``fn`` on ``(N, ...)`` arrays in fixed-size padded chunks.
+
+    One shape per function, so every batch size reuses one compiled program.
+    """
     n = arrays[0].shape[0]
     if n == 0:
         return np.zeros(0, bool)
     out = []
     for lo in range(0, n, chunk):
         m = min(chunk, n - lo)
-        size = _pow2(m)
         bufs = []
         for a in arrays:
-            b = np.zeros((size,) + a.shape[1:], a.dtype)
+            b = np.zeros((chunk,) + a.shape[1:], a.dtype)
             b[:m] = a[lo:lo + m]
             bufs.append(b)
-        out.append(np.asarray(fn(*bufs))[:m])
-    return np.concatenate(out)
+        out.append(fn(*bufs))
+    return np.concatenate([np.asarray(o)[:min(chunk, n - i * chunk)] for i, o in enumerate(out)])
 
 
 def valid_queries(env, q: np.ndarray, padding: float) -> np.ndarray:

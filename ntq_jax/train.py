@@ -297,18 +297,42 @@ def member_step(graphdef, tx, params, opt_state, x, y, key, idx, mask, active):
             loss)
 
 
+def member_val_loss(graphdef, params, x, y, mask):
+    """Dropout-free loss of one member over padded validation rows.
+
+    Args:
+        x, y, mask: ``(C, R, 2d)``, ``(C, R, d)``, ``(C, R)``: rows in ``C`` chunks of ``R``.
+
+    Returns:
+        The mean loss over the unmasked rows.
+    """
+    model = nnx.merge(graphdef, params)
+
+    def one(args):
+        xc, yc, mc = args
+        return model.loss(xc, yc, mc, None, deterministic=True) * jnp.sum(mc)
+
+    total = jnp.sum(jax.lax.map(one, (x, y, mask)))
+    return total / jnp.maximum(jnp.sum(mask), 1.0)
+
+
 def make_train_chunk(graphdef, tx, steps: int):
-    """A jitted function running ``steps`` ensemble steps (``lax.scan`` of a vmapped step).
+    """A jitted function running ``steps`` ensemble steps (``lax.scan`` of a vmapped step),
+    then, if asked, the validation loss (fused: one compilation instead of two).
 
     Returns:
         ``fn(state, x (M, N, 2d), y (M, N, d), dropout_keys (M,), g0, idx (K, M, B),
-        mask (K, M, B), active (K, M)) -> (state, losses (K, M))``; member ``m`` at
-        global step ``g0 + k`` uses the dropout key ``fold_in(dropout_keys[m], g0 + k)``.
+        mask (K, M, B), active (K, M), val_x, val_y, val_mask, do_eval) -> (state,
+        losses (K, M), val_loss (M,))``; member ``m`` at global step ``g0 + k`` uses the
+        dropout key ``fold_in(dropout_keys[m], g0 + k)``; ``val_loss`` is 0 unless
+        ``do_eval`` (validation arrays as in :func:`member_val_loss`, with a member axis).
     """
     vstep = jax.vmap(lambda p, o, x, y, k, i, mk, a: member_step(graphdef, tx, p, o, x, y, k, i,
                                                                  mk, a))
+    veval = jax.vmap(lambda p, x, y, mk: member_val_loss(graphdef, p, x, y, mk))
 
-    def chunk(state: TrainState, x, y, dropout_keys, g0, idx, mask, active):
+    def chunk(state: TrainState, x, y, dropout_keys, g0, idx, mask, active, val_x, val_y,
+              val_mask, do_eval):
         def body(carry, inp):
             params, opt = carry
             k, idx_k, mask_k, act_k = inp
@@ -318,40 +342,17 @@ def make_train_chunk(graphdef, tx, steps: int):
 
         (params, opt), losses = jax.lax.scan(
             body, (state.params, state.opt_state), (jnp.arange(steps), idx, mask, active))
-        return TrainState(params, opt), losses
+        val = jax.lax.cond(do_eval, lambda p: veval(p, val_x, val_y, val_mask),
+                           lambda p: jnp.zeros(val_mask.shape[:1], jnp.float32), params)
+        return TrainState(params, opt), losses, val
 
     return jax.jit(chunk, donate_argnums=(0,))
-
-
-def make_eval(graphdef):
-    """A jitted dropout-free loss over padded validation rows.
-
-    Returns:
-        ``fn(params, x (M, C, R, 2d), y (M, C, R, d), mask (M, C, R)) -> (M,)``
-        (rows in ``C`` chunks of ``R``; the mean over the unmasked rows).
-    """
-    def member_eval(p, x, y, mask):
-        model = nnx.merge(graphdef, p)
-
-        def one(args):
-            xc, yc, mc = args
-            return model.loss(xc, yc, mc, None, deterministic=True) * jnp.sum(mc)
-
-        total = jnp.sum(jax.lax.map(one, (x, y, mask)))
-        return total / jnp.maximum(jnp.sum(mask), 1.0)
-
-    return jax.jit(jax.vmap(member_eval))
 
 
 @functools.lru_cache(maxsize=16)
 def _cached_chunk_fn(graphdef, optimizer: str, learning_rate: float, steps: int):
     cfg = TrainConfig(optimizer=optimizer, learning_rate=learning_rate)
     return make_train_chunk(graphdef, make_optimizer(cfg), steps)
-
-
-@functools.lru_cache(maxsize=16)
-def _cached_eval_fn(graphdef):
-    return make_eval(graphdef)
 
 
 # ---------------------------------------------------------------------------
@@ -531,8 +532,10 @@ class History(NamedTuple):
     Attributes:
         step: ``(T,)`` global steps.
         epoch: ``(T, M)`` each member's epochs done.
-        train_loss: ``(T, M)`` mean training minibatch loss since the previous row.
-        val_loss: ``(T, M)`` validation loss (dropout off); NaN without validation rows.
+        train_loss: ``(T, M)`` mean training minibatch loss since the previous row
+            (NaN in the first row, step 0, which holds the untrained validation loss).
+        val_loss: ``(T, M)`` validation loss (dropout off); NaN without validation rows
+            and once a member has finished.
     """
 
     step: np.ndarray
@@ -560,13 +563,13 @@ def write_history(out: Path, records: list[dict], labels: Sequence[str]):
     """Writes ``history.jsonl``, ``history.csv`` and ``curves.png`` (matplotlib Agg) into ``out``."""
     _atomic_write(out / "history.jsonl", "".join(json.dumps(r) + "\n" for r in records))
     lines = ["step,member,dataset,epoch,train_loss,val_loss"]
+    fmt = lambda v: "" if v is None else format(v, ".8g")
     for r in records:
         for m, lab in enumerate(labels):
-            if r["train_loss"][m] is None:
+            t, v = r["train_loss"][m], r["val_loss"][m]
+            if t is None and v is None:
                 continue
-            v = r["val_loss"][m]
-            lines.append(f"{r['step']},{m},{lab},{r['epoch'][m]:.6g},{r['train_loss'][m]:.8g},"
-                         f"{'' if v is None else format(v, '.8g')}")
+            lines.append(f"{r['step']},{m},{lab},{r['epoch'][m]:.6g},{fmt(t)},{fmt(v)}")
     _atomic_write(out / "history.csv", "\n".join(lines) + "\n")
     try:
         import matplotlib
@@ -579,7 +582,7 @@ def write_history(out: Path, records: list[dict], labels: Sequence[str]):
     for m, lab in enumerate(labels):
         ok = np.isfinite(h.train_loss[:, m])
         line, = ax.plot(h.epoch[ok, m], h.train_loss[ok, m], "--", lw=1, label=f"{lab} train")
-        okv = ok & np.isfinite(h.val_loss[:, m])
+        okv = np.isfinite(h.val_loss[:, m])
         if okv.any():
             ax.plot(h.epoch[okv, m], h.val_loss[okv, m], "-", lw=1.5, color=line.get_color(),
                     label=f"{lab} val")
@@ -695,7 +698,6 @@ def train_ensemble(datasets: Sequence[Any], env, model_cfg: ModelConfig, train_c
     has_val = [len(md.val_x) > 0 for md in members]
     chunk_fn = _cached_chunk_fn(ens.graphdef, train_cfg.optimizer, train_cfg.learning_rate,
                                 k_steps)
-    eval_fn = _cached_eval_fn(ens.graphdef)
 
     fingerprint = {
         "model": dataclasses.asdict(model_cfg) | {"hidden": list(model_cfg.hidden)},
@@ -749,26 +751,36 @@ def train_ensemble(datasets: Sequence[Any], env, model_cfg: ModelConfig, train_c
     next_eval = (g // eval_every + 1) * eval_every
     next_ckpt = (g // train_cfg.checkpoint_every + 1) * train_cfg.checkpoint_every
     end = total if stop_after is None else min(total, int(stop_after))
+    def run_chunk(g0: int, do_eval: bool, train: bool = True):
+        idx, mask, active = plan.chunk(g0, k_steps)
+        if not train:
+            active[:] = False
+        st, losses, val = chunk_fn(state, x_dev, y_dev, dropout_keys, jnp.int32(g0),
+                                   _place(jnp.asarray(idx), mesh, 1),
+                                   _place(jnp.asarray(mask), mesh, 1),
+                                   _place(jnp.asarray(active), mesh, 1), vx, vy, vmask,
+                                   jnp.bool_(do_eval))
+        return st, np.asarray(losses), np.asarray(val), active
+
+    if g == 0 and not records and any(has_val):  # the untrained baseline of the curves
+        state, _, val, _ = run_chunk(0, True, train=False)
+        records.append({"step": 0, "epoch": [0.0] * num, "train_loss": [None] * num,
+                        "val_loss": [float(v) if hv else None for v, hv in zip(val, has_val)]})
     while g < end:
-        idx, mask, active = plan.chunk(g, k_steps)
-        state, losses = chunk_fn(state, x_dev, y_dev, dropout_keys, jnp.int32(g),
-                                 _place(jnp.asarray(idx), mesh, 1),
-                                 _place(jnp.asarray(mask), mesh, 1),
-                                 _place(jnp.asarray(active), mesh, 1))
-        losses = np.asarray(losses)
+        g_new = min(g + k_steps, total)
+        do_eval = g_new >= next_eval or g_new >= total
+        state, losses, val, active = run_chunk(g, do_eval)
         loss_sum += np.where(active, losses, 0.0).sum(0)
         loss_cnt += active.sum(0)
         n_act = active.sum(0)
         last_loss = np.where(n_act > 0, np.where(active, losses, 0.0).sum(0) / np.maximum(n_act, 1),
                              last_loss)
-        g_new = min(g + k_steps, total)
         if bar is not None:
             bar.update(g_new - g)
             bar.set_postfix_str(" ".join(f"{lab}={last_loss[m]:.4g}{'' if n_act[m] else '(done)'}"
                                          for m, lab in enumerate(labels)))
         g = g_new
-        if g >= next_eval or g >= total:
-            val = np.asarray(eval_fn(state.params, vx, vy, vmask))
+        if do_eval:
             pos = schedule.position(g)
             records.append({
                 "step": g,

@@ -417,7 +417,10 @@ def padded_world(world, multiple: int = 16):
 
     The extra obstacles are tiny and far outside any workspace (at ``1e6``), so
     no state or motion inside the bounds can touch them; maps with similar
-    obstacle counts then share one compilation of the planner.
+    obstacle counts then share one compilation of the planner. The kernels
+    unroll over obstacles, so padding also lengthens every compilation (a
+    5-box map padded to 16 compiles about 4x slower): worth it only when many
+    maps share one obstacle-count bucket.
     """
     from ntq_jax.geometry import World
 
@@ -437,7 +440,8 @@ def bucket_size(n: int) -> int:
 
 
 def plan_batch(env, pnet: Callable, queries, key: Array,
-               opts: PlannerOptions = PlannerOptions(), *, chunk: int = 1024) -> NeuralPlanResult:
+               opts: PlannerOptions = PlannerOptions(), *, chunk: int = 1024,
+               pad_obstacles: int = 0) -> NeuralPlanResult:
     """Plans every query with the neural planner (all of a chunk in one jitted call).
 
     Args:
@@ -447,6 +451,8 @@ def plan_batch(env, pnet: Callable, queries, key: Array,
         key: PRNG key (dropout); the result is deterministic given the key.
         opts: :class:`PlannerOptions`.
         chunk: largest batch per jitted call (batches are padded to a power of two).
+        pad_obstacles: if > 0, pad the obstacle lists to a multiple of it
+            (:func:`padded_world`) so maps with similar counts share one compilation.
 
     Returns:
         A :class:`NeuralPlanResult` with paths trimmed to the longest one.
@@ -461,7 +467,7 @@ def plan_batch(env, pnet: Callable, queries, key: Array,
         raise ValueError("the bidirectional planner needs steerTo (steer=True)")
     k = q.shape[0]
     fn = as_pnet(pnet)
-    world = padded_world(env.world)
+    world = padded_world(env.world, pad_obstacles) if pad_obstacles > 0 else env.world
     size = bucket_size(min(max(k, 1), chunk))
     outs, secs, comp = [], 0.0, 0.0
     for ci, lo in enumerate(range(0, k, size)):

@@ -1,0 +1,157 @@
+#!/usr/bin/env python
+"""Plans one query with a trained PNet of a run folder; prints the path and its cost, draws a PNG.
+
+Examples::
+
+    python scripts/plan.py --run runs/point-1a2b3c4d --model 3 --start 1 1 --goal 18 18
+    python scripts/plan.py --run RUN --env point/2 --model 0 --start 2 2 --goal 18 2 --no-steer
+    python scripts/plan.py --run RUN --env rigid/1 --model 3 --start 1 1 0 --goal 9 9 1.57
+
+The start and goal are states in the robot's coordinates (x y for the point
+robot, x y theta for the rigid body, joint angles for the arm). A state out of
+bounds or in collision (on the evaluation geometry, padding 0) is refused with
+an error naming it. The PNG (default ``<run>/figures/plan_<env>_PNet_<m>.png``)
+shows the map, the neural path and, for point robots, the exact optimum.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+
+class PlanError(ValueError):
+    pass
+
+
+def _load(run: Path, env_name: str | None):
+    from ntq_jax import config as C
+    from ntq_jax import make_env
+    from ntq_jax.evaluate import env_slug
+    cfg_f = run / "config.yaml"
+    if not cfg_f.is_file():
+        raise PlanError(f"{run} is not a run folder (no config.yaml); pass the folder printed by "
+                        "scripts/train_all.py")
+    cfg = C.load(cfg_f)
+    if env_name is None:
+        if len(cfg.envs) != 1:
+            raise PlanError(f"the run has several environments ({', '.join(cfg.envs)}); "
+                            "choose one with --env")
+        env_name = cfg.envs[0]
+    if env_name not in cfg.envs:
+        raise PlanError(f"environment {env_name!r} is not in this run ({', '.join(cfg.envs)})")
+    slug = env_slug(env_name)
+    env_json = run / "data" / slug / "env.json"
+    env = make_env(env_json if env_json.is_file() else env_name)
+    return cfg, env, env_name, slug
+
+
+def _check_state(env, x, what: str):
+    import numpy as np
+    x = np.asarray(x, np.float32)
+    if x.shape != (env.dim,):
+        raise PlanError(f"--{what} needs {env.dim} numbers for the {env.robot.kind} robot of "
+                        f"{env.name}, got {x.size}")
+    if not np.all(np.isfinite(x)):
+        raise PlanError(f"--{what} {x.tolist()} is not finite")
+    lo, hi = (np.asarray(b) for b in env.robot.config_bounds(env.world))
+    if np.any(x < lo) or np.any(x > hi):
+        raise PlanError(f"--{what} {x.tolist()} is out of bounds: each coordinate must lie in "
+                        f"[{', '.join(f'{a:g}..{b:g}' for a, b in zip(lo, hi))}]")
+    if not bool(np.asarray(env.is_valid(x[None], padding=0.0))[0]):
+        raise PlanError(f"--{what} {x.tolist()} is in collision with an obstacle of {env.name}")
+    return x
+
+
+def plan_one(run, model: int, start, goal, *, env_name=None, steer: bool = True, seed: int = 0,
+             png=None):
+    """Plans one query; returns ``(result, env, png_path)`` (see the module docstring)."""
+    import jax
+    import numpy as np
+
+    from ntq_jax.evaluate import member_pnets
+    from ntq_jax.neural_planner import PlannerOptions, plan_batch
+    from ntq_jax.train import CheckpointError, load_ensemble
+
+    run = Path(run)
+    cfg, env, env_name, slug = _load(run, env_name)
+    s = _check_state(env, start, "start")
+    g = _check_state(env, goal, "goal")
+    try:
+        ens = load_ensemble(run / "models" / slug)
+    except CheckpointError as e:
+        raise PlanError(str(e)) from None
+    if not 0 <= model < ens.num_members:
+        raise PlanError(f"--model must be in 0..{ens.num_members - 1}, got {model}")
+    opts = PlannerOptions.from_config(cfg.eval, steer=steer)
+    res = plan_batch(env, member_pnets(ens)[model], np.stack([s, g])[None],
+                     jax.random.key(seed), opts)
+    png = Path(png) if png else run / "figures" / f"plan_{slug}_PNet_{model}.png"
+    _draw(env, res, s, g, model, png)
+    return res, env, png
+
+
+def _draw(env, res, s, g, model, png: Path):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    from ntq_jax.report import _draw_map
+    fig, ax = plt.subplots(figsize=(5, 5))
+    _draw_map(ax, env.to_json())
+    if env.robot.kind == "point":
+        from ntq_jax.planners.visgraph import plan_visgraph
+        opt = plan_visgraph(env, np.stack([s, g])[None], padding=0.0)
+        if opt.status[0] == 0:
+            p = opt.path(0)
+            ax.plot(p[:, 0], p[:, 1], "k--", lw=2, label=f"optimum ({opt.costs[0]:.3f})")
+    p = res.path(0)
+    ok = bool(res.success[0])
+    ax.plot(p[:, 0], p[:, 1], "-" if ok else ":", color="tab:red", marker=".",
+            label=f"PNet_{model} ({res.costs[0]:.3f})" if ok else f"PNet_{model} (failed)")
+    ax.plot(*s[:2], "o", color="green", ms=8)
+    ax.plot(*g[:2], "*", color="blue", ms=12)
+    ax.legend(fontsize=8)
+    png.parent.mkdir(parents=True, exist_ok=True)
+    tmp = png.with_name(png.stem + ".tmp.png")
+    fig.savefig(tmp, dpi=110, bbox_inches="tight")
+    tmp.replace(png)
+    plt.close(fig)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--run", required=True, help="run folder of scripts/train_all.py")
+    ap.add_argument("--model", type=int, required=True, help="ensemble member (PNet_<N>)")
+    ap.add_argument("--start", type=float, nargs="+", required=True, help="start state")
+    ap.add_argument("--goal", type=float, nargs="+", required=True, help="goal state")
+    ap.add_argument("--env", default=None, help="environment (needed when the run has several)")
+    ap.add_argument("--no-steer", action="store_true", help="the variant without steerTo")
+    ap.add_argument("--seed", type=int, default=0, help="dropout seed")
+    ap.add_argument("--png", default=None, help="output figure")
+    args = ap.parse_args(argv)
+    from ntq_jax.config import ConfigError
+    from ntq_jax.envs import EnvError
+    from ntq_jax.neural_planner import CAUSES
+    try:
+        res, env, png = plan_one(args.run, args.model, args.start, args.goal, env_name=args.env,
+                                 steer=not args.no_steer, seed=args.seed, png=args.png)
+    except (PlanError, ConfigError, EnvError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    path = res.path(0)
+    print(f"{env.name}, PNet_{args.model}: {CAUSES[int(res.cause[0])]}")
+    for row in path:
+        print("  " + " ".join(f"{v:.4f}" for v in row))
+    print(f"cost: {res.costs[0]:.4f}" if res.success[0] else "cost: inf (no collision-free path)")
+    print(f"figure: {png}")
+    return 0 if res.success[0] else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

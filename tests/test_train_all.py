@@ -1,0 +1,122 @@
+"""End to end: scripts/train_all.py on a tiny config (data -> train -> evaluate -> report),
+its resume, the refusal of a foreign run folder, and scripts/plan.py's input errors.
+
+Every success in the saved paths files is re-checked with shapely (float64, closed
+boxes), independently of the planner's flag and of the package's kernels.
+"""
+
+import importlib.util
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from shapely.geometry import LineString, Point, box as shapely_box
+from shapely.ops import unary_union
+
+ROOT = Path(__file__).resolve().parents[1]
+TINY = ["envs=[point/2]", "data.k_train=40", "data.gamma_queries=2000", "train.epochs=2",
+        "model.hidden=[32,32]", "eval.k_test=16", "eval.n_plan=20", "eval.replan_rounds=2",
+        "eval.replan_steps=6", "eval.gamma_queries=2000"]
+
+
+def _script(name):
+    spec = importlib.util.spec_from_file_location(name, ROOT / "scripts" / f"{name}.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def _args(out, extra=()):
+    a = ["--out", str(out), "--no-progress"]
+    for s in list(TINY) + list(extra):
+        a += ["--set", s]
+    return a
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("run")
+    rc = _script("train_all").main(_args(out))
+    assert rc == 0
+    return out
+
+
+def test_run_folder_contents(run):
+    res = json.loads((run / "results.json").read_text())
+    rows = res["rows"]
+    assert {(r["model"], r["query_kind"]) for r in rows} == {
+        (f"PNet_{m}", k) for m in range(4) for k in ("uniform", "nontrivial")}
+    for r in rows:
+        assert r["k_test"] == 16 and 0 <= r["success_ratio"] <= 1
+        lo, hi = r["success_ci95"]
+        assert lo <= r["success_ratio"] <= hi
+        assert r["gamma_nt"] is not None
+    md = (run / "tables.md").read_text()
+    assert "## Point robot planning" in md and "Environment point/2, gamma_nt" in md
+    for m in range(4):
+        assert f"| PNet_{m} |" in md
+    assert (run / "tables.tex").read_text().count("\\begin{tabular}") == 1
+    assert len((run / "results.csv").read_text().strip().splitlines()) == 9
+    for f in ("success_ratio.png", "examples_point_2.png", "queries_point_2.png"):
+        assert (run / "figures" / f).stat().st_size > 1000
+    assert (run / "data" / "point_2" / "env.json").is_file()
+    assert (run / "models" / "point_2" / "ensemble" / "ensemble.json").is_file()
+    info = json.loads((run / "run.json").read_text())
+    assert {"data/point_2", "train/point_2", "eval/point_2", "report"} <= set(info["stages"])
+
+
+def test_every_success_is_collision_free(run):
+    env = json.loads((run / "data" / "point_2" / "env.json").read_text())
+    obst = unary_union([shapely_box(cx - hw, cy - hh, cx + hw, cy + hh)
+                        for cx, cy, hw, hh in env["boxes"]])
+    (x0, x1), (y0, y1) = env["bounds"]
+    checked = 0
+    for f in sorted((run / "paths" / "point_2").glob("PNet_*_*.npz")):
+        z = np.load(f)
+        assert z["paths"].shape[0] == 16 and np.all(np.isinf(z["costs"][~z["success"]]))
+        for i in np.flatnonzero(z["success"]):
+            p = z["paths"][i, : z["lengths"][i]].astype(np.float64)
+            np.testing.assert_allclose(p[0], z["queries"][i, 0], atol=1e-6)
+            np.testing.assert_allclose(p[-1], z["queries"][i, 1], atol=1e-6)
+            assert np.all((p[:, 0] >= x0) & (p[:, 0] <= x1) & (p[:, 1] >= y0) & (p[:, 1] <= y1))
+            for a, b in zip(p[:-1], p[1:]):
+                geom = Point(a) if np.allclose(a, b) else LineString([a, b])
+                assert not geom.intersects(obst), (f.name, i)
+            seg = np.linalg.norm(np.diff(p, axis=0), axis=1).sum()
+            assert z["costs"][i] == pytest.approx(seg, rel=1e-4)
+            checked += 1
+    assert len(list((run / "paths" / "point_2").glob("*.npz"))) == 8
+    assert checked > 0
+
+
+def test_rerun_resumes_without_redoing_work(run, capsys):
+    files = sorted((run / "paths").rglob("*.npz")) + [run / "eval" / "point_2" / "reference.npz"]
+    before = {f: f.stat().st_mtime_ns for f in files}
+    rc = _script("train_all").main(_args(run))
+    assert rc == 0
+    assert {f: f.stat().st_mtime_ns for f in files} == before
+    out = capsys.readouterr().out
+    assert "train: complete" in out and "| PNet_3 |" in out
+
+
+def test_foreign_run_folder_is_refused(run, capsys):
+    rc = _script("train_all").main(_args(run, ["eval.k_test=17"]))
+    assert rc == 2
+    assert "another config" in capsys.readouterr().err
+
+
+def test_plan_script_rejects_bad_states(run, capsys):
+    plan = _script("plan")
+    env = json.loads((run / "data" / "point_2" / "env.json").read_text())
+    cx, cy = env["boxes"][0][:2]  # inside the first wall
+    assert plan.main(["--run", str(run), "--model", "0", "--start", str(cx), str(cy),
+                      "--goal", "1", "1"]) == 2
+    assert "--start" in capsys.readouterr().err
+    assert plan.main(["--run", str(run), "--model", "0", "--start", "1", "1",
+                      "--goal", "30", "1"]) == 2
+    assert "out of bounds" in capsys.readouterr().err
+    assert plan.main(["--run", str(run), "--model", "9", "--start", "1", "1",
+                      "--goal", "2", "2"]) == 2
+    assert "--model" in capsys.readouterr().err

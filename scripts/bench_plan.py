@@ -1,0 +1,116 @@
+#!/usr/bin/env python
+"""Benchmark: the batched neural planner vs a per-query loop of the same planner.
+
+Examples::
+
+    python scripts/bench_plan.py                         # point/0, 500 queries
+    python scripts/bench_plan.py --env rigid/0 --env nlink/4 --loop-queries 100
+    python scripts/bench_plan.py --run runs/point-xxxx --env point/3   # a trained PNet_3
+
+The same compiled planner (:func:`ntq_jax.neural_planner.plan_batch`, the
+evaluation options of the config) plans the same test queries (half uniform,
+half non-trivial, padding 0) once as one batch and once one query at a time
+(batch size 1). Compilation is excluded from both (each shape is warmed up
+first). Without ``--run`` the PNet is an untrained ensemble member (random
+weights, widths from ``--hidden``); its paths differ from a trained one's, so
+use ``--run`` for the timing of a real evaluation. With ``--loop-queries`` smaller than ``--queries`` the loop's time
+is measured on that many queries and scaled (reported as such).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+
+def bench(env_name: str, *, queries: int, loop_queries: int, run=None, model: int = 3,
+          hidden=(256, 256, 128, 64), seed: int = 0, eval_overrides=()) -> dict:
+    import jax
+    import numpy as np
+
+    from ntq_jax import config as C
+    from ntq_jax import make_env, models
+    from ntq_jax.evaluate import env_slug, member_pnets
+    from ntq_jax.neural_planner import PlannerOptions, plan_batch
+
+    env = make_env(env_name)
+    if run is not None:
+        from ntq_jax.train import load_ensemble
+        cfg = C.load(Path(run) / "config.yaml", list(eval_overrides))
+        ens = load_ensemble(Path(run) / "models" / env_slug(env_name))
+        source = f"trained PNet_{model} of {run}"
+    else:
+        cfg = C.load(None, [f"model.hidden={list(hidden)}", *eval_overrides])
+        spec = models.ModelSpec.from_env(env, cfg.model)
+        ens = models.init_ensemble(spec, seed, num_members=model + 1)
+        source = f"untrained PNet (hidden {list(hidden)})"
+    pnet = member_pnets(ens)[model]
+    opts = PlannerOptions.from_config(cfg.eval, steer=True)
+    key = jax.random.key(seed)
+    qu, _ = env.sample_queries(jax.random.fold_in(key, 1), queries // 2, 0.0, padding=0.0)
+    qn, _ = env.sample_queries(jax.random.fold_in(key, 2), queries - queries // 2, 1.0, padding=0.0)
+    q = np.concatenate([qu, qn]).astype(np.float32)
+
+    warm = plan_batch(env, pnet, q, key, opts)  # compiles the batch shape
+    t0 = time.perf_counter()
+    res = plan_batch(env, pnet, q, key, opts)
+    batched = time.perf_counter() - t0
+
+    n_loop = min(loop_queries, len(q))
+    plan_batch(env, pnet, q[:1], key, opts)  # compiles the single-query shape
+    t0 = time.perf_counter()
+    succ = 0
+    for i in range(n_loop):
+        r = plan_batch(env, pnet, q[i:i + 1], jax.random.fold_in(key, i), opts)
+        succ += int(r.success[0])
+    loop = (time.perf_counter() - t0) * len(q) / n_loop
+    return {
+        "env": env_name, "robot": env.robot.kind, "queries": len(q), "loop_queries": n_loop,
+        "pnet": source, "n_plan": opts.n_plan, "replan_rounds": opts.replan_rounds,
+        "batched_seconds": batched, "batched_seconds_per_query": batched / len(q),
+        "loop_seconds": loop, "loop_seconds_per_query": loop / len(q),
+        "speedup": loop / batched, "compile_seconds": warm.compile_seconds,
+        "batched_success": float(res.success.mean()),
+        "loop_success": succ / n_loop,
+        "mean_pnet_calls": float(res.pnet_calls.mean()),
+    }
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--env", action="append", default=None, help="environment(s) (default point/0)")
+    ap.add_argument("--queries", type=int, default=500)
+    ap.add_argument("--loop-queries", type=int, default=500,
+                    help="queries timed in the per-query loop (scaled to --queries)")
+    ap.add_argument("--run", default=None, help="use a trained ensemble of this run folder")
+    ap.add_argument("--model", type=int, default=3)
+    ap.add_argument("--hidden", type=int, nargs="+", default=[256, 256, 128, 64])
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="eval config override, e.g. --set eval.n_plan=50")
+    ap.add_argument("--json", default=None, help="also write the results to this JSON file")
+    args = ap.parse_args(argv)
+    out = []
+    for name in args.env or ["point/0"]:
+        r = bench(name, queries=args.queries, loop_queries=args.loop_queries, run=args.run,
+                  model=args.model, hidden=tuple(args.hidden), eval_overrides=args.set)
+        out.append(r)
+        print(f"{r['env']:8s} {r['queries']} queries ({r['pnet']}, n_plan {r['n_plan']}, "
+              f"replan {r['replan_rounds']}): batched {r['batched_seconds']:.2f} s "
+              f"({r['batched_seconds_per_query'] * 1e3:.2f} ms/query), per-query loop "
+              f"{r['loop_seconds']:.2f} s ({r['loop_seconds_per_query'] * 1e3:.2f} ms/query"
+              f"{', measured on %d' % r['loop_queries'] if r['loop_queries'] < r['queries'] else ''}"
+              f"), speedup {r['speedup']:.1f}x; success {r['batched_success']:.3f} / "
+              f"{r['loop_success']:.3f}; compile {r['compile_seconds']:.1f} s", flush=True)
+    if args.json:
+        Path(args.json).write_text(json.dumps(out, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

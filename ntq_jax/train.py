@@ -559,8 +559,12 @@ def _atomic_write(path: Path, text: str):
     os.replace(tmp, path)
 
 
-def write_history(out: Path, records: list[dict], labels: Sequence[str]):
-    """Writes ``history.jsonl``, ``history.csv`` and ``curves.png`` (matplotlib Agg) into ``out``."""
+def write_history(out: Path, records: list[dict], labels: Sequence[str], png: bool = True):
+    """Writes ``history.jsonl``, ``history.csv`` and (``png``) ``curves.png`` into ``out``.
+
+    The figure (matplotlib, Agg backend) costs far more than the text files, so the
+    training loop redraws it only at checkpoints and at the end.
+    """
     _atomic_write(out / "history.jsonl", "".join(json.dumps(r) + "\n" for r in records))
     lines = ["step,member,dataset,epoch,train_loss,val_loss"]
     fmt = lambda v: "" if v is None else format(v, ".8g")
@@ -571,14 +575,17 @@ def write_history(out: Path, records: list[dict], labels: Sequence[str]):
                 continue
             lines.append(f"{r['step']},{m},{lab},{r['epoch'][m]:.6g},{fmt(t)},{fmt(v)}")
     _atomic_write(out / "history.csv", "\n".join(lines) + "\n")
-    try:
-        import matplotlib
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
+    if not png:
+        return
+    try:  # the object API with the Agg canvas: no pyplot, no global backend switch
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
     except ImportError:  # pragma: no cover
         return
     h = _history(records, len(labels))
-    fig, ax = plt.subplots(figsize=(6.4, 4.0))
+    fig = Figure(figsize=(6.4, 4.0))
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot()
     for m, lab in enumerate(labels):
         ok = np.isfinite(h.train_loss[:, m])
         line, = ax.plot(h.epoch[ok, m], h.train_loss[ok, m], "--", lw=1, label=f"{lab} train")
@@ -594,7 +601,6 @@ def write_history(out: Path, records: list[dict], labels: Sequence[str]):
     fig.tight_layout()
     tmp = out / "curves.tmp.png"
     fig.savefig(tmp, dpi=110)
-    plt.close(fig)
     os.replace(tmp, out / "curves.png")
 
 
@@ -630,6 +636,7 @@ def train_ensemble(datasets: Sequence[Any], env, model_cfg: ModelConfig, train_c
                    shard: bool | None = None, stop_after: int | None = None,
                    extra_fingerprint: dict | None = None,
                    on_checkpoint: Callable[[int], None] | None = None,
+                   resolved_config: dict | None = None,
                    ) -> tuple[models.Ensemble, History]:
     """Trains one PNet per dataset, all members together (see the module docstring).
 
@@ -652,6 +659,8 @@ def train_ensemble(datasets: Sequence[Any], env, model_cfg: ModelConfig, train_c
         extra_fingerprint: more values that must match for a resume (e.g. the
             resolved experiment config's hash).
         on_checkpoint: called with the global step after each checkpoint is saved.
+        resolved_config: the whole experiment config (a plain dict) to store in every
+            checkpoint's metadata (the model and train sections are always stored).
 
     Returns:
         ``(ensemble, history)``: the trained :class:`ntq_jax.models.Ensemble`
@@ -737,7 +746,9 @@ def train_ensemble(datasets: Sequence[Any], env, model_cfg: ModelConfig, train_c
     def meta_at(step: int) -> dict:
         return {"format": FORMAT_VERSION, "step": step, "total_steps": total,
                 "position": schedule.position(step), "fingerprint": fingerprint,
-                "labels": labels, "history": records, "time": time.time()}
+                "labels": labels, "history": records, "time": time.time(),
+                "config": resolved_config or {"model": fingerprint["model"],
+                                              "train": dataclasses.asdict(train_cfg)}}
 
     # -- loop ----------------------------------------------------------------
     bar = None
@@ -794,9 +805,10 @@ def train_ensemble(datasets: Sequence[Any], env, model_cfg: ModelConfig, train_c
             loss_cnt[:] = 0
             next_eval = (g // eval_every + 1) * eval_every
             if out is not None:
-                write_history(out, records, labels)
+                write_history(out, records, labels, png=False)
         if mgr is not None and (g >= next_ckpt or g >= end):
             _save_checkpoint(mgr, g, state, meta_at(g))
+            write_history(out, records, labels)
             if on_checkpoint is not None:
                 on_checkpoint(g)
             next_ckpt = (g // train_cfg.checkpoint_every + 1) * train_cfg.checkpoint_every
@@ -806,7 +818,8 @@ def train_ensemble(datasets: Sequence[Any], env, model_cfg: ModelConfig, train_c
     params = jax.device_put(state.params, jax.devices()[0])
     result = models.Ensemble(graphdef=ens.graphdef, params=params, spec=spec)
     if out is not None:
-        write_history(out, records, labels)
+        if mgr is None or not (out / "curves.png").exists() or not records:
+            write_history(out, records, labels)
         if g >= total:
             save_ensemble(result, out / "ensemble",
                           {"labels": labels, "member_ids": ids, "steps": total,
@@ -839,4 +852,4 @@ def train_from_folder(env_dir: str | os.PathLike, cfg, out_dir: str | os.PathLik
     _atomic_write(out / "config.json", json.dumps(cfg.to_dict(), indent=1))
     return train_ensemble(datasets, env, cfg.model, cfg.train, seed=cfg.seed, ckpt_dir=out,
                           progress=progress, labels=[f"D{i}" for i in range(len(datasets))],
-                          shard=shard)
+                          shard=shard, resolved_config=cfg.to_dict())

@@ -673,7 +673,7 @@ def _generate_rest(*, env, config, env_name, env_dir, slug, dc, specs, names, K,
     if rejected:
         warnings.warn(f"{env_name}: {rejected} planner path(s) failed the independent check "
                       f"(endpoints or a segment in collision at padding {pad}); they are "
-                      "recorded as unsolved", RuntimeWarning, stacklevel=2)
+                      "recorded as unsolved", RuntimeWarning, stacklevel=3)
     blocked = ~steer_to_chunked(env, pool[:, 0], pool[:, 1], padding=pad)
     timings["check"] = time.perf_counter() - t0
 
@@ -727,7 +727,7 @@ def _generate_rest(*, env, config, env_name, env_dir, slug, dc, specs, names, K,
                           else "(no query was solved)" if not len(sel) else "(empty)")
                        + "; an empty, valid dataset was written")
                 warn.append(msg)
-                warnings.warn(msg, RuntimeWarning, stacklevel=2)
+                warnings.warn(msg, RuntimeWarning, stacklevel=3)
             n_exh = int((kind == Q.NT_EXHAUSTED).sum())
             if n_exh:
                 msg = (f"{env_name} {nm}: {n_exh} non-trivial draw(s) found no blocked query in "
@@ -771,14 +771,11 @@ def _generate_rest(*, env, config, env_name, env_dir, slug, dc, specs, names, K,
         try:
             plot_environment(env_dir, out=env_dir / "figure.png")
         except Exception as e:  # a figure must never cost the data  # noqa: BLE001
-            warnings.warn(f"{env_name}: figure not written: {e}", RuntimeWarning, stacklevel=2)
+            warnings.warn(f"{env_name}: figure not written: {e}", RuntimeWarning, stacklevel=3)
         timings["figure"] = time.perf_counter() - t0
 
-    shutil.rmtree(env_dir / ".work" / fp, ignore_errors=True)
-    try:
-        (env_dir / ".work").rmdir()
-    except OSError:
-        pass
+    # the datasets are complete: drop this run's chunks and any stale ones of older settings
+    shutil.rmtree(env_dir / ".work", ignore_errors=True)
     timings["total"] = time.perf_counter() - t_all
     return {"env_dir": str(env_dir), "skipped": False, "fingerprint": fp, "timings": timings,
             "reused_queries": reused, "datasets": summary, "planned_queries": len(pool)}

@@ -334,7 +334,8 @@ def _lane_step(jump, word, of, orow, stack, top, used, fresh, tok, start, goal, 
     """One A*/JPS iteration of ONE query (vmapped over the lanes).
 
     Args:
-        jump: ``(H * W * 8,)`` int16 jump table (shared by all lanes).
+        jump: the ``(H * W, 8)`` int16 jump table (shared by all lanes), split
+            by directions into flat parts (see ``_split_jump_table``).
         word: ``(H * W,)`` uint32 cell words of this lane (see ``_TOK_SHIFT``).
         of: ``(C,)`` float32 f of the open-list slots (``inf`` = free).
         orow: ``(C, 3)`` int32 open-list rows: cell, g (float32 bits), and
@@ -378,9 +379,14 @@ def _lane_step(jump, word, of, orow, stack, top, used, fresh, tok, start, goal, 
     reached = act & (u == goal)
     expand = act & ~reached
     closed_word = seen_word | _CLOSED_BIT | (how & _SLOT_MASK).astype(jnp.uint32)
+    # (barriers: materialise intermediate results once; XLA would otherwise recompute
+    #  the whole elementwise chain inside every gather/scatter kernel that uses it)
+    u, gu, how, act, reached, expand, popped, i, closed_word = lax.optimization_barrier(
+        (u, gu, how, act, reached, expand, popped, i, closed_word))
 
     # -- one jump along each searched direction ----------------------------------------
-    vals = jump[u * 8 + ks].astype(jnp.int32)
+    per = 8 // len(jump)
+    vals = jnp.concatenate([part[u * per + jnp.arange(per)] for part in jump]).astype(jnp.int32)
     reach = jnp.abs(vals)
     is_jp = vals > 0
     ur, uc = lax.div(u, width), lax.rem(u, width)
@@ -398,6 +404,7 @@ def _lane_step(jump, word, of, orow, stack, top, used, fresh, tok, start, goal, 
     s = jnp.where(has, u + offs * steps, u)
     gs = gu + steps.astype(jnp.float32) * jnp.asarray(STEP_COST)
     fs = gs + _octile(gr - (ur + dr_k * steps), gc - (uc + dc_k * steps))
+    s, gs, fs, steps, has = lax.optimization_barrier((s, gs, fs, steps, has))
 
     # -- relax: new cells take free slots (the popped one first), better ones update in place
     ws = word[s]
@@ -420,6 +427,8 @@ def _lane_step(jump, word, of, orow, stack, top, used, fresh, tok, start, goal, 
     stack = stack.at[jnp.where(spare, top, cap)].set(i, mode="drop")
     top = jnp.maximum(top - n_stack, 0) + spare
     slot = jnp.where((new | better) & ~overflow, slot, cap)
+    slot, new, overflow, spare, top, used = lax.optimization_barrier(
+        (slot, new, overflow, spare, top, used))
     of = of.at[jnp.concatenate([jnp.where(spare, i, cap)[None], slot])].set(
         jnp.concatenate([inf[None], fs]), mode="drop")
     rows = jnp.stack([s, lax.bitcast_convert_type(gs, jnp.int32), (ks << _DIR_SHIFT) | steps], -1)
@@ -433,6 +442,19 @@ def _lane_step(jump, word, of, orow, stack, top, used, fresh, tok, start, goal, 
 
 _IDLE, _SEARCH, _TRACE = 0, 1, 2
 
+# XLA:CPU splits a gather whose operand exceeds ~512 KB over two threads; inside a
+# loop of small steps the synchronisation costs more than the gather itself.
+_NO_SPLIT_BYTES = 480 << 10
+
+
+def _split_jump_table(jump: Array) -> tuple[Array, ...]:
+    """``(H*W, 8)`` -> 1, 2, 4 or 8 flat parts by direction, each below ``_NO_SPLIT_BYTES`` if possible."""
+    parts = 1
+    while parts < 8 and jump.size * jump.dtype.itemsize // parts > _NO_SPLIT_BYTES:
+        parts *= 2
+    per = 8 // parts
+    return tuple(jump[:, p * per:(p + 1) * per].reshape(-1) for p in range(parts))
+
 
 def _search(graph: GridGraph, start: Array, goal: Array, nq: Array, *, lanes: int, cap: int,
             max_jp: int, trace_steps: int):
@@ -445,7 +467,7 @@ def _search(graph: GridGraph, start: Array, goal: Array, nq: Array, *, lanes: in
     n = start.shape[0]
     b = lanes
     inf = jnp.float32(jnp.inf)
-    jump = graph.jump.reshape(-1)
+    jump = _split_jump_table(graph.jump)
     lane_ids = jnp.arange(b)
     ends = jnp.stack([start, goal], -1)
     vstep = jax.vmap(functools.partial(_lane_step, width=w), in_axes=(None,) + (0,) * 11)
@@ -527,8 +549,8 @@ def _cells_from_jump_points(jp: Array, njp: Array, width: int, max_len: int):
     the waypoints ``(N, J, 2)``, the cell paths ``(N, max_len, 2)`` (both
     ``(row, col)``, padded with -1) and the paths' numbers of cells ``(N,)``
     (which may exceed ``max_len``). The cells come from one scan over the path
-    index that accumulates unit steps (the changes of step are scattered at the
-    waypoints), so there is no per-cell gather or search.
+    index that accumulates flat unit steps (the changes of step are scattered
+    at the waypoints), so there is no per-cell gather or search.
     """
     n, jmax = jp.shape
     ar = jnp.arange(jmax)
@@ -540,26 +562,23 @@ def _cells_from_jump_points(jp: Array, njp: Array, width: int, max_len: int):
     seg = jnp.where(vseg, jnp.maximum(jnp.abs(dr), jnp.abs(dc)), 0)
     pos = jnp.concatenate([jnp.zeros((n, 1), jnp.int32), jnp.cumsum(seg, axis=1)], axis=1)
     total = jnp.where(njp > 0, jnp.take_along_axis(pos, jnp.maximum(njp - 1, 0)[:, None], 1)[:, 0] + 1, 0)
-    sr = jnp.where(vseg, jnp.sign(dr), 0)  # unit step of each segment
-    sc = jnp.where(vseg, jnp.sign(dc), 0)
-    zero = jnp.zeros((n, 1), jnp.int32)
-    change = ((sr - jnp.concatenate([zero, sr[:, :-1]], 1)) * 8
-              + (sc - jnp.concatenate([zero, sc[:, :-1]], 1)))  # packed (d_row, d_col), each in [-2, 2]
+    step = jnp.where(vseg, jnp.sign(dr) * width + jnp.sign(dc), 0)  # flat unit step of each segment
+    change = step - jnp.concatenate([jnp.zeros((n, 1), jnp.int32), step[:, :-1]], 1)
     at = pos[:, :-1]
     flat = jnp.where(at < max_len, at * n + jnp.arange(n)[:, None], max_len * n)
     delta = jnp.zeros(max_len * n, jnp.int32).at[flat.reshape(-1)].add(
         change.reshape(-1), mode="drop").reshape(max_len, n)
 
-    def step(carry, d):
-        srow, scol, row, col = carry
-        d_row = (d + 4) >> 3
-        srow, scol = srow + d_row, scol + d - 8 * d_row
-        return (srow, scol, row + srow, col + scol), jnp.stack([row, col], -1)
+    def advance(carry, d):
+        unit, cell = carry
+        unit = unit + d
+        return (unit, cell + unit), cell
 
-    z = jnp.zeros(n, jnp.int32)
-    _, cells = lax.scan(step, (z, z, r[:, 0], c[:, 0]), delta)
+    _, cells = lax.scan(advance, (jnp.zeros(n, jnp.int32), pts[:, 0]), delta)
+    cells = cells.T
+    cells = jnp.stack([lax.div(cells, width), lax.rem(cells, width)], -1)
     ok = jnp.arange(max_len)[None, :] < total[:, None]
-    path = jnp.where(ok[..., None], jnp.swapaxes(cells, 0, 1), -1).astype(jnp.int32)
+    path = jnp.where(ok[..., None], cells, -1).astype(jnp.int32)
     wps = jnp.where(valid[..., None], jnp.stack([r, c], -1), -1).astype(jnp.int32)
     return wps, path, total
 

@@ -74,11 +74,9 @@ start/goal distributions of D0 (uniform) and D2 (non-trivial) and a few paths.
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import hashlib
 import json
-import math
 import os
 import re
 import shutil
@@ -324,7 +322,18 @@ def resolve_planner(planner, options: dict) -> tuple[Callable, str]:
 # ---------------------------------------------------------------------------
 
 def _fsync_replace(tmp: Path, dst: Path):
+    """Renames ``tmp`` over ``dst`` and syncs the directory, so the rename survives a crash."""
     os.replace(tmp, dst)
+    try:
+        fd = os.open(dst.parent, os.O_RDONLY)
+    except OSError:  # pragma: no cover (platforms without directory fds)
+        return
+    try:
+        os.fsync(fd)
+    except OSError:  # pragma: no cover
+        pass
+    finally:
+        os.close(fd)
 
 
 def _atomic_write_bytes(path: Path, blob: bytes):
@@ -651,135 +660,131 @@ def generate_datasets(env, config, out_dir, *, env_name: str | None = None, plan
         gamma_seconds[0] = time.perf_counter() - tg
         return gd, ge
 
-    with ThreadPoolExecutor(1, thread_name_prefix="ntq_jax-gamma") as pool_ex:
-        gamma_future = pool_ex.submit(_gammas)
-        return_value = _generate_rest(**locals())
-    return return_value
-
-
-def _generate_rest(*, env, config, env_name, env_dir, slug, dc, specs, names, K, pad, prune_pad,
-                   options, plan_fn, planner_name, bits, n_u, n_nt, fp, work, pool, pool_kind,
-                   timings, t_all, progress, figure, gamma_future, gamma_seconds, **_):
-    # 2. planning (chunked, resumable)
-    t0 = time.perf_counter()
-    res, reused = _plan_pool(env, pool, plan_fn, pad, config.seed, dc.chunk, work, progress,
-                             f"{slug}: plan ({planner_name})")
-    timings["plan"] = time.perf_counter() - t0
-
-    # 3. independent check of every path, blocked-ness of every query
-    t0 = time.perf_counter()
-    good = check_paths(env, pool, res, pad)
-    rejected = int(((res.status == SOLVED) & ~good).sum())
-    if rejected:
-        warnings.warn(f"{env_name}: {rejected} planner path(s) failed the independent check "
-                      f"(endpoints or a segment in collision at padding {pad}); they are "
-                      "recorded as unsolved", RuntimeWarning, stacklevel=3)
-    blocked = ~steer_to_chunked(env, pool[:, 0], pool[:, 1], padding=pad)
-    timings["check"] = time.perf_counter() - t0
-
-    # 4. gamma_nt of the map (computed in a background thread while the planner runs)
-    t0 = time.perf_counter()
-    g_data, g_eval = gamma_future.result()
-    timings["gamma"] = gamma_seconds[0]
-    timings["gamma_wait"] = time.perf_counter() - t0
-    bar = _bar(progress, f"{slug}: gamma_nt", 1, "estimate")
-    bar.update(1)
-    bar.close()
-
-    # 5. includeData per dataset, write
-    t_inc = t_write = 0.0
-    summary: dict[str, dict] = {}
-    common = {
-        "format": FORMAT, "format_version": FORMAT_VERSION, "env": env.name,
-        "env_name": env_name, "env_slug": slug, "seed": config.seed, "k_train": K,
-        "padding": pad, "prune_padding": prune_pad,
-        "planner": {"name": planner_name, "options": options},
-        "sampling": {"n_max": config.sampling.n_max},
-        "gamma_nt": g_data, "gamma_nt_eval": g_eval,
-        "package_version": _package_version(), "config_hash": config.hash(), "fingerprint": fp,
-        "query_kind_values": {"0": "uniform", "1": "non-trivial",
-                              "2": "non-trivial sampler exhausted (trivial)"},
-    }
-    with _bar(progress, f"{slug}: includeData + write", len(specs), "dataset") as bar:
-        for j, (nm, spec, b) in enumerate(zip(names, specs, bits)):
-            t0 = time.perf_counter()
-            # query t: next of N if b[t] else next of U (pool index n_u + rank in N)
-            rank_nt = np.cumsum(b) - 1
-            rank_u = np.cumsum(~b) - 1
-            idx = np.where(b, n_u + rank_nt, rank_u)
-            q, kind = pool[idx], pool_kind[idx]
-            solved = good[idx]
-            sel = idx[solved]
-            lens = res.lengths[sel].astype(np.int32)
-            lmax = int(lens.max()) if len(lens) else 0
-            paths = np.ascontiguousarray(res.paths[sel, :lmax]) if len(sel) else \
-                np.zeros((0, 0, env.dim), np.float32)
-            inputs, targets, pidx = include_data(env, paths, lens, prune=spec.prune,
-                                                 padding=prune_pad)
-            segments = int(np.maximum(lens - 1, 0).sum())
-            t_inc += time.perf_counter() - t0
-            t0 = time.perf_counter()
-            warn = []
-            if len(inputs) == 0:
-                msg = (f"{env_name} {nm}: the dataset has no samples "
-                       + ("(pruning removed every segment: no waypoint of any path is blocked "
-                          "from its goal, e.g. a map without obstacles)" if spec.prune and segments
-                          else "(no query was solved)" if not len(sel) else "(empty)")
-                       + "; an empty, valid dataset was written")
-                warn.append(msg)
-                warnings.warn(msg, RuntimeWarning, stacklevel=3)
-            n_exh = int((kind == Q.NT_EXHAUSTED).sum())
-            if n_exh:
-                msg = (f"{env_name} {nm}: {n_exh} non-trivial draw(s) found no blocked query in "
-                       f"n_max={config.sampling.n_max} attempts and are trivial (query_kind 2)")
-                warn.append(msg)
-            nblk = int(blocked[idx].sum())
-            stats = {
-                "queries": K, "uniform": int((kind == Q.UNIFORM).sum()),
-                "non_trivial": int((kind == Q.NON_TRIVIAL).sum()), "nt_exhausted": n_exh,
-                "solved": int(solved.sum()), "unsolved": int(K - solved.sum()),
-                "rejected_paths": int(((res.status[idx] == SOLVED) & ~solved).sum()),
-                "paths": int(len(sel)), "segments": segments, "samples": int(len(inputs)),
-                "pruned": segments - int(len(inputs)) if spec.prune else 0,
-                "fraction_pruned": ((segments - len(inputs)) / segments
-                                    if spec.prune and segments else 0.0),
-                "mean_waypoints": float(lens.mean()) if len(lens) else 0.0,
-                "max_waypoints": lmax,
-                "blocked_fraction": nblk / K, "blocked_fraction_ci95": _wilson(nblk, K),
-                "mean_cost": float(res.costs[sel].mean()) if len(sel) else None,
-                "gamma_nt": g_data["gamma"], "gamma_nt_eval": g_eval["gamma"],
-            }
-            arrays = {"inputs": inputs, "targets": targets, "path_index": pidx,
-                      "paths": paths.astype(np.float32), "path_lengths": lens,
-                      "queries": q.astype(np.float32), "query_kind": kind.astype(np.int8),
-                      "solved": solved.astype(np.bool_)}
-            sharing = {"uniform_pool": [0, int((~b).sum())],
-                       "nontrivial_pool": [0, int(b.sum())],
-                       "same_queries_as": [names[i] for i in range(j)
-                                           if np.array_equal(bits[i], b)]}
-            meta = dict(common, name=nm, p_nt=spec.p_nt, prune=spec.prune, stats=stats,
-                        sharing=sharing, warnings=warn)
-            _write_dataset(env_dir / nm, arrays, meta)
-            summary[nm] = stats
-            t_write += time.perf_counter() - t0
-            bar.update(1)
-    timings["include"] = t_inc
-    timings["write"] = t_write
-
-    if figure:
+    gamma_pool = ThreadPoolExecutor(1, thread_name_prefix="ntq_jax-gamma")
+    gamma_future = gamma_pool.submit(_gammas)
+    try:
+        # 2. planning (chunked, resumable)
         t0 = time.perf_counter()
-        try:
-            plot_environment(env_dir, out=env_dir / "figure.png")
-        except Exception as e:  # a figure must never cost the data  # noqa: BLE001
-            warnings.warn(f"{env_name}: figure not written: {e}", RuntimeWarning, stacklevel=3)
-        timings["figure"] = time.perf_counter() - t0
+        res, reused = _plan_pool(env, pool, plan_fn, pad, config.seed, dc.chunk, work, progress,
+                                 f"{slug}: plan ({planner_name})")
+        timings["plan"] = time.perf_counter() - t0
 
-    # the datasets are complete: drop this run's chunks and any stale ones of older settings
-    shutil.rmtree(env_dir / ".work", ignore_errors=True)
-    timings["total"] = time.perf_counter() - t_all
-    return {"env_dir": str(env_dir), "skipped": False, "fingerprint": fp, "timings": timings,
-            "reused_queries": reused, "datasets": summary, "planned_queries": len(pool)}
+        # 3. independent check of every path, blocked-ness of every query
+        t0 = time.perf_counter()
+        good = check_paths(env, pool, res, pad)
+        rejected = int(((res.status == SOLVED) & ~good).sum())
+        if rejected:
+            warnings.warn(f"{env_name}: {rejected} planner path(s) failed the independent check "
+                          f"(endpoints or a segment in collision at padding {pad}); they are "
+                          "recorded as unsolved", RuntimeWarning, stacklevel=2)
+        blocked = ~steer_to_chunked(env, pool[:, 0], pool[:, 1], padding=pad)
+        timings["check"] = time.perf_counter() - t0
 
+        # 4. gamma_nt of the map (computed in a background thread while the planner runs)
+        t0 = time.perf_counter()
+        g_data, g_eval = gamma_future.result()
+        timings["gamma"] = gamma_seconds[0]
+        timings["gamma_wait"] = time.perf_counter() - t0
+        bar = _bar(progress, f"{slug}: gamma_nt", 1, "estimate")
+        bar.update(1)
+        bar.close()
+
+        # 5. includeData per dataset, write
+        t_inc = t_write = 0.0
+        summary: dict[str, dict] = {}
+        common = {
+            "format": FORMAT, "format_version": FORMAT_VERSION, "env": env.name,
+            "env_name": env_name, "env_slug": slug, "seed": config.seed, "k_train": K,
+            "padding": pad, "prune_padding": prune_pad,
+            "planner": {"name": planner_name, "options": options},
+            "sampling": {"n_max": config.sampling.n_max},
+            "gamma_nt": g_data, "gamma_nt_eval": g_eval,
+            "package_version": _package_version(), "config_hash": config.hash(), "fingerprint": fp,
+            "query_kind_values": {"0": "uniform", "1": "non-trivial",
+                                  "2": "non-trivial sampler exhausted (trivial)"},
+        }
+        with _bar(progress, f"{slug}: includeData + write", len(specs), "dataset") as bar:
+            for j, (nm, spec, b) in enumerate(zip(names, specs, bits)):
+                t0 = time.perf_counter()
+                # query t: next of N if b[t] else next of U (pool index n_u + rank in N)
+                rank_nt = np.cumsum(b) - 1
+                rank_u = np.cumsum(~b) - 1
+                idx = np.where(b, n_u + rank_nt, rank_u)
+                q, kind = pool[idx], pool_kind[idx]
+                solved = good[idx]
+                sel = idx[solved]
+                lens = res.lengths[sel].astype(np.int32)
+                lmax = int(lens.max()) if len(lens) else 0
+                paths = np.ascontiguousarray(res.paths[sel, :lmax]) if len(sel) else \
+                    np.zeros((0, 0, env.dim), np.float32)
+                inputs, targets, pidx = include_data(env, paths, lens, prune=spec.prune,
+                                                     padding=prune_pad)
+                segments = int(np.maximum(lens - 1, 0).sum())
+                t_inc += time.perf_counter() - t0
+                t0 = time.perf_counter()
+                warn = []
+                if len(inputs) == 0:
+                    msg = (f"{env_name} {nm}: the dataset has no samples "
+                           + ("(pruning removed every segment: no waypoint of any path is blocked "
+                              "from its goal, e.g. a map without obstacles)" if spec.prune and segments
+                              else "(no query was solved)" if not len(sel) else "(empty)")
+                           + "; an empty, valid dataset was written")
+                    warn.append(msg)
+                    warnings.warn(msg, RuntimeWarning, stacklevel=2)
+                n_exh = int((kind == Q.NT_EXHAUSTED).sum())
+                if n_exh:
+                    msg = (f"{env_name} {nm}: {n_exh} non-trivial draw(s) found no blocked query in "
+                           f"n_max={config.sampling.n_max} attempts and are trivial (query_kind 2)")
+                    warn.append(msg)
+                nblk = int(blocked[idx].sum())
+                stats = {
+                    "queries": K, "uniform": int((kind == Q.UNIFORM).sum()),
+                    "non_trivial": int((kind == Q.NON_TRIVIAL).sum()), "nt_exhausted": n_exh,
+                    "solved": int(solved.sum()), "unsolved": int(K - solved.sum()),
+                    "rejected_paths": int(((res.status[idx] == SOLVED) & ~solved).sum()),
+                    "paths": int(len(sel)), "segments": segments, "samples": int(len(inputs)),
+                    "pruned": segments - int(len(inputs)) if spec.prune else 0,
+                    "fraction_pruned": ((segments - len(inputs)) / segments
+                                        if spec.prune and segments else 0.0),
+                    "mean_waypoints": float(lens.mean()) if len(lens) else 0.0,
+                    "max_waypoints": lmax,
+                    "blocked_fraction": nblk / K, "blocked_fraction_ci95": _wilson(nblk, K),
+                    "mean_cost": float(res.costs[sel].mean()) if len(sel) else None,
+                    "gamma_nt": g_data["gamma"], "gamma_nt_eval": g_eval["gamma"],
+                }
+                arrays = {"inputs": inputs, "targets": targets, "path_index": pidx,
+                          "paths": paths.astype(np.float32), "path_lengths": lens,
+                          "queries": q.astype(np.float32), "query_kind": kind.astype(np.int8),
+                          "solved": solved.astype(np.bool_)}
+                sharing = {"uniform_pool": [0, int((~b).sum())],
+                           "nontrivial_pool": [0, int(b.sum())],
+                           "same_queries_as": [names[i] for i in range(j)
+                                               if np.array_equal(bits[i], b)]}
+                meta = dict(common, name=nm, p_nt=spec.p_nt, prune=spec.prune, stats=stats,
+                            sharing=sharing, warnings=warn)
+                _write_dataset(env_dir / nm, arrays, meta)
+                summary[nm] = stats
+                t_write += time.perf_counter() - t0
+                bar.update(1)
+        timings["include"] = t_inc
+        timings["write"] = t_write
+
+        if figure:
+            t0 = time.perf_counter()
+            try:
+                plot_environment(env_dir, out=env_dir / "figure.png")
+            except Exception as e:  # a figure must never cost the data  # noqa: BLE001
+                warnings.warn(f"{env_name}: figure not written: {e}", RuntimeWarning, stacklevel=2)
+            timings["figure"] = time.perf_counter() - t0
+
+        # the datasets are complete: drop this run's chunks and any stale ones of older settings
+        shutil.rmtree(env_dir / ".work", ignore_errors=True)
+        timings["total"] = time.perf_counter() - t_all
+        return {"env_dir": str(env_dir), "skipped": False, "fingerprint": fp, "timings": timings,
+                "reused_queries": reused, "datasets": summary, "planned_queries": len(pool)}
+
+    finally:
+        gamma_pool.shutdown(wait=True)
 
 def _package_version() -> str:
     try:

@@ -23,6 +23,22 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 
+def enable_compile_cache():
+    """JAX's persistent compilation cache (``$JAX_COMPILATION_CACHE_DIR`` or
+    ``~/.cache/ntq_jax/jax``): a rerun, a resume or scripts/plan.py reuse the
+    compiled planner instead of compiling it again."""
+    import os
+
+    import jax
+    path = os.environ.get("JAX_COMPILATION_CACHE_DIR",
+                          str(Path.home() / ".cache" / "ntq_jax" / "jax"))
+    try:
+        jax.config.update("jax_compilation_cache_dir", path)
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 2.0)
+    except Exception:  # noqa: BLE001 - the cache is an optimisation only
+        pass
+
+
 class PlanError(ValueError):
     pass
 
@@ -134,7 +150,11 @@ def main(argv=None) -> int:
     ap.add_argument("--no-steer", action="store_true", help="the variant without steerTo")
     ap.add_argument("--seed", type=int, default=0, help="dropout seed")
     ap.add_argument("--png", default=None, help="output figure")
+    ap.add_argument("--no-compile-cache", action="store_true",
+                    help="do not use JAX's persistent compilation cache")
     args = ap.parse_args(argv)
+    if not args.no_compile_cache:
+        enable_compile_cache()
     from ntq_jax.config import ConfigError
     from ntq_jax.envs import EnvError
     from ntq_jax.neural_planner import CAUSES

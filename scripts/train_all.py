@@ -39,6 +39,22 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+
+def enable_compile_cache():
+    """JAX's persistent compilation cache (``$JAX_COMPILATION_CACHE_DIR`` or
+    ``~/.cache/ntq_jax/jax``): a rerun, a resume or scripts/plan.py reuse the
+    compiled planner instead of compiling it again."""
+    import os
+
+    import jax
+    path = os.environ.get("JAX_COMPILATION_CACHE_DIR",
+                          str(Path.home() / ".cache" / "ntq_jax" / "jax"))
+    try:
+        jax.config.update("jax_compilation_cache_dir", path)
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 2.0)
+    except Exception:  # noqa: BLE001 - the cache is an optimisation only
+        pass
+
 DEFAULT = {
     "task": "point",
     "envs": ["point/0", "point/1", "point/2", "point/3"],
@@ -169,8 +185,12 @@ def main(argv=None) -> int:
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help="config override, e.g. --set eval.k_test=100 (repeatable)")
     ap.add_argument("--no-progress", action="store_true", help="no progress bars")
+    ap.add_argument("--no-compile-cache", action="store_true",
+                    help="do not use JAX's persistent compilation cache")
     ap.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     args = ap.parse_args(argv)
+    if not args.no_compile_cache:
+        enable_compile_cache()
 
     from ntq_jax.config import ConfigError
     try:

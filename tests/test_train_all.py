@@ -29,7 +29,7 @@ def _script(name):
 
 
 def _args(out, extra=()):
-    a = ["--out", str(out), "--no-progress"]
+    a = ["--out", str(out), "--no-progress", "--no-compile-cache"]
     for s in list(TINY) + list(extra):
         a += ["--set", s]
     return a

@@ -417,11 +417,15 @@ def _save_checkpoint(mgr, step: int, state: TrainState, meta: dict):
     mgr.wait_until_finished()
 
 
-def _fingerprint_diff(saved: dict, current: dict) -> list[str]:
+def _fingerprint_diff(saved: dict, current: dict, prefix: str = "") -> list[str]:
+    """``key: checkpoint has X, this run has Y`` for every differing (nested) key."""
     out = []
-    for k in sorted(set(saved) | set(current)):
-        if saved.get(k) != current.get(k):
-            out.append(f"{k}: checkpoint has {saved.get(k)!r}, this run has {current.get(k)!r}")
+    for k in sorted(set(saved) | set(current), key=str):
+        a, b = saved.get(k), current.get(k)
+        if isinstance(a, dict) and isinstance(b, dict):
+            out += _fingerprint_diff(a, b, f"{prefix}{k}.")
+        elif a != b:
+            out.append(f"{prefix}{k}: checkpoint has {a!r}, this run has {b!r}")
     return out
 
 
@@ -711,7 +715,8 @@ def train_ensemble(datasets: Sequence[Any], env, model_cfg: ModelConfig, train_c
     fingerprint = {
         "model": dataclasses.asdict(model_cfg) | {"hidden": list(model_cfg.hidden)},
         "train": {k: v for k, v in dataclasses.asdict(train_cfg).items()
-                  if k not in ("checkpoint_every", "keep_checkpoints")},
+                  if k not in ("checkpoint_every", "keep_checkpoints", "eval_every",
+                               "steps_per_call")},  # these do not change the result
         "seed": seed, "member_ids": ids, "robot": env.robot.to_json(),
         "spec": spec.to_json(), "data": [md.fingerprint for md in members],
         **(extra_fingerprint or {}),

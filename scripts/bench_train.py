@@ -52,7 +52,7 @@ def straight_paths(n_rows: int, seed: int, lo, hi, step: float = 1.0):
             np.array(pis[:n_rows], np.int32))
 
 
-def bench_jax(datasets, env, model_cfg, train_cfg, seed):
+def bench_jax(datasets, env, model_cfg, train_cfg, seed, together_only=False):
     from ntq_jax import train as T
 
     def run(ds, ids):
@@ -70,6 +70,9 @@ def bench_jax(datasets, env, model_cfg, train_cfg, seed):
                        train_cfg.epochs)
     member_steps = sum(sched.member_steps)
     together, together_compile, hist = run(datasets, list(range(len(datasets))))
+    if together_only:
+        return {"member_steps": member_steps, "together_s": together,
+                "together_compile_s": together_compile}
     seq, seq_compile = 0.0, 0.0
     for i, d in enumerate(datasets):
         s, c, _ = run([d], [i])
@@ -139,6 +142,10 @@ def main(argv=None) -> int:
                     help="a real environment data folder instead of synthetic paths")
     ap.add_argument("--torch-threads", type=int, default=0, help="0 = PyTorch's default")
     ap.add_argument("--no-torch", action="store_true")
+    ap.add_argument("--sharded-devices", type=int, default=4,
+                    help="also time the ensemble with the member axis sharded over this many "
+                         "forced host CPU devices (a child process); 0 = skip")
+    ap.add_argument("--child-together", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", type=Path, default=None, help="also write the figures as JSON")
     args = ap.parse_args(argv)
@@ -166,6 +173,10 @@ def main(argv=None) -> int:
         source = f"synthetic straight paths on point/0, rows {sizes}"
     spec = models.ModelSpec.from_env(env, model_cfg)
 
+    if args.child_together:  # run by the parent with XLA_FLAGS forcing host devices
+        r = bench_jax(datasets, env, model_cfg, train_cfg, args.seed, together_only=True)
+        print("CHILD " + json.dumps(r))
+        return 0
     print(f"data: {source}\nPNet {hidden}, batch {args.batch}, {args.epochs} epochs, "
           f"Adagrad 0.01; JAX {jax.__version__} on {len(jax.devices())} "
           f"{jax.default_backend()} device(s), {os.cpu_count()} CPU cores", flush=True)
@@ -174,6 +185,22 @@ def main(argv=None) -> int:
              res["together_compile_s"]),
             ("JAX, 4 sequential single-model trainings", res["member_steps"], res["sequential_s"],
              res["sequential_compile_s"])]
+    if args.sharded_devices:
+        import subprocess
+        child_env = dict(os.environ, XLA_FLAGS=(os.environ.get("XLA_FLAGS", "") + " "
+                         f"--xla_force_host_platform_device_count={args.sharded_devices}"))
+        argv_child = [a for a in (argv if argv is not None else sys.argv[1:])
+                      if a != "--child-together"]
+        proc = subprocess.run([sys.executable, __file__, *argv_child, "--child-together"],
+                              env=child_env, capture_output=True, text=True)
+        line = [ln for ln in proc.stdout.splitlines() if ln.startswith("CHILD ")]
+        if proc.returncode != 0 or not line:
+            print(f"sharded run failed:\n{proc.stderr[-2000:]}")
+        else:
+            r = json.loads(line[0][6:])
+            rows.insert(1, (f"JAX, 4 members together, member axis sharded over "
+                            f"{args.sharded_devices} host CPU devices", r["member_steps"],
+                            r["together_s"], r["together_compile_s"]))
     torch_res = None
     if not args.no_torch:
         try:

@@ -55,7 +55,9 @@ so a folder without ``meta.json`` is incomplete) and removes the work folder.
 Query sampling, the mixing bits and (for the deterministic planners ``astar``
 and ``visgraph``) the planning depend only on the seed, never on the chunk
 size or the worker count, so the arrays are byte-identical. BIT* stops on a
-time budget and is not deterministic; its completed chunks are still kept.
+time budget and is not deterministic (its seed, ``(seed * 1000003 + chunk
+start) mod (2^31 - 1)`` per chunk, does not make it so); its completed chunks
+are still kept, so a resumed BIT* run loses and duplicates nothing either.
 
 On-disk format (DESIGN.md, "Dataset folder")
 --------------------------------------------
@@ -488,7 +490,9 @@ def _plan_pool(env, pool: np.ndarray, plan_fn, pad: float, seed: int, chunk: int
                 if res is None:  # stale or damaged: plan again
                     p.unlink(missing_ok=True)
             if res is None:
-                raw = plan_fn(env, pool[lo:hi], padding=pad, seed=seed)
+                # distinct seeds per chunk for randomised planners (ignored by astar/visgraph)
+                chunk_seed = (int(seed) * 1_000_003 + lo) % (2 ** 31 - 1)
+                raw = plan_fn(env, pool[lo:hi], padding=pad, seed=chunk_seed)
                 res = _as_plan_output(raw, hi - lo, d)
                 _atomic_save_npz(work / f"plan_{lo:09d}_{hi:09d}.npz", queries=pool[lo:hi],
                                  paths=res.paths, lengths=res.lengths, costs=res.costs,

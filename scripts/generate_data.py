@@ -71,7 +71,8 @@ def main(argv=None) -> int:
                   f"samples, pruned {st['fraction_pruned']:.1%}, mean waypoints "
                   f"{st['mean_waypoints']:.2f}, blocked {st['blocked_fraction']:.3f} "
                   f"(gamma_nt {st['gamma_nt']})")
-    (out / "generate_summary.json").write_text(json.dumps(results, indent=1, default=str))
+    data._atomic_write_bytes(out / "generate_summary.json",
+                             json.dumps(results, indent=1, default=str).encode())
     return 0
 
 

@@ -136,16 +136,20 @@ def test_predictor_dropout_active_and_members_consistent(point):
     rng = np.random.default_rng(1)
     cur = rng.uniform(0, 20, (32, 2)).astype(np.float32)
     goal = rng.uniform(0, 20, (32, 2)).astype(np.float32)
-    all_fn = jax.jit(models.predictor(ens))
-    out = all_fn(jax.random.key(7), cur, goal)
+
+    @jax.jit  # one compilation for all the variants
+    def run(key, other_key):
+        out = models.predictor(ens)(key, cur, goal)
+        det = models.predictor(ens, 1, deterministic=True)
+        return (out, models.predictor(ens)(other_key, cur, goal),
+                models.predictor(ens, 3)(key, cur, goal), det(key, cur, goal), det(other_key, cur, goal))
+
+    out, other, one, det_a, det_b = run(jax.random.key(7), jax.random.key(8))
     assert out.shape == (4, 32, 2)
-    np.testing.assert_array_equal(out, all_fn(jax.random.key(7), cur, goal))  # pure
-    other = all_fn(jax.random.key(8), cur, goal)
+    np.testing.assert_array_equal(out, run(jax.random.key(7), jax.random.key(8))[0])  # pure
     assert not np.allclose(out, other)  # dropout is on at planning time
-    one = jax.jit(models.predictor(ens, 3))(jax.random.key(7), cur, goal)
     np.testing.assert_allclose(one, out[3], rtol=1e-6, atol=1e-6)
-    det = jax.jit(models.predictor(ens, 1, deterministic=True))
-    np.testing.assert_array_equal(det(jax.random.key(1), cur, goal), det(jax.random.key(2), cur, goal))
+    np.testing.assert_array_equal(det_a, det_b)
     with pytest.raises(ValueError, match="member"):
         models.predictor(ens, 4)
 

@@ -626,6 +626,13 @@ def generate_datasets(env, config, out_dir, *, env_name: str | None = None, plan
     # already complete?
     if _complete(env_dir, names, fp):
         metas = {nm: json.loads((env_dir / nm / "meta.json").read_text()) for nm in names}
+        # an interruption after the last meta.json: finish the figure and the clean-up
+        if figure and not (env_dir / "figure.png").is_file():
+            try:
+                plot_environment(env_dir, out=env_dir / "figure.png")
+            except Exception as e:  # noqa: BLE001
+                warnings.warn(f"{env_name}: figure not written: {e}", RuntimeWarning, stacklevel=2)
+        shutil.rmtree(env_dir / ".work", ignore_errors=True)
         return {"env_dir": str(env_dir), "skipped": True, "fingerprint": fp, "timings": {},
                 "reused_queries": 0, "datasets": {nm: m["stats"] for nm, m in metas.items()}}
 

@@ -38,14 +38,16 @@ compilation.
 3. **Feasibility** on the evaluation geometry (``eval_padding``, 0 by
    default): every segment checked by the exact / discretised ``steer_to``.
 4. **Neural replanning** (MPNet), at most ``replan_rounds`` rounds while a path
-   is infeasible: take the first blocked segment ``(p_k, p_k+1)``, widened to
-   the nearest states that are not in collision (MPNet drops the states in
-   collision first), connect its ends with the bidirectional neural connection
-   (at most ``replan_steps`` predictions), splice the new states in, contract,
-   re-check. MPNet repairs every blocked segment in one pass; here one segment
-   per path per round keeps the shapes fixed (the round count bounds the
-   repairs). A connection that fails leaves the path unchanged; the next round
-   draws new dropout masks.
+   is infeasible: every blocked segment ``(p_k, p_k+1)`` (last first, so a
+   splice never moves the segments still to repair), widened to the nearest
+   states that are not in collision (MPNet drops the states in collision
+   first), is reconnected by the bidirectional neural connection (at most
+   ``replan_steps`` predictions) and the new states are spliced in; then the
+   path is contracted and re-checked. Unlike MPNet, which abandons the query
+   at the first connection that fails, a failed connection leaves its segment
+   as it was and the other segments are still repaired; the next round
+   retries with new dropout masks. A splice that would overflow the path
+   buffer (``max_len`` rows) is skipped.
 
 The variant without steerTo has no contraction and no replanning (both need
 the steering function); its paths are still checked for collisions, and only
@@ -340,30 +342,49 @@ def _plan_core(robot, opts: PlannerOptions, world, pnet, key, starts, goals, act
         feasible = feasible | (pending & (n >= 2) & ~jnp.any(blocked, axis=1))
         todo = pending & ~feasible & (r < rounds)
         if rounds > 0:
-            # the first blocked segment, widened to the nearest valid states around it
-            # (MPNet drops the states in collision before repairing)
+            # Repair every blocked segment, last first (a splice then never moves the
+            # states of the segments still to repair); each is widened to the nearest
+            # states not in collision (MPNet drops the states in collision first).
             ok = is_valid_cm(robot, world, p.reshape(-1, d).T,
                              opts.eval_padding).reshape(num, length) & (t < n[:, None])
-            k = jnp.argmax(blocked, axis=1).astype(jnp.int32)[:, None]
-            ia = jnp.max(jnp.where(ok & (t <= k), t, 0), axis=1)
-            ib = jnp.min(jnp.where(ok & (t > k), t, length), axis=1)
-            ib = jnp.minimum(ib, n - 1)
-            pa, na, pb, nb, conn, used = _connect(robot, world, pnet, jax.random.fold_in(k_rep, r),
-                                                  _rows(p, ia), _rows(p, ib), todo, steps,
-                                                  opts.plan_padding)
-            sub, ns = _join(pa, na, pb, nb, steps + 2)
-            # splice: p[:ia] + sub[:ns] + p[ib+1:n]
-            lo, hi = ia[:, None], (ia + ns)[:, None]
-            src = jnp.where(t < lo, t, t - hi + ib[:, None] + 1)
-            gp = jnp.take_along_axis(p, jnp.clip(src, 0, length - 1)[..., None], axis=1)
-            gs = jnp.take_along_axis(sub, jnp.clip(t - lo, 0, steps + 1)[..., None], axis=1)
-            nn = n - (ib - ia + 1) + ns
-            spliced = jnp.where(((t >= lo) & (t < hi))[..., None], gs, gp)
-            spliced = jnp.where((t < nn[:, None])[..., None], spliced, jnp.nan)
-            put = conn & (nn <= length)
-            p = jnp.where(put[:, None, None], spliced, p)
-            n = jnp.where(put, nn, n)
-            calls = calls + used
+            tseg = t[:, :-1]
+            k_round = jax.random.fold_in(k_rep, r)
+
+            def left(cursor):
+                return blocked & (tseg < cursor[:, None]) & todo[:, None]
+
+            def inner_cond(ic):
+                return jnp.any(left(ic[2]))
+
+            def inner_body(ic):
+                p, n, cursor, calls, j = ic
+                cand = left(cursor)
+                live = jnp.any(cand, axis=1)
+                k = jnp.max(jnp.where(cand, tseg, -1), axis=1)[:, None]
+                ia = jnp.max(jnp.where(ok & (t <= k), t, 0), axis=1)
+                ib = jnp.min(jnp.where(ok & (t > k), t, length), axis=1)
+                ib = jnp.minimum(ib, n - 1)
+                pa, na, pb, nb, conn, used = _connect(
+                    robot, world, pnet, jax.random.fold_in(k_round, j), _rows(p, ia),
+                    _rows(p, ib), live, steps, opts.plan_padding)
+                sub, ns = _join(pa, na, pb, nb, steps + 2)
+                # splice: p[:ia] + sub[:ns] + p[ib+1:n]
+                lo, hi = ia[:, None], (ia + ns)[:, None]
+                src = jnp.where(t < lo, t, t - hi + ib[:, None] + 1)
+                gp = jnp.take_along_axis(p, jnp.clip(src, 0, length - 1)[..., None], axis=1)
+                gs = jnp.take_along_axis(sub, jnp.clip(t - lo, 0, steps + 1)[..., None], axis=1)
+                nn = n - (ib - ia + 1) + ns
+                spliced = jnp.where(((t >= lo) & (t < hi))[..., None], gs, gp)
+                spliced = jnp.where((t < nn[:, None])[..., None], spliced, jnp.nan)
+                put = live & conn & (nn <= length)
+                p = jnp.where(put[:, None, None], spliced, p)
+                n = jnp.where(put, nn, n)
+                cursor = jnp.where(live, jnp.minimum(ia, k[:, 0]), cursor)
+                return p, n, cursor, calls + used, j + 1
+
+            p, n, _, calls, _ = jax.lax.while_loop(
+                inner_cond, inner_body,
+                (p, n, jnp.full(num, length, jnp.int32), calls, jnp.int32(0)))
         return r + 1, p, n, feasible, todo, calls, replans + todo
 
     init = (jnp.int32(0), p, n, jnp.zeros(num, bool), reached, calls, jnp.zeros(num, jnp.int32))

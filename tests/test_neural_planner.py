@@ -37,6 +37,7 @@ MAPS = {
     "straight": [[0.3, 0.3, 0.1, 0.1]] + DUMMY,
     "wall": [[5.0, 5.0, 0.5, 3.0]] + DUMMY,  # x 4.5..5.5, y 2..8
     # a cup open downwards around (5, 4): top wall y 6..6.5, sides x 3..3.5 and 6.5..7
+    "twowalls": [[3.0, 5.0, 0.25, 3.0], [7.0, 5.0, 0.25, 3.0], [0.3, 0.3, 0.1, 0.1]],
     "deadend": [[5.0, 6.25, 2.0, 0.25], [3.25, 4.25, 0.25, 2.25], [6.75, 4.25, 0.25, 2.25]],
 }
 V_PAD = 32
@@ -67,9 +68,11 @@ def _stand_in(mode, nodes, dist, world, jump, sigma, key, cur, goal):
     seek_noisy = seek + sigma * jax.random.normal(key, cur.shape)
     ok = steer_to_cm(robot, world, cur.T, seek.T, 0.0)
     cautious = jnp.where(ok[:, None], seek, cur)
-    at_start = (jnp.linalg.norm(cur - jump[0], axis=1) < 1e-6) & (
-        jnp.linalg.norm(goal - jump[1], axis=1) < 1e-6)
-    broken = jnp.where(at_start[:, None], jump[2], oracle)
+    broken = oracle
+    for rule in jump:  # (from, towards, to): jump straight to ``to`` from ``from`` towards ``towards``
+        hit = (jnp.linalg.norm(cur - rule[0], axis=1) < 1e-6) & (
+            jnp.linalg.norm(goal - rule[1], axis=1) < 1e-6)
+        broken = jnp.where(hit[:, None], rule[2], broken)
     return jnp.select([mode == ORACLE, mode == SEEKER, mode == CAUTIOUS, mode == BROKEN],
                       [oracle, seek_noisy, cautious, broken], cur)
 
@@ -78,7 +81,10 @@ ENV_ROBOT = make("straight").robot
 _GRAPHS = {}
 
 
-def pnet(name, mode, jump=((0, 0), (0, 0), (0, 0)), sigma=0.0):
+NO_JUMP = ((-99, -99), (-99, -99), (0, 0))
+
+
+def pnet(name, mode, jump=(NO_JUMP, NO_JUMP), sigma=0.0):
     env = make(name)
     if name not in _GRAPHS:
         g = VisGraph.build(env, 0.0)
@@ -161,7 +167,7 @@ def test_dead_end():
 
 def test_replanning_repairs_a_broken_path():
     s, g, jump = (2.0, 5.0), (8.0, 5.0), (7.0, 5.0)  # s -> jump crosses the wall
-    kw = dict(jump=(s, g, jump))
+    kw = dict(jump=((s, g, jump), NO_JUMP))
     no_replan = PlannerOptions(n_plan=12, replan_rounds=0, replan_steps=8)
     _, res = run("wall", BROKEN, [[s, g]], opts=no_replan, **kw)
     assert np.all(res.cause == INFEASIBLE)
@@ -169,6 +175,18 @@ def test_replanning_repairs_a_broken_path():
     q, res = run("wall", BROKEN, [[s, g]], **kw)
     assert np.all(res.success) and np.all(res.replans == 1)
     np.testing.assert_allclose(res.costs, optimum("wall", q), rtol=1e-4)  # contracted to optimum
+
+
+def test_one_round_repairs_every_blocked_segment():
+    s, g, j1, j2 = (1.0, 5.0), (9.0, 5.0), (5.0, 5.0), (8.5, 5.0)  # s -> j1 -> j2 cross both walls
+    kw = dict(jump=((s, g, j1), (j1, g, j2)))
+    q, res = run("twowalls", BROKEN, [[s, g]], opts=PlannerOptions(n_plan=12, replan_rounds=0,
+                                                                  replan_steps=8), **kw)
+    assert np.all(res.cause == INFEASIBLE)
+    np.testing.assert_allclose(res.paths[0, :4], [s, j1, j2, g])
+    q, res = run("twowalls", BROKEN, [[s, g]], **kw)
+    assert np.all(res.success) and np.all(res.replans == 1)
+    assert np.all(res.costs >= optimum("twowalls", q) * (1 - 1e-4))
 
 
 def test_without_steer_to():

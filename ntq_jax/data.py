@@ -30,9 +30,10 @@ Sharing the planning between datasets
 The four datasets are generated from two *pools* of queries, each planned once:
 a pool ``U`` of i.i.d. uniform queries and a pool ``N`` of i.i.d. non-trivial
 queries (Alg. 3, each an independent call of the sampler). Dataset ``j`` draws
-its own mixing bits ``b_t ~ Bernoulli(p_nt)`` (``t = 0..K-1``, key
-``fold_in(k_mix, j)``); query ``t`` is the next unused query of ``N`` if
-``b_t`` else the next unused query of ``U``. So dataset ``j`` uses the prefixes
+its mixing bits ``b_t ~ Bernoulli(p_nt)`` (``t = 0..K-1``, key
+``fold_in(k_mix, round(1e6 p_nt))``, so datasets with equal ``p_nt`` share
+their queries and paths and differ only in pruning); query ``t`` is the next
+unused query of ``N`` if ``b_t`` else the next unused query of ``U``. So dataset ``j`` uses the prefixes
 ``U[:K - sum(b)]`` and ``N[:sum(b)]``, interleaved in the order of its bits.
 Because the bits are independent of the pools and the pool entries are i.i.d.,
 the query sequence of every dataset has exactly the distribution of Alg. 2
@@ -441,13 +442,18 @@ def _env_key(seed: int, slug: str) -> jax.Array:
     return jax.random.fold_in(jax.random.PRNGKey(seed), zlib.crc32(slug.encode()) & 0x7FFFFFFF)
 
 
-def mixing_bits(key: jax.Array, index: int, k: int, p_nt: float) -> np.ndarray:
-    """Dataset ``index``'s Alg. 2 draws ``u_rand < p_nt`` as ``(k,)`` bool (True = non-trivial)."""
+def mixing_bits(key: jax.Array, k: int, p_nt: float) -> np.ndarray:
+    """Alg. 2's draws ``u_rand < p_nt`` for ``k`` queries, ``(k,)`` bool (True = non-trivial).
+
+    The uniforms come from ``fold_in(key, round(1e6 p_nt))``: datasets with the same
+    ``p_nt`` get the same bits, hence the same queries (e.g. D3 = D2 pruned).
+    """
     if p_nt <= 0.0:
         return np.zeros(k, bool)
     if p_nt >= 1.0:
         return np.ones(k, bool)
-    return np.asarray(jax.random.uniform(jax.random.fold_in(key, index), (k,))) < p_nt
+    sub = jax.random.fold_in(key, int(round(p_nt * 1_000_000)))
+    return np.asarray(jax.random.uniform(sub, (k,))) < p_nt
 
 
 def _plan_pool(env, pool: np.ndarray, plan_fn, pad: float, seed: int, chunk: int, work: Path,
@@ -618,7 +624,7 @@ def generate_datasets(env, config, out_dir, *, env_name: str | None = None, plan
 
     key = _env_key(config.seed, slug)
     k_uni, k_nt, k_mix, k_gam = jax.random.split(key, 4)
-    bits = [mixing_bits(k_mix, j, K, s.p_nt) for j, s in enumerate(specs)]
+    bits = [mixing_bits(k_mix, K, s.p_nt) for s in specs]
     n_nt = max(int(b.sum()) for b in bits)
     n_u = max(int((~b).sum()) for b in bits)
     fp = _fingerprint(env, config, env_name, pad, prune_pad, planner_name, options, n_u, n_nt)

@@ -89,7 +89,7 @@ def main(argv=None) -> int:
         kr = rcfg.data.k_train_for("rigid/0")
         key = data._env_key(rcfg.seed, "rigid_0")
         _, _, k_mix, _ = jax.random.split(key, 4)
-        bits = [data.mixing_bits(k_mix, j, kr, sp.p_nt) for j, sp in enumerate(rcfg.data.datasets)]
+        bits = [data.mixing_bits(k_mix, kr, sp.p_nt) for sp in rcfg.data.datasets]
         n_pool = max(int((~b).sum()) for b in bits) + max(int(b.sum()) for b in bits)
         t0 = time.perf_counter()
         Q.sample_nontrivial_queries(renv.robot, renv.world, jax.random.PRNGKey(0), kr,

@@ -421,3 +421,27 @@ def test_cli_generates_and_rejects_a_bad_key(tmp_path):
     ds = data.load_datasets(tmp_path / "out" / "point_0")
     assert [len(d.queries) for d in ds] == [20] * 4
     assert generate_data.main(["--set", "data.k_trian=3"]) == 2
+
+
+def test_custom_dataset_specs_share_pools_by_prefix(tmp_path):
+    """Any list of (p_nt, prune): equal specs share their queries, all draw pool prefixes."""
+    env = make_env("point/0")
+    cfg = C.load(None, ["data.k_train=50", "data.chunk=64", "data.gamma_queries=20000",
+                        "data.gamma_eval=false",
+                        "data.datasets=[{p_nt: 0.3}, {p_nt: 0.3, prune: true}, {p_nt: 0.8}]"])
+    s = data.generate_datasets(env, cfg, tmp_path, planner="visgraph", progress=False,
+                               figure=False)
+    a, b, c = data.load_datasets(tmp_path / "point_0")
+    assert b.meta["sharing"]["same_queries_as"] == ["D0"]
+    assert np.array_equal(a.queries, b.queries)
+    free = np.asarray(env.steer_to(a.inputs[:, :2], a.inputs[:, 2:]))
+    assert np.array_equal(np.asarray(a.inputs)[~free], np.asarray(b.inputs))
+    for x, y in ((a, c), (c, a)):
+        for kinds in ((0,), (1, 2)):
+            mx = np.isin(np.asarray(x.query_kind), kinds)
+            my = np.isin(np.asarray(y.query_kind), kinds)
+            n = min(mx.sum(), my.sum())
+            assert np.array_equal(x.queries[mx][:n], y.queries[my][:n])
+    n_nt = [int((np.asarray(d.query_kind) >= 1).sum()) for d in (a, c)]
+    assert n_nt[0] < n_nt[1]
+    assert s["planned_queries"] == max(50 - n for n in n_nt) + max(n_nt)

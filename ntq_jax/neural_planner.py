@@ -18,10 +18,15 @@ How a batch is planned
 ----------------------
 All N queries step together inside one jitted call (``lax.while_loop`` over
 steps with per-query masks, fixed shapes; the loop exits early once every query
-is decided). Batches are padded to a power of two so repeated calls reuse the
-compiled code; ``pnet`` is passed as a pytree (:class:`jax.tree_util.Partial`),
-so two PNets that share the same apply function and parameter shapes share one
-compilation.
+is decided): coarse plan, contraction and feasibility check (steps 1-3 below).
+Each replanning round (step 4) is a second jitted call on the infeasible paths
+only, gathered on the host into fixed-width chunks (``repair_width``), so a
+round costs in proportion to the paths that need it rather than to the whole
+batch (a masked full-width loop would run every query's PNet as long as the
+slowest repair). Batches are padded to a power of two so repeated calls reuse
+the compiled code; ``pnet`` is passed as a pytree
+(:class:`jax.tree_util.Partial`), so two PNets that share the same apply
+function and parameter shapes share one compilation.
 
 1. **Coarse plan** (Alg. 1, lines 2-9): for ``n_plan`` iterations, if
    ``steerTo(pi_end, goal)`` append the goal and stop, else append
@@ -308,114 +313,128 @@ def _forward(pnet, key, starts, goals, active, opts: PlannerOptions, robot, worl
     return p, n, reached, calls
 
 
-def _plan_core(robot, opts: PlannerOptions, world, pnet, key, starts, goals, active):
-    num, d = starts.shape
+def _coarse_core(robot, opts: PlannerOptions, world, pnet, key, starts, goals, active):
+    """Coarse plan, contraction and feasibility check of a batch (one jitted call)."""
     length = opts.max_len
-    k_main, k_rep = jax.random.split(key)
     valid = (active & is_valid_cm(robot, world, starts.T, opts.eval_padding)
              & is_valid_cm(robot, world, goals.T, opts.eval_padding))
-
     if opts.bidirectional:
-        pa, na, pb, nb, reached, calls = _connect(robot, world, pnet, k_main, starts, goals, valid,
+        pa, na, pb, nb, reached, calls = _connect(robot, world, pnet, key, starts, goals, valid,
                                                   opts.n_plan, opts.plan_padding)
         p, n = _join(pa, na, pb, nb, length)
     else:
-        p, n, reached, calls = _forward(pnet, k_main, starts, goals, valid, opts, robot, world,
+        p, n, reached, calls = _forward(pnet, key, starts, goals, valid, opts, robot, world,
                                         length)
-    rounds = opts.replan_rounds if opts.steer else 0
-    contract = opts.contract and opts.steer
+    if opts.steer and opts.contract:
+        p, n = _contract(robot, world, p, n, opts.plan_padding, reached)
+    free, seg = _segments(robot, world, p, n, opts.eval_padding, reached)
+    blocked = seg & ~free
+    feasible = reached & (n >= 2) & ~jnp.any(blocked, axis=1)
+    return p, n, valid, reached, feasible, blocked, calls
+
+
+def _repair_core(robot, opts: PlannerOptions, world, pnet, key, p, n, blocked, todo):
+    """One neural replanning round for the rows ``todo`` (one jitted call).
+
+    Every blocked segment is repaired, last first (a splice then never moves the
+    states of the segments still to repair), each widened to the nearest states
+    not in collision; then the paths are contracted and checked again.
+    Returns ``(p, n, feasible, blocked, calls)``.
+    """
+    num, length, d = p.shape
     steps = opts.replan_steps
     t = jnp.arange(length)[None, :]
+    tseg = t[:, :-1]
+    ok = is_valid_cm(robot, world, p.reshape(-1, d).T,
+                     opts.eval_padding).reshape(num, length) & (t < n[:, None])
 
-    # One loop does contraction, the feasibility check and the repairs: round r contracts
-    # the paths still pending, checks them, and repairs the infeasible ones (r < rounds);
-    # each kernel call site is compiled once.
+    def left(cursor):
+        return blocked & (tseg < cursor[:, None]) & todo[:, None]
+
     def cond(c):
-        return jnp.any(c[4])
+        return jnp.any(left(c[2]))
 
     def body(c):
-        r, p, n, feasible, pending, calls, replans = c
-        if contract:
-            p, n = _contract(robot, world, p, n, opts.plan_padding, pending)
-        free, seg = _segments(robot, world, p, n, opts.eval_padding, pending)
-        blocked = seg & ~free
-        feasible = feasible | (pending & (n >= 2) & ~jnp.any(blocked, axis=1))
-        todo = pending & ~feasible & (r < rounds)
-        if rounds > 0:
-            # Repair every blocked segment, last first (a splice then never moves the
-            # states of the segments still to repair); each is widened to the nearest
-            # states not in collision (MPNet drops the states in collision first).
-            ok = is_valid_cm(robot, world, p.reshape(-1, d).T,
-                             opts.eval_padding).reshape(num, length) & (t < n[:, None])
-            tseg = t[:, :-1]
-            k_round = jax.random.fold_in(k_rep, r)
+        p, n, cursor, calls, j = c
+        cand = left(cursor)
+        live = jnp.any(cand, axis=1)
+        k = jnp.max(jnp.where(cand, tseg, -1), axis=1)[:, None]
+        ia = jnp.max(jnp.where(ok & (t <= k), t, 0), axis=1)
+        ib = jnp.min(jnp.where(ok & (t > k), t, length), axis=1)
+        ib = jnp.minimum(ib, n - 1)
+        pa, na, pb, nb, conn, used = _connect(robot, world, pnet, jax.random.fold_in(key, j),
+                                              _rows(p, ia), _rows(p, ib), live, steps,
+                                              opts.plan_padding)
+        sub, ns = _join(pa, na, pb, nb, steps + 2)
+        # splice: p[:ia] + sub[:ns] + p[ib+1:n]
+        lo, hi = ia[:, None], (ia + ns)[:, None]
+        src = jnp.where(t < lo, t, t - hi + ib[:, None] + 1)
+        gp = jnp.take_along_axis(p, jnp.clip(src, 0, length - 1)[..., None], axis=1)
+        gs = jnp.take_along_axis(sub, jnp.clip(t - lo, 0, steps + 1)[..., None], axis=1)
+        nn = n - (ib - ia + 1) + ns
+        spliced = jnp.where(((t >= lo) & (t < hi))[..., None], gs, gp)
+        spliced = jnp.where((t < nn[:, None])[..., None], spliced, jnp.nan)
+        put = live & conn & (nn <= length)
+        p = jnp.where(put[:, None, None], spliced, p)
+        n = jnp.where(put, nn, n)
+        cursor = jnp.where(live, jnp.minimum(ia, k[:, 0]), cursor)
+        return p, n, cursor, calls + used, j + 1
 
-            def left(cursor):
-                return blocked & (tseg < cursor[:, None]) & todo[:, None]
+    p, n, _, calls, _ = jax.lax.while_loop(
+        cond, body, (p, n, jnp.full(num, length, jnp.int32), jnp.zeros(num, jnp.int32),
+                     jnp.int32(0)))
+    if opts.contract:
+        p, n = _contract(robot, world, p, n, opts.plan_padding, todo)
+    free, seg = _segments(robot, world, p, n, opts.eval_padding, todo)
+    blocked = seg & ~free
+    feasible = todo & (n >= 2) & ~jnp.any(blocked, axis=1)
+    return p, n, feasible, blocked, calls
 
-            def inner_cond(ic):
-                return jnp.any(left(ic[2]))
 
-            def inner_body(ic):
-                p, n, cursor, calls, j = ic
-                cand = left(cursor)
-                live = jnp.any(cand, axis=1)
-                k = jnp.max(jnp.where(cand, tseg, -1), axis=1)[:, None]
-                ia = jnp.max(jnp.where(ok & (t <= k), t, 0), axis=1)
-                ib = jnp.min(jnp.where(ok & (t > k), t, length), axis=1)
-                ib = jnp.minimum(ib, n - 1)
-                pa, na, pb, nb, conn, used = _connect(
-                    robot, world, pnet, jax.random.fold_in(k_round, j), _rows(p, ia),
-                    _rows(p, ib), live, steps, opts.plan_padding)
-                sub, ns = _join(pa, na, pb, nb, steps + 2)
-                # splice: p[:ia] + sub[:ns] + p[ib+1:n]
-                lo, hi = ia[:, None], (ia + ns)[:, None]
-                src = jnp.where(t < lo, t, t - hi + ib[:, None] + 1)
-                gp = jnp.take_along_axis(p, jnp.clip(src, 0, length - 1)[..., None], axis=1)
-                gs = jnp.take_along_axis(sub, jnp.clip(t - lo, 0, steps + 1)[..., None], axis=1)
-                nn = n - (ib - ia + 1) + ns
-                spliced = jnp.where(((t >= lo) & (t < hi))[..., None], gs, gp)
-                spliced = jnp.where((t < nn[:, None])[..., None], spliced, jnp.nan)
-                put = live & conn & (nn <= length)
-                p = jnp.where(put[:, None, None], spliced, p)
-                n = jnp.where(put, nn, n)
-                cursor = jnp.where(live, jnp.minimum(ia, k[:, 0]), cursor)
-                return p, n, cursor, calls + used, j + 1
-
-            p, n, _, calls, _ = jax.lax.while_loop(
-                inner_cond, inner_body,
-                (p, n, jnp.full(num, length, jnp.int32), calls, jnp.int32(0)))
-        return r + 1, p, n, feasible, todo, calls, replans + todo
-
-    init = (jnp.int32(0), p, n, jnp.zeros(num, bool), reached, calls, jnp.zeros(num, jnp.int32))
-    _, p, n, feasible, _, calls, replans = jax.lax.while_loop(cond, body, init)
-
-    success = reached & feasible
+def _cost_core(robot, p, n):
+    num, length, d = p.shape
     seg_cost = jax.vmap(robot.distance, in_axes=(1, 1))(
         p[:, :-1].reshape(-1, d).T, p[:, 1:].reshape(-1, d).T).reshape(num, length - 1)
     seg = jnp.arange(length - 1)[None, :] < (n - 1)[:, None]
-    cost = jnp.where(success, jnp.sum(jnp.where(seg, seg_cost, 0.0), axis=1), jnp.inf)
-    cause = jnp.where(~valid, INVALID_QUERY,
-                      jnp.where(~reached, NO_PATH, jnp.where(success, SUCCESS, INFEASIBLE)))
-    return p, n, success, cost, cause.astype(jnp.int8), calls, replans
+    return jnp.sum(jnp.where(seg, seg_cost, 0.0), axis=1)
 
 
-_jit_core = jax.jit(_plan_core, static_argnames=("robot", "opts"))
+_JITS = {
+    "coarse": jax.jit(_coarse_core, static_argnames=("robot", "opts")),
+    "repair": jax.jit(_repair_core, static_argnames=("robot", "opts")),
+}
+_jit_cost = jax.jit(_cost_core, static_argnames=("robot",))
 _COMPILED: dict = {}
 
 
-def _signature(args) -> tuple:
+def _signature(name, args) -> tuple:
     robot, opts = args[:2]
     leaves, tree = jax.tree_util.tree_flatten(args[2:])
-    return (robot, opts, tree, tuple((x.shape, str(x.dtype)) for x in map(jnp.asarray, leaves)))
+    return (name, robot, opts, tree,
+            tuple((x.shape, str(x.dtype)) for x in map(jnp.asarray, leaves)))
 
 
-def _compiled(args):
-    """The compiled planner for these static settings and shapes (compiled once per process)."""
-    sig = _signature(args)
+def _compiled(name, args):
+    """The compiled stage ``name`` for these static settings and shapes (once per process)."""
+    sig = _signature(name, args)
     if sig not in _COMPILED:
-        _COMPILED[sig] = _jit_core.lower(*args).compile()
+        _COMPILED[sig] = _JITS[name].lower(*args).compile()
     return _COMPILED[sig]
+
+
+class _Timer:
+    def __init__(self):
+        self.run = 0.0
+        self.compile = 0.0
+
+    def call(self, name, args):
+        t0 = time.perf_counter()
+        fn = _compiled(name, args)
+        t1 = time.perf_counter()
+        out = jax.block_until_ready(fn(*args[2:]))
+        self.compile += t1 - t0
+        self.run += time.perf_counter() - t1
+        return [np.asarray(o) for o in out]
 
 
 # ---------------------------------------------------------------------------
@@ -462,7 +481,7 @@ def bucket_size(n: int) -> int:
 
 def plan_batch(env, pnet: Callable, queries, key: Array,
                opts: PlannerOptions = PlannerOptions(), *, chunk: int = 1024,
-               pad_obstacles: int = 0) -> NeuralPlanResult:
+               repair_width: int = 64, pad_obstacles: int = 0) -> NeuralPlanResult:
     """Plans every query with the neural planner (all of a chunk in one jitted call).
 
     Args:
@@ -472,6 +491,9 @@ def plan_batch(env, pnet: Callable, queries, key: Array,
         key: PRNG key (dropout); the result is deterministic given the key.
         opts: :class:`PlannerOptions`.
         chunk: largest batch per jitted call (batches are padded to a power of two).
+        repair_width: batch width of the replanning calls: the infeasible paths of a
+            round are gathered into chunks of this many (power of two), so the rounds
+            cost in proportion to the paths that need them, not to the batch.
         pad_obstacles: if > 0, pad the obstacle lists to a multiple of it
             (:func:`padded_world`) so maps with similar counts share one compilation.
 
@@ -490,32 +512,65 @@ def plan_batch(env, pnet: Callable, queries, key: Array,
     fn = as_pnet(pnet)
     world = padded_world(env.world, pad_obstacles) if pad_obstacles > 0 else env.world
     size = bucket_size(min(max(k, 1), chunk))
-    outs, secs, comp = [], 0.0, 0.0
+    width = bucket_size(min(max(repair_width, 1), size))
+    timer = _Timer()
+    length, d = opts.max_len, env.dim
+    paths = np.full((k, length, d), np.nan, np.float32)
+    lengths = np.zeros(k, np.int32)
+    valid = np.zeros(k, bool)
+    reached = np.zeros(k, bool)
+    feasible = np.zeros(k, bool)
+    blocked = np.zeros((k, length - 1), bool)
+    calls = np.zeros(k, np.int32)
+    replans = np.zeros(k, np.int32)
+    k_coarse, k_rep = jax.random.split(key)
+    # 1. coarse plans, contraction, feasibility: all queries, chunks of ``size``
     for ci, lo in enumerate(range(0, k, size)):
         hi = min(lo + size, k)
-        part = np.zeros((size, 2, env.dim), np.float32)
+        part = np.zeros((size, 2, d), np.float32)
         part[: hi - lo] = q[lo:hi]
         act = np.zeros(size, bool)
         act[: hi - lo] = True
-        args = (env.robot, opts, world, fn, jax.random.fold_in(key, ci),
-                jnp.asarray(part[:, 0]), jnp.asarray(part[:, 1]), jnp.asarray(act))
-        t0 = time.perf_counter()
-        compiled = _compiled(args)
-        t1 = time.perf_counter()
-        comp += t1 - t0
-        out = jax.block_until_ready(compiled(*args[2:]))
-        secs += time.perf_counter() - t1
-        outs.append([np.asarray(o)[: hi - lo] for o in out])
-    if not outs:
-        d = env.dim
-        return NeuralPlanResult(np.zeros((0, 1, d), np.float32), *(np.zeros(0, t) for t in
-                                (np.int32, bool, np.float64, np.int8, np.int32, np.int32)))
-    cat = [np.concatenate(c) for c in zip(*outs)]
-    paths, lengths = cat[0], cat[1].astype(np.int32)
-    width = max(1, int(lengths.max()))
-    return NeuralPlanResult(paths[:, :width].astype(np.float32), lengths, cat[2].astype(bool),
-                            cat[3].astype(np.float64), cat[4].astype(np.int8),
-                            cat[5].astype(np.int32), cat[6].astype(np.int32), secs, comp)
+        out = timer.call("coarse", (env.robot, opts, world, fn, jax.random.fold_in(k_coarse, ci),
+                                    jnp.asarray(part[:, 0]), jnp.asarray(part[:, 1]),
+                                    jnp.asarray(act)))
+        for dst, src in zip((paths, lengths, valid, reached, feasible, blocked, calls), out):
+            dst[lo:hi] = src[: hi - lo]
+    # 2. replanning rounds: only the infeasible paths, gathered into chunks of ``width``
+    rounds = opts.replan_rounds if opts.steer else 0
+    for r in range(rounds):
+        todo = np.flatnonzero(reached & ~feasible)
+        if not len(todo):
+            break
+        for ci, lo in enumerate(range(0, len(todo), width)):
+            idx = todo[lo:lo + width]
+            m = len(idx)
+            sel = np.zeros(width, np.int64)
+            sel[:m] = idx
+            mask = np.zeros(width, bool)
+            mask[:m] = True
+            out = timer.call("repair", (env.robot, opts, world, fn,
+                                        jax.random.fold_in(jax.random.fold_in(k_rep, r), ci),
+                                        jnp.asarray(paths[sel]), jnp.asarray(lengths[sel]),
+                                        jnp.asarray(blocked[sel]), jnp.asarray(mask)))
+            p_new, n_new, f_new, b_new, c_new = (o[:m] for o in out)
+            paths[idx], lengths[idx], feasible[idx], blocked[idx] = p_new, n_new, f_new, b_new
+            calls[idx] += c_new
+        replans[todo] += 1
+    success = reached & feasible
+    costs = np.full(k, np.inf)
+    if success.any():
+        ok = np.flatnonzero(success)
+        cw = bucket_size(len(ok))
+        sel = np.zeros(cw, np.int64)
+        sel[: len(ok)] = ok
+        costs[ok] = np.asarray(_jit_cost(env.robot, jnp.asarray(paths[sel]),
+                                         jnp.asarray(lengths[sel])))[: len(ok)]
+    cause = np.where(~valid, INVALID_QUERY,
+                     np.where(~reached, NO_PATH, np.where(success, SUCCESS, INFEASIBLE)))
+    top = max(1, int(lengths.max())) if k else 1
+    return NeuralPlanResult(paths[:, :top], lengths, success, costs.astype(np.float64),
+                            cause.astype(np.int8), calls, replans, timer.run, timer.compile)
 
 
 def path_costs(env, paths: np.ndarray, lengths: np.ndarray) -> np.ndarray:

@@ -145,6 +145,21 @@ def test_load_ensemble_for_planning(full_run):
         T.load_ensemble(out / "nowhere")
 
 
+def test_corrupt_saved_ensemble_is_a_clear_error(full_run, tmp_path):
+    import shutil
+    out, _, _ = full_run
+    bad = tmp_path / "ensemble"
+    shutil.copytree(out / "ensemble", bad)
+    for f in (bad / "params").rglob("*"):
+        if f.is_file() and f.stat().st_size > 0:
+            f.write_bytes(b"\x00garbage" * 10)
+    with pytest.raises(T.CheckpointError, match="corrupt"):
+        T.load_ensemble(bad)
+    (bad / "ensemble.json").write_text("{not json")
+    with pytest.raises(T.CheckpointError, match="corrupt"):
+        T.load_ensemble(bad)
+
+
 def test_resume_gives_the_uninterrupted_result(env, datasets, full_run, tmp_path):
     _, ens, hist = full_run
     partial, _ = T.train_ensemble(datasets, env, MODEL, TRAIN, seed=SEED, ckpt_dir=tmp_path,

@@ -321,7 +321,8 @@ def evaluate_env(env, ensemble, cfg, run_dir, *, env_name: str, data_env_dir=Non
             for ki, kind in enumerate(KINDS):
                 q = queries[kind]
                 f = paths_file(run_dir, slug, m, kind, steer)
-                fp = _fp(cfg.hash(), slug, m, kind, steer, str(ref["fingerprint"]))
+                fp = _fp(cfg.hash(), slug, m, kind, steer, str(ref["fingerprint"]),
+                         NP.ALGORITHM_VERSION)
                 got = load_npz(f, fp)
                 if got is None:
                     key = jax.random.fold_in(jax.random.fold_in(

@@ -83,6 +83,7 @@ from ntq_jax.robots.batch import is_valid_cm, steer_to_cm
 
 Array = jax.Array
 
+ALGORITHM_VERSION = 2  # bump when planning results change (saved evaluations are then redone)
 SUCCESS, NO_PATH, INFEASIBLE, INVALID_QUERY = 0, 1, 2, 3
 CAUSES = {SUCCESS: "success", NO_PATH: "no_path", INFEASIBLE: "infeasible",
           INVALID_QUERY: "invalid_query"}

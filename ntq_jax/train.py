@@ -334,11 +334,18 @@ def make_train_chunk(graphdef, tx, steps: int):
     def chunk(state: TrainState, x, y, dropout_keys, g0, idx, mask, active, val_x, val_y,
               val_mask, do_eval):
         def body(carry, inp):
-            params, opt = carry
             k, idx_k, mask_k, act_k = inp
-            keys = jax.vmap(lambda dk: jax.random.fold_in(dk, g0 + k))(dropout_keys)
-            params, opt, loss = vstep(params, opt, x, y, keys, idx_k, mask_k, act_k)
-            return (params, opt), loss
+
+            def step(carry):
+                params, opt = carry
+                keys = jax.vmap(lambda dk: jax.random.fold_in(dk, g0 + k))(dropout_keys)
+                params, opt, loss = vstep(params, opt, x, y, keys, idx_k, mask_k, act_k)
+                return (params, opt), loss
+
+            def skip(carry):  # no member active (padding of the last chunk): no compute
+                return carry, jnp.zeros(act_k.shape, jnp.float32)
+
+            return jax.lax.cond(jnp.any(act_k), step, skip, carry)
 
         (params, opt), losses = jax.lax.scan(
             body, (state.params, state.opt_state), (jnp.arange(steps), idx, mask, active))

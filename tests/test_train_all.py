@@ -16,7 +16,8 @@ from shapely.geometry import LineString, Point, box as shapely_box
 from shapely.ops import unary_union
 
 ROOT = Path(__file__).resolve().parents[1]
-TINY = ["envs=[point/2]", "data.k_train=40", "data.gamma_queries=2000", "train.epochs=2",
+TINY = ["envs=[point/2]", "data.k_train=40", "data.gamma_queries=2000", "data.gamma_eval=false",
+        "train.epochs=2",
         "model.hidden=[32,32]", "eval.k_test=16", "eval.n_plan=20", "eval.replan_rounds=2",
         "eval.replan_steps=6", "eval.gamma_queries=2000"]
 

@@ -22,10 +22,22 @@ Usage:
     python scripts/bench_planners.py [--env point/3] [--resolution 0.1]
         [--queries 1000] [--repeats 5] [--heapq-queries 1000] [--seed 0]
         [--random-boxes K]   # a random 20x20 map of K inflated boxes instead of --env
+        [--visgraph-queries 100000] [--plan-queries 1000]
 
 Reports the median wall time over repeats (JAX: after one compiling call, with
 the per-grid tables built once and timed separately), queries per second, and
 the ratios to pyastar2d.
+
+Then, on the environment itself (not with ``--random-boxes``):
+
+* the visibility-graph planner (``VisGraph.plan``, lengths and paths) on
+  ``--visgraph-queries`` uniform valid queries at padding 0 and at the
+  environment's padding: build time and queries per second;
+* the public entry point end to end, ``ntq_jax.plan(env, q, "astar")`` (grid,
+  snapping, A*, shortcutting, exact verification) and ``"visgraph"`` on
+  ``--plan-queries`` queries of ``env.sample_queries`` (p_nt = 0.5), at
+  padding 0: queries per second, per-stage times, and the distribution of the
+  smoothed A* cost over the visibility-graph optimum.
 """
 
 from __future__ import annotations
@@ -231,6 +243,47 @@ def bench(occ, starts, goals, args, label):
     return rows
 
 
+def bench_visgraph(env_name: str, n: int, seed: int) -> None:
+    import ntq_jax
+    from ntq_jax.planners.visgraph import benchmark_visgraph
+
+    env = ntq_jax.make_env(env_name)
+    for pad in (0.0, env.padding):
+        st = benchmark_visgraph(env, n, padding=pad, seed=seed, repeats=3)
+        print(f"visgraph {env_name} padding {pad}: {st['nodes']} nodes, build {st['build_s']:.2f} s, "
+              f"{n} queries in {st['plan_s']:.3f} s = {st['queries_per_s']:.0f} queries/s "
+              f"(solved {st['solved']:.1%}, direct {st['direct']:.1%}, {st['devices']} device)")
+
+
+def bench_plan(env_name: str, n: int, seed: int, repeats: int) -> None:
+    import ntq_jax
+
+    env = ntq_jax.make_env(env_name)
+    q, _ = env.sample_queries(jax.random.PRNGKey(seed), n, 0.5)
+    q = np.asarray(q)
+    print(f"\n== ntq_jax.plan on {env_name}, {n} queries (p_nt 0.5), padding 0 ==")
+    for planner in ("astar", "visgraph"):
+        t0 = time.perf_counter()
+        ntq_jax.plan(env, q, planner, padding=0.0)
+        first = time.perf_counter() - t0
+        t_med, t_min, res = timed(lambda: ntq_jax.plan(env, q, planner, padding=0.0), repeats)
+        stages = {k: round(v * 1e3, 1) for k, v in res.info.items()
+                  if k.endswith("_time") and isinstance(v, float)}
+        print(f"plan({planner!r}): first call {first:.1f} s; median {t_med:.3f} s = "
+              f"{n / t_med:.0f} queries/s; solved {res.solved.mean():.1%}; "
+              f"mean waypoints {res.lengths[res.solved].mean():.2f}; stages (ms, last run) {stages}")
+        if planner == "astar":
+            ast = res
+        else:
+            vis = res
+    both = ast.solved & vis.solved
+    r = ast.costs[both] / vis.costs[both]
+    print(f"smoothed A* cost / visgraph optimum over {both.sum()} queries: min {r.min():.5f}, "
+          f"median {np.median(r):.5f}, mean {r.mean():.5f}, p90 {np.percentile(r, 90):.5f}, "
+          f"p99 {np.percentile(r, 99):.5f}, max {r.max():.5f}; "
+          f"within 1%: {np.mean(r <= 1.01):.1%}, within 5%: {np.mean(r <= 1.05):.1%}")
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--env", default="point/3", help="package environment to rasterise")
@@ -243,6 +296,10 @@ def main(argv=None):
     p.add_argument("--heapq-repeats", type=int, default=1)
     p.add_argument("--sets", default="reachable,uniform", help="query sets to run")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--visgraph-queries", type=int, default=100_000,
+                   help="queries for the visibility-graph throughput (0 = skip)")
+    p.add_argument("--plan-queries", type=int, default=1000,
+                   help="queries for the ntq_jax.plan end-to-end comparison (0 = skip)")
     args = p.parse_args(argv)
 
     rng = np.random.default_rng(args.seed)
@@ -256,6 +313,12 @@ def main(argv=None):
     for kind in args.sets.split(","):
         starts, goals = sample_queries(rng, occ, args.queries, reachable=(kind == "reachable"))
         bench(occ, starts, goals, args, f"{name}, {kind} queries")
+    if not args.random_boxes:
+        if args.visgraph_queries:
+            print()
+            bench_visgraph(args.env, args.visgraph_queries, args.seed)
+        if args.plan_queries:
+            bench_plan(args.env, args.plan_queries, args.seed, args.repeats)
 
 
 if __name__ == "__main__":

@@ -113,7 +113,7 @@ def test_one_compilation_per_bucket():
     rng = np.random.default_rng(0)
     shortcut_paths(env, *polyline_batch(rng, 9, 7))
     before = shortcut._cache_size()
-    for b, l in [(10, 8), (16, 6), (12, 5)]:  # same (16, 8) bucket
+    for b, l in [(10, 8), (16, 6), (200, 16)]:  # same path buffer (16), chunks of 128
         shortcut_paths(env, *polyline_batch(rng, b, l))
     assert shortcut._cache_size() == before
     other = random_env(2)  # same obstacle count: world is traced, no recompilation

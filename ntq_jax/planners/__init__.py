@@ -334,7 +334,7 @@ def _snap(env, grid: ConfigGrid, pts: np.ndarray, padding: float, to_cell: bool)
 
 
 def _plan_astar(env, q, *, padding, seed, resolution: float = 0.1, smooth: bool = True,
-                chunk_size: int = 1024, smooth_chunk: int = 256, **astar_options) -> PlanResult:
+                chunk_size: int = 1024, smooth_chunk: int = 128, **astar_options) -> PlanResult:
     from ntq_jax.planners import astar as A
     from ntq_jax.planners.smoothing import shortcut_paths
 

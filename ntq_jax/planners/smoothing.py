@@ -104,12 +104,13 @@ def _pow2(n: int, lo: int) -> int:
 
 
 def shortcut_paths(env, paths, lengths, *, padding: float | None = None,
-                   chunk_size: int = 256) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                   chunk_size: int = 128) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Shortcuts a batch of NaN-padded paths in ``env`` (greedy farthest-visible rule).
 
-    The batch is processed in chunks of at most ``chunk_size`` paths; the chunk
-    size and the path buffer are padded to powers of two (the buffer to the
-    longest path of the batch), so repeated calls reuse the compiled program.
+    The batch is processed in chunks of exactly ``chunk_size`` paths (the last
+    one padded with empty paths) and the path buffer is padded to a power of
+    two >= 16 (from the longest path of the batch), so repeated calls reuse
+    one compiled program per buffer size.
 
     Args:
         env: an :class:`ntq_jax.Env`.
@@ -134,8 +135,10 @@ def shortcut_paths(env, paths, lengths, *, padding: float | None = None,
         return np.zeros((0, 2, env.dim), np.float32), np.zeros(0, np.int32), np.zeros(0, bool)
     n_in = np.clip(n_in, 0, p.shape[1])
     lmax = int(n_in.max())
-    lp = _pow2(lmax, 2)
-    chunk = _pow2(min(bsz, int(chunk_size)), 8)
+    lp = _pow2(lmax, 16)
+    chunk = int(chunk_size)
+    if chunk < 1:
+        raise ValueError(f"chunk_size must be >= 1, got {chunk_size}")
     out = np.full((bsz, lp, env.dim), np.nan, np.float32)
     n_out = np.zeros(bsz, np.int32)
     ok = np.zeros(bsz, bool)

@@ -107,7 +107,8 @@ STATUS_NAMES = {SOLVED: "solved", NO_PATH: "no_path", INVALID: "invalid"}
 DEFAULT_EPS_REL = 5e-5
 #: Default largest angle (radians) between consecutive tangents of an arc's circumscribed polygon.
 DEFAULT_ARC_STEP = math.pi / 8
-#: The node count is padded to a multiple of this in :meth:`VisGraph.plan` (fewer recompilations).
+#: The node count and the route buffer are padded to multiples of this in :meth:`VisGraph.plan`
+#: (maps with similar counts share the compiled code).
 NODE_PAD = 8
 
 
@@ -429,13 +430,15 @@ class VisGraph:
         # Pad the node set to a multiple of NODE_PAD with NaN nodes (never visible), so maps
         # with similar node counts share the compiled code.
         vp = max(NODE_PAD, -(-v // NODE_PAD) * NODE_PAD)
-        r = self.routes.shape[-1] if v else 1
+        r0 = self.routes.shape[-1] if v else 1
+        r = max(NODE_PAD, -(-r0 // NODE_PAD) * NODE_PAD)  # route buffer: same bucketing
         nodes_cm = np.full((2, vp), np.nan, np.float32)
         nodes_cm[:, :v] = self.nodes.T
         dist32 = np.full((vp, vp), np.inf, np.float32)
         dist32[:v, :v] = self.dist
         routes = np.zeros((vp, vp, r), np.int32)
-        routes[:v, :v] = self.routes
+        routes[:v, :v, :r0] = self.routes
+        routes[:v, :v, r0:] = self.routes[:, :, -1:]  # padded by repeating the last node
         route_len = np.zeros((vp, vp), np.int32)
         route_len[:v, :v] = self.route_len
         graph = [jnp.asarray(a) for a in (nodes_cm, dist32, routes, route_len)]
@@ -464,7 +467,8 @@ class VisGraph:
                           + np.linalg.norm(g64 - nodes64[l], axis=1))
             costs = np.where(via, graph_cost, costs)
         costs = np.where(status == SOLVED, costs, np.inf)
-        return VisGraphResult(paths, length, costs, status)
+        width = max(2, int(length.max(initial=0)))
+        return VisGraphResult(np.ascontiguousarray(paths[:, :width]), length, costs, status)
 
 
 def plan_visgraph(env, queries, *, padding: float | None = None, **build_options) -> VisGraphResult:

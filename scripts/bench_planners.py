@@ -4,10 +4,9 @@ Same grid, same queries, one process. The grid is the environment's occupancy
 grid from the package's rasteriser (default ``point/3`` at 0.1 resolution with
 the environment's padding, 200x200). Two query sets are timed:
 
-* ``uniform``: start and goal uniform over the free cells (on ``point/3`` the
-  padded doors are closed, so most of these are unreachable: the JAX planner
-  answers them from its component labels, the other two search the whole
-  component);
+* ``uniform``: start and goal uniform over the free cells (unreachable pairs,
+  if the grid has several components, are answered by the JAX planner from its
+  component labels while the other two search the whole component);
 * ``reachable``: the same sampling restricted to start/goal pairs in the same
   component (every query needs a search: the fair speed comparison).
 

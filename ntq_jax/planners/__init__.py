@@ -355,7 +355,7 @@ def _plan_astar(env, q, *, padding, seed, resolution: float = 0.1, smooth: bool 
     t1 = time.perf_counter()
     res = A.astar_chunked(grid.graph, s_cell, g_cell, chunk_size=int(chunk_size), **astar_options)
     t2 = time.perf_counter()
-    info["grid_time"], info["astar_time"] = t1 - t0, t2 - t1
+    info["prep_time"], info["astar_time"] = t1 - t0, t2 - t1  # prep: grid, validity, snapping
     a_status = np.asarray(res.status)
     status[idx[a_status == A.NO_PATH]] = NO_PATH
     status[idx[a_status == A.CAPACITY]] = TIMEOUT

@@ -21,7 +21,7 @@ import math
 import types
 import typing
 from pathlib import Path
-from typing import Any, Optional
+from typing import Optional
 
 import yaml
 

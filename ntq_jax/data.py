@@ -80,7 +80,6 @@ from __future__ import annotations
 import functools
 import hashlib
 import json
-import os
 import re
 import shutil
 import time
@@ -94,6 +93,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ntq_jax import files
 from ntq_jax import queries as Q
 from ntq_jax.geometry import KERNEL_COMPILER_OPTIONS
 from ntq_jax.robots.batch import steer_to_cm
@@ -324,68 +324,6 @@ def resolve_planner(planner, options: dict) -> tuple[Callable, str]:
 # Atomic writes
 # ---------------------------------------------------------------------------
 
-def _fsync_replace(tmp: Path, dst: Path):
-    """Renames ``tmp`` over ``dst`` and syncs the directory, so the rename survives a crash."""
-    os.replace(tmp, dst)
-    try:
-        fd = os.open(dst.parent, os.O_RDONLY)
-    except OSError:  # pragma: no cover (platforms without directory fds)
-        return
-    try:
-        os.fsync(fd)
-    except OSError:  # pragma: no cover
-        pass
-    finally:
-        os.close(fd)
-
-
-def _atomic_write_bytes(path: Path, blob: bytes):
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    with open(tmp, "wb") as f:
-        f.write(blob)
-        f.flush()
-        os.fsync(f.fileno())
-    _fsync_replace(tmp, path)
-
-
-def _atomic_save_npy(path: Path, arr: np.ndarray) -> str:
-    """Writes ``arr`` as ``.npy`` atomically; returns the sha256 of the file."""
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    with open(tmp, "wb") as f:
-        np.save(f, np.ascontiguousarray(arr), allow_pickle=False)
-        f.flush()
-        os.fsync(f.fileno())
-    digest = _sha256(tmp)
-    _fsync_replace(tmp, path)
-    return digest
-
-
-def _atomic_save_npz(path: Path, **arrays):
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    with open(tmp, "wb") as f:
-        np.savez(f, **arrays)
-        f.flush()
-        os.fsync(f.fileno())
-    _fsync_replace(tmp, path)
-
-
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for blk in iter(lambda: f.read(1 << 20), b""):
-            h.update(blk)
-    return h.hexdigest()
-
-
-def _clean_tmp(folder: Path):
-    if folder.is_dir():
-        for p in folder.glob(".*.tmp-*"):
-            try:
-                p.unlink()
-            except OSError:
-                pass
-
-
 def _json_default(o):
     if isinstance(o, (np.integer,)):
         return int(o)
@@ -500,7 +438,7 @@ def _plan_pool(env, pool: np.ndarray, plan_fn, pad: float, seed: int, chunk: int
                 chunk_seed = (int(seed) * 1_000_003 + lo) % (2 ** 31 - 1)
                 raw = plan_fn(env, pool[lo:hi], padding=pad, seed=chunk_seed)
                 res = _as_plan_output(raw, hi - lo, d)
-                _atomic_save_npz(work / f"plan_{lo:09d}_{hi:09d}.npz", queries=pool[lo:hi],
+                files.save_npz(work / f"plan_{lo:09d}_{hi:09d}.npz", queries=pool[lo:hi],
                                  paths=res.paths, lengths=res.lengths, costs=res.costs,
                                  status=res.status)
             results.append(res)
@@ -574,7 +512,7 @@ def _estimate_gamma(env, key, n: int, pad: float, work: Path, tag: str) -> dict:
         out = {"padding": pad, "gamma": e.gamma, "ci95": list(e.ci95), "queries": e.queries}
     except Q.FreeSpaceTooSmall as err:
         out = {"padding": pad, "gamma": None, "ci95": None, "queries": 0, "error": str(err)}
-    _atomic_write_bytes(f, _dumps(out))
+    files.write_bytes(f, _dumps(out))
     return out
 
 
@@ -644,7 +582,7 @@ def generate_datasets(env, config, out_dir, *, env_name: str | None = None, plan
 
     work = env_dir / ".work" / fp
     work.mkdir(parents=True, exist_ok=True)
-    _clean_tmp(work)
+    files.clean_tmp(work)
     env.save_json(env_dir / "env.json")
 
     # 1. query pools
@@ -829,15 +767,15 @@ def _complete(env_dir: Path, names: list[str], fp: str) -> bool:
 def _write_dataset(folder: Path, arrays: dict[str, np.ndarray], meta: dict):
     """Writes one dataset folder: ``meta.json`` removed first, arrays atomically, ``meta.json`` last."""
     folder.mkdir(parents=True, exist_ok=True)
-    _clean_tmp(folder)
+    files.clean_tmp(folder)
     (folder / "meta.json").unlink(missing_ok=True)
     info = {}
     for name, (dtype, ndim) in ARRAY_SPECS.items():
         arr = np.asarray(arrays[name])
         assert arr.dtype == dtype and arr.ndim == ndim, (name, arr.dtype, arr.shape)
-        digest = _atomic_save_npy(folder / f"{name}.npy", arr)
+        digest = files.sha256(files.save_npy(folder / f"{name}.npy", arr))
         info[name] = {"dtype": dtype.str, "shape": list(arr.shape), "sha256": digest}
-    _atomic_write_bytes(folder / "meta.json", _dumps(dict(meta, arrays=info)))
+    files.write_bytes(folder / "meta.json", _dumps(dict(meta, arrays=info)))
 
 
 # ---------------------------------------------------------------------------
@@ -886,7 +824,7 @@ def load_dataset(folder, mmap: bool = True, verify: bool = True) -> Dataset:
         want = info.get(name)
         if not isinstance(want, dict):
             raise DatasetError(f"{mpath}: no entry for array {name!r}; {_FIX}")
-        if verify and _sha256(f) != want.get("sha256"):
+        if verify and files.sha256(f) != want.get("sha256"):
             raise DatasetError(f"{f}: corrupt (sha256 differs from meta.json); {_FIX}")
         try:
             if mmap and f.stat().st_size > 0:
@@ -1075,10 +1013,8 @@ def plot_environment(env_dir, out=None, n_points: int = 400, n_paths: int = 6):
                      f"{g['padding']})", fontsize=10)
     fig.tight_layout()
     out = Path(out) if out is not None else env_dir / "figure.png"
-    tmp = out.with_name(f".{out.name}.tmp-{os.getpid()}.png")
-    fig.savefig(tmp, dpi=110)
+    files.save_figure(fig, out, dpi=110)
     plt.close(fig)
-    os.replace(tmp, out)
     return out
 
 

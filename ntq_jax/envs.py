@@ -28,7 +28,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ntq_jax import geometry, queries as Q
+from ntq_jax import files, geometry, queries as Q
 from ntq_jax.geometry import World
 from ntq_jax.robots import Robot, robot_from_json
 from ntq_jax.robots.batch import distance_batch, is_valid_batch, steer_to_batch
@@ -125,12 +125,7 @@ class Env:
 
     def save_json(self, path: str | os.PathLike) -> Path:
         """Writes :meth:`to_json` atomically (temporary file, then rename)."""
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(path.name + ".tmp")
-        tmp.write_text(json.dumps(self.to_json(), indent=1))
-        os.replace(tmp, path)
-        return path
+        return files.write_json(path, self.to_json())
 
     @staticmethod
     def from_json(spec: dict[str, Any], where: str = "environment") -> "Env":

@@ -33,8 +33,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import math
-import os
 import time
 import zlib
 from pathlib import Path
@@ -45,6 +43,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.tree_util import Partial
 
+from ntq_jax import files
 from ntq_jax import neural_planner as NP
 from ntq_jax.queries import wilson_interval
 
@@ -75,18 +74,6 @@ def paths_file(run_dir, slug: str, member: int, kind: str, steer: bool) -> Path:
 # Atomic files
 # ---------------------------------------------------------------------------
 
-def save_npz(path: Path, **arrays):
-    """``np.savez`` to a temporary name, then rename (complete or absent)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + f".tmp{os.getpid()}")
-    with open(tmp, "wb") as f:
-        np.savez(f, **arrays)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
-
-
 def load_npz(path: Path, fingerprint: str | None = None) -> dict | None:
     """The arrays of a complete ``.npz`` (None if absent, unreadable or of another run)."""
     path = Path(path)
@@ -102,13 +89,6 @@ def load_npz(path: Path, fingerprint: str | None = None) -> dict | None:
     return out
 
 
-def write_text(path: Path, text: str):
-    """Atomic text write."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + f".tmp{os.getpid()}")
-    tmp.write_text(text)
-    os.replace(tmp, path)
 
 
 # ---------------------------------------------------------------------------
@@ -166,7 +146,7 @@ def test_queries(env, cfg, slug: str, out_dir: Path) -> dict[str, np.ndarray]:
         q, _ = env.sample_queries(jax.random.fold_in(key, i), ev.k_test, float(i), padding=qpad,
                                   n_max=cfg.sampling.n_max)
         out[kind] = np.asarray(q, np.float32)
-    save_npz(f, fingerprint=fp, query_padding=qpad, **out)
+    files.save_npz(f, fingerprint=fp, query_padding=qpad, **out)
     return out
 
 
@@ -194,7 +174,7 @@ def reference_plans(env, cfg, env_name: str, slug: str, queries: dict, out_dir: 
         if env.robot.kind == "point":
             opt = _visgraph(env, q)
             out[f"{kind}_opt_costs"] = np.asarray(opt.costs, np.float64)
-    save_npz(f, **out)
+    files.save_npz(f, **out)
     return load_npz(f)
 
 
@@ -275,7 +255,7 @@ def _gamma(env, cfg, data_env_dir, slug: str, out_dir: Path) -> dict:
     e = env.gamma_nt(key, cfg.eval.gamma_queries, padding=0.0)
     g = {"gamma": float(e.gamma), "ci95": [float(x) for x in e.ci95], "queries": int(e.queries),
          "source": "eval"}
-    write_text(f, json.dumps(g))
+    files.write_text(f, json.dumps(g))
     return g
 
 
@@ -335,7 +315,7 @@ def evaluate_env(env, ensemble, cfg, run_dir, *, env_name: str, data_env_dir=Non
                                seconds=res.seconds, compile_seconds=res.compile_seconds)
                     if f"{kind}_opt_costs" in ref:
                         got["opt_costs"] = ref[f"{kind}_opt_costs"]
-                    save_npz(f, **got)
+                    files.save_npz(f, **got)
                     log(f"  {slug} {model_name(m)} {kind:10s} steer={steer!s:5s}: success "
                         f"{res.success.mean():.3f}, {res.seconds / max(len(q), 1) * 1e3:.2f} "
                         f"ms/query (+{res.compile_seconds:.1f} s compile)")

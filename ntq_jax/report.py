@@ -26,7 +26,8 @@ from typing import Sequence
 
 import numpy as np
 
-from ntq_jax.evaluate import KINDS, load_npz, write_text
+from ntq_jax import files
+from ntq_jax.evaluate import KINDS, load_npz
 
 TITLES = {"point": "Point robot planning", "rigid": "Rigid body planning",
           "nlink": "n-link manipulator planning"}
@@ -170,10 +171,7 @@ def _plt():
 
 
 def _save(fig, path: Path):
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.stem + ".tmp.png")
-    fig.savefig(tmp, dpi=110, bbox_inches="tight")
-    tmp.replace(path)
+    files.save_figure(fig, path, dpi=110, bbox_inches="tight")
 
 
 def success_figure(rows, path: Path, steer: bool = True):
@@ -309,14 +307,14 @@ def write_report(run_dir, rows: list[dict], envs: dict | None = None, meta: dict
     run_dir = Path(run_dir)
     out = {}
     out["results.json"] = run_dir / "results.json"
-    write_text(out["results.json"], json.dumps({"meta": meta or {}, "rows": rows}, indent=1,
+    files.write_text(out["results.json"], json.dumps({"meta": meta or {}, "rows": rows}, indent=1,
                                                default=str))
     out["results.csv"] = run_dir / "results.csv"
-    write_text(out["results.csv"], results_csv(rows))
+    files.write_text(out["results.csv"], results_csv(rows))
     out["tables.md"] = run_dir / "tables.md"
-    write_text(out["tables.md"], tables_md(rows))
+    files.write_text(out["tables.md"], tables_md(rows))
     out["tables.tex"] = run_dir / "tables.tex"
-    write_text(out["tables.tex"], tables_tex(rows))
+    files.write_text(out["tables.tex"], tables_tex(rows))
     if figures:
         figs = run_dir / "figures"
         for steer in sorted({r["steer"] for r in rows}, reverse=True):

@@ -66,7 +66,7 @@ import numpy as np
 import optax
 from flax import nnx
 
-from ntq_jax import models
+from ntq_jax import files, models
 from ntq_jax.config import ModelConfig, TrainConfig
 
 Array = jax.Array
@@ -564,10 +564,6 @@ def _history(records: list[dict], num: int) -> History:
                    f("val_loss"))
 
 
-def _atomic_write(path: Path, text: str):
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
 
 
 def write_history(out: Path, records: list[dict], labels: Sequence[str], png: bool = True):
@@ -576,7 +572,7 @@ def write_history(out: Path, records: list[dict], labels: Sequence[str], png: bo
     The figure (matplotlib, Agg backend) costs far more than the text files, so the
     training loop redraws it only at checkpoints and at the end.
     """
-    _atomic_write(out / "history.jsonl", "".join(json.dumps(r) + "\n" for r in records))
+    files.write_text(out / "history.jsonl", "".join(json.dumps(r) + "\n" for r in records))
     lines = ["step,member,dataset,epoch,train_loss,val_loss"]
     fmt = lambda v: "" if v is None else format(v, ".8g")
     for r in records:
@@ -585,7 +581,7 @@ def write_history(out: Path, records: list[dict], labels: Sequence[str], png: bo
             if t is None and v is None:
                 continue
             lines.append(f"{r['step']},{m},{lab},{r['epoch'][m]:.6g},{fmt(t)},{fmt(v)}")
-    _atomic_write(out / "history.csv", "\n".join(lines) + "\n")
+    files.write_text(out / "history.csv", "\n".join(lines) + "\n")
     if not png:
         return
     try:  # the object API with the Agg canvas: no pyplot, no global backend switch
@@ -610,9 +606,7 @@ def write_history(out: Path, records: list[dict], labels: Sequence[str], png: bo
     ax.legend(fontsize=7, ncol=2)
     ax.grid(alpha=0.3)
     fig.tight_layout()
-    tmp = out / "curves.tmp.png"
-    fig.savefig(tmp, dpi=110)
-    os.replace(tmp, out / "curves.png")
+    files.save_figure(fig, out / "curves.png", dpi=110)
 
 
 # ---------------------------------------------------------------------------
@@ -861,7 +855,7 @@ def train_from_folder(env_dir: str | os.PathLike, cfg, out_dir: str | os.PathLik
     datasets = data_mod.load_datasets(env_dir)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    _atomic_write(out / "config.json", json.dumps(cfg.to_dict(), indent=1))
+    files.write_text(out / "config.json", json.dumps(cfg.to_dict(), indent=1))
     return train_ensemble(datasets, env, cfg.model, cfg.train, seed=cfg.seed, ckpt_dir=out,
                           progress=progress, labels=[f"D{i}" for i in range(len(datasets))],
                           shard=shard, resolved_config=cfg.to_dict())

@@ -41,6 +41,7 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 import ntq_jax as nj  # noqa: E402
+from ntq_jax import files  # noqa: E402
 from ntq_jax import queries as Q  # noqa: E402
 from ntq_jax.geometry import KERNEL_COMPILER_OPTIONS  # noqa: E402
 from ntq_jax.robots.batch import steer_to_cm  # noqa: E402
@@ -380,10 +381,7 @@ def main(argv=None) -> int:
         out = {"command": " ".join([Path(sys.argv[0]).name] + (argv if argv is not None else sys.argv[1:])),
                "jax": jax.__version__, "cpus": os.cpu_count(), "load_average": [load0[0], load1[0]],
                "map": MAP, "rows": rows}
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        tmp = args.json.with_name(args.json.name + ".tmp")
-        tmp.write_text(json.dumps(out, indent=1))
-        os.replace(tmp, args.json)
+        files.write_json(args.json, out)
     return 0
 
 

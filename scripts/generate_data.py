@@ -39,7 +39,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
 
     from ntq_jax import config as C
-    from ntq_jax import data, make_env
+    from ntq_jax import data, files, make_env
     from ntq_jax.envs import EnvError
 
     overrides = list(args.set)
@@ -71,8 +71,7 @@ def main(argv=None) -> int:
                   f"samples, pruned {st['fraction_pruned']:.1%}, mean waypoints "
                   f"{st['mean_waypoints']:.2f}, blocked {st['blocked_fraction']:.3f} "
                   f"(gamma_nt {st['gamma_nt']})")
-    data._atomic_write_bytes(out / "generate_summary.json",
-                             json.dumps(results, indent=1, default=str).encode())
+    files.write_json(out / "generate_summary.json", results, default=str)
     return 0
 
 

@@ -15,12 +15,12 @@ gamma_nt; ``--padding`` measures another geometry (e.g. the data-generation one)
 from __future__ import annotations
 
 import argparse
-import json
-import os
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from ntq_jax import files  # noqa: E402
 
 
 def _count(text: str) -> int:
@@ -87,10 +87,7 @@ def main(argv=None) -> int:
                "queries_per_second": est.queries_per_second,
                "candidates": est.candidates,
                "candidates_per_second": est.candidates_per_second}
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        tmp = args.json.with_name(args.json.name + ".tmp")
-        tmp.write_text(json.dumps(out, indent=1))
-        os.replace(tmp, args.json)
+        files.write_json(args.json, out)
     return 0
 
 

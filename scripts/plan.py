@@ -22,21 +22,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-
-def enable_compile_cache():
-    """JAX's persistent compilation cache (``$JAX_COMPILATION_CACHE_DIR`` or
-    ``~/.cache/ntq_jax/jax``): a rerun, a resume or scripts/plan.py reuse the
-    compiled planner instead of compiling it again."""
-    import os
-
-    import jax
-    path = os.environ.get("JAX_COMPILATION_CACHE_DIR",
-                          str(Path.home() / ".cache" / "ntq_jax" / "jax"))
-    try:
-        jax.config.update("jax_compilation_cache_dir", path)
-        jax.config.update("jax_persistent_cache_min_compile_time_secs", 2.0)
-    except Exception:  # noqa: BLE001 - the cache is an optimisation only
-        pass
+from ntq_jax import files  # noqa: E402
 
 
 class PlanError(ValueError):
@@ -154,7 +140,7 @@ def main(argv=None) -> int:
                     help="do not use JAX's persistent compilation cache")
     args = ap.parse_args(argv)
     if not args.no_compile_cache:
-        enable_compile_cache()
+        files.enable_compile_cache()
     from ntq_jax.config import ConfigError
     from ntq_jax.envs import EnvError
     from ntq_jax.neural_planner import CAUSES

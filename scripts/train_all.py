@@ -32,28 +32,14 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ntq_jax import files  # noqa: E402
 
-def enable_compile_cache():
-    """JAX's persistent compilation cache (``$JAX_COMPILATION_CACHE_DIR`` or
-    ``~/.cache/ntq_jax/jax``): a rerun, a resume or scripts/plan.py reuse the
-    compiled planner instead of compiling it again."""
-    import os
-
-    import jax
-    path = os.environ.get("JAX_COMPILATION_CACHE_DIR",
-                          str(Path.home() / ".cache" / "ntq_jax" / "jax"))
-    try:
-        jax.config.update("jax_compilation_cache_dir", path)
-        jax.config.update("jax_persistent_cache_min_compile_time_secs", 2.0)
-    except Exception:  # noqa: BLE001 - the cache is an optimisation only
-        pass
 
 DEFAULT = {
     "task": "point",
@@ -83,12 +69,6 @@ def load_config(path, overrides):
     return C.load(path, overrides)
 
 
-def _write(path: Path, text: str):
-    tmp = path.with_name(path.name + f".tmp{os.getpid()}")
-    tmp.write_text(text)
-    os.replace(tmp, path)
-
-
 def prepare_run(cfg, out) -> Path:
     """Creates (or reopens) the run folder; refuses a folder made with another config."""
     import yaml
@@ -106,8 +86,8 @@ def prepare_run(cfg, out) -> Path:
                 f"{run} holds a run with another config (hash {info.get('config_hash')}, this one "
                 f"{cfg.hash()}); pass a new --out, or delete the folder to start over")
     info.update({"config_hash": cfg.hash(), "stages": info.get("stages", {})})
-    _write(info_f, json.dumps(info, indent=1))
-    _write(run / "config.yaml", yaml.safe_dump(cfg.to_dict(), sort_keys=False))
+    files.write_text(info_f, json.dumps(info, indent=1))
+    files.write_text(run / "config.yaml", yaml.safe_dump(cfg.to_dict(), sort_keys=False))
     return run
 
 
@@ -115,7 +95,7 @@ def _mark(run: Path, stage: str, **fields):
     f = run / "run.json"
     info = json.loads(f.read_text())
     info["stages"][stage] = {"done": True, "time": time.strftime("%Y-%m-%dT%H:%M:%S"), **fields}
-    _write(f, json.dumps(info, indent=1))
+    files.write_text(f, json.dumps(info, indent=1))
 
 
 def run_pipeline(cfg, run: Path, *, progress: bool = True, figures: bool = True,
@@ -190,7 +170,7 @@ def main(argv=None) -> int:
     ap.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     args = ap.parse_args(argv)
     if not args.no_compile_cache:
-        enable_compile_cache()
+        files.enable_compile_cache()
 
     from ntq_jax.config import ConfigError
     try:

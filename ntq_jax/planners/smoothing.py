@@ -28,7 +28,6 @@ of two, so one program serves many calls.
 
 from __future__ import annotations
 
-import functools
 
 import jax
 import jax.numpy as jnp

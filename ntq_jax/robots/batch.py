@@ -15,7 +15,6 @@ from __future__ import annotations
 import functools
 
 import jax
-import jax.numpy as jnp
 
 from ntq_jax.geometry import KERNEL_COMPILER_OPTIONS, World
 

@@ -1,0 +1,127 @@
+"""Files on disk: atomic writes, and JAX's persistent compilation cache.
+
+Every file the package writes goes through here: the content goes to a hidden
+temporary name in the same folder (``.<name>.tmp-<pid>``), is flushed and
+fsynced, then renamed over the destination, and the folder is fsynced so the
+rename survives a crash. A reader therefore sees the old file or the complete
+new one, never a partial one; an interrupted writer leaves only a temporary
+file, which :func:`clean_tmp` removes.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+__all__ = ["tmp_name", "replace", "write_with", "write_bytes", "write_text", "write_json",
+           "save_npy", "save_npz", "save_figure", "clean_tmp", "sha256", "enable_compile_cache"]
+
+
+def tmp_name(path: Path) -> Path:
+    """The hidden temporary name a write of ``path`` goes through."""
+    return path.with_name(f".{path.name}.tmp-{os.getpid()}")
+
+
+def replace(tmp: Path, dst: Path) -> None:
+    """Renames ``tmp`` over ``dst`` and fsyncs the folder, so the rename survives a crash."""
+    os.replace(tmp, dst)
+    try:
+        fd = os.open(dst.parent, os.O_RDONLY)
+    except OSError:  # pragma: no cover (platforms without directory fds)
+        return
+    try:
+        os.fsync(fd)
+    except OSError:  # pragma: no cover
+        pass
+    finally:
+        os.close(fd)
+
+
+def write_with(path: str | os.PathLike, write: Callable[[Any], None]) -> Path:
+    """Atomically writes ``path`` with ``write(binary_file)``; creates the folder."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = tmp_name(path)
+    try:
+        with open(tmp, "wb") as f:
+            write(f)
+            f.flush()
+            os.fsync(f.fileno())
+        replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return path
+
+
+def write_bytes(path: str | os.PathLike, blob: bytes) -> Path:
+    """Atomic binary write."""
+    return write_with(path, lambda f: f.write(blob))
+
+
+def write_text(path: str | os.PathLike, text: str) -> Path:
+    """Atomic text write (UTF-8)."""
+    return write_bytes(path, text.encode("utf-8"))
+
+
+def write_json(path: str | os.PathLike, obj: Any, indent: int | None = 1, **kwargs) -> Path:
+    """Atomic JSON write."""
+    return write_text(path, json.dumps(obj, indent=indent, **kwargs))
+
+
+def save_npy(path: str | os.PathLike, arr: np.ndarray) -> Path:
+    """Atomic ``.npy`` write (no pickles)."""
+    return write_with(path, lambda f: np.save(f, np.ascontiguousarray(arr), allow_pickle=False))
+
+
+def save_npz(path: str | os.PathLike, **arrays) -> Path:
+    """Atomic uncompressed ``.npz`` write."""
+    return write_with(path, lambda f: np.savez(f, **arrays))
+
+
+def save_figure(fig, path: str | os.PathLike, **savefig_kwargs) -> Path:
+    """Atomic ``fig.savefig`` (the format comes from ``path``'s suffix)."""
+    fmt = Path(path).suffix.lstrip(".") or "png"
+    return write_with(path, lambda f: fig.savefig(f, format=fmt, **savefig_kwargs))
+
+
+def clean_tmp(folder: str | os.PathLike) -> None:
+    """Removes the temporary files interrupted writes left in ``folder``."""
+    folder = Path(folder)
+    if folder.is_dir():
+        for p in folder.glob(".*.tmp-*"):
+            p.unlink(missing_ok=True)
+
+
+def sha256(path: str | os.PathLike) -> str:
+    """Hex sha256 of a file's bytes."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def enable_compile_cache() -> None:
+    """Turns on JAX's persistent compilation cache.
+
+    The folder is ``$JAX_COMPILATION_CACHE_DIR`` or ``~/.cache/ntq_jax/jax``; only
+    compilations over 2 s are stored. A rerun, a resumed run or
+    ``scripts/plan.py`` then reuse the compiled planners and training steps
+    instead of compiling them again. The cache is an optimisation only: if it
+    cannot be enabled, nothing changes.
+    """
+    import jax
+
+    path = os.environ.get("JAX_COMPILATION_CACHE_DIR",
+                          str(Path.home() / ".cache" / "ntq_jax" / "jax"))
+    try:
+        jax.config.update("jax_compilation_cache_dir", path)
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 2.0)
+    except Exception:  # noqa: BLE001 - the cache is an optimisation only
+        pass

@@ -10,7 +10,7 @@ Examples::
 
 Without ``--config`` the embedded default runs: the four point-robot maps at
 reduced sizes (K_train 600, a 256-256-128-64 PNet, 40 epochs, K_test 200;
-about 10-15 minutes on a 2-core CPU). ``--set KEY=VALUE`` overrides any config
+about 2-3 minutes on an idle 2-core CPU). ``--set KEY=VALUE`` overrides any config
 key (YAML values).
 
 The run folder (``--out``, default ``<out_dir>/<task>-<config hash>``) holds::

@@ -79,6 +79,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.tree_util import Partial
 
+from ntq_jax.planners.smoothing import shortcut_batch
 from ntq_jax.robots.batch import is_valid_cm, steer_to_cm
 
 Array = jax.Array
@@ -212,30 +213,14 @@ def _segments(robot, world, p: Array, n: Array, padding: float, mask: Array):
 
 
 def _contract(robot, world, p: Array, n: Array, padding: float, mask: Array):
-    """Lazy states contraction: keep start, then greedily the farthest steerable later state."""
-    num, length, d = p.shape
-    j = jnp.arange(length)[None, :]
-    flat = p.reshape(-1, d)
-    out = jnp.full_like(p, jnp.nan).at[:, 0].set(p[:, 0])
+    """Lazy states contraction of the masked paths (the others are returned unchanged).
 
-    def cond(c):
-        return jnp.any(c[3])
-
-    def body(c):
-        i, q, m, active = c
-        cur = _rows(p, i)
-        cand = active[:, None] & (j > (i + 1)[:, None]) & (j < n[:, None])
-        free = _steer(robot, world, jnp.repeat(cur, length, axis=0), flat, padding,
-                      cand.reshape(-1)).reshape(num, length)
-        best = jnp.max(jnp.where(free & cand, j, (i + 1)[:, None]), axis=1)
-        q = q.at[jnp.arange(num), jnp.where(active, m, length)].set(_rows(p, best), mode="drop")
-        m = m + active
-        i = jnp.where(active, best, i)
-        return i, q, m, active & (best < n - 1)
-
-    init = (jnp.zeros(num, jnp.int32), out, jnp.ones(num, jnp.int32), mask & (n >= 2))
-    _, q, m, _ = jax.lax.while_loop(cond, body, init)
+    The rule (keep the start, then greedily the farthest later state reachable
+    by one steerTo) is the package's path shortcutting,
+    :func:`ntq_jax.planners.smoothing.shortcut_batch`, written once.
+    """
     keep = mask & (n >= 2)
+    q, m, _ = shortcut_batch(robot, world, p, jnp.where(keep, n, 0), padding)
     return jnp.where(keep[:, None, None], q, p), jnp.where(keep, m, n)
 
 

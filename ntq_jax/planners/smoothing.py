@@ -40,7 +40,7 @@ from ntq_jax.robots.batch import steer_to_cm
 Array = jax.Array
 
 
-def _shortcut(robot, world: World, paths: Array, lengths: Array, padding: float):
+def shortcut_batch(robot, world: World, paths: Array, lengths: Array, padding: float):
     """Greedy farthest-visible shortcutting of a batch of paths (traceable, static shapes).
 
     Args:
@@ -93,9 +93,9 @@ def _shortcut(robot, world: World, paths: Array, lengths: Array, padding: float)
     return out, n, ok
 
 
-shortcut = jax.jit(_shortcut, static_argnames=("robot", "padding"),
+shortcut = jax.jit(shortcut_batch, static_argnames=("robot", "padding"),
                    compiler_options=KERNEL_COMPILER_OPTIONS)
-shortcut.__doc__ = _shortcut.__doc__
+shortcut.__doc__ = shortcut_batch.__doc__
 
 
 def _pow2(n: int, lo: int) -> int:

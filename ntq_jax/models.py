@@ -54,6 +54,8 @@ import jax.numpy as jnp
 import numpy as np
 from flax import nnx
 
+from ntq_jax import prng
+
 Array = jax.Array
 
 PRELU_INIT = 0.25  # torch.nn.PReLU's default, as MPNet uses it
@@ -168,8 +170,9 @@ class PNet(nnx.Module):
 
         Dropout is inverted dropout as ``nnx.Dropout``/``torch.nn.Dropout`` (keep with
         probability ``1 - rate``, scale kept units by ``1 / (1 - rate)``); the masks of
-        all dropout layers come from ONE ``jax.random.uniform(key, (..., sum of their
-        widths))`` draw (one PRNG call site compiles much faster than one per layer).
+        all dropout layers come from ONE ``prng.uniform_array(key, (..., sum of their
+        widths))`` draw (one PRNG call site compiles much faster than one per layer;
+        the counter hash is ~2x cheaper per step than threefry when vmapped over members).
         """
         spec = self.spec
         off = deterministic or spec.dropout == 0.0 or spec.dropout_layers == 0
@@ -177,7 +180,7 @@ class PNet(nnx.Module):
             raise ValueError("PNet: dropout is active, pass a PRNG key (or deterministic=True)")
         u, offset = None, 0
         if not off:
-            u = jax.random.uniform(key, x.shape[:-1] + (sum(spec.hidden[:spec.dropout_layers]),))
+            u = prng.uniform_array(key, x.shape[:-1] + (sum(spec.hidden[:spec.dropout_layers]),))
         for i, (lin, act) in enumerate(zip(self.layers, self.acts)):
             x = act(lin(x))
             if not off and i < spec.dropout_layers:

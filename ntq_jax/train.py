@@ -40,24 +40,29 @@ config and the history so far) and, at the end, ``ensemble/`` for
 parameters as an uninterrupted run: the data order and dropout keys depend only
 on the seed and the global step.
 
-**Devices.** With at least ``M`` devices (GPUs, or CPU devices via
-``XLA_FLAGS=--xla_force_host_platform_device_count=4``) the member axis of
-every stacked array is sharded over ``M`` devices with a ``NamedSharding``
-(``shard=None`` = automatic); otherwise everything runs on one device.
+**Devices.** With ``D >= 2`` devices that can hold equal shares of the ``M``
+members (GPUs, or CPU devices from :func:`use_cpu_devices`, the
+``jax_num_cpu_devices`` option or ``XLA_FLAGS=--xla_force_host_platform_device_count``)
+the member axis of every stacked array is sharded over the largest such ``D``
+with a ``NamedSharding`` (``shard=None`` = automatic): 4 members on 4 devices
+one each, on 2 devices two each. Otherwise everything runs on one device. On a
+CPU, one device per core lets each core run its own members (the training
+scripts call :func:`use_cpu_devices`); see BENCHMARKS.md for the measured effect.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import json
 import math
 import os
+import re
 import shutil
 import sys
 import time
 from pathlib import Path
-import functools
 from typing import Any, Callable, NamedTuple, Sequence
 
 import jax
@@ -327,8 +332,15 @@ def make_train_chunk(graphdef, tx, steps: int):
         dropout key ``fold_in(dropout_keys[m], g0 + k)``; ``val_loss`` is 0 unless
         ``do_eval`` (validation arrays as in :func:`member_val_loss`, with a member axis).
     """
-    vstep = jax.vmap(lambda p, o, x, y, k, i, mk, a: member_step(graphdef, tx, p, o, x, y, k, i,
-                                                                 mk, a))
+    def one(p, o, x, y, k, i, mk, a):
+        return member_step(graphdef, tx, p, o, x, y, k, i, mk, a)
+
+    def vstep(*args):
+        if args[-1].shape[0] == 1:  # one member: no vmap (XLA:CPU runs its dots ~1.5x faster)
+            squeeze = functools.partial(jax.tree.map, lambda v: v[0])
+            return jax.tree.map(lambda v: v[None], one(*squeeze(args)))
+        return jax.vmap(one)(*args)
+
     veval = jax.vmap(lambda p, x, y, mk: member_val_loss(graphdef, p, x, y, mk))
 
     def chunk(state: TrainState, x, y, dropout_keys, g0, idx, mask, active, val_x, val_y,
@@ -366,20 +378,69 @@ def _cached_chunk_fn(graphdef, optimizer: str, learning_rate: float, steps: int)
 # Devices
 # ---------------------------------------------------------------------------
 
+def use_cpu_devices(count: int | None = None) -> int:
+    """Exposes the host's cores as ``count`` JAX CPU devices (call right after ``import jax``).
+
+    On a CPU, :func:`train_ensemble` then shards the member axis over these devices
+    (:func:`member_mesh`): each device runs its members on its own core instead of
+    every small matmul being split over all cores. Measured on 2 cores
+    (``scripts/bench_train.py``, BENCHMARKS.md): 1.3-1.4x the steps/s of one
+    device at the quick widths, equal at the paper's widths (large matmuls already
+    use both cores). Other computations keep running on device 0 with all cores.
+
+    Nothing is changed when ``XLA_FLAGS`` already forces a host device count, or when
+    ``count`` is 1.
+
+    Args:
+        count: devices to create; None = ``min(os.cpu_count(), 4)`` (the ensemble's size).
+
+    Returns:
+        The number of CPU devices requested (or already forced).
+
+    Raises:
+        RuntimeError: JAX has already run a computation in this process (the device
+            count is fixed then); call this before any JAX operation.
+    """
+    forced = re.search(r"--xla_force_host_platform_device_count=(\d+)", os.environ.get("XLA_FLAGS", ""))
+    if forced:
+        return int(forced.group(1))
+    count = min(os.cpu_count() or 1, 4) if count is None else int(count)
+    if count < 1:
+        raise ValueError(f"use_cpu_devices: count must be >= 1, got {count}")
+    if count > 1:
+        try:
+            jax.config.update("jax_num_cpu_devices", count)
+        except RuntimeError as e:
+            raise RuntimeError("use_cpu_devices must be called before any JAX operation "
+                               f"(right after `import jax`): {e}") from None
+    return count
+
+
+def mesh_size(num_members: int, num_devices: int) -> int:
+    """The largest device count ``<= num_devices`` that divides ``num_members`` (>= 1)."""
+    return max(d for d in range(1, min(num_devices, num_members) + 1) if num_members % d == 0)
+
+
 def member_mesh(num_members: int, shard: bool | None = None):
-    """A 1-D mesh ``("member",)`` over ``num_members`` devices, or None to run on one device.
+    """A 1-D mesh ``("member",)`` to shard the member axis over, or None to run on one device.
+
+    The mesh has the largest number of devices ``D <= len(jax.devices())`` that
+    divides ``M`` (each device then holds ``M / D`` members): 4 members on 4
+    devices one each, on 2 devices two each.
 
     Args:
         num_members: ``M``.
-        shard: True requires ``>= M`` devices, False never shards, None shards when
-            ``M >= 2`` and there are ``>= M`` devices.
+        shard: True requires a mesh of >= 2 devices, False never shards, None shards
+            whenever such a mesh exists.
     """
     devices = jax.devices()
-    if shard is False or (shard is None and (num_members < 2 or len(devices) < num_members)):
+    size = mesh_size(num_members, len(devices))
+    if shard is False or (shard is None and size < 2):
         return None
-    if len(devices) < num_members:
-        raise ValueError(f"shard=True needs >= {num_members} devices, found {len(devices)}")
-    return jax.sharding.Mesh(np.array(devices[:num_members]), ("member",))
+    if size < 2:
+        raise ValueError(f"shard=True needs >= 2 devices and a member count they divide; "
+                         f"found {len(devices)} device(s) for {num_members} members")
+    return jax.sharding.Mesh(np.array(devices[:size]), ("member",))
 
 
 def _place(tree, mesh, axis: int = 0):
@@ -658,7 +719,8 @@ def train_ensemble(datasets: Sequence[Any], env, model_cfg: ModelConfig, train_c
         member_ids: ids keying each member's randomness (default ``0..M-1``);
             ``member_ids=[i]`` with ``datasets=[D_i]`` reproduces member ``i`` alone.
         labels: names of the members in logs and files (default ``D<id>``).
-        shard: shard the member axis over devices (None = when ``>= M`` devices).
+        shard: shard the member axis over devices (None = whenever >= 2 devices can
+            hold equal shares of the members, see :func:`member_mesh`).
         stop_after: stop (after checkpointing) once this many global steps are done;
             for tests and benchmarks, as an interruption would.
         extra_fingerprint: more values that must match for a resume (e.g. the

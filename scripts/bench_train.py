@@ -10,10 +10,19 @@ Data: by default four synthetic datasets of straight-line paths in the point/0
 workspace (rows ``(current, goal) -> next``) with ``--rows`` rows each, the
 last one 60 % the size (D3 is the smallest in the paper). Every variant runs
 ``--epochs`` epochs with batch ``--batch``, Adagrad lr 0.01, dropout 0.5 after
-the first ``--dropout-layers`` layers. Compilation is excluded from the JAX
-timings (a warm-up call with the same shapes) and reported separately.
+the first ``--dropout-layers`` layers; no validation passes by default
+(``--val-fraction 0``), as the PyTorch loop has none.
 Throughput is member-steps per second (one member-step = one optimizer step
-of one PNet on one minibatch).
+of one PNet on one minibatch). Two measurements:
+
+* steady state, in this process: every JAX variant is compiled first (a
+  warm-up call with the same shapes, timed apart), then the variants run
+  interleaved ``--repeats`` times; medians and the median of the per-repeat
+  ratios are printed (the machine is shared: side by side is what counts);
+* end to end, in fresh processes (no compile cache): the wall time of the
+  training calls including compilation, what a user waits for. The four
+  sequential trainings compile once per distinct dataset shape, as four
+  separate single-model runs would.
 
 PyTorch runs only if ``import torch`` works (install it into the venv for the
 benchmark only: ``pip install torch==2.13.0+cpu``); otherwise that column is
@@ -23,6 +32,7 @@ skipped with a message.
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import os
 import sys
@@ -51,39 +61,41 @@ def straight_paths(n_rows: int, seed: int, lo, hi, step: float = 1.0):
             np.array(pis[:n_rows], np.int32))
 
 
-def bench_jax(datasets, env, model_cfg, train_cfg, seed, together_only=False):
+def jax_training(datasets, env, model_cfg, train_cfg, seed, ids, stop_after=None,
+                 shard=False) -> float:
+    """Wall seconds of one ``train_ensemble`` call on ``datasets`` (members ``ids``)."""
     from ntq_jax import train as T
 
-    def run(ds, ids):
-        t = time.perf_counter()  # warm-up with the same shapes: compiles, runs one chunk
-        T.train_ensemble(ds, env, model_cfg, train_cfg, seed=seed, member_ids=ids,
-                         progress=False, stop_after=train_cfg.steps_per_call)
-        compile_s = time.perf_counter() - t
-        t = time.perf_counter()
-        ens, hist = T.train_ensemble(ds, env, model_cfg, train_cfg, seed=seed, member_ids=ids,
-                                     progress=False)
-        return time.perf_counter() - t, compile_s, hist
+    t = time.perf_counter()
+    T.train_ensemble(datasets, env, model_cfg, train_cfg, seed=seed, member_ids=ids,
+                     progress=False, stop_after=stop_after, shard=shard)
+    return time.perf_counter() - t
 
-    members = [T.prepare_member(d, train_cfg.val_fraction, seed, i) for i, d in enumerate(datasets)]
-    sched = T.Schedule(tuple(len(md.train_x) for md in members), train_cfg.batch_size,
-                       train_cfg.epochs)
-    member_steps = sum(sched.member_steps)
-    together, together_compile, hist = run(datasets, list(range(len(datasets))))
-    if together_only:
-        return {"member_steps": member_steps, "together_s": together,
-                "together_compile_s": together_compile}
-    seq, seq_compile = 0.0, 0.0
-    for i, d in enumerate(datasets):
-        s, c, _ = run([d], [i])
-        seq += s
-        seq_compile += c
-    return {"member_steps": member_steps, "together_s": together, "together_compile_s":
-            together_compile, "sequential_s": seq, "sequential_compile_s": seq_compile,
-            "final_train_loss": [float(v) for v in hist.train_loss[-1]],
-            "members": members, "schedule": sched}
+
+def together(datasets, env, model_cfg, train_cfg, seed, **kw) -> float:
+    """The four members in one ensemble (one vmapped, jitted step) on one device."""
+    return jax_training(datasets, env, model_cfg, train_cfg, seed, list(range(len(datasets))),
+                        shard=False, **kw)
+
+
+def together_sharded(datasets, env, model_cfg, train_cfg, seed, **kw) -> float:
+    """The same, the member axis sharded over the CPU devices (one per core)."""
+    return jax_training(datasets, env, model_cfg, train_cfg, seed, list(range(len(datasets))),
+                        shard=True, **kw)
+
+
+def sequential(datasets, env, model_cfg, train_cfg, seed, **kw) -> float:
+    """Four single-model trainings, one after the other (the same code with one member)."""
+    return sum(jax_training([d], env, model_cfg, train_cfg, seed, [i], **kw)
+               for i, d in enumerate(datasets))
+
+
+VARIANTS = {"together": together, "together_sharded": together_sharded,
+            "sequential": sequential}
 
 
 def bench_torch(members, spec, train_cfg, seed, threads):
+    """Four sequential PyTorch trainings of the same MLP on the same rows (MPNet's loop)."""
     import torch
     from torch import nn
 
@@ -106,7 +118,7 @@ def bench_torch(members, spec, train_cfg, seed, threads):
         return nn.Sequential(*layers)
 
     total_s, steps = 0.0, 0
-    for m, md in enumerate(members):
+    for md in members:
         d = spec.dim
         x = torch.from_numpy(np.concatenate([norm(md.train_x[:, :d]), norm(md.train_x[:, d:])], 1))
         y = torch.from_numpy(norm(md.train_y))
@@ -124,8 +136,23 @@ def bench_torch(members, spec, train_cfg, seed, threads):
                 opt.step()
                 steps += 1
         total_s += time.perf_counter() - t
-    return {"member_steps": steps, "sequential_s": total_s, "threads": torch.get_num_threads(),
+    return {"member_steps": steps, "seconds": total_s, "threads": torch.get_num_threads(),
             "version": torch.__version__}
+
+
+def run_child(argv, variant: str) -> dict | None:
+    """Runs ``variant`` in a fresh process (no compile cache); returns its JSON line."""
+    import subprocess
+
+    env = dict(os.environ)
+    env.pop("JAX_COMPILATION_CACHE_DIR", None)
+    proc = subprocess.run([sys.executable, __file__, *argv, "--child", variant], env=env,
+                          capture_output=True, text=True)
+    line = [ln for ln in proc.stdout.splitlines() if ln.startswith("CHILD ")]
+    if proc.returncode != 0 or not line:
+        print(f"child run {variant!r} failed:\n{proc.stderr[-2000:]}")
+        return None
+    return json.loads(line[0][6:])
 
 
 def main(argv=None) -> int:
@@ -137,27 +164,38 @@ def main(argv=None) -> int:
     ap.add_argument("--epochs", type=int, default=2)
     ap.add_argument("--batch", type=int, default=100)
     ap.add_argument("--steps-per-call", type=int, default=50)
+    ap.add_argument("--val-fraction", type=float, default=0.0,
+                    help="validation split (default 0: no validation passes, like the PyTorch "
+                         "loop)")
+    ap.add_argument("--repeats", type=int, default=3,
+                    help="interleaved repeats of the steady-state timings (medians reported)")
     ap.add_argument("--data", type=Path, default=None,
                     help="a real environment data folder instead of synthetic paths")
     ap.add_argument("--torch-threads", type=int, default=0, help="0 = PyTorch's default")
     ap.add_argument("--no-torch", action="store_true")
-    ap.add_argument("--sharded-devices", type=int, default=4,
-                    help="also time the ensemble with the member axis sharded over this many "
-                         "forced host CPU devices (a child process); 0 = skip")
-    ap.add_argument("--child-together", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument("--no-end-to-end", action="store_true",
+                    help="skip the fresh-process runs that include compilation")
+    ap.add_argument("--cpu-devices", type=int, default=None,
+                    help="JAX CPU devices (as scripts/train.py; default min(cores, 4)) for the "
+                         "sharded variant; 1 = skip that variant")
+    ap.add_argument("--child", choices=sorted(VARIANTS), help=argparse.SUPPRESS)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", type=Path, default=None, help="also write the figures as JSON")
     args = ap.parse_args(argv)
+    argv_child = [a for a in (argv if argv is not None else sys.argv[1:])]
 
     import jax
 
     from ntq_jax import make_env, models
+    from ntq_jax import train as T
+
+    T.use_cpu_devices(args.cpu_devices)  # before any JAX operation
     from ntq_jax.config import ModelConfig, TrainConfig
 
     hidden = tuple(int(h) for h in args.hidden.split(","))
     model_cfg = ModelConfig(hidden=hidden, dropout=0.5, dropout_layers=args.dropout_layers)
     train_cfg = TrainConfig(epochs=args.epochs, batch_size=args.batch, optimizer="adagrad",
-                            learning_rate=0.01, val_fraction=0.1,
+                            learning_rate=0.01, val_fraction=args.val_fraction,
                             steps_per_call=args.steps_per_call, eval_every=10**9)
     if args.data is not None:
         from ntq_jax import data as data_mod
@@ -171,65 +209,86 @@ def main(argv=None) -> int:
         datasets = [straight_paths(n, 10 + i, lo, hi) for i, n in enumerate(sizes)]
         source = f"synthetic straight paths on point/0, rows {sizes}"
     spec = models.ModelSpec.from_env(env, model_cfg)
+    run = functools.partial(lambda f, **kw: VARIANTS[f](datasets, env, model_cfg, train_cfg,
+                                                        args.seed, **kw))
 
-    if args.child_together:  # run by the parent with XLA_FLAGS forcing host devices
-        r = bench_jax(datasets, env, model_cfg, train_cfg, args.seed, together_only=True)
-        print("CHILD " + json.dumps(r))
+    if args.child:  # a fresh process: the first call compiles, as a user's run would
+        wall = run(args.child)
+        print("CHILD " + json.dumps({"seconds": wall, "devices": len(jax.devices())}))
         return 0
+
+    members = [T.prepare_member(d, train_cfg.val_fraction, args.seed, i)
+               for i, d in enumerate(datasets)]
+    sched = T.Schedule(tuple(len(md.train_x) for md in members), train_cfg.batch_size,
+                       train_cfg.epochs)
+    member_steps = sum(sched.member_steps)
     print(f"data: {source}\nPNet {hidden}, batch {args.batch}, {args.epochs} epochs, "
-          f"Adagrad 0.01; JAX {jax.__version__} on {len(jax.devices())} "
-          f"{jax.default_backend()} device(s), {os.cpu_count()} CPU cores", flush=True)
-    res = bench_jax(datasets, env, model_cfg, train_cfg, args.seed)
-    rows = [("JAX, 4 members together (vmap, 1 jit)", res["member_steps"], res["together_s"],
-             res["together_compile_s"]),
-            ("JAX, 4 sequential single-model trainings", res["member_steps"], res["sequential_s"],
-             res["sequential_compile_s"])]
-    if args.sharded_devices:
-        import subprocess
-        child_env = dict(os.environ, XLA_FLAGS=(os.environ.get("XLA_FLAGS", "") + " "
-                         f"--xla_force_host_platform_device_count={args.sharded_devices}"))
-        argv_child = [a for a in (argv if argv is not None else sys.argv[1:])
-                      if a != "--child-together"]
-        proc = subprocess.run([sys.executable, __file__, *argv_child, "--child-together"],
-                              env=child_env, capture_output=True, text=True)
-        line = [ln for ln in proc.stdout.splitlines() if ln.startswith("CHILD ")]
-        if proc.returncode != 0 or not line:
-            print(f"sharded run failed:\n{proc.stderr[-2000:]}")
-        else:
-            r = json.loads(line[0][6:])
-            rows.insert(1, (f"JAX, 4 members together, member axis sharded over "
-                            f"{args.sharded_devices} host CPU devices", r["member_steps"],
-                            r["together_s"], r["together_compile_s"]))
-    torch_res = None
-    if not args.no_torch:
-        try:
-            import torch  # noqa: F401
-        except ImportError:
+          f"Adagrad 0.01, {member_steps} member-steps per variant; JAX {jax.__version__} on "
+          f"{len(jax.devices())} {jax.default_backend()} device(s), {os.cpu_count()} CPU cores",
+          flush=True)
+
+    mesh = T.member_mesh(len(datasets))
+    variants = [v for v in VARIANTS if v != "together_sharded" or mesh is not None]
+
+    # -- steady state: compile first (timed apart), then interleaved repeats -----------
+    compile_s = {v: run(v, stop_after=train_cfg.steps_per_call) for v in variants}
+    have_torch = not args.no_torch
+    if have_torch:
+        import importlib.util
+        if importlib.util.find_spec("torch") is None:
+            have_torch = False
             print("PyTorch not installed: skipping the PyTorch comparison "
                   "(pip install torch==2.13.0+cpu into the venv to include it)")
-        else:
-            torch_res = bench_torch(res["members"], spec, train_cfg, args.seed, args.torch_threads)
-            rows.append((f"PyTorch {torch_res['version']} CPU ({torch_res['threads']} threads), "
-                         "4 sequential", torch_res["member_steps"], torch_res["sequential_s"],
-                         None))
-    print("\n| variant | member-steps | seconds | member-steps/s | compile s |")
-    print("|---|---:|---:|---:|---:|")
-    for name, steps, s, c in rows:
-        print(f"| {name} | {steps} | {s:.2f} | {steps / s:.0f} | "
-              f"{'-' if c is None else f'{c:.1f}'} |")
-    speed = res["sequential_s"] / res["together_s"]
-    print(f"\ntogether vs sequential: {speed:.2f}x faster (goal >= 2x)")
-    if torch_res is not None:
-        ratio = (res["member_steps"] / res["together_s"]) / (torch_res["member_steps"]
-                                                              / torch_res["sequential_s"])
-        ratio_seq = (res["member_steps"] / res["sequential_s"]) / (
-            torch_res["member_steps"] / torch_res["sequential_s"])
-        print(f"JAX together vs PyTorch: {ratio:.2f}x the member-steps/s (goal >= 1x); "
-              f"JAX single-model vs PyTorch: {ratio_seq:.2f}x")
+    times = {v: [] for v in variants}
+    times["torch"] = []
+    torch_info = None
+    for r in range(args.repeats):
+        for v in variants:
+            times[v].append(run(v))
+        if have_torch:
+            torch_info = bench_torch(members, spec, train_cfg, args.seed + r, args.torch_threads)
+            times["torch"].append(torch_info["seconds"])
+        print(f"repeat {r + 1}/{args.repeats}: " + ", ".join(
+            f"{v} {member_steps / t[-1]:.1f}/s" for v, t in times.items() if t), flush=True)
+    med = {v: float(np.median(t)) for v, t in times.items() if t}
+    pair = lambda a, b: float(np.median(np.array(times[b]) / np.array(times[a])))  # noqa: E731
+
+    # -- end to end: fresh processes, compilation included -------------------------------
+    e2e = {}
+    if not args.no_end_to_end:
+        for v in variants:
+            r = run_child(argv_child, v)
+            if r is not None:
+                e2e[v] = r["seconds"]
+
+    print("\n| variant | member-steps/s (median of %d) | compile s | end to end s (fresh "
+          "process, incl. compile) |" % args.repeats)
+    print("|---|---:|---:|---:|")
+    names = {"together": "JAX, 4 members together (vmap, one jit, one device)",
+             "together_sharded": "JAX, 4 members together, member axis sharded over "
+                                 f"{mesh.devices.size if mesh else 0} CPU devices",
+             "sequential": "JAX, 4 sequential single-model trainings",
+             "torch": (f"PyTorch {torch_info['version']} CPU ({torch_info['threads']} threads), "
+                       "4 sequential") if torch_info else ""}
+    for v, t in med.items():
+        c = compile_s.get(v)
+        print(f"| {names[v]} | {member_steps / t:.1f} | {'-' if c is None else f'{c:.1f}'} | "
+              f"{f'{e2e[v]:.1f}' if v in e2e else '-'} |")
+    out = {"hidden": hidden, "batch": args.batch, "epochs": args.epochs, "source": source,
+           "member_steps": member_steps, "seconds": times, "compile_s": compile_s,
+           "end_to_end_s": e2e}
+    print()
+    for v in ("together", "together_sharded"):
+        if v not in times:
+            continue
+        print(f"{names[v]} vs sequential: {pair(v, 'sequential'):.2f}x steady state "
+              f"(goal >= 2x)" + (f", {e2e['sequential'] / e2e[v]:.2f}x end to end incl. "
+                                 "compilation" if v in e2e and "sequential" in e2e else ""))
+        if times["torch"]:
+            print(f"  vs PyTorch: {pair(v, 'torch'):.2f}x the member-steps/s (goal >= 1x)")
+    if times["torch"]:
+        print(f"JAX single-model vs PyTorch: {pair('sequential', 'torch'):.2f}x")
     if args.json:
-        out = {"hidden": hidden, "batch": args.batch, "epochs": args.epochs, "source": source,
-               "rows": [{"variant": n, "member_steps": st, "seconds": s, "compile_s": c}
-                        for n, st, s, c in rows]}
         args.json.write_text(json.dumps(out, indent=1))
     return 0
 

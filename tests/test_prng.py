@@ -143,3 +143,26 @@ def test_fused_gamma_agrees_with_threefry(name, n):
     lo1, hi1 = est.ci95
     lo2, hi2 = Q.wilson_interval(k, n)
     assert lo1 <= hi2 and lo2 <= hi1  # the two 95% intervals overlap
+
+
+def test_uniform_array_for_dropout_masks():
+    """``uniform_array`` (PNet's dropout masks): shape, range, a function of the key only,
+    different keys give independent draws, uniform (KS), keep-rate of a p=0.5 mask."""
+    key = jax.random.key(7)
+    u = np.asarray(jax.jit(prng.uniform_array, static_argnums=1)(key, (1000, 500)))
+    assert u.shape == (1000, 500) and u.dtype == np.float32
+    assert u.min() >= 0.0 and u.max() < 1.0
+    np.testing.assert_array_equal(u, np.asarray(prng.uniform_array(key, (1000, 500))))
+    v = np.asarray(prng.uniform_array(jax.random.key(8), (1000, 500)))
+    assert stats.kstest(u.ravel(), "uniform").pvalue > P_MIN
+    r = np.corrcoef(u.ravel(), v.ravel())[0, 1]
+    assert abs(r) * math.sqrt(u.size) < z_max(1)
+    keep = (u >= 0.5).mean()
+    assert abs(keep - 0.5) < z_max(1) * 0.5 / math.sqrt(u.size)
+    # vmapped over keys (one key per ensemble member) = one call per key
+    keys = jax.random.split(key, 3)
+    w = np.asarray(jax.vmap(lambda k: prng.uniform_array(k, (4, 5)))(keys))
+    for i in range(3):
+        np.testing.assert_array_equal(w[i], np.asarray(prng.uniform_array(keys[i], (4, 5))))
+    with pytest.raises(ValueError, match="2\\*\\*32"):
+        prng.uniform_array(key, (2**16, 2**16 + 1))

@@ -384,9 +384,11 @@ def use_cpu_devices(count: int | None = None) -> int:
     On a CPU, :func:`train_ensemble` then shards the member axis over these devices
     (:func:`member_mesh`): each device runs its members on its own core instead of
     every small matmul being split over all cores. Measured on 2 cores
-    (``scripts/bench_train.py``, BENCHMARKS.md): 1.3-1.4x the steps/s of one
-    device at the quick widths, equal at the paper's widths (large matmuls already
-    use both cores). Other computations keep running on device 0 with all cores.
+    (``scripts/bench_train.py``, BENCHMARKS.md): 1.17x the steps/s of one
+    device at the quick widths (median; 0.98-1.39x per repeat), equal at the
+    paper's widths (large matmuls already use both cores). Results differ from a
+    one-device run at float level, hence the scripts' default of one device.
+    Other computations keep running on device 0 with all cores.
 
     Nothing is changed when ``XLA_FLAGS`` already forces a host device count, or when
     ``count`` is 1.

@@ -1,6 +1,7 @@
 #!/usr/bin/env python
-"""Benchmark PNet ensemble training: four members together vs four sequential
-trainings vs the same MLP in PyTorch (CPU), same architecture, data and batch size.
+"""Benchmark PNet ensemble training: four members together (on one device, and
+sharded over one CPU device per core) vs four sequential single-model trainings
+vs the same MLP in PyTorch (CPU), same architecture, data and batch size.
 
     python scripts/bench_train.py                       # quick widths 256-256-128-64
     python scripts/bench_train.py --hidden 1280,1024,896,768,512,384,256,256,128,64,32

@@ -38,7 +38,7 @@ def main(argv=None) -> int:
                     help="never shard the member axis over devices")
     ap.add_argument("--cpu-devices", type=int, default=1,
                     help="JAX CPU devices to create (one per core, e.g. 2 on 2 cores): the "
-                         "members then train on separate cores; measured 1.1-1.5x faster at "
+                         "members then train on separate cores; measured 1.17x faster at "
                          "small widths, no gain at the paper's (BENCHMARKS.md); results differ "
                          "from a one-device run at float level. Default 1")
     ap.add_argument("--no-progress", action="store_true", help="hide the progress bar")

@@ -170,7 +170,7 @@ def main(argv=None) -> int:
     ap.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     ap.add_argument("--cpu-devices", type=int, default=1,
                     help="JAX CPU devices to create (one per core, e.g. 2 on 2 cores): the "
-                         "four PNets then train on separate cores; measured 1.1-1.5x faster at "
+                         "four PNets then train on separate cores; measured 1.17x faster at "
                          "small widths, no gain at the paper's (BENCHMARKS.md); results differ "
                          "from a one-device run at float level. Default 1")
     args = ap.parse_args(argv)

@@ -19,10 +19,14 @@ How a batch is planned
 All N queries step together inside one jitted call (``lax.while_loop`` over
 steps with per-query masks, fixed shapes; the loop exits early once every query
 is decided): coarse plan, contraction and feasibility check (steps 1-3 below).
-Each replanning round (step 4) is a second jitted call on the infeasible paths
-only, gathered on the host into fixed-width chunks (``repair_width``), so a
-round costs in proportion to the paths that need it rather than to the whole
-batch (a masked full-width loop would run every query's PNet as long as the
+Each replanning round (step 4) works on the infeasible paths only: the windows
+to reconnect are found on the host (:func:`repair_windows`), then the blocked
+segments of *all* those paths are reconnected together, gathered into
+fixed-width chunks (``repair_width``) of one jitted neural connection each, and
+spliced back; a last jitted call contracts and re-checks the repaired paths. A
+round thus costs in proportion to the segments that need it, and a path with
+many blocked segments does not keep its chunk busy one segment after another
+(a masked full-width loop would run every query's PNet as long as the
 slowest repair). Batches are padded to a power of two so repeated calls reuse
 the compiled code; ``pnet`` is passed as a pytree
 (:class:`jax.tree_util.Partial`), so two PNets that share the same apply
@@ -43,12 +47,13 @@ function and parameter shapes share one compilation.
 3. **Feasibility** on the evaluation geometry (``eval_padding``, 0 by
    default): every segment checked by the exact / discretised ``steer_to``.
 4. **Neural replanning** (MPNet), at most ``replan_rounds`` rounds while a path
-   is infeasible: every blocked segment ``(p_k, p_k+1)`` (last first, so a
-   splice never moves the segments still to repair), widened to the nearest
+   is infeasible: every blocked segment ``(p_k, p_k+1)``, widened to the nearest
    states that are not in collision (MPNet drops the states in collision
    first), is reconnected by the bidirectional neural connection (at most
    ``replan_steps`` predictions) and the new states are spliced in; then the
-   path is contracted and re-checked. Unlike MPNet, which abandons the query
+   path is contracted and re-checked. The windows of one path never overlap and
+   are spliced last first, so a splice never moves a window still to splice and
+   all connections of a round run at once. Unlike MPNet, which abandons the query
    at the first connection that fails, a failed connection leaves its segment
    as it was and the other segments are still repaired; the next round
    retries with new dropout masks. A splice that would overflow the path
@@ -84,7 +89,7 @@ from ntq_jax.robots.batch import is_valid_cm, steer_to_cm
 
 Array = jax.Array
 
-ALGORITHM_VERSION = 2  # bump when planning results change (saved evaluations are then redone)
+ALGORITHM_VERSION = 3  # bump when planning results change (saved evaluations are then redone)
 SUCCESS, NO_PATH, INFEASIBLE, INVALID_QUERY = 0, 1, 2, 3
 CAUSES = {SUCCESS: "success", NO_PATH: "no_path", INFEASIBLE: "infeasible",
           INVALID_QUERY: "invalid_query"}
@@ -319,62 +324,69 @@ def _coarse_core(robot, opts: PlannerOptions, world, pnet, key, starts, goals, a
     return p, n, valid, reached, feasible, blocked, calls
 
 
-def _repair_core(robot, opts: PlannerOptions, world, pnet, key, p, n, blocked, todo):
-    """One neural replanning round for the rows ``todo`` (one jitted call).
-
-    Every blocked segment is repaired, last first (a splice then never moves the
-    states of the segments still to repair), each widened to the nearest states
-    not in collision; then the paths are contracted and checked again.
-    Returns ``(p, n, feasible, blocked, calls)``.
-    """
+def _valid_core(robot, opts: PlannerOptions, world, p, n):
+    """Validity ``(N, L)`` of every path state on the evaluation geometry (one jitted call)."""
     num, length, d = p.shape
-    steps = opts.replan_steps
     t = jnp.arange(length)[None, :]
-    tseg = t[:, :-1]
-    ok = is_valid_cm(robot, world, p.reshape(-1, d).T,
-                     opts.eval_padding).reshape(num, length) & (t < n[:, None])
+    ok = is_valid_cm(robot, world, p.reshape(-1, d).T, opts.eval_padding).reshape(num, length)
+    return (ok & (t < n[:, None]),)
 
-    def left(cursor):
-        return blocked & (tseg < cursor[:, None]) & todo[:, None]
 
-    def cond(c):
-        return jnp.any(left(c[2]))
+def _connect_core(robot, opts: PlannerOptions, world, pnet, key, a, b, active):
+    """Neural connection of a batch of windows ``a -> b`` (one jitted call).
 
-    def body(c):
-        p, n, cursor, calls, j = c
-        cand = left(cursor)
-        live = jnp.any(cand, axis=1)
-        k = jnp.max(jnp.where(cand, tseg, -1), axis=1)[:, None]
-        ia = jnp.max(jnp.where(ok & (t <= k), t, 0), axis=1)
-        ib = jnp.min(jnp.where(ok & (t > k), t, length), axis=1)
-        ib = jnp.minimum(ib, n - 1)
-        pa, na, pb, nb, conn, used = _connect(robot, world, pnet, jax.random.fold_in(key, j),
-                                              _rows(p, ia), _rows(p, ib), live, steps,
-                                              opts.plan_padding)
-        sub, ns = _join(pa, na, pb, nb, steps + 2)
-        # splice: p[:ia] + sub[:ns] + p[ib+1:n]
-        lo, hi = ia[:, None], (ia + ns)[:, None]
-        src = jnp.where(t < lo, t, t - hi + ib[:, None] + 1)
-        gp = jnp.take_along_axis(p, jnp.clip(src, 0, length - 1)[..., None], axis=1)
-        gs = jnp.take_along_axis(sub, jnp.clip(t - lo, 0, steps + 1)[..., None], axis=1)
-        nn = n - (ib - ia + 1) + ns
-        spliced = jnp.where(((t >= lo) & (t < hi))[..., None], gs, gp)
-        spliced = jnp.where((t < nn[:, None])[..., None], spliced, jnp.nan)
-        put = live & conn & (nn <= length)
-        p = jnp.where(put[:, None, None], spliced, p)
-        n = jnp.where(put, nn, n)
-        cursor = jnp.where(live, jnp.minimum(ia, k[:, 0]), cursor)
-        return p, n, cursor, calls + used, j + 1
+    Returns ``(sub (N, replan_steps + 2, d), ns, connected, calls)``: ``sub[:ns]``
+    runs from ``a`` to ``b``.
+    """
+    steps = opts.replan_steps
+    pa, na, pb, nb, conn, calls = _connect(robot, world, pnet, key, a, b, active, steps,
+                                           opts.plan_padding)
+    sub, ns = _join(pa, na, pb, nb, steps + 2)
+    return sub, ns, conn, calls
 
-    p, n, _, calls, _ = jax.lax.while_loop(
-        cond, body, (p, n, jnp.full(num, length, jnp.int32), jnp.zeros(num, jnp.int32),
-                     jnp.int32(0)))
+
+def _check_core(robot, opts: PlannerOptions, world, p, n, todo):
+    """Contraction (if on) and the feasibility check of the rows ``todo`` (one jitted call).
+
+    Returns ``(p, n, feasible, blocked)``.
+    """
     if opts.contract:
         p, n = _contract(robot, world, p, n, opts.plan_padding, todo)
     free, seg = _segments(robot, world, p, n, opts.eval_padding, todo)
     blocked = seg & ~free
     feasible = todo & (n >= 2) & ~jnp.any(blocked, axis=1)
-    return p, n, feasible, blocked, calls
+    return p, n, feasible, blocked
+
+
+def repair_windows(blocked: np.ndarray, ok: np.ndarray, n: int) -> list[tuple[int, int]]:
+    """The windows ``(ia, ib)`` one replanning round reconnects in a path, last first.
+
+    Step 4 of the module docstring: take the last blocked segment ``(k, k+1)`` not
+    yet covered, widen it to the nearest states not in collision (``ia <= k`` and
+    ``ib > k``; the start and the goal are always valid), and continue left of
+    ``min(ia, k)``. Windows never overlap (neighbours may share an end state), so
+    splicing them right to left never moves a window still to splice, and all of
+    them can be connected at once.
+
+    Args:
+        blocked: ``(L-1,)`` blocked segments of the path.
+        ok: ``(L,)`` validity of its states (False beyond its end).
+        n: its length.
+    """
+    length = ok.shape[0]
+    segs = np.flatnonzero(blocked[: max(n - 1, 0)])
+    good = np.flatnonzero(ok[:n])
+    out, cursor = [], length
+    for k in segs[::-1]:
+        if k >= cursor:
+            continue
+        left = good[good <= k]
+        right = good[good > k]
+        ia = int(left[-1]) if len(left) else 0
+        ib = min(int(right[0]) if len(right) else length, n - 1)
+        out.append((ia, ib))
+        cursor = min(ia, int(k))
+    return out
 
 
 def _cost_core(robot, p, n):
@@ -387,7 +399,9 @@ def _cost_core(robot, p, n):
 
 _JITS = {
     "coarse": jax.jit(_coarse_core, static_argnames=("robot", "opts")),
-    "repair": jax.jit(_repair_core, static_argnames=("robot", "opts")),
+    "valid": jax.jit(_valid_core, static_argnames=("robot", "opts")),
+    "connect": jax.jit(_connect_core, static_argnames=("robot", "opts")),
+    "check": jax.jit(_check_core, static_argnames=("robot", "opts")),
 }
 _jit_cost = jax.jit(_cost_core, static_argnames=("robot",))
 _COMPILED: dict = {}
@@ -465,9 +479,21 @@ def bucket_size(n: int) -> int:
     return 1 << max(0, (int(n) - 1).bit_length())
 
 
+def _chunks(items: np.ndarray, width: int):
+    """``(chunk index, part, sel, mask)`` for ``items`` in chunks of ``width``: ``sel`` is
+    ``part`` padded to ``width`` with ``items[0]`` (ignored rows, ``mask`` False)."""
+    for ci, lo in enumerate(range(0, len(items), width)):
+        part = items[lo:lo + width]
+        sel = np.full(width, items[0], items.dtype)
+        sel[: len(part)] = part
+        mask = np.zeros(width, bool)
+        mask[: len(part)] = True
+        yield ci, part, sel, mask
+
+
 def plan_batch(env, pnet: Callable, queries, key: Array,
                opts: PlannerOptions = PlannerOptions(), *, chunk: int = 1024,
-               repair_width: int = 64, pad_obstacles: int = 0) -> NeuralPlanResult:
+               repair_width: int = 256, pad_obstacles: int = 0) -> NeuralPlanResult:
     """Plans every query with the neural planner (all of a chunk in one jitted call).
 
     Args:
@@ -478,8 +504,10 @@ def plan_batch(env, pnet: Callable, queries, key: Array,
         opts: :class:`PlannerOptions`.
         chunk: largest batch per jitted call (batches are padded to a power of two).
         repair_width: batch width of the replanning calls: the infeasible paths of a
-            round are gathered into chunks of this many (power of two), so the rounds
-            cost in proportion to the paths that need them, not to the batch.
+            round, and the windows they reconnect, are gathered into chunks of this
+            many (power of two), so the rounds cost in proportion to what needs
+            repair, not to the batch (256: measured fastest of 64/128/256 on the
+            point maps, see BENCHMARKS.md).
         pad_obstacles: if > 0, pad the obstacle lists to a multiple of it
             (:func:`padded_world`) so maps with similar counts share one compilation.
 
@@ -522,26 +550,51 @@ def plan_batch(env, pnet: Callable, queries, key: Array,
                                     jnp.asarray(act)))
         for dst, src in zip((paths, lengths, valid, reached, feasible, blocked, calls), out):
             dst[lo:hi] = src[: hi - lo]
-    # 2. replanning rounds: only the infeasible paths, gathered into chunks of ``width``
+    # 2. replanning rounds, only on the infeasible paths: the windows of every blocked
+    #    segment of every such path are reconnected in one batch (chunks of ``width``)
     rounds = opts.replan_rounds if opts.steer else 0
     for r in range(rounds):
         todo = np.flatnonzero(reached & ~feasible)
         if not len(todo):
             break
-        for ci, lo in enumerate(range(0, len(todo), width)):
-            idx = todo[lo:lo + width]
-            m = len(idx)
-            sel = np.zeros(width, np.int64)
-            sel[:m] = idx
-            mask = np.zeros(width, bool)
-            mask[:m] = True
-            out = timer.call("repair", (env.robot, opts, world, fn,
-                                        jax.random.fold_in(jax.random.fold_in(k_rep, r), ci),
-                                        jnp.asarray(paths[sel]), jnp.asarray(lengths[sel]),
-                                        jnp.asarray(blocked[sel]), jnp.asarray(mask)))
-            p_new, n_new, f_new, b_new, c_new = (o[:m] for o in out)
-            paths[idx], lengths[idx], feasible[idx], blocked[idx] = p_new, n_new, f_new, b_new
-            calls[idx] += c_new
+        k_round = jax.random.fold_in(k_rep, r)
+        ok = np.zeros((len(todo), length), bool)
+        for _, part, sel, _ in _chunks(np.arange(len(todo)), width):
+            (o,) = timer.call("valid", (env.robot, opts, world, jnp.asarray(paths[todo[sel]]),
+                                        jnp.asarray(lengths[todo[sel]])))
+            ok[part] = o[: len(part)]
+        wins = [(i, ia, ib) for j, i in enumerate(todo)
+                for ia, ib in repair_windows(blocked[i], ok[j], int(lengths[i]))]
+        rows, wa, wb = np.array(wins, np.int64).reshape(-1, 3).T
+        ends = paths[rows, wa], paths[rows, wb]
+        sub = np.zeros((len(wins), opts.replan_steps + 2, d), np.float32)
+        ns = np.zeros(len(wins), np.int64)
+        conn = np.zeros(len(wins), bool)
+        for ci, part, sel, mask in _chunks(np.arange(len(wins)), width):
+            o = timer.call("connect", (env.robot, opts, world, fn, jax.random.fold_in(k_round, ci),
+                                       jnp.asarray(ends[0][sel]), jnp.asarray(ends[1][sel]),
+                                       jnp.asarray(mask)))
+            m = len(part)
+            sub[part], ns[part], conn[part] = o[0][:m], o[1][:m], o[2][:m]
+            np.add.at(calls, rows[part], o[3][:m])
+        # splice p[:ia] + sub[:ns] + p[ib+1:n], right to left within a path (``wins``
+        # lists each path's windows last first, so no splice moves a window still to do)
+        for w in np.flatnonzero(conn):
+            i, ia, ib, s = rows[w], wa[w], wb[w], ns[w]
+            n_old = int(lengths[i])
+            nn = n_old - (ib - ia + 1) + s
+            if nn > length:  # would overflow the path buffer: skipped
+                continue
+            tail = paths[i, ib + 1:n_old].copy()
+            paths[i, ia:ia + s] = sub[w, :s]
+            paths[i, ia + s:nn] = tail
+            paths[i, nn:] = np.nan
+            lengths[i] = nn
+        for _, part, sel, mask in _chunks(np.arange(len(todo)), width):
+            o = timer.call("check", (env.robot, opts, world, jnp.asarray(paths[todo[sel]]),
+                                     jnp.asarray(lengths[todo[sel]]), jnp.asarray(mask)))
+            m, idx = len(part), todo[part]
+            paths[idx], lengths[idx], feasible[idx], blocked[idx] = (x[:m] for x in o)
         replans[todo] += 1
     success = reached & feasible
     costs = np.full(k, np.inf)

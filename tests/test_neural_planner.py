@@ -20,13 +20,14 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 import shapely
+from hypothesis import given, settings, strategies as st
 from jax.tree_util import Partial
 from shapely.geometry import LineString, Point, box as shapely_box
 from shapely.ops import unary_union
 
 from ntq_jax import Env
 from ntq_jax.neural_planner import (INFEASIBLE, INVALID_QUERY, NO_PATH, SUCCESS, PlannerOptions,
-                                    _contract, plan_batch)
+                                    _contract, plan_batch, repair_windows)
 from ntq_jax.planners.visgraph import VisGraph
 from ntq_jax.robots.batch import steer_to_cm
 
@@ -246,3 +247,30 @@ def test_lazy_states_contraction():
     np.testing.assert_allclose(q[0, :2], [[1, 1], [9, 1]])
     assert 3 <= m[1] < 7 and shapely_free("wall", q[1, : m[1]])
     np.testing.assert_allclose(q[1, [0, m[1] - 1]], [[2, 5], [8, 5]])
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.data())
+def test_repair_windows_cover_every_blocked_segment_without_overlap(data):
+    """Random validity / blocked patterns: every blocked segment lies inside a window;
+    a window's ends are valid states (or the path's ends) and all states strictly inside
+    it are in collision; windows are listed last first and never overlap, so splicing
+    them in that order never moves one still to splice."""
+    length = data.draw(st.integers(2, 24))
+    n = data.draw(st.integers(2, length))
+    ok = np.array(data.draw(st.lists(st.booleans(), min_size=length, max_size=length)))
+    ok[0] = ok[n - 1] = True  # the planner only repairs paths between valid start and goal
+    ok[n:] = False
+    blocked = np.array(data.draw(st.lists(st.booleans(), min_size=length - 1,
+                                          max_size=length - 1)))
+    blocked[n - 1:] = False
+    blocked |= ~ok[:-1] | ~ok[1:]  # a segment touching a state in collision is blocked
+    blocked[n - 1:] = False
+    wins = repair_windows(blocked, ok, n)
+    for k in np.flatnonzero(blocked):
+        assert any(ia <= k < ib for ia, ib in wins), (k, wins)
+    for ia, ib in wins:
+        assert 0 <= ia < ib <= n - 1 and ok[ia] and ok[ib]
+        assert not ok[ia + 1:ib].any()
+    for (ia1, _), (_, ib2) in zip(wins, wins[1:]):
+        assert ib2 <= ia1

@@ -12,7 +12,6 @@ import signal
 import subprocess
 import sys
 import textwrap
-import time
 from pathlib import Path
 
 import jax
@@ -209,7 +208,32 @@ from ntq_jax import train as T
 {prelude}
 env = make_env("point/0")
 datasets = [straight_paths(n, 100 + i) for i, n in enumerate(PATHS)]
+
+def sharded_run(n_devices, out_file):
+    # trains with shard=None on this process's devices, checks that every placed array
+    # is spread over n_devices, saves the parameters to out_file
+    import jax
+    assert len(jax.devices()) == n_devices, jax.devices()
+    seen, place = [], T._place
+    def spy(tree, mesh, axis=0):
+        r = place(tree, mesh, axis)
+        seen.extend(len(x.sharding.device_set) for x in jax.tree.leaves(r))
+        return r
+    T._place = spy
+    try:
+        ens_s, _ = T.train_ensemble(datasets, env, MODEL, TRAIN, seed=SEED, progress=False)
+    finally:
+        T._place = place
+    assert set(seen) == {{n_devices}}, set(seen)
+    np.savez(out_file, *[np.asarray(x) for x in jax.tree.leaves(ens_s.params)])
 """
+
+
+def _assert_saved_params_close(out_file, ens):
+    """The parameters a child saved (``sharded_run``) == ``ens``'s, to round-off."""
+    with np.load(out_file) as z:
+        for i, leaf in enumerate(jax.tree.leaves(ens.params)):
+            np.testing.assert_allclose(z[f"arr_{i}"], np.asarray(leaf), rtol=1e-5, atol=SHARD_ATOL)
 
 
 def _run_child(code: str, env_extra: dict | None = None, prelude: str = "", **popen):
@@ -231,18 +255,7 @@ def test_sharded_run_agrees_and_resumes_after_kill9(env, datasets, full_run, tmp
     _, ens, _ = full_run
     out_file, run_dir = tmp_path / "sharded.npz", tmp_path / "run"
     child = _run_child(textwrap.dedent(f"""
-        import jax
-        assert len(jax.devices()) == 4, jax.devices()
-        seen = []
-        place = T._place
-        def spy(tree, mesh, axis=0):
-            r = place(tree, mesh, axis)
-            seen.extend(len(x.sharding.device_set) for x in jax.tree.leaves(r))
-            return r
-        T._place = spy
-        ens_s, _ = T.train_ensemble(datasets, env, MODEL, TRAIN, seed=SEED, progress=False)
-        assert set(seen) == {{4}}, set(seen)  # shard=None: automatic with >= 4 devices
-        np.savez({str(out_file)!r}, *[np.asarray(x) for x in jax.tree.leaves(ens_s.params)])
+        sharded_run(4, {str(out_file)!r})  # shard=None: automatic with >= 4 devices
         def hook(step):
             print("CHECKPOINT", step, flush=True)
             time.sleep(600)  # wait here to be killed
@@ -261,9 +274,7 @@ def test_sharded_run_agrees_and_resumes_after_kill9(env, datasets, full_run, tmp
         if child.poll() is None:
             child.kill()
     assert child.returncode == -signal.SIGKILL
-    with np.load(out_file) as z:  # sharded == unsharded (to float32 round-off over ~40 steps)
-        for i, leaf in enumerate(jax.tree.leaves(ens.params)):
-            np.testing.assert_allclose(z[f"arr_{i}"], np.asarray(leaf), rtol=1e-5, atol=SHARD_ATOL)
+    _assert_saved_params_close(out_file, ens)  # sharded == unsharded
     assert (run_dir / "checkpoints" / str(TRAIN.checkpoint_every)).is_dir()
     assert not (run_dir / "ensemble").exists()
     resumed, _ = T.train_ensemble(datasets, env, MODEL, TRAIN, seed=SEED, ckpt_dir=run_dir,
@@ -285,18 +296,7 @@ def test_two_cpu_devices_hold_two_members_each(env, datasets, full_run, tmp_path
     _, ens, _ = full_run
     out_file = tmp_path / "two.npz"
     child = _run_child(textwrap.dedent(f"""
-        import jax
-        assert len(jax.devices()) == 2, jax.devices()
-        seen = []
-        place = T._place
-        def spy(tree, mesh, axis=0):
-            r = place(tree, mesh, axis)
-            seen.extend(len(x.sharding.device_set) for x in jax.tree.leaves(r))
-            return r
-        T._place = spy
-        ens_s, _ = T.train_ensemble(datasets, env, MODEL, TRAIN, seed=SEED, progress=False)
-        assert set(seen) == {{2}}, set(seen)
-        np.savez({str(out_file)!r}, *[np.asarray(x) for x in jax.tree.leaves(ens_s.params)])
+        sharded_run(2, {str(out_file)!r})
         try:
             T.use_cpu_devices(3)
         except RuntimeError as e:
@@ -307,6 +307,4 @@ def test_two_cpu_devices_hold_two_members_each(env, datasets, full_run, tmp_path
     """), {"XLA_FLAGS": ""}, prelude="assert T.use_cpu_devices(2) == 2")
     out, err = child.communicate(timeout=300)
     assert child.returncode == 0 and "OK" in out, err[-3000:]
-    with np.load(out_file) as z:
-        for i, leaf in enumerate(jax.tree.leaves(ens.params)):
-            np.testing.assert_allclose(z[f"arr_{i}"], np.asarray(leaf), rtol=1e-5, atol=SHARD_ATOL)
+    _assert_saved_params_close(out_file, ens)

@@ -16,7 +16,6 @@ chunks; a complete output is left as it is.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 

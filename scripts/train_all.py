@@ -59,8 +59,6 @@ class PipelineError(RuntimeError):
 
 def load_config(path, overrides):
     """The resolved config: the YAML file (or the embedded default) plus overrides."""
-    import yaml
-
     from ntq_jax import config as C
     if path is None:
         data = C.apply_overrides(DEFAULT, overrides)

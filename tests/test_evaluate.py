@@ -5,7 +5,7 @@ evaluate_env with a trained ensemble); these tests are fast and exact.
 """
 
 import json
-import math
+from pathlib import Path
 
 import jax
 import numpy as np
@@ -113,6 +113,7 @@ def test_report_layout(tmp_path):
             for steer in (True, False) for e in ("point/0", "point/3")
             for m in range(4) for kind in E.KINDS]
     out = R.write_report(tmp_path, rows, envs=None, meta={"seed": 0})
+    assert out and all(Path(f).is_file() for f in out.values())
     md = (tmp_path / "tables.md").read_text()
     assert "## Point robot planning" in md and "## Point robot planning without steerTo" in md
     assert "Environment point/3, gamma_nt = 0.400 [0.390, 0.410] (paper 0.628)" in md

@@ -19,7 +19,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-import shapely
 from hypothesis import given, settings, strategies as st
 from jax.tree_util import Partial
 from shapely.geometry import LineString, Point, box as shapely_box

@@ -7,7 +7,6 @@ boxes), independently of the planner's flag and of the package's kernels.
 
 import importlib.util
 import json
-import sys
 from pathlib import Path
 
 import numpy as np

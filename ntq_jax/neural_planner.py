@@ -491,6 +491,55 @@ def _chunks(items: np.ndarray, width: int):
         yield ci, part, sel, mask
 
 
+def _replan_round(robot, opts: PlannerOptions, world, fn, key, todo: np.ndarray, width: int,
+                  timer: "_Timer", paths, lengths, feasible, blocked, calls) -> None:
+    """One neural replanning round of the paths ``todo``, updating the arrays in place.
+
+    The windows of every blocked segment of every path in ``todo``
+    (:func:`repair_windows`) are reconnected in one batch of neural connections
+    (chunks of ``width``), spliced in right to left, and the paths contracted and
+    checked again.
+    """
+    length, d = paths.shape[1:]
+    ok = np.zeros((len(todo), length), bool)
+    for _, part, sel, _ in _chunks(np.arange(len(todo)), width):
+        (o,) = timer.call("valid", (robot, opts, world, jnp.asarray(paths[todo[sel]]),
+                                    jnp.asarray(lengths[todo[sel]])))
+        ok[part] = o[: len(part)]
+    wins = [(i, ia, ib) for j, i in enumerate(todo)
+            for ia, ib in repair_windows(blocked[i], ok[j], int(lengths[i]))]
+    rows, wa, wb = np.array(wins, np.int64).reshape(-1, 3).T
+    ends = paths[rows, wa], paths[rows, wb]
+    sub = np.zeros((len(wins), opts.replan_steps + 2, d), np.float32)
+    ns = np.zeros(len(wins), np.int64)
+    conn = np.zeros(len(wins), bool)
+    for ci, part, sel, mask in _chunks(np.arange(len(wins)), width):
+        o = timer.call("connect", (robot, opts, world, fn, jax.random.fold_in(key, ci),
+                                   jnp.asarray(ends[0][sel]), jnp.asarray(ends[1][sel]),
+                                   jnp.asarray(mask)))
+        m = len(part)
+        sub[part], ns[part], conn[part] = o[0][:m], o[1][:m], o[2][:m]
+        np.add.at(calls, rows[part], o[3][:m])
+    # splice p[:ia] + sub[:ns] + p[ib+1:n], right to left within a path (``wins`` lists
+    # each path's windows last first, so no splice moves a window still to do)
+    for w in np.flatnonzero(conn):
+        i, ia, ib, s = rows[w], wa[w], wb[w], ns[w]
+        n_old = int(lengths[i])
+        nn = n_old - (ib - ia + 1) + s
+        if nn > length:  # would overflow the path buffer: skipped
+            continue
+        tail = paths[i, ib + 1:n_old].copy()
+        paths[i, ia:ia + s] = sub[w, :s]
+        paths[i, ia + s:nn] = tail
+        paths[i, nn:] = np.nan
+        lengths[i] = nn
+    for _, part, sel, mask in _chunks(np.arange(len(todo)), width):
+        o = timer.call("check", (robot, opts, world, jnp.asarray(paths[todo[sel]]),
+                                 jnp.asarray(lengths[todo[sel]]), jnp.asarray(mask)))
+        m, idx = len(part), todo[part]
+        paths[idx], lengths[idx], feasible[idx], blocked[idx] = (x[:m] for x in o)
+
+
 def plan_batch(env, pnet: Callable, queries, key: Array,
                opts: PlannerOptions = PlannerOptions(), *, chunk: int = 1024,
                repair_width: int = 256, pad_obstacles: int = 0) -> NeuralPlanResult:
@@ -550,51 +599,14 @@ def plan_batch(env, pnet: Callable, queries, key: Array,
                                     jnp.asarray(act)))
         for dst, src in zip((paths, lengths, valid, reached, feasible, blocked, calls), out):
             dst[lo:hi] = src[: hi - lo]
-    # 2. replanning rounds, only on the infeasible paths: the windows of every blocked
-    #    segment of every such path are reconnected in one batch (chunks of ``width``)
+    # 2. replanning rounds, only on the infeasible paths (see :func:`_replan_round`)
     rounds = opts.replan_rounds if opts.steer else 0
     for r in range(rounds):
         todo = np.flatnonzero(reached & ~feasible)
         if not len(todo):
             break
-        k_round = jax.random.fold_in(k_rep, r)
-        ok = np.zeros((len(todo), length), bool)
-        for _, part, sel, _ in _chunks(np.arange(len(todo)), width):
-            (o,) = timer.call("valid", (env.robot, opts, world, jnp.asarray(paths[todo[sel]]),
-                                        jnp.asarray(lengths[todo[sel]])))
-            ok[part] = o[: len(part)]
-        wins = [(i, ia, ib) for j, i in enumerate(todo)
-                for ia, ib in repair_windows(blocked[i], ok[j], int(lengths[i]))]
-        rows, wa, wb = np.array(wins, np.int64).reshape(-1, 3).T
-        ends = paths[rows, wa], paths[rows, wb]
-        sub = np.zeros((len(wins), opts.replan_steps + 2, d), np.float32)
-        ns = np.zeros(len(wins), np.int64)
-        conn = np.zeros(len(wins), bool)
-        for ci, part, sel, mask in _chunks(np.arange(len(wins)), width):
-            o = timer.call("connect", (env.robot, opts, world, fn, jax.random.fold_in(k_round, ci),
-                                       jnp.asarray(ends[0][sel]), jnp.asarray(ends[1][sel]),
-                                       jnp.asarray(mask)))
-            m = len(part)
-            sub[part], ns[part], conn[part] = o[0][:m], o[1][:m], o[2][:m]
-            np.add.at(calls, rows[part], o[3][:m])
-        # splice p[:ia] + sub[:ns] + p[ib+1:n], right to left within a path (``wins``
-        # lists each path's windows last first, so no splice moves a window still to do)
-        for w in np.flatnonzero(conn):
-            i, ia, ib, s = rows[w], wa[w], wb[w], ns[w]
-            n_old = int(lengths[i])
-            nn = n_old - (ib - ia + 1) + s
-            if nn > length:  # would overflow the path buffer: skipped
-                continue
-            tail = paths[i, ib + 1:n_old].copy()
-            paths[i, ia:ia + s] = sub[w, :s]
-            paths[i, ia + s:nn] = tail
-            paths[i, nn:] = np.nan
-            lengths[i] = nn
-        for _, part, sel, mask in _chunks(np.arange(len(todo)), width):
-            o = timer.call("check", (env.robot, opts, world, jnp.asarray(paths[todo[sel]]),
-                                     jnp.asarray(lengths[todo[sel]]), jnp.asarray(mask)))
-            m, idx = len(part), todo[part]
-            paths[idx], lengths[idx], feasible[idx], blocked[idx] = (x[:m] for x in o)
+        _replan_round(env.robot, opts, world, fn, jax.random.fold_in(k_rep, r), todo, width,
+                      timer, paths, lengths, feasible, blocked, calls)
         replans[todo] += 1
     success = reached & feasible
     costs = np.full(k, np.inf)

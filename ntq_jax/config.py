@@ -230,6 +230,9 @@ class TrainConfig:
         epochs: passes over each member's dataset.
         batch_size: minibatch size (same for every member).
         optimizer: ``adagrad`` (MPNet's), ``adam`` or ``sgd``.
+        adagrad_initial_accumulator: Adagrad's starting accumulator. 0 (PyTorch's
+            and so MPNet's default) makes the first update ``lr * sign(grad)`` for
+            every weight; 0.1 (optax's and TensorFlow's default) damps the first steps.
         learning_rate: step size.
         val_fraction: held-out fraction of each dataset's paths for validation.
         checkpoint_every: steps between checkpoints.
@@ -244,6 +247,7 @@ class TrainConfig:
     batch_size: int = 100
     optimizer: str = "adagrad"
     learning_rate: float = 0.01
+    adagrad_initial_accumulator: float = 0.0
     val_fraction: float = 0.1
     checkpoint_every: int = 500
     eval_every: int = 0
@@ -255,6 +259,8 @@ class TrainConfig:
         _check(self.batch_size >= 1, f"{p}.batch_size", f"must be >= 1, got {self.batch_size}")
         _check(self.optimizer in ("adagrad", "adam", "sgd"), f"{p}.optimizer",
                f"must be adagrad, adam or sgd; got {self.optimizer!r}")
+        _check(self.adagrad_initial_accumulator >= 0.0, f"{p}.adagrad_initial_accumulator",
+               f"must be >= 0, got {self.adagrad_initial_accumulator}")
         _check(self.learning_rate > 0, f"{p}.learning_rate",
                f"must be > 0, got {self.learning_rate}")
         _check(0.0 <= self.val_fraction < 1.0, f"{p}.val_fraction",

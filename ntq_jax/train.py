@@ -269,12 +269,15 @@ class TrainState(NamedTuple):
 def make_optimizer(train_cfg: TrainConfig) -> optax.GradientTransformation:
     """The optimizer of every member (MPNet: Adagrad with lr 0.01).
 
-    Adagrad starts its accumulator at 0 with ``eps = 1e-10``, as PyTorch's
-    ``torch.optim.Adagrad`` that MPNet uses.
+    Adagrad uses ``eps = 1e-10`` (optax adds it under the square root, PyTorch
+    outside) and starts its accumulator at ``train.adagrad_initial_accumulator``
+    (default 0, as PyTorch's ``torch.optim.Adagrad`` that MPNet uses; the
+    paper-width configs use 0.1, see ``configs/point.yaml``).
     """
     lr = train_cfg.learning_rate
     if train_cfg.optimizer == "adagrad":
-        return optax.adagrad(lr, initial_accumulator_value=0.0, eps=1e-10)
+        return optax.adagrad(lr, initial_accumulator_value=train_cfg.adagrad_initial_accumulator,
+                             eps=1e-10)
     if train_cfg.optimizer == "adam":
         return optax.adam(lr)
     return optax.sgd(lr)
@@ -369,8 +372,10 @@ def make_train_chunk(graphdef, tx, steps: int):
 
 
 @functools.lru_cache(maxsize=16)
-def _cached_chunk_fn(graphdef, optimizer: str, learning_rate: float, steps: int):
-    cfg = TrainConfig(optimizer=optimizer, learning_rate=learning_rate)
+def _cached_chunk_fn(graphdef, optimizer: str, learning_rate: float, initial_accumulator: float,
+                     steps: int):
+    cfg = TrainConfig(optimizer=optimizer, learning_rate=learning_rate,
+                      adagrad_initial_accumulator=initial_accumulator)
     return make_train_chunk(graphdef, make_optimizer(cfg), steps)
 
 
@@ -775,7 +780,7 @@ def train_ensemble(datasets: Sequence[Any], env, model_cfg: ModelConfig, train_c
     vx, vy, vmask = (_place(jnp.asarray(a), mesh) for a in _val_arrays(members))
     has_val = [len(md.val_x) > 0 for md in members]
     chunk_fn = _cached_chunk_fn(ens.graphdef, train_cfg.optimizer, train_cfg.learning_rate,
-                                k_steps)
+                                train_cfg.adagrad_initial_accumulator, k_steps)
 
     fingerprint = {
         "model": dataclasses.asdict(model_cfg) | {"hidden": list(model_cfg.hidden)},

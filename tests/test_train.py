@@ -308,3 +308,19 @@ def test_two_cpu_devices_hold_two_members_each(env, datasets, full_run, tmp_path
     out, err = child.communicate(timeout=300)
     assert child.returncode == 0 and "OK" in out, err[-3000:]
     _assert_saved_params_close(out_file, ens)
+
+
+def test_adagrad_first_step_and_its_initial_accumulator():
+    """Accumulator 0 (as PyTorch's Adagrad, MPNet's): the first update is lr * sign(grad)
+    on every weight, whatever the gradient's size; 0.1 (the paper-width configs):
+    lr * g / sqrt(0.1 + g^2). (optax adds eps = 1e-10 under the square root.)"""
+    import jax.numpy as jnp
+    g = np.array([1e-3, -0.5, 2.0])
+    p = {"w": jnp.zeros(3)}
+    for acc in (0.0, 0.1):
+        tx = T.make_optimizer(TrainConfig(adagrad_initial_accumulator=acc))
+        upd, _ = tx.update({"w": jnp.asarray(g, jnp.float32)}, tx.init(p), p)
+        np.testing.assert_allclose(np.asarray(upd["w"]), -0.01 * g / np.sqrt(acc + g**2 + 1e-10),
+                                   rtol=1e-5)
+        if acc == 0.0:
+            np.testing.assert_allclose(np.asarray(upd["w"]), -0.01 * np.sign(g), rtol=1e-4)

@@ -45,23 +45,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import numpy as np
 
 
-def straight_paths(n_rows: int, seed: int, lo, hi, step: float = 1.0):
-    """About ``n_rows`` rows of straight paths between uniform random points."""
-    rng = np.random.default_rng(seed)
-    xs, ys, pis, p = [], [], [], 0
-    while len(xs) < n_rows:
-        a, b = rng.uniform(lo, hi), rng.uniform(lo, hi)
-        n = max(1, int(np.ceil(np.linalg.norm(b - a) / step)))
-        pts = a + (b - a) * (np.arange(n + 1) / n)[:, None]
-        for k in range(n):
-            xs.append(np.concatenate([pts[k], b]))
-            ys.append(pts[k + 1])
-            pis.append(p)
-        p += 1
-    return (np.array(xs[:n_rows], np.float32), np.array(ys[:n_rows], np.float32),
-            np.array(pis[:n_rows], np.int32))
-
-
 def jax_training(datasets, env, model_cfg, train_cfg, seed, ids, stop_after=None,
                  shard=False) -> float:
     """Wall seconds of one ``train_ensemble`` call on ``datasets`` (members ``ids``)."""
@@ -187,6 +170,7 @@ def main(argv=None) -> int:
 
     import jax
 
+    from ntq_jax import data as data_mod
     from ntq_jax import make_env, models
     from ntq_jax import train as T
 
@@ -199,7 +183,6 @@ def main(argv=None) -> int:
                             learning_rate=0.01, val_fraction=args.val_fraction,
                             steps_per_call=args.steps_per_call, eval_every=10**9)
     if args.data is not None:
-        from ntq_jax import data as data_mod
         env = make_env(args.data / "env.json")
         datasets = data_mod.load_datasets(args.data)
         source = str(args.data)
@@ -207,7 +190,8 @@ def main(argv=None) -> int:
         env = make_env("point/0")
         lo, hi = (np.asarray(a) for a in env.robot.config_bounds(env.world))
         sizes = [args.rows, args.rows, args.rows, int(0.6 * args.rows)]
-        datasets = [straight_paths(n, 10 + i, lo, hi) for i, n in enumerate(sizes)]
+        datasets = [data_mod.straight_line_rows(10 + i, lo, hi, step=1.0, n_rows=n)
+                    for i, n in enumerate(sizes)]
         source = f"synthetic straight paths on point/0, rows {sizes}"
     spec = models.ModelSpec.from_env(env, model_cfg)
     run = functools.partial(lambda f, **kw: VARIANTS[f](datasets, env, model_cfg, train_cfg,

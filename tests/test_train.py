@@ -21,6 +21,7 @@ import pytest
 from ntq_jax import make_env, models
 from ntq_jax import train as T
 from ntq_jax.config import ModelConfig, TrainConfig
+from ntq_jax.data import straight_line_rows
 
 MODEL = ModelConfig(hidden=(32, 32), dropout=0.1, dropout_layers=1)
 TRAIN = TrainConfig(epochs=6, batch_size=32, learning_rate=0.05, val_fraction=0.2,
@@ -35,18 +36,7 @@ SHARD_ATOL = 2e-5
 
 def straight_paths(n_paths: int, seed: int, lo=(0.0, 0.0), hi=(20.0, 20.0), step=1.5):
     """Rows of straight paths between random points: inputs (N, 4), targets (N, 2), path ids."""
-    rng = np.random.default_rng(seed)
-    lo, hi = np.asarray(lo), np.asarray(hi)
-    xs, ys, pis = [], [], []
-    for p in range(n_paths):
-        a, b = rng.uniform(lo, hi), rng.uniform(lo, hi)
-        n = max(1, int(np.ceil(np.linalg.norm(b - a) / step)))
-        pts = a + (b - a) * (np.arange(n + 1) / n)[:, None]
-        for k in range(n):
-            xs.append(np.concatenate([pts[k], b]))
-            ys.append(pts[k + 1])
-            pis.append(p)
-    return np.array(xs, np.float32), np.array(ys, np.float32), np.array(pis, np.int32)
+    return straight_line_rows(seed, lo, hi, step=step, n_paths=n_paths)
 
 
 @pytest.fixture(scope="module")

@@ -22,16 +22,56 @@ is measured on that many queries and scaled (reported as such).
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import json
+import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def planner_at(rev: str):
+    """The ``ntq_jax.neural_planner`` module of git revision ``rev``, as a separate module."""
+    src = subprocess.run(["git", "-C", str(ROOT), "show", f"{rev}:ntq_jax/neural_planner.py"],
+                         check=True, capture_output=True, text=True).stdout
+    path = Path(tempfile.mkdtemp()) / "neural_planner_at_rev.py"
+    path.write_text(src)
+    name = f"neural_planner_{rev}"
+    spec = importlib.util.spec_from_file_location(name, path)
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules[name] = mod
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def against(env, pnet, q, key, cfg, other, repeats: int) -> dict:
+    """Median batched seconds (compile excluded) of this planner and ``other``, interleaved."""
+    import jax
+    import numpy as np
+
+    from ntq_jax import neural_planner as current
+
+    times = {"current": [], "other": []}
+    for mod in (current, other):  # compile both first
+        mod.plan_batch(env, pnet, q, key, mod.PlannerOptions.from_config(cfg.eval, steer=True))
+    for r in range(repeats):
+        for name, mod in (("current", current), ("other", other)):
+            opts = mod.PlannerOptions.from_config(cfg.eval, steer=True)
+            t0 = time.perf_counter()
+            res = mod.plan_batch(env, pnet, q, jax.random.fold_in(key, r), opts)
+            times[name].append(time.perf_counter() - t0 - res.compile_seconds)
+    return {k: float(np.median(v)) for k, v in times.items()}
+
+
 def bench(env_name: str, *, queries: int, loop_queries: int, run=None, model: int = 3,
-          hidden=(256, 256, 128, 64), seed: int = 0, eval_overrides=()) -> dict:
+          hidden=(256, 256, 128, 64), seed: int = 0, eval_overrides=(), other=None,
+          repeats: int = 5) -> dict:
     import jax
     import numpy as np
 
@@ -65,8 +105,10 @@ def bench(env_name: str, *, queries: int, loop_queries: int, run=None, model: in
     res = plan_batch(env, pnet, q, key, opts)
     batched = time.perf_counter() - t0 - res.compile_seconds
 
+    vs = against(env, pnet, q, key, cfg, other, repeats) if other is not None else None
     n_loop = min(loop_queries, len(q))
-    plan_batch(env, pnet, q[:1], key, opts)  # compiles the single-query shapes (most of them)
+    if n_loop:
+        plan_batch(env, pnet, q[:1], key, opts)  # compiles the single-query shapes
     loop, succ, loop_compile = 0.0, 0, 0.0
     for i in range(n_loop):
         t0 = time.perf_counter()
@@ -74,7 +116,7 @@ def bench(env_name: str, *, queries: int, loop_queries: int, run=None, model: in
         loop += time.perf_counter() - t0 - r.compile_seconds
         loop_compile += r.compile_seconds
         succ += int(r.success[0])
-    loop *= len(q) / n_loop
+    loop *= len(q) / max(n_loop, 1)
     return {
         "env": env_name, "robot": env.robot.kind, "queries": len(q), "loop_queries": n_loop,
         "pnet": source, "n_plan": opts.n_plan, "replan_rounds": opts.replan_rounds,
@@ -83,8 +125,9 @@ def bench(env_name: str, *, queries: int, loop_queries: int, run=None, model: in
         "speedup": loop / batched, "compile_seconds": warm.compile_seconds,
         "loop_compile_seconds_excluded": loop_compile,
         "batched_success": float(res.success.mean()),
-        "loop_success": succ / n_loop,
+        "loop_success": succ / max(n_loop, 1),
         "mean_pnet_calls": float(res.pnet_calls.mean()),
+        "against": vs,
     }
 
 
@@ -100,13 +143,25 @@ def main(argv=None) -> int:
     ap.add_argument("--hidden", type=int, nargs="+", default=[256, 256, 128, 64])
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help="eval config override, e.g. --set eval.n_plan=50")
+    ap.add_argument("--against", default=None, metavar="REV",
+                    help="also time the batched planner of this git revision, side by side")
+    ap.add_argument("--repeats", type=int, default=5, help="interleaved repeats for --against")
     ap.add_argument("--json", default=None, help="also write the results to this JSON file")
     args = ap.parse_args(argv)
+    other = planner_at(args.against) if args.against else None
     out = []
     for name in args.env or ["point/0"]:
         r = bench(name, queries=args.queries, loop_queries=args.loop_queries, run=args.run,
-                  model=args.model, hidden=tuple(args.hidden), eval_overrides=args.set)
+                  model=args.model, hidden=tuple(args.hidden), eval_overrides=args.set,
+                  other=other, repeats=args.repeats)
         out.append(r)
+        if r["against"] is not None:
+            a = r["against"]
+            print(f"{r['env']:8s} batched, median of {args.repeats}: this tree {a['current']:.3f} s, "
+                  f"{args.against} {a['other']:.3f} s: {a['other'] / a['current']:.2f}x faster",
+                  flush=True)
+        if not r["loop_queries"]:
+            continue
         print(f"{r['env']:8s} {r['queries']} queries ({r['pnet']}, n_plan {r['n_plan']}, "
               f"replan {r['replan_rounds']}): batched {r['batched_seconds']:.2f} s "
               f"({r['batched_seconds_per_query'] * 1e3:.2f} ms/query), per-query loop "

@@ -172,7 +172,8 @@ class PNet(nnx.Module):
         probability ``1 - rate``, scale kept units by ``1 / (1 - rate)``); the masks of
         all dropout layers come from ONE ``prng.uniform_array(key, (..., sum of their
         widths))`` draw (one PRNG call site compiles much faster than one per layer;
-        the counter hash is ~2x cheaper per step than threefry when vmapped over members).
+        vmapped over the ensemble's members, threefry draws took about half of a
+        training step, see BENCHMARKS.md).
         """
         spec = self.spec
         off = deterministic or spec.dropout == 0.0 or spec.dropout_layers == 0

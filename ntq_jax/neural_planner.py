@@ -555,8 +555,7 @@ def plan_batch(env, pnet: Callable, queries, key: Array,
         repair_width: batch width of the replanning calls: the infeasible paths of a
             round, and the windows they reconnect, are gathered into chunks of this
             many (power of two), so the rounds cost in proportion to what needs
-            repair, not to the batch (256: measured fastest of 64/128/256 on the
-            point maps, see BENCHMARKS.md).
+            repair, not to the batch.
         pad_obstacles: if > 0, pad the obstacle lists to a multiple of it
             (:func:`padded_world`) so maps with similar counts share one compilation.
 

@@ -1,0 +1,127 @@
+"""Bit-identical outputs against golden hashes recorded before the architecture refactor.
+
+A tiny pipeline run (point/2: grid A* data, four PNets, neural planning, report)
+and a data-only run of the 2-link arm (grid A* in joint space) are fingerprinted:
+the bytes of every dataset array, the trained parameters, every saved planned
+path and every number of ``results.json`` except wall-clock times. The golden
+values in ``tests/golden.json`` were taken from the code before the refactor
+(commit 04d95da) on this machine's JAX (recorded in the file): a refactor that
+changes any output by one bit fails here.
+
+Re-record (only for a deliberate change of results)::
+
+    python tests/test_golden.py --record
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib.util
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+GOLDEN = ROOT / "tests" / "golden.json"
+TINY = ["envs=[point/2]", "data.k_train=40", "data.gamma_queries=2000", "data.gamma_eval=false",
+        "train.epochs=2", "model.hidden=[32,32]", "eval.k_test=16", "eval.n_plan=20",
+        "eval.replan_rounds=2", "eval.replan_steps=6", "eval.gamma_queries=2000"]
+ARM = ["envs=[nlink/2]", "data.k_train=30", "data.gamma_queries=2000", "planner.name=astar",
+       "planner.resolution=0.05"]
+TIME_KEYS = {"seconds", "compile_seconds", "seconds_per_query", "reference_seconds_per_query",
+             "time", "timings"}
+
+
+def _script(name):
+    spec = importlib.util.spec_from_file_location(name, ROOT / "scripts" / f"{name}.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def _args(out, sets):
+    a = ["--out", str(out), "--no-progress"]
+    for s in sets:
+        a += ["--set", s]
+    return a
+
+
+def _h(*arrays) -> str:
+    h = hashlib.sha256()
+    for a in arrays:
+        a = np.ascontiguousarray(np.asarray(a))
+        h.update(str((a.dtype.str, a.shape)).encode())
+        h.update(a.tobytes())
+    return h.hexdigest()[:20]
+
+
+def _datasets(root: Path) -> dict:
+    out = {}
+    for f in sorted(root.rglob("D*/*.npy")):
+        out[str(f.relative_to(root))] = _h(np.load(f))
+    return out
+
+
+def _numbers(obj):
+    """The JSON tree without wall-clock fields and file paths."""
+    if isinstance(obj, dict):
+        return {k: _numbers(v) for k, v in sorted(obj.items())
+                if k not in TIME_KEYS and not k.endswith("_file")}
+    if isinstance(obj, list):
+        return [_numbers(v) for v in obj]
+    return obj
+
+
+def fingerprint_pipeline(run: Path) -> dict:
+    try:
+        from ntq_jax.training import load_ensemble
+    except ImportError:  # TEMP: before the refactor
+        from ntq_jax.train import load_ensemble
+
+    ens = load_ensemble(run / "models" / "point_2")
+    import jax
+    leaves = jax.tree_util.tree_leaves_with_path(ens.params)
+    params = {jax.tree_util.keystr(p): _h(v) for p, v in leaves}
+    paths = {}
+    for f in sorted((run / "paths").rglob("*.npz")) + sorted((run / "eval").rglob("*.npz")):
+        z = np.load(f)
+        paths[str(f.relative_to(run))] = {k: _h(z[k]) for k in sorted(z.files)
+                                          if k not in TIME_KEYS and k != "fingerprint"
+                                          and not k.endswith("_seconds")}
+    res = json.loads((run / "results.json").read_text())
+    rows = _numbers(res["rows"])
+    return {"datasets": _datasets(run / "data"), "params": params, "paths": paths,
+            "rows_sha": hashlib.sha256(json.dumps(rows, sort_keys=True).encode()).hexdigest()[:20]}
+
+
+def fingerprint_arm(out: Path) -> dict:
+    return {"datasets": _datasets(out)}
+
+
+def _run_all(tmp: Path) -> dict:
+    assert _script("train_all").main(_args(tmp / "run", TINY) + ["--no-compile-cache"]) == 0
+    assert _script("generate_data").main(
+        ["--out", str(tmp / "arm"), "--no-progress", "--no-figure"]
+        + sum((["--set", s] for s in ARM), [])) == 0
+    return {"pipeline": fingerprint_pipeline(tmp / "run"), "arm": fingerprint_arm(tmp / "arm")}
+
+
+def test_outputs_bit_identical_to_golden(tmp_path):
+    golden = json.loads(GOLDEN.read_text())
+    got = _run_all(tmp_path)
+    for part in ("pipeline", "arm"):
+        for key, want in golden[part].items():
+            assert got[part][key] == want, f"{part}/{key} differs from the golden record"
+
+
+if __name__ == "__main__" and "--record" in sys.argv:
+    import tempfile
+
+    import jax
+    with tempfile.TemporaryDirectory() as d:
+        rec = _run_all(Path(d))
+    rec["jax"] = jax.__version__
+    GOLDEN.write_text(json.dumps(rec, indent=1, sort_keys=True) + "\n")
+    print(f"recorded {GOLDEN}")

@@ -93,14 +93,15 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ntq_jax import files
+from ntq_jax import artifacts, plotting
 from ntq_jax import queries as Q
+from ntq_jax.envs import Env
 from ntq_jax.geometry import KERNEL_COMPILER_OPTIONS
 from ntq_jax.robots.batch import steer_to_cm
+from ntq_jax.types import PlanStatus
 
 FORMAT = "ntq_jax.dataset"
 FORMAT_VERSION = 1
-SOLVED = 0  # planner status of a solved query (the ntq_jax.planners contract)
 SEG_CHUNK = 8192  # segments per compiled steer_to call in include_data (fixed: one compilation)
 
 # name -> (dtype, ndim)
@@ -182,7 +183,7 @@ def steer_to_chunked(env, a, b, *, padding: float | None = None,
     Returns:
         ``(n,)`` bool, True where the straight connection is collision-free.
     """
-    pad = env._pad(padding)
+    pad = env.resolve_padding(padding)
     a = np.asarray(a, np.float32).reshape(-1, env.dim)
     b = np.asarray(b, np.float32).reshape(-1, env.dim)
     n = len(a)
@@ -438,7 +439,7 @@ def _plan_pool(env, pool: np.ndarray, plan_fn, pad: float, seed: int, chunk: int
                 chunk_seed = (int(seed) * 1_000_003 + lo) % (2 ** 31 - 1)
                 raw = plan_fn(env, pool[lo:hi], padding=pad, seed=chunk_seed)
                 res = _as_plan_output(raw, hi - lo, d)
-                files.save_npz(work / f"plan_{lo:09d}_{hi:09d}.npz", queries=pool[lo:hi],
+                artifacts.save_npz(work / f"plan_{lo:09d}_{hi:09d}.npz", queries=pool[lo:hi],
                                  paths=res.paths, lengths=res.lengths, costs=res.costs,
                                  status=res.status)
             results.append(res)
@@ -461,7 +462,7 @@ def check_paths(env, queries: np.ndarray, res: PlanOutput, pad: float) -> np.nda
     """
     k, L, d = res.paths.shape
     lengths = res.lengths.astype(np.int64)
-    ok = (res.status == SOLVED) & (lengths >= 2) & (lengths <= L)
+    ok = (res.status == PlanStatus.SOLVED) & (lengths >= 2) & (lengths <= L)
     rows = np.arange(k)
     ln = np.clip(lengths, 1, L)
     # endpoints: must be the query's (a planner may round them by ~1e-6: snap, then check)
@@ -512,7 +513,7 @@ def _estimate_gamma(env, key, n: int, pad: float, work: Path, tag: str) -> dict:
         out = {"padding": pad, "gamma": e.gamma, "ci95": list(e.ci95), "queries": e.queries}
     except Q.FreeSpaceTooSmall as err:
         out = {"padding": pad, "gamma": None, "ci95": None, "queries": 0, "error": str(err)}
-    files.write_bytes(f, _dumps(out))
+    artifacts.write_bytes(f, _dumps(out))
     return out
 
 
@@ -551,8 +552,8 @@ def generate_datasets(env, config, out_dir, *, env_name: str | None = None, plan
     specs = list(dc.datasets)
     names = dataset_names(len(specs))
     K = dc.k_train_for(env_name)
-    pad = env._pad(None)
-    prune_pad = env._pad(dc.prune_padding)
+    pad = env.resolve_padding(None)
+    prune_pad = env.resolve_padding(dc.prune_padding)
     if planner is None:
         planner = config.planner.name
     options = planner_options(config, env_name, None if callable(planner) else str(planner))
@@ -582,7 +583,7 @@ def generate_datasets(env, config, out_dir, *, env_name: str | None = None, plan
 
     work = env_dir / ".work" / fp
     work.mkdir(parents=True, exist_ok=True)
-    files.clean_tmp(work)
+    artifacts.clean_tmp(work)
     env.save_json(env_dir / "env.json")
 
     # 1. query pools
@@ -627,7 +628,7 @@ def generate_datasets(env, config, out_dir, *, env_name: str | None = None, plan
         # 3. independent check of every path, blocked-ness of every query
         t0 = time.perf_counter()
         good = check_paths(env, pool, res, pad)
-        rejected = int(((res.status == SOLVED) & ~good).sum())
+        rejected = int(((res.status == PlanStatus.SOLVED) & ~good).sum())
         if rejected:
             warnings.warn(f"{env_name}: {rejected} planner path(s) failed the independent check "
                           f"(endpoints or a segment in collision at padding {pad}); they are "
@@ -696,7 +697,7 @@ def generate_datasets(env, config, out_dir, *, env_name: str | None = None, plan
                     "queries": K, "uniform": int((kind == Q.UNIFORM).sum()),
                     "non_trivial": int((kind == Q.NON_TRIVIAL).sum()), "nt_exhausted": n_exh,
                     "solved": int(solved.sum()), "unsolved": int(K - solved.sum()),
-                    "rejected_paths": int(((res.status[idx] == SOLVED) & ~solved).sum()),
+                    "rejected_paths": int(((res.status[idx] == PlanStatus.SOLVED) & ~solved).sum()),
                     "paths": int(len(sel)), "segments": segments, "samples": int(len(inputs)),
                     "pruned": segments - int(len(inputs)) if spec.prune else 0,
                     "fraction_pruned": ((segments - len(inputs)) / segments
@@ -767,15 +768,15 @@ def _complete(env_dir: Path, names: list[str], fp: str) -> bool:
 def _write_dataset(folder: Path, arrays: dict[str, np.ndarray], meta: dict):
     """Writes one dataset folder: ``meta.json`` removed first, arrays atomically, ``meta.json`` last."""
     folder.mkdir(parents=True, exist_ok=True)
-    files.clean_tmp(folder)
+    artifacts.clean_tmp(folder)
     (folder / "meta.json").unlink(missing_ok=True)
     info = {}
     for name, (dtype, ndim) in ARRAY_SPECS.items():
         arr = np.asarray(arrays[name])
         assert arr.dtype == dtype and arr.ndim == ndim, (name, arr.dtype, arr.shape)
-        digest = files.sha256(files.save_npy(folder / f"{name}.npy", arr))
+        digest = artifacts.sha256(artifacts.save_npy(folder / f"{name}.npy", arr))
         info[name] = {"dtype": dtype.str, "shape": list(arr.shape), "sha256": digest}
-    files.write_bytes(folder / "meta.json", _dumps(dict(meta, arrays=info)))
+    artifacts.write_bytes(folder / "meta.json", _dumps(dict(meta, arrays=info)))
 
 
 # ---------------------------------------------------------------------------
@@ -824,7 +825,7 @@ def load_dataset(folder, mmap: bool = True, verify: bool = True) -> Dataset:
         want = info.get(name)
         if not isinstance(want, dict):
             raise DatasetError(f"{mpath}: no entry for array {name!r}; {_FIX}")
-        if verify and files.sha256(f) != want.get("sha256"):
+        if verify and artifacts.sha256(f) != want.get("sha256"):
             raise DatasetError(f"{f}: corrupt (sha256 differs from meta.json); {_FIX}")
         try:
             if mmap and f.stat().st_size > 0:
@@ -937,120 +938,13 @@ def straight_line_rows(seed: int, lo, hi, *, step: float, n_paths: int | None = 
             np.array(pis[:end], np.int32))
 
 
-# ---------------------------------------------------------------------------
-# Figure
-# ---------------------------------------------------------------------------
-
-def _draw_obstacles(ax, spec: dict, padded: bool = True):
-    from matplotlib.patches import Circle, FancyBboxPatch, Rectangle
-
-    pad = float(spec.get("padding", 0.0))
-    for cx, cy, hw, hh in spec.get("boxes", []):
-        if padded and pad > 0:
-            ax.add_patch(FancyBboxPatch((cx - hw, cy - hh), 2 * hw, 2 * hh,
-                                        boxstyle=f"round,pad={pad}", fc="0.85", ec="none"))
-        ax.add_patch(Rectangle((cx - hw, cy - hh), 2 * hw, 2 * hh, fc="0.35", ec="none"))
-    for cx, cy, r in spec.get("discs", []):
-        if padded and pad > 0:
-            ax.add_patch(Circle((cx, cy), r + pad, fc="0.85", ec="none"))
-        ax.add_patch(Circle((cx, cy), r, fc="0.35", ec="none"))
-    (x0, x1), (y0, y1) = spec["bounds"]
-    ax.set_xlim(x0, x1)
-    ax.set_ylim(y0, y1)
-    ax.set_aspect("equal")
-
-
-def _fk(spec: dict, q: np.ndarray) -> np.ndarray:
-    """Joint positions ``(..., n + 1, 2)`` of a planar arm (NumPy)."""
-    r = spec["robot"]
-    lengths = np.asarray(r.get("link_lengths"), np.float64)
-    base = np.asarray(r.get("base", [0.0, 0.0]), np.float64)
-    phi = np.cumsum(q, axis=-1)
-    steps = np.stack([np.cos(phi), np.sin(phi)], -1) * lengths[:, None]
-    pts = np.concatenate([np.zeros(q.shape[:-1] + (1, 2)), np.cumsum(steps, axis=-2)], axis=-2)
-    return pts + base
-
-
-def plot_environment(env_dir, out=None, n_points: int = 400, n_paths: int = 6):
-    """PNG of the map with the start/goal distributions of D0 and D2 and a few solved paths.
-
-    Point robot and rigid body: (x, y) of starts (green) and goals (blue) and
-    paths (magenta) over the obstacles (dark) and their padding (light). Arm:
-    the workspace with the arm along a solved path, and the configuration space
-    (joints 1 and 2; for the 2-link arm this is the whole C-space, with the
-    colliding configurations shaded).
-
-    Returns:
-        The path of the written PNG.
-    """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+def plot_environment(env_dir, out=None, n_points: int = 400, n_paths: int = 6) -> Path:
+    """:func:`ntq_jax.plotting.dataset_figure` of a dataset folder (default ``<env_dir>/figure.png``)."""
     env_dir = Path(env_dir)
-    spec = json.loads((env_dir / "env.json").read_text())
-    ds = load_datasets(env_dir, verify=False)
-    picks = [(0, "D0 (uniform queries)"), (min(2, len(ds) - 1), "D2 (non-trivial queries)")]
-    picks = [(i, f"D{i}: p_nt={ds[i].meta['p_nt']}" + (", pruned" if ds[i].meta["prune"] else ""))
-             for i, _ in picks]
-    kind = spec["robot"]["kind"]
-    rng = np.random.default_rng(0)
-    ncol = len(picks) + (1 if kind == "nlink" else 0)
-    fig, axes = plt.subplots(1, ncol, figsize=(5 * ncol, 5), squeeze=False)
-    axes = axes[0]
-    col = 0
-    if kind == "nlink":
-        from ntq_jax.envs import Env
-
-        ax = axes[0]
-        _draw_obstacles(ax, spec)
-        d = ds[picks[-1][0]]
-        if len(d.path_lengths):
-            L = int(d.path_lengths[0])
-            for t, q in enumerate(np.asarray(d.paths[0, :L])):
-                pts = _fk(spec, q.astype(np.float64))
-                c = "green" if t == 0 else "blue" if t == L - 1 else "magenta"
-                ax.plot(pts[:, 0], pts[:, 1], "-o", color=c, ms=2, lw=1.5, alpha=0.9)
-        ax.set_title(f"{spec.get('name')}: workspace, one solved path")
-        col = 1
-        env = Env.from_json(spec)
-    for (i, title), ax in zip(picks, axes[col:]):
-        d = ds[i]
-        q = np.asarray(d.queries)
-        sel = rng.permutation(len(q))[:n_points]
-        if kind == "nlink":
-            lo, hi = -np.pi, np.pi
-            if env.dim == 2:
-                g = np.linspace(lo, hi, 181, dtype=np.float32)
-                A, B = np.meshgrid(g, g)
-                ok = np.asarray(env.is_valid(np.stack([A.ravel(), B.ravel()], 1))).reshape(A.shape)
-                ax.imshow(~ok, origin="lower", extent=(lo, hi, lo, hi), cmap="Greys", alpha=0.5)
-            ax.set_xlim(lo, hi)
-            ax.set_ylim(lo, hi)
-            ax.set_xlabel("joint 1 (rad)")
-            ax.set_ylabel("joint 2 (rad)")
-        else:
-            _draw_obstacles(ax, spec)
-        ax.scatter(q[sel, 0, 0], q[sel, 0, 1], s=4, c="green", label="start")
-        ax.scatter(q[sel, 1, 0], q[sel, 1, 1], s=4, c="blue", label="goal")
-        P = len(d.path_lengths)
-        for p in rng.permutation(P)[:n_paths]:
-            L = int(d.path_lengths[p])
-            ax.plot(d.paths[p, :L, 0], d.paths[p, :L, 1], "-", color="magenta", lw=1.2)
-        st = d.meta["stats"]
-        ax.set_title(f"{title}\n{st['solved']}/{st['queries']} solved, {st['samples']} samples",
-                     fontsize=9)
-        ax.legend(loc="upper right", fontsize=7, markerscale=3)
-    g = ds[0].meta.get("gamma_nt", {}) or {}
-    if g.get("gamma") is not None:
-        fig.suptitle(f"{spec.get('name')}  (gamma_nt = {g['gamma']:.3f} at padding "
-                     f"{g['padding']})", fontsize=10)
-    fig.tight_layout()
+    env = Env.from_json(json.loads((env_dir / "env.json").read_text()))
     out = Path(out) if out is not None else env_dir / "figure.png"
-    files.save_figure(fig, out, dpi=110)
-    plt.close(fig)
-    return out
+    return plotting.dataset_figure(env, load_datasets(env_dir, verify=False), out,
+                                   n_points=n_points, n_paths=n_paths)
 
 
 __all__ = ["Dataset", "DatasetError", "include_data", "generate_datasets", "load_dataset",

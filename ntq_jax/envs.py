@@ -28,7 +28,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ntq_jax import files, geometry, queries as Q
+from ntq_jax import artifacts, geometry, queries as Q
 from ntq_jax.geometry import World
 from ntq_jax.robots import Robot, robot_from_json
 from ntq_jax.robots.batch import distance_batch, is_valid_batch, steer_to_batch
@@ -63,7 +63,8 @@ class Env:
     def dim(self) -> int:
         return self.robot.dim
 
-    def _pad(self, padding) -> float:
+    def resolve_padding(self, padding: float | None) -> float:
+        """``padding`` as a number: None is the environment's own (data-generation) padding."""
         p = self.padding if padding is None else float(padding)
         if not (math.isfinite(p) and p >= 0):
             raise ValueError(f"padding must be a finite number >= 0, got {padding!r}")
@@ -79,14 +80,14 @@ class Env:
     def is_valid(self, states, padding: float | None = None) -> Array:
         """``(N, d) -> (N,)`` bool: in bounds and clear of obstacles (False for NaN/inf)."""
         return is_valid_batch(self.robot, self.world, self._states(states, "states"),
-                              self._pad(padding))
+                              self.resolve_padding(padding))
 
     def steer_to(self, a, b, padding: float | None = None) -> Array:
         """``(N, d), (N, d) -> (N,)`` bool: True where the straight connection is collision-free."""
         a, b = self._states(a, "a"), self._states(b, "b")
         if a.shape != b.shape:
             raise ValueError(f"a and b must have the same shape, got {a.shape} and {b.shape}")
-        return steer_to_batch(self.robot, self.world, a, b, self._pad(padding))
+        return steer_to_batch(self.robot, self.world, a, b, self.resolve_padding(padding))
 
     def distance(self, a, b) -> Array:
         """``(N, d), (N, d) -> (N,)``: the robot's cost metric."""
@@ -94,22 +95,22 @@ class Env:
 
     def rasterize(self, resolution: float, padding: float | None = None) -> np.ndarray:
         """Occupancy grid ``(H, W)`` bool of the workspace (point robot geometry)."""
-        return geometry.rasterize(self.world, resolution, self._pad(padding))
+        return geometry.rasterize(self.world, resolution, self.resolve_padding(padding))
 
     # -- sampling ------------------------------------------------------------
     def sample_states(self, key: Array, n: int, padding: float | None = None) -> np.ndarray:
         """``n`` uniform valid states ``(n, d)``."""
-        return Q.sample_states(self.robot, self.world, key, n, self._pad(padding))
+        return Q.sample_states(self.robot, self.world, key, n, self.resolve_padding(padding))
 
     def sample_queries(self, key: Array, n: int, p_nt: float = 0.0,
                        padding: float | None = None, n_max: int = Q.DEFAULT_N_MAX):
         """``n`` queries of Alg. 2 ``((n, 2, d), kind (n,) int8)``; see :mod:`ntq_jax.queries`."""
-        return Q.sample_queries(self.robot, self.world, key, n, p_nt, self._pad(padding), n_max)
+        return Q.sample_queries(self.robot, self.world, key, n, p_nt, self.resolve_padding(padding), n_max)
 
     def gamma_nt(self, key: Array, n: int, padding: float | None = None,
                  chunk: int | None = None, progress=None) -> Q.GammaEstimate:
         """gamma_nt over ``n`` uniform queries, with its Wilson 95% interval."""
-        return Q.gamma_nt(self.robot, self.world, key, n, self._pad(padding), chunk, progress)
+        return Q.gamma_nt(self.robot, self.world, key, n, self.resolve_padding(padding), chunk, progress)
 
     # -- JSON ------------------------------------------------------------------
     def to_json(self) -> dict[str, Any]:
@@ -125,7 +126,7 @@ class Env:
 
     def save_json(self, path: str | os.PathLike) -> Path:
         """Writes :meth:`to_json` atomically (temporary file, then rename)."""
-        return files.write_json(path, self.to_json())
+        return artifacts.write_json(path, self.to_json())
 
     @staticmethod
     def from_json(spec: dict[str, Any], where: str = "environment") -> "Env":

@@ -43,13 +43,13 @@ import jax.numpy as jnp
 import numpy as np
 from jax.tree_util import Partial
 
-from ntq_jax import files
+from ntq_jax import artifacts
 from ntq_jax import neural_planner as NP
+from ntq_jax.types import PlanStatus
 from ntq_jax.queries import wilson_interval
 
 EVAL_TAG = 0x7E57  # key tag of the test queries (training uses other streams)
 KINDS = ("uniform", "nontrivial")
-SOLVED = 0  # reference planner status (ntq_jax.planners contract)
 
 
 def env_slug(name: str) -> str:
@@ -134,7 +134,7 @@ def _tag(slug: str) -> int:
 def test_queries(env, cfg, slug: str, out_dir: Path) -> dict[str, np.ndarray]:
     """``{"uniform": (K, 2, d), "nontrivial": (K, 2, d)}``, cached in ``queries.npz``."""
     ev = cfg.eval
-    qpad = env._pad(ev.query_padding)
+    qpad = env.resolve_padding(ev.query_padding)
     fp = _fp(slug, ev.k_test, qpad, cfg.seed, cfg.sampling.n_max, env.to_json())
     f = Path(out_dir) / "queries.npz"
     got = load_npz(f, fp)
@@ -146,7 +146,7 @@ def test_queries(env, cfg, slug: str, out_dir: Path) -> dict[str, np.ndarray]:
         q, _ = env.sample_queries(jax.random.fold_in(key, i), ev.k_test, float(i), padding=qpad,
                                   n_max=cfg.sampling.n_max)
         out[kind] = np.asarray(q, np.float32)
-    files.save_npz(f, fingerprint=fp, query_padding=qpad, **out)
+    artifacts.save_npz(f, fingerprint=fp, query_padding=qpad, **out)
     return out
 
 
@@ -174,7 +174,7 @@ def reference_plans(env, cfg, env_name: str, slug: str, queries: dict, out_dir: 
         if env.robot.kind == "point":
             opt = _visgraph(env, q)
             out[f"{kind}_opt_costs"] = np.asarray(opt.costs, np.float64)
-    files.save_npz(f, **out)
+    artifacts.save_npz(f, **out)
     return load_npz(f)
 
 
@@ -214,7 +214,7 @@ def metrics(success: np.ndarray, costs: np.ndarray, cause: np.ndarray, ref_costs
     k = int(len(success))
     s = int(np.sum(success))
     lo, hi = wilson_interval(s, k)
-    ref_ok = (ref_status == SOLVED) & np.isfinite(ref_costs) & (ref_costs > 0)
+    ref_ok = (ref_status == PlanStatus.SOLVED) & np.isfinite(ref_costs) & (ref_costs > 0)
     both = success & ref_ok
     out = {
         "k_test": k, "successes": s, "success_ratio": s / k if k else float("nan"),
@@ -222,8 +222,8 @@ def metrics(success: np.ndarray, costs: np.ndarray, cause: np.ndarray, ref_costs
         "cost_ratio": float(np.mean(costs[both] / ref_costs[both])) if both.any() else None,
         "cost_ratio_n": int(both.sum()),
         "failures": {NP.CAUSES[c]: int(np.sum(cause == c)) for c in NP.CAUSES if c != NP.SUCCESS},
-        "reference_failed": int(np.sum(~(ref_status == SOLVED))),
-        "reference_success_ratio": float(np.mean(ref_status == SOLVED)) if k else float("nan"),
+        "reference_failed": int(np.sum(~(ref_status == PlanStatus.SOLVED))),
+        "reference_success_ratio": float(np.mean(ref_status == PlanStatus.SOLVED)) if k else float("nan"),
     }
     if opt_costs is not None:
         ok = success & np.isfinite(opt_costs) & (opt_costs > 0)
@@ -255,7 +255,7 @@ def _gamma(env, cfg, data_env_dir, slug: str, out_dir: Path) -> dict:
     e = env.gamma_nt(key, cfg.eval.gamma_queries, padding=0.0)
     g = {"gamma": float(e.gamma), "ci95": [float(x) for x in e.ci95], "queries": int(e.queries),
          "source": "eval"}
-    files.write_text(f, json.dumps(g))
+    artifacts.write_text(f, json.dumps(g))
     return g
 
 
@@ -315,7 +315,7 @@ def evaluate_env(env, ensemble, cfg, run_dir, *, env_name: str, data_env_dir=Non
                                seconds=res.seconds, compile_seconds=res.compile_seconds)
                     if f"{kind}_opt_costs" in ref:
                         got["opt_costs"] = ref[f"{kind}_opt_costs"]
-                    files.save_npz(f, **got)
+                    artifacts.save_npz(f, **got)
                     log(f"  {slug} {model_name(m)} {kind:10s} steer={steer!s:5s}: success "
                         f"{res.success.mean():.3f}, {res.seconds / max(len(q), 1) * 1e3:.2f} "
                         f"ms/query (+{res.compile_seconds:.1f} s compile)")

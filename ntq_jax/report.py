@@ -26,7 +26,7 @@ from typing import Sequence
 
 import numpy as np
 
-from ntq_jax import files
+from ntq_jax import artifacts, plotting
 from ntq_jax.evaluate import KINDS, load_npz
 
 TITLES = {"point": "Point robot planning", "rigid": "Rigid body planning",
@@ -160,135 +160,6 @@ def results_csv(rows) -> str:
 
 
 # ---------------------------------------------------------------------------
-# Figures
-# ---------------------------------------------------------------------------
-
-def _plt():
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    return plt
-
-
-def _save(fig, path: Path):
-    files.save_figure(fig, path, dpi=110, bbox_inches="tight")
-
-
-def success_figure(rows, path: Path, steer: bool = True):
-    """Grouped bars: success ratio per environment and model, with 95% intervals."""
-    plt = _plt()
-    rows = [r for r in rows if r["steer"] == steer]
-    if not rows:
-        return None
-    envs = list(dict.fromkeys(r["env"] for r in rows))
-    models = sorted({r["model"] for r in rows}, key=lambda s: int(s.split("_")[-1]))
-    fig, axes = plt.subplots(1, 2, figsize=(11, 3.8), sharey=True)
-    width = 0.8 / max(len(models), 1)
-    for ax, kind in zip(axes, KINDS):
-        for j, m in enumerate(models):
-            ys, lo, hi = [], [], []
-            for e in envs:
-                r = next((r for r in rows if r["env"] == e and r["model"] == m
-                          and r["query_kind"] == kind), None)
-                y = r["success_ratio"] if r else np.nan
-                ci = r["success_ci95"] if r else (np.nan, np.nan)
-                ys.append(y)
-                lo.append(max(y - ci[0], 0.0))
-                hi.append(max(ci[1] - y, 0.0))
-            x = np.arange(len(envs)) + (j - (len(models) - 1) / 2) * width
-            ax.bar(x, ys, width, yerr=[lo, hi], capsize=2, label=m)
-        gam = {r["env"]: r.get("gamma_nt") for r in rows}
-        ax.set_xticks(np.arange(len(envs)),
-                      [f"{e}\n$\\gamma_{{nt}}$={_f(gam[e], 2)}" for e in envs])
-        ax.set_title(KIND_TITLE[kind] + ("" if steer else " (no steerTo)"))
-        ax.set_ylim(0, 1.05)
-        ax.grid(axis="y", alpha=0.3)
-    axes[0].set_ylabel("success ratio (95% interval)")
-    handles, labels = axes[0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="upper center", ncol=len(models), fontsize=8,
-               bbox_to_anchor=(0.5, 1.06))
-    _save(fig, path)
-    plt.close(fig)
-    return path
-
-
-def _draw_map(ax, env_json: dict):
-    import matplotlib.patches as mp
-    kind = env_json["robot"]["kind"]
-    if kind == "nlink":  # joint space: no obstacle drawing
-        ax.set_xlim(-math.pi, math.pi)
-        ax.set_ylim(-math.pi, math.pi)
-        ax.set_xlabel("joint 1 (rad)")
-        ax.set_ylabel("joint 2 (rad)")
-        return
-    (x0, x1), (y0, y1) = env_json["bounds"]
-    for cx, cy, hw, hh in env_json.get("boxes", []):
-        ax.add_patch(mp.Rectangle((cx - hw, cy - hh), 2 * hw, 2 * hh, color="0.35"))
-    for cx, cy, r in env_json.get("discs", []):
-        ax.add_patch(mp.Circle((cx, cy), r, color="0.35"))
-    ax.set_xlim(x0, x1)
-    ax.set_ylim(y0, y1)
-    ax.set_aspect("equal")
-
-
-def examples_figure(run_dir: Path, env, slug: str, models: Sequence[str], path: Path,
-                    steer: bool = True, n_examples: int = 4):
-    """Neural paths (each model) beside the reference paths on non-trivial test queries."""
-    plt = _plt()
-    run_dir = Path(run_dir)
-    ref = load_npz(run_dir / "eval" / slug / "reference.npz")
-    files = {m: load_npz(run_dir / "paths" / slug / f"{m}_nontrivial{'' if steer else '_nosteer'}.npz")
-             for m in models}
-    files = {m: z for m, z in files.items() if z is not None}
-    if ref is None or not files:
-        return None
-    ok = ref["nontrivial_status"] == 0
-    pick = np.flatnonzero(ok)[:n_examples]
-    ej = env.to_json()
-    fig, axes = plt.subplots(1, max(len(pick), 1), figsize=(3.6 * max(len(pick), 1), 3.8))
-    axes = np.atleast_1d(axes)
-    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-    for ax, i in zip(axes, pick):
-        _draw_map(ax, ej)
-        rp = ref["nontrivial_paths"][i, : ref["nontrivial_lengths"][i]]
-        ax.plot(rp[:, 0], rp[:, 1], "k--", lw=2, label=f"reference ({ref['nontrivial_costs'][i]:.2f})")
-        for j, (m, z) in enumerate(files.items()):
-            p = z["paths"][i, : z["lengths"][i]]
-            good = bool(z["success"][i])
-            lab = f"{m} ({z['costs'][i]:.2f})" if good else f"{m} (failed)"
-            ax.plot(p[:, 0], p[:, 1], "-" if good else ":", color=colors[j % len(colors)], lw=1.3,
-                    marker=".", ms=4, label=lab)
-        s, g = ref["nontrivial_paths"][i, 0], rp[-1]
-        ax.plot(*s[:2], "o", color="green", ms=7)
-        ax.plot(*g[:2], "*", color="blue", ms=10)
-        ax.legend(fontsize=6, loc="best")
-        ax.set_title(f"{env.name}: non-trivial query {i}", fontsize=9)
-    _save(fig, path)
-    plt.close(fig)
-    return path
-
-
-def queries_figure(run_dir: Path, env, slug: str, path: Path):
-    """The test query distributions: starts (green) and goals (blue), per kind."""
-    plt = _plt()
-    q = load_npz(Path(run_dir) / "eval" / slug / "queries.npz")
-    if q is None:
-        return None
-    ej = env.to_json()
-    fig, axes = plt.subplots(1, 2, figsize=(8, 4))
-    for ax, kind in zip(axes, KINDS):
-        _draw_map(ax, ej)
-        qq = q[kind]
-        ax.scatter(qq[:, 0, 0], qq[:, 0, 1], s=4, c="green", label="start")
-        ax.scatter(qq[:, 1, 0], qq[:, 1, 1], s=4, c="blue", label="goal")
-        ax.set_title(f"{env.name}: {KIND_TITLE[kind].lower()} test queries", fontsize=9)
-    axes[0].legend(fontsize=7, loc="upper right")
-    _save(fig, path)
-    plt.close(fig)
-    return path
-
-
-# ---------------------------------------------------------------------------
 # Everything
 # ---------------------------------------------------------------------------
 
@@ -307,18 +178,18 @@ def write_report(run_dir, rows: list[dict], envs: dict | None = None, meta: dict
     run_dir = Path(run_dir)
     out = {}
     out["results.json"] = run_dir / "results.json"
-    files.write_text(out["results.json"], json.dumps({"meta": meta or {}, "rows": rows}, indent=1,
+    artifacts.write_text(out["results.json"], json.dumps({"meta": meta or {}, "rows": rows}, indent=1,
                                                default=str))
     out["results.csv"] = run_dir / "results.csv"
-    files.write_text(out["results.csv"], results_csv(rows))
+    artifacts.write_text(out["results.csv"], results_csv(rows))
     out["tables.md"] = run_dir / "tables.md"
-    files.write_text(out["tables.md"], tables_md(rows))
+    artifacts.write_text(out["tables.md"], tables_md(rows))
     out["tables.tex"] = run_dir / "tables.tex"
-    files.write_text(out["tables.tex"], tables_tex(rows))
+    artifacts.write_text(out["tables.tex"], tables_tex(rows))
     if figures:
         figs = run_dir / "figures"
         for steer in sorted({r["steer"] for r in rows}, reverse=True):
-            p = success_figure(rows, figs / f"success_ratio{'' if steer else '_nosteer'}.png", steer)
+            p = plotting.success_figure(rows, figs / f"success_ratio{'' if steer else '_nosteer'}.png", steer)
             if p:
                 out[p.name] = p
         for name, env in (envs or {}).items():
@@ -326,10 +197,15 @@ def write_report(run_dir, rows: list[dict], envs: dict | None = None, meta: dict
             models = sorted({r["model"] for r in rows if r["env"] == name},
                             key=lambda s: int(s.split("_")[-1]))
             steer = any(r["steer"] for r in rows if r["env"] == name)
-            p = examples_figure(run_dir, env, slug, models, figs / f"examples_{slug}.png", steer)
+            suffix = "" if steer else "_nosteer"
+            saved = {m: load_npz(run_dir / "paths" / slug / f"{m}_nontrivial{suffix}.npz")
+                     for m in models}
+            p = plotting.examples_figure(env, load_npz(run_dir / "eval" / slug / "reference.npz"),
+                                         saved, figs / f"examples_{slug}.png")
             if p:
                 out[p.name] = p
-            p = queries_figure(run_dir, env, slug, figs / f"queries_{slug}.png")
+            p = plotting.queries_figure(env, load_npz(run_dir / "eval" / slug / "queries.npz"),
+                                        figs / f"queries_{slug}.png")
             if p:
                 out[p.name] = p
     return out

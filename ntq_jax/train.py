@@ -71,7 +71,7 @@ import numpy as np
 import optax
 from flax import nnx
 
-from ntq_jax import files, models
+from ntq_jax import artifacts, models, plotting
 from ntq_jax.config import ModelConfig, TrainConfig
 
 Array = jax.Array
@@ -640,7 +640,7 @@ def write_history(out: Path, records: list[dict], labels: Sequence[str], png: bo
     The figure (matplotlib, Agg backend) costs far more than the text files, so the
     training loop redraws it only at checkpoints and at the end.
     """
-    files.write_text(out / "history.jsonl", "".join(json.dumps(r) + "\n" for r in records))
+    artifacts.write_text(out / "history.jsonl", "".join(json.dumps(r) + "\n" for r in records))
     lines = ["step,member,dataset,epoch,train_loss,val_loss"]
     fmt = lambda v: "" if v is None else format(v, ".8g")
     for r in records:
@@ -649,32 +649,9 @@ def write_history(out: Path, records: list[dict], labels: Sequence[str], png: bo
             if t is None and v is None:
                 continue
             lines.append(f"{r['step']},{m},{lab},{r['epoch'][m]:.6g},{fmt(t)},{fmt(v)}")
-    files.write_text(out / "history.csv", "\n".join(lines) + "\n")
-    if not png:
-        return
-    try:  # the object API with the Agg canvas: no pyplot, no global backend switch
-        from matplotlib.backends.backend_agg import FigureCanvasAgg
-        from matplotlib.figure import Figure
-    except ImportError:  # pragma: no cover
-        return
-    h = _history(records, len(labels))
-    fig = Figure(figsize=(6.4, 4.0))
-    FigureCanvasAgg(fig)
-    ax = fig.add_subplot()
-    for m, lab in enumerate(labels):
-        ok = np.isfinite(h.train_loss[:, m])
-        line, = ax.plot(h.epoch[ok, m], h.train_loss[ok, m], "--", lw=1, label=f"{lab} train")
-        okv = np.isfinite(h.val_loss[:, m])
-        if okv.any():
-            ax.plot(h.epoch[okv, m], h.val_loss[okv, m], "-", lw=1.5, color=line.get_color(),
-                    label=f"{lab} val")
-    ax.set_xlabel("epoch")
-    ax.set_ylabel("loss (normalised MSE)")
-    ax.set_yscale("log")
-    ax.legend(fontsize=7, ncol=2)
-    ax.grid(alpha=0.3)
-    fig.tight_layout()
-    files.save_figure(fig, out / "curves.png", dpi=110)
+    artifacts.write_text(out / "history.csv", "\n".join(lines) + "\n")
+    if png:
+        plotting.curves_figure(_history(records, len(labels)), labels, out / "curves.png")
 
 
 # ---------------------------------------------------------------------------
@@ -924,7 +901,7 @@ def train_from_folder(env_dir: str | os.PathLike, cfg, out_dir: str | os.PathLik
     datasets = data_mod.load_datasets(env_dir)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    files.write_text(out / "config.json", json.dumps(cfg.to_dict(), indent=1))
+    artifacts.write_text(out / "config.json", json.dumps(cfg.to_dict(), indent=1))
     return train_ensemble(datasets, env, cfg.model, cfg.train, seed=cfg.seed, ckpt_dir=out,
                           progress=progress, labels=[f"D{i}" for i in range(len(datasets))],
                           shard=shard, resolved_config=cfg.to_dict())

@@ -51,11 +51,10 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-import jax  # noqa: E402
+import jax
 
-from ntq_jax.planners.astar import SOLVED, astar, prepare_grid  # noqa: E402
+from ntq_jax.planners.astar import SOLVED, astar, prepare_grid
 
 SQ2 = math.sqrt(2.0)
 

@@ -34,17 +34,16 @@ import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-import jax  # noqa: E402
-import jax.numpy as jnp  # noqa: E402
-import numpy as np  # noqa: E402
+import jax
+import jax.numpy as jnp
+import numpy as np
 
-import ntq_jax as nj  # noqa: E402
-from ntq_jax import files  # noqa: E402
-from ntq_jax import queries as Q  # noqa: E402
-from ntq_jax.geometry import KERNEL_COMPILER_OPTIONS  # noqa: E402
-from ntq_jax.robots.batch import steer_to_cm  # noqa: E402
+import ntq_jax as nj
+from ntq_jax import artifacts
+from ntq_jax import queries as Q
+from ntq_jax.geometry import KERNEL_COMPILER_OPTIONS
+from ntq_jax.robots.batch import steer_to_cm
 
 # The fixed benchmark map: 7 boxes (walls with doors and a block) on 20 x 20.
 MAP = {"name": "bench7", "robot": {"kind": "point"}, "bounds": [[0, 20], [0, 20]],
@@ -381,7 +380,7 @@ def main(argv=None) -> int:
         out = {"command": " ".join([Path(sys.argv[0]).name] + (argv if argv is not None else sys.argv[1:])),
                "jax": jax.__version__, "cpus": os.cpu_count(), "load_average": [load0[0], load1[0]],
                "map": MAP, "rows": rows}
-        files.write_json(args.json, out)
+        artifacts.write_json(args.json, out)
     return 0
 
 

@@ -19,7 +19,6 @@ import argparse
 import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 
 def main(argv=None) -> int:
@@ -38,7 +37,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
 
     from ntq_jax import config as C
-    from ntq_jax import data, files, make_env
+    from ntq_jax import artifacts, data, make_env
     from ntq_jax.envs import EnvError
 
     overrides = list(args.set)
@@ -70,7 +69,7 @@ def main(argv=None) -> int:
                   f"samples, pruned {st['fraction_pruned']:.1%}, mean waypoints "
                   f"{st['mean_waypoints']:.2f}, blocked {st['blocked_fraction']:.3f} "
                   f"(gamma_nt {st['gamma_nt']})")
-    files.write_json(out / "generate_summary.json", results, default=str)
+    artifacts.write_json(out / "generate_summary.json", results, default=str)
     return 0
 
 

@@ -18,9 +18,8 @@ import argparse
 import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from ntq_jax import files  # noqa: E402
+from ntq_jax import artifacts
 
 
 def _count(text: str) -> int:
@@ -87,7 +86,7 @@ def main(argv=None) -> int:
                "queries_per_second": est.queries_per_second,
                "candidates": est.candidates,
                "candidates_per_second": est.candidates_per_second}
-        files.write_json(args.json, out)
+        artifacts.write_json(args.json, out)
     return 0
 
 

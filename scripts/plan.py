@@ -20,9 +20,9 @@ import argparse
 import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from ntq_jax import files  # noqa: E402
+import ntq_jax as nj
+from ntq_jax import artifacts
 
 
 class PlanError(ValueError):
@@ -97,32 +97,18 @@ def plan_one(run, model: int, start, goal, *, env_name=None, steer: bool = True,
 
 
 def _draw(env, res, s, g, model, png: Path):
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
     import numpy as np
 
-    from ntq_jax.report import _draw_map
-    fig, ax = plt.subplots(figsize=(5, 5))
-    _draw_map(ax, env.to_json())
+    from ntq_jax import plotting
+    from ntq_jax.types import PlanStatus
+
+    optimum = None
     if env.robot.kind == "point":
-        from ntq_jax.planners.visgraph import plan_visgraph
-        opt = plan_visgraph(env, np.stack([s, g])[None], padding=0.0)
-        if opt.status[0] == 0:
-            p = opt.path(0)
-            ax.plot(p[:, 0], p[:, 1], "k--", lw=2, label=f"optimum ({opt.costs[0]:.3f})")
-    p = res.path(0)
-    ok = bool(res.success[0])
-    ax.plot(p[:, 0], p[:, 1], "-" if ok else ":", color="tab:red", marker=".",
-            label=f"PNet_{model} ({res.costs[0]:.3f})" if ok else f"PNet_{model} (failed)")
-    ax.plot(*s[:2], "o", color="green", ms=8)
-    ax.plot(*g[:2], "*", color="blue", ms=12)
-    ax.legend(fontsize=8)
-    png.parent.mkdir(parents=True, exist_ok=True)
-    tmp = png.with_name(png.stem + ".tmp.png")
-    fig.savefig(tmp, dpi=110, bbox_inches="tight")
-    tmp.replace(png)
-    plt.close(fig)
+        opt = nj.plan(env, np.stack([s, g])[None], "visgraph", padding=0.0)
+        if opt.status[0] == PlanStatus.SOLVED:
+            optimum = (opt.path(0), float(opt.costs[0]))
+    plotting.query_figure(env, res.path(0), bool(res.success[0]), float(res.costs[0]),
+                          f"PNet_{model}", s, g, png, optimum=optimum)
 
 
 def main(argv=None) -> int:
@@ -140,7 +126,7 @@ def main(argv=None) -> int:
                     help="do not use JAX's persistent compilation cache")
     args = ap.parse_args(argv)
     if not args.no_compile_cache:
-        files.enable_compile_cache()
+        artifacts.enable_compile_cache()
     from ntq_jax.config import ConfigError
     from ntq_jax.envs import EnvError
     from ntq_jax.neural_planner import CAUSES

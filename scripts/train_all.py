@@ -36,9 +36,8 @@ import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from ntq_jax import files  # noqa: E402
+from ntq_jax import artifacts
 
 
 DEFAULT = {
@@ -84,8 +83,8 @@ def prepare_run(cfg, out) -> Path:
                 f"{run} holds a run with another config (hash {info.get('config_hash')}, this one "
                 f"{cfg.hash()}); pass a new --out, or delete the folder to start over")
     info.update({"config_hash": cfg.hash(), "stages": info.get("stages", {})})
-    files.write_text(info_f, json.dumps(info, indent=1))
-    files.write_text(run / "config.yaml", yaml.safe_dump(cfg.to_dict(), sort_keys=False))
+    artifacts.write_text(info_f, json.dumps(info, indent=1))
+    artifacts.write_text(run / "config.yaml", yaml.safe_dump(cfg.to_dict(), sort_keys=False))
     return run
 
 
@@ -93,7 +92,7 @@ def _mark(run: Path, stage: str, **fields):
     f = run / "run.json"
     info = json.loads(f.read_text())
     info["stages"][stage] = {"done": True, "time": time.strftime("%Y-%m-%dT%H:%M:%S"), **fields}
-    files.write_text(f, json.dumps(info, indent=1))
+    artifacts.write_text(f, json.dumps(info, indent=1))
 
 
 def run_pipeline(cfg, run: Path, *, progress: bool = True, figures: bool = True,
@@ -175,7 +174,7 @@ def main(argv=None) -> int:
     from ntq_jax.train import use_cpu_devices
     use_cpu_devices(args.cpu_devices)  # before any JAX operation
     if not args.no_compile_cache:
-        files.enable_compile_cache()
+        artifacts.enable_compile_cache()
 
     from ntq_jax.config import ConfigError
     try:

@@ -1,4 +1,4 @@
-"""Evaluation metrics, cached test queries / references, and the report files.
+"""Evaluation metrics, cached test queries / references, and the report artifacts.
 
 No neural planning here (the end-to-end test in test_train_all.py runs
 evaluate_env with a trained ensemble); these tests are fast and exact.
@@ -11,7 +11,7 @@ import jax
 import numpy as np
 import pytest
 
-from ntq_jax import config, files, make_env
+from ntq_jax import artifacts, config, make_env
 from ntq_jax import evaluate as E
 from ntq_jax import report as R
 from ntq_jax.neural_planner import INFEASIBLE, NO_PATH, SUCCESS
@@ -132,7 +132,7 @@ def test_report_layout(tmp_path):
 
 def test_npz_roundtrip_rejects_other_fingerprints(tmp_path):
     f = tmp_path / "a.npz"
-    files.save_npz(f, fingerprint="abc", x=np.arange(3))
+    artifacts.save_npz(f, fingerprint="abc", x=np.arange(3))
     assert E.load_npz(f, "abc")["x"].tolist() == [0, 1, 2]
     assert E.load_npz(f, "other") is None
     f.write_bytes(b"truncated")

@@ -65,7 +65,7 @@ def assert_contract(env, q, res: PlanResult, padding):
 @pytest.mark.parametrize("padding", [None, 0.0])
 def test_paths_collision_free_with_exact_endpoints(point3, queries, planner, padding):
     res = plan(point3, queries, planner, padding=padding)
-    assert_contract(point3, queries, res, point3._pad(padding))
+    assert_contract(point3, queries, res, point3.resolve_padding(padding))
     # every preset query is valid at the data-generation padding (so also at 0) and solvable
     assert res.solved.mean() >= 0.98, np.bincount(res.status, minlength=4)
 

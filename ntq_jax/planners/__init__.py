@@ -66,39 +66,13 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
-SOLVED, NO_PATH, TIMEOUT, INVALID = 0, 1, 2, 3
-STATUS_NAMES = {SOLVED: "solved", NO_PATH: "no_path", TIMEOUT: "timeout", INVALID: "invalid"}
+from ntq_jax.batching import map_chunks
+from ntq_jax.planners.verify import CHECK_CHUNK, check_paths, finalize, valid_queries
+from ntq_jax.types import STATUS_NAMES, PlannerFn, PlanResult, PlanStatus
 
+SOLVED, NO_PATH, TIMEOUT, INVALID = (PlanStatus.SOLVED, PlanStatus.NO_PATH, PlanStatus.TIMEOUT,
+                                     PlanStatus.INVALID)
 
-class PlanResult(NamedTuple):
-    """Per-query planning results (K queries).
-
-    Attributes:
-        paths: ``(K, L, d)`` float32 waypoints, start first and goal last (exactly
-            the query's states), NaN-padded after ``lengths[i]``.
-        lengths: ``(K,)`` int32 number of waypoints (0 unless solved).
-        costs: ``(K,)`` float64 path cost in the ``env.distance`` metric, inf unless solved.
-        status: ``(K,)`` int8: SOLVED 0, NO_PATH 1, TIMEOUT 2, INVALID 3.
-        info: planner-specific statistics (times, counts).
-    """
-
-    paths: np.ndarray
-    lengths: np.ndarray
-    costs: np.ndarray
-    status: np.ndarray
-    info: dict
-
-    @property
-    def solved(self) -> np.ndarray:
-        """``(K,)`` bool, status == SOLVED."""
-        return self.status == SOLVED
-
-    def path(self, i: int) -> np.ndarray | None:
-        """Query ``i``'s path ``(lengths[i], d)``, or None unless solved."""
-        return self.paths[i, :self.lengths[i]] if self.status[i] == SOLVED else None
-
-
-PlannerFn = Callable[..., PlanResult]
 _REGISTRY: dict[str, PlannerFn] = {}
 
 
@@ -144,108 +118,11 @@ def plan(env, queries, planner: str = "astar", *, padding: float | None = None, 
     """
     if planner not in _REGISTRY:
         raise ValueError(f"unknown planner {planner!r}; available: {', '.join(available_planners())}")
-    pad = env._pad(padding)
+    pad = env.resolve_padding(padding)
     q = np.asarray(queries, np.float32)
     if q.ndim != 3 or q.shape[1:] != (2, env.dim):
         raise ValueError(f"queries must have shape (K, 2, {env.dim}) for {env.name}, got {q.shape}")
     return _REGISTRY[planner](env, q, padding=pad, seed=int(seed), **options)
-
-
-# ---------------------------------------------------------------------------
-# Shared helpers
-# ---------------------------------------------------------------------------
-
-_CHECK_CHUNK = 2048
-
-
-def _bucketed(fn, *arrays: np.ndarray, chunk: int = _CHECK_CHUNK) -> np.ndarray:
-    """Calls a jitted row-wise ``fn`` on ``(N, ...)`` arrays in fixed-size padded chunks.
-
-    One shape per function, so every batch size reuses one compiled program.
-    """
-    n = arrays[0].shape[0]
-    if n == 0:
-        return np.zeros(0, bool)
-    out = []
-    for lo in range(0, n, chunk):
-        m = min(chunk, n - lo)
-        bufs = []
-        for a in arrays:
-            b = np.zeros((chunk,) + a.shape[1:], a.dtype)
-            b[:m] = a[lo:lo + m]
-            bufs.append(b)
-        out.append(fn(*bufs))
-    return np.concatenate([np.asarray(o)[:min(chunk, n - i * chunk)] for i, o in enumerate(out)])
-
-
-def valid_queries(env, q: np.ndarray, padding: float) -> np.ndarray:
-    """``(K,)`` bool: start and goal finite and valid at ``padding``."""
-    k, d = q.shape[0], q.shape[2]
-    flat = q.reshape(2 * k, d)
-    ok = _bucketed(lambda x: env.is_valid(x, padding=padding), flat).astype(bool)
-    return ok.reshape(k, 2).all(axis=1) & np.isfinite(flat).all(axis=1).reshape(k, 2).all(axis=1)
-
-
-def check_paths(env, paths: np.ndarray, lengths: np.ndarray, padding: float):
-    """Verifies NaN-padded paths with the exact kernel and computes their costs.
-
-    Args:
-        env: the environment.
-        paths: ``(K, L, d)`` float32; lengths ``(K,)`` waypoint counts.
-        padding: planning clearance.
-
-    Returns:
-        ``(ok (K,) bool, costs (K,) float64)``: ``ok`` where the path has at least 2
-        waypoints, all finite, and every segment passes ``env.steer_to`` in the
-        travelled direction; costs are float64 sums of segment lengths in the
-        robot's metric (exact float64 Euclidean for the point robot), inf where not ok.
-    """
-    k, l, d = paths.shape
-    lengths = np.asarray(lengths)
-    seg = np.arange(max(l - 1, 0))[None, :] < (lengths[:, None] - 1)  # (K, L-1)
-    rows, cols = np.nonzero(seg)
-    a = paths[rows, cols]
-    b = paths[rows, cols + 1]
-    finite = np.isfinite(a).all(1) & np.isfinite(b).all(1)
-    free = _bucketed(lambda x, y: env.steer_to(x, y, padding=padding), a, b).astype(bool)
-    if env.robot.kind == "point":
-        dist = np.linalg.norm(b.astype(np.float64) - a.astype(np.float64), axis=1)
-    else:
-        dist = _bucketed(lambda x, y: env.distance(x, y), a, b).astype(np.float64)
-    bad = np.zeros(k, bool)
-    np.logical_or.at(bad, rows, ~(free & finite))
-    costs = np.zeros(k)
-    np.add.at(costs, rows, dist)
-    ok = (lengths >= 2) & ~bad
-    return ok, np.where(ok, costs, np.inf)
-
-
-def _finalize(q, paths, lengths, status, info, env, padding) -> PlanResult:
-    """Forces exact endpoints, verifies SOLVED paths and assembles a PlanResult."""
-    k, d = q.shape[0], q.shape[2]
-    lengths = np.where(status == SOLVED, lengths, 0).astype(np.int32)
-    width = max(2, int(lengths.max(initial=0)))
-    out = np.full((k, width, d), np.nan, np.float32)
-    w = min(width, paths.shape[1])
-    out[:, :w] = paths[:, :w]
-    keep = np.arange(width)[None, :] < lengths[:, None]
-    out = np.where(keep[:, :, None], out, np.nan).astype(np.float32)
-    solved = lengths >= 2
-    rows = np.flatnonzero(solved)
-    endpoints_exact = (np.array_equal(out[rows, 0], q[rows, 0])
-                       and np.array_equal(out[rows, lengths[rows] - 1], q[rows, 1]))
-    if not endpoints_exact:  # planners must return the exact states; enforce it
-        out[rows, 0] = q[rows, 0]
-        out[rows, lengths[rows] - 1] = q[rows, 1]
-    ok, costs = check_paths(env, out, lengths, padding)
-    status = status.astype(np.int8).copy()
-    rejected = (status == SOLVED) & ~ok
-    status[rejected] = NO_PATH
-    info["rejected"] = int(rejected.sum())
-    lengths = np.where(status == SOLVED, lengths, 0).astype(np.int32)
-    out[status != SOLVED] = np.nan
-    costs = np.where(status == SOLVED, costs, np.inf)
-    return PlanResult(out, lengths, costs, status, info)
 
 
 # ---------------------------------------------------------------------------
@@ -286,7 +163,7 @@ def config_grid(env, resolution: float, padding: float) -> ConfigGrid:
         ys = lo[1] + (np.arange(h) + 0.5) * resolution
         gx, gy = np.meshgrid(xs, ys)
         pts = np.stack([gx.ravel(), gy.ravel()], 1).astype(np.float32)
-        occ = ~_bucketed(lambda x: env.is_valid(x, padding=padding), pts).astype(bool).reshape(h, w)
+        occ = ~map_chunks(lambda x: env.is_valid(x, padding=padding), pts, chunk=CHECK_CHUNK).astype(bool).reshape(h, w)
     occ = np.asarray(occ, bool)
     return ConfigGrid(occ, lo, float(resolution), prepare_grid(occ))
 
@@ -326,8 +203,8 @@ def _snap(env, grid: ConfigGrid, pts: np.ndarray, padding: float, to_cell: bool)
         if not len(idx):
             continue
         p, cen = pts[idx], centre[idx, c]
-        vis = _bucketed(lambda a, b: env.steer_to(a, b, padding=padding),
-                        *((cen, p) if to_cell else (p, cen))).astype(bool)
+        vis = map_chunks(lambda a, b: env.steer_to(a, b, padding=padding),
+                         *((cen, p) if to_cell else (p, cen)), chunk=CHECK_CHUNK).astype(bool)
         best[idx[vis]] = c[vis]
     cells = np.where(best[:, None] >= 0, cand[np.arange(n), np.maximum(best, 0)], -1)
     return cells
@@ -386,7 +263,7 @@ def _plan_astar(env, q, *, padding, seed, resolution: float = 0.1, smooth: bool 
     full_paths[idx] = paths
     full_len[idx] = lengths
     status[idx] = SOLVED
-    out = _finalize(q, full_paths, full_len, status, info, env, padding)
+    out = finalize(q, full_paths, full_len, status, info, env, padding)
     info["check_time"] = time.perf_counter() - t3
     info["time"] = time.perf_counter() - t0
     return out
@@ -420,7 +297,7 @@ def _plan_visgraph(env, q, *, padding, seed, eps: float | None = None,
             "delta": graph.delta, "build_time": t1 - t0, "plan_time": time.perf_counter() - t1}
     status = np.select([res.status == V.SOLVED, res.status == V.INVALID], [SOLVED, INVALID],
                        NO_PATH).astype(np.int8)
-    out = _finalize(q, res.paths, res.path_lengths, status, info, env, padding)
+    out = finalize(q, res.paths, res.path_lengths, status, info, env, padding)
     info["time"] = time.perf_counter() - t0
     return out
 
@@ -446,7 +323,7 @@ def _plan_bitstar(env, q, *, padding, seed, time_budget: float = 1.0, workers: i
     info = dict(res.info)
     info.update(planner="bitstar", bitstar_status=res.status, solve_times=res.solve_times,
                 planner_costs=res.planner_costs, seeds=res.seeds, time_budget=time_budget)
-    return _finalize(q, paths, lengths, status, info, env, padding)
+    return finalize(q, paths, lengths, status, info, env, padding)
 
 
 register_planner("astar", _plan_astar)

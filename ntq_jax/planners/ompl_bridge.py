@@ -914,7 +914,7 @@ def plan_bitstar(env, queries, *, time_budget: float, padding: float | None = No
         raise ValueError(f"ompl_log_level must be one of {_LOG_LEVELS}, got {ompl_log_level!r}")
     if importlib.util.find_spec("ompl") is None:
         raise ImportError("plan_bitstar needs OMPL's Python bindings: pip install 'ompl>=2.0.1'")
-    pad = env._pad(padding)
+    pad = env.resolve_padding(padding)
     n = q.shape[0]
     workers = int(workers) if workers else (os.cpu_count() or 1)
     if workers < 1:

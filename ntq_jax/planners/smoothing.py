@@ -123,7 +123,7 @@ def shortcut_paths(env, paths, lengths, *, padding: float | None = None,
         with ``L' <= L`` the longest smoothed path (at least 2 when B > 0); ``ok``
         is False where an input connection was blocked (see the module docstring).
     """
-    pad = env._pad(padding)
+    pad = env.resolve_padding(padding)
     p = np.asarray(paths, np.float32)
     n_in = np.asarray(lengths, np.int64).reshape(-1)
     if p.ndim != 3 or p.shape[2] != env.dim or p.shape[0] != n_in.shape[0]:

@@ -371,7 +371,7 @@ class VisGraph:
         """
         if env.robot.kind != "point":
             raise ValueError(f"the visibility graph plans for a point robot, got {env.robot.kind!r}")
-        pad = env._pad(padding)
+        pad = env.resolve_padding(padding)
         bounds = np.asarray(env.world.bounds, np.float64)
         if eps is None:
             eps = DEFAULT_EPS_REL * float(np.max(bounds[:, 1] - bounds[:, 0]))
@@ -495,7 +495,7 @@ def benchmark_visgraph(env, n: int = 100_000, *, padding: float = 0.0, seed: int
     """
     key = jax.random.PRNGKey(seed)
     k1, k2 = jax.random.split(key)
-    pad = env._pad(padding)
+    pad = env.resolve_padding(padding)
     q = np.stack([env.sample_states(k1, n, pad), env.sample_states(k2, n, pad)], 1)
     t0 = time.perf_counter()
     graph = VisGraph.build(env, pad, **build_options)

@@ -1,4 +1,4 @@
-"""Files on disk: atomic writes, and JAX's persistent compilation cache.
+"""Files on disk: atomic writes, fingerprints, compute-or-load, JAX's compilation cache.
 
 Every file the package writes goes through here: the content goes to a hidden
 temporary name in the same folder (``.<name>.tmp-<pid>``), is flushed and
@@ -6,6 +6,11 @@ fsynced, then renamed over the destination, and the folder is fsynced so the
 rename survives a crash. A reader therefore sees the old file or the complete
 new one, never a partial one; an interrupted writer leaves only a temporary
 file, which :func:`clean_tmp` removes.
+
+A cached result (an ``.npz`` of a planning chunk, a test-query set, a saved
+evaluation) carries the :func:`fingerprint` of everything that made it; it is
+reused only when the fingerprint matches (:func:`load_npz`,
+:func:`compute_or_load`), else computed again.
 """
 
 from __future__ import annotations
@@ -19,7 +24,8 @@ from typing import Any, Callable
 import numpy as np
 
 __all__ = ["tmp_name", "replace", "write_with", "write_bytes", "write_text", "write_json",
-           "save_npy", "save_npz", "save_figure", "clean_tmp", "sha256", "enable_compile_cache"]
+           "save_npy", "save_npz", "save_figure", "clean_tmp", "sha256", "json_default",
+           "fingerprint", "array_digest", "load_npz", "compute_or_load", "enable_compile_cache"]
 
 
 def tmp_name(path: Path) -> Path:
@@ -105,6 +111,63 @@ def sha256(path: str | os.PathLike) -> str:
         for block in iter(lambda: f.read(1 << 20), b""):
             h.update(block)
     return h.hexdigest()
+
+
+def json_default(o):
+    """``json.dumps`` ``default=`` for NumPy scalars and arrays."""
+    if isinstance(o, np.integer):
+        return int(o)
+    if isinstance(o, np.floating):
+        return float(o)
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+
+
+def fingerprint(*parts, default: Callable[[Any], Any] = str) -> str:
+    """A 16-hex-digit sha256 of ``parts`` as canonical JSON (sorted keys).
+
+    ``default`` turns what JSON cannot hold into something it can (``str`` by
+    default; :func:`json_default` for NumPy values). One call, one part: a dict.
+    """
+    obj = parts[0] if len(parts) == 1 else list(parts)
+    blob = json.dumps(obj, sort_keys=True, default=default).encode()
+    return hashlib.sha256(blob).hexdigest()[:16]
+
+
+def array_digest(*arrays: np.ndarray) -> str:
+    """A 16-hex-digit sha1 of the arrays' bytes (C order), e.g. a dataset's content."""
+    h = hashlib.sha1()
+    for a in arrays:
+        h.update(np.ascontiguousarray(a).tobytes())
+    return h.hexdigest()[:16]
+
+
+def load_npz(path: str | os.PathLike, fingerprint: str | None = None) -> dict | None:
+    """The arrays of a complete ``.npz``; None if absent, unreadable, or (with
+    ``fingerprint``) made from other inputs (its ``fingerprint`` entry differs)."""
+    path = Path(path)
+    if not path.is_file():
+        return None
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            out = {k: z[k] for k in z.files}
+    except Exception:  # noqa: BLE001 - a corrupt or partial file is recomputed
+        return None
+    if fingerprint is not None and str(out.get("fingerprint", "")) != fingerprint:
+        return None
+    return out
+
+
+def compute_or_load(path: str | os.PathLike, fingerprint: str,
+                    compute: Callable[[], dict]) -> dict:
+    """The arrays saved at ``path`` if their fingerprint matches, else ``compute()``'s,
+    saved atomically with the fingerprint (returned dict includes it)."""
+    got = load_npz(path, fingerprint)
+    if got is None:
+        got = dict(compute(), fingerprint=fingerprint)
+        save_npz(path, **got)
+    return got
 
 
 def enable_compile_cache() -> None:

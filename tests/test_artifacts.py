@@ -1,35 +1,35 @@
-"""Atomic writes (ntq_jax.files): complete file or the old one, never a partial one."""
+"""Atomic writes (ntq_jax.artifacts): complete file or the old one, never a partial one."""
 
 import json
 
 import numpy as np
 import pytest
 
-from ntq_jax import files
+from ntq_jax import artifacts
 
 
 def test_writes_round_trip_and_leave_no_temporaries(tmp_path):
-    files.write_json(tmp_path / "sub" / "a.json", {"x": [1, 2]})
-    files.save_npy(tmp_path / "b.npy", np.arange(5, dtype=np.int32))
-    files.save_npz(tmp_path / "c.npz", y=np.ones(3))
+    artifacts.write_json(tmp_path / "sub" / "a.json", {"x": [1, 2]})
+    artifacts.save_npy(tmp_path / "b.npy", np.arange(5, dtype=np.int32))
+    artifacts.save_npz(tmp_path / "c.npz", y=np.ones(3))
     assert json.loads((tmp_path / "sub" / "a.json").read_text()) == {"x": [1, 2]}
     assert np.load(tmp_path / "b.npy").tolist() == [0, 1, 2, 3, 4]
     with np.load(tmp_path / "c.npz") as z:
         assert z["y"].tolist() == [1.0, 1.0, 1.0]
     assert not list(tmp_path.rglob(".*.tmp-*"))
-    assert len(files.sha256(tmp_path / "b.npy")) == 64
+    assert len(artifacts.sha256(tmp_path / "b.npy")) == 64
 
 
 def test_a_failed_write_keeps_the_old_file_and_no_temporary(tmp_path):
     f = tmp_path / "a.txt"
-    files.write_text(f, "old")
+    artifacts.write_text(f, "old")
 
     def boom(fh):
         fh.write(b"partial")
         raise RuntimeError("interrupted")
 
     with pytest.raises(RuntimeError):
-        files.write_with(f, boom)
+        artifacts.write_with(f, boom)
     assert f.read_text() == "old"
     assert not list(tmp_path.glob(".*.tmp-*"))
 
@@ -37,5 +37,5 @@ def test_a_failed_write_keeps_the_old_file_and_no_temporary(tmp_path):
 def test_clean_tmp_removes_leftovers_only(tmp_path):
     (tmp_path / ".x.npy.tmp-123").write_bytes(b"junk")
     (tmp_path / "x.npy").write_bytes(b"keep")
-    files.clean_tmp(tmp_path)
+    artifacts.clean_tmp(tmp_path)
     assert [p.name for p in tmp_path.iterdir()] == ["x.npy"]

@@ -1,0 +1,86 @@
+"""Fixed shapes for jitted calls: bucket sizes, padding, and mapping over fixed-size chunks.
+
+A jitted function compiles once per input shape. Everything that feeds a
+variable number of rows to a compiled kernel goes through here, so that a
+batch of any size reuses one program (fixed ``chunk`` rows, the tail padded
+and masked) or one of a few (sizes rounded up to a power of two).
+"""
+
+from __future__ import annotations
+
+from typing import Callable, Iterator, Sequence
+
+import numpy as np
+
+__all__ = ["bucket_size", "pad_rows", "padded_chunks", "map_chunks"]
+
+
+def bucket_size(n: int, minimum: int = 1) -> int:
+    """The next power of two ``>= n`` (and ``>= minimum``); 1 for ``n <= 1``."""
+    return max(int(minimum), 1 << (max(int(n), 1) - 1).bit_length())
+
+
+def pad_rows(a: np.ndarray, rows: int, fill=0) -> np.ndarray:
+    """``a`` with its first axis padded to ``rows``: ``fill`` values, or ``fill="first"``
+    to repeat ``a[0]``; ``a`` itself when it already has ``rows`` rows."""
+    a = np.asarray(a)
+    n = a.shape[0]
+    if n == rows:
+        return a
+    if n > rows:
+        raise ValueError(f"cannot pad {n} rows down to {rows}")
+    if isinstance(fill, str) and fill == "first":
+        extra = np.repeat(a[:1], rows - n, axis=0)
+    else:
+        extra = np.full((rows - n,) + a.shape[1:], fill, a.dtype)
+    return np.concatenate([a, extra])
+
+
+def padded_chunks(arrays: Sequence[np.ndarray], chunk: int, fill=0
+                  ) -> Iterator[tuple[int, int, list[np.ndarray], np.ndarray]]:
+    """Yields ``(lo, m, padded, mask)`` for consecutive row chunks of ``arrays``.
+
+    ``padded`` are the rows ``lo:lo+m`` of every array padded to exactly
+    ``chunk`` rows (see :func:`pad_rows` for ``fill``); ``mask`` ``(chunk,)``
+    is True on the ``m`` real rows.
+    """
+    if chunk < 1:
+        raise ValueError(f"chunk must be >= 1, got {chunk}")
+    n = np.asarray(arrays[0]).shape[0]
+    for lo in range(0, n, chunk):
+        m = min(chunk, n - lo)
+        padded = [pad_rows(np.asarray(a)[lo:lo + m], chunk, fill) for a in arrays]
+        mask = np.zeros(chunk, bool)
+        mask[:m] = True
+        yield lo, m, padded, mask
+
+
+def map_chunks(fn: Callable, *arrays: np.ndarray, chunk: int, fill=0, with_mask: bool = False,
+               empty=None):
+    """``fn`` over the rows of ``arrays`` in fixed-size padded chunks, outputs concatenated.
+
+    Args:
+        fn: a row-wise function of ``chunk``-row arrays (``fn(*padded)`` or, with
+            ``with_mask``, ``fn(*padded, mask)``) returning an array or a tuple of
+            arrays with ``chunk`` leading rows.
+        *arrays: ``(N, ...)`` inputs.
+        chunk: rows per call (the one compiled shape).
+        fill: padding of the tail (:func:`pad_rows`).
+        with_mask: pass the ``(chunk,)`` bool mask of real rows as the last argument.
+        empty: the result for ``N == 0`` (default a ``(0,)`` bool array).
+
+    Returns:
+        The outputs' first ``N`` rows, as NumPy (a tuple when ``fn`` returns one).
+    """
+    outs = []
+    for _, m, padded, mask in padded_chunks(arrays, chunk, fill):
+        out = fn(*padded, mask) if with_mask else fn(*padded)
+        if isinstance(out, tuple):
+            outs.append(tuple(np.asarray(o)[:m] for o in out))
+        else:
+            outs.append(np.asarray(out)[:m])
+    if not outs:
+        return np.zeros(0, bool) if empty is None else empty
+    if isinstance(outs[0], tuple):
+        return tuple(np.concatenate(parts) for parts in zip(*outs))
+    return np.concatenate(outs)

@@ -11,20 +11,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from ntq_jax.batching import map_chunks
+from ntq_jax.robots.batch import CHECK_CHUNK, distances, steer_to_pairs, valid_states
 from ntq_jax.types import PlanResult, PlanStatus
 
 __all__ = ["CHECK_CHUNK", "valid_queries", "check_paths", "finalize"]
-
-CHECK_CHUNK = 2048  # rows per compiled validity / steer_to call
-
 
 def valid_queries(env, q: np.ndarray, padding: float) -> np.ndarray:
     """``(K,)`` bool: start and goal finite and valid at ``padding``."""
     k, d = q.shape[0], q.shape[2]
     flat = q.reshape(2 * k, d)
-    ok = map_chunks(lambda x: env.is_valid(x, padding=padding), flat,
-                    chunk=CHECK_CHUNK).astype(bool)
+    ok = valid_states(env.robot, env.world, flat, padding)
     return ok.reshape(k, 2).all(axis=1) & np.isfinite(flat).all(axis=1).reshape(k, 2).all(axis=1)
 
 
@@ -49,13 +45,11 @@ def check_paths(env, paths: np.ndarray, lengths: np.ndarray, padding: float):
     a = paths[rows, cols]
     b = paths[rows, cols + 1]
     finite = np.isfinite(a).all(1) & np.isfinite(b).all(1)
-    free = map_chunks(lambda x, y: env.steer_to(x, y, padding=padding), a, b,
-                      chunk=CHECK_CHUNK).astype(bool)
+    free = steer_to_pairs(env.robot, env.world, a, b, padding)
     if env.robot.kind == "point":
         dist = np.linalg.norm(b.astype(np.float64) - a.astype(np.float64), axis=1)
     else:
-        dist = map_chunks(lambda x, y: env.distance(x, y), a, b,
-                          chunk=CHECK_CHUNK).astype(np.float64)
+        dist = distances(env.robot, a, b).astype(np.float64)
     bad = np.zeros(k, bool)
     np.logical_or.at(bad, rows, ~(free & finite))
     costs = np.zeros(k)

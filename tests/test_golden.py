@@ -16,7 +16,6 @@ Re-record (only for a deliberate change of results)::
 from __future__ import annotations
 
 import hashlib
-import importlib.util
 import json
 import sys
 from pathlib import Path
@@ -32,20 +31,6 @@ ARM = ["envs=[nlink/2]", "data.k_train=30", "data.gamma_queries=2000", "planner.
        "planner.resolution=0.05"]
 TIME_KEYS = {"seconds", "compile_seconds", "seconds_per_query", "reference_seconds_per_query",
              "time", "timings"}
-
-
-def _script(name):
-    spec = importlib.util.spec_from_file_location(name, ROOT / "scripts" / f"{name}.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
-def _args(out, sets):
-    a = ["--out", str(out), "--no-progress"]
-    for s in sets:
-        a += ["--set", s]
-    return a
 
 
 def _h(*arrays) -> str:
@@ -101,10 +86,14 @@ def fingerprint_arm(out: Path) -> dict:
 
 
 def _run_all(tmp: Path) -> dict:
-    assert _script("train_all").main(_args(tmp / "run", TINY) + ["--no-compile-cache"]) == 0
-    assert _script("generate_data").main(
-        ["--out", str(tmp / "arm"), "--no-progress", "--no-figure"]
-        + sum((["--set", s] for s in ARM), [])) == 0
+    from ntq_jax import config, data, make_env
+    from ntq_jax.pipeline import load_config, prepare_run, run_pipeline
+
+    cfg = load_config(None, TINY)
+    run_pipeline(cfg, prepare_run(cfg, tmp / "run"), progress=False)
+    cfg = config.load(None, ARM)
+    data.generate_datasets(make_env("nlink/2"), cfg, tmp / "arm", env_name="nlink/2",
+                           progress=False, figure=False)
     return {"pipeline": fingerprint_pipeline(tmp / "run"), "arm": fingerprint_arm(tmp / "arm")}
 
 

@@ -1,5 +1,6 @@
-"""End to end: scripts/train_all.py on a tiny config (data -> train -> evaluate -> report),
-its resume, the refusal of a foreign run folder, and scripts/plan.py's input errors.
+"""End to end: the pipeline (ntq_jax.pipeline) on a tiny config (data -> train -> evaluate ->
+report), its resume, the refusal of a foreign run folder (also through scripts/train_all.py:
+one error line, exit code 2), and scripts/plan.py's input errors.
 
 Every success in the saved paths files is re-checked with shapely (float64, closed
 boxes), independently of the planner's flag and of the package's kernels.
@@ -7,12 +8,16 @@ boxes), independently of the planner's flag and of the package's kernels.
 
 import importlib.util
 import json
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 from shapely.geometry import LineString, Point, box as shapely_box
 from shapely.ops import unary_union
+
+from ntq_jax.pipeline import PipelineError, load_config, prepare_run, run_pipeline
 
 ROOT = Path(__file__).resolve().parents[1]
 TINY = ["envs=[point/2]", "data.k_train=40", "data.gamma_queries=2000", "data.gamma_eval=false",
@@ -28,18 +33,16 @@ def _script(name):
     return mod
 
 
-def _args(out, extra=()):
-    a = ["--out", str(out), "--no-progress", "--no-compile-cache"]
-    for s in list(TINY) + list(extra):
-        a += ["--set", s]
-    return a
+def _pipeline(out, extra=(), log=print):
+    cfg = load_config(None, list(TINY) + list(extra))
+    return run_pipeline(cfg, prepare_run(cfg, out), progress=False, log=log)
 
 
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
     out = tmp_path_factory.mktemp("run")
-    rc = _script("train_all").main(_args(out))
-    assert rc == 0
+    written = _pipeline(out)
+    assert written["tables.md"] == out / "tables.md"
     return out
 
 
@@ -91,20 +94,30 @@ def test_every_success_is_collision_free(run):
     assert checked > 0
 
 
-def test_rerun_resumes_without_redoing_work(run, capsys):
+def test_rerun_resumes_without_redoing_work(run):
     files = sorted((run / "paths").rglob("*.npz")) + [run / "eval" / "point_2" / "reference.npz"]
     before = {f: f.stat().st_mtime_ns for f in files}
-    rc = _script("train_all").main(_args(run))
-    assert rc == 0
+    lines = []
+    _pipeline(run, log=lines.append)
     assert {f: f.stat().st_mtime_ns for f in files} == before
-    out = capsys.readouterr().out
-    assert "train: complete" in out and "| PNet_3 |" in out
+    assert any("train: complete" in ln for ln in lines)
+    assert "| PNet_3 |" in (run / "tables.md").read_text()
 
 
-def test_foreign_run_folder_is_refused(run, capsys):
-    rc = _script("train_all").main(_args(run, ["eval.k_test=17"]))
-    assert rc == 2
-    assert "another config" in capsys.readouterr().err
+def test_foreign_run_folder_is_refused(run):
+    with pytest.raises(PipelineError, match="another config"):
+        _pipeline(run, ["eval.k_test=17"])
+
+
+def test_train_all_script_error_is_one_line(run):
+    """The command line turns the refusal into one error line and exit code 2, no traceback."""
+    args = [sys.executable, str(ROOT / "scripts" / "train_all.py"), "--out", str(run),
+            "--no-progress"] + sum((["--set", s] for s in TINY + ["eval.k_test=17"]), [])
+    proc = subprocess.run(args, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 2
+    err = proc.stderr.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error:") and "another config" in err[0]
+    assert "Traceback" not in proc.stderr
 
 
 def test_plan_script_rejects_bad_states(run, capsys):

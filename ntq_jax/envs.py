@@ -1,7 +1,7 @@
 """Environments: a robot in a world of obstacles, with a data-generation padding.
 
 ``make_env("point/0")`` builds a preset (see :mod:`ntq_jax.presets`);
-``make_env("my_map.json")`` loads a user's map in the JSON format of DESIGN.md::
+``make_env("my_map.json")`` loads a user's map in this JSON format::
 
     {"name": "my_map",
      "robot": {"kind": "point" | "rigid_body" | "nlink", ...robot parameters},
@@ -30,6 +30,7 @@ import numpy as np
 
 from ntq_jax import artifacts, geometry, queries as Q
 from ntq_jax.geometry import World
+from ntq_jax.presets import PRESETS
 from ntq_jax.robots import Robot, robot_from_json
 from ntq_jax.robots.batch import distance_batch, is_valid_batch, steer_to_batch
 
@@ -114,7 +115,7 @@ class Env:
 
     # -- JSON ------------------------------------------------------------------
     def to_json(self) -> dict[str, Any]:
-        """The environment in the JSON format of DESIGN.md (a dict)."""
+        """The environment in the JSON format of this module's docstring (a dict)."""
         return {
             "name": self.name,
             "robot": self.robot.to_json(),
@@ -159,8 +160,6 @@ def make_env(name_or_path: str | os.PathLike) -> Env:
     Raises:
         EnvError: unknown preset (listing the presets), unreadable or invalid file.
     """
-    from ntq_jax.presets import PRESETS
-
     name = str(name_or_path)
     if name in PRESETS:
         return Env.from_json(PRESETS[name], where=f"preset {name}")

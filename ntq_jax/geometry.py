@@ -10,8 +10,8 @@ is the closed-set intersection test (touching counts as a collision).
 Every kernel here is written for ONE item (scalars or ``(2,)`` vectors) and is
 batched by the caller with ``jax.vmap``. Callers batch over the minor axis of
 coordinate-major ``(d, N)`` arrays (``jax.vmap(f, in_axes=1)``), which makes the
-vmapped code purely elementwise over contiguous ``(N,)`` rows: that layout is
-~30x faster on CPU than ``(N, d)`` rows (see BENCHMARKS.md).
+vmapped code purely elementwise over contiguous ``(N,)`` rows, the fast layout
+on CPU (BENCHMARKS.md compares it with ``(N, d)`` rows).
 
 The obstacle loop is unrolled at trace time (one fused elementwise expression
 per obstacle), so the number of boxes and discs is part of the compiled shape
@@ -28,8 +28,7 @@ kernels.
 
 Every jitted batch entry point compiles with :data:`KERNEL_COMPILER_OPTIONS`
 (512-bit vectors on CPUs that have them): the kernels are long chains of
-elementwise compares, and twice the vector width measured 1.5-1.8x more
-queries per CPU second on the AVX-512 development machine (BENCHMARKS.md).
+elementwise compares, which wider vectors speed up (BENCHMARKS.md).
 """
 
 from __future__ import annotations

@@ -26,13 +26,13 @@ import jax.numpy as jnp
 
 from ntq_jax import geometry
 from ntq_jax.geometry import World
-from ntq_jax.robots.base import discretized_steer_to, discretized_steer_to_batch, wrap_angle
+from ntq_jax.robots.base import DiscretizedSteering, wrap_angle
 
 Array = jax.Array
 
 
 @dataclasses.dataclass(frozen=True)
-class RigidBody:
+class RigidBody(DiscretizedSteering):
     """Rectangle robot in SE(2)."""
 
     length: float = 1.5
@@ -68,14 +68,6 @@ class RigidBody:
     def distance(self, a: Array, b: Array) -> Array:
         dx, dy = b[0] - a[0], b[1] - a[1]
         return jnp.sqrt(dx * dx + dy * dy) + self.angle_weight * jnp.abs(wrap_angle(b[2] - a[2]))
-
-    def steer_to(self, a: Array, b: Array, world: World, padding: float) -> Array:
-        return discretized_steer_to(self, a, b, world, padding, self.resolution)
-
-    def steer_to_batch(self, a: Array, b: Array, world: World, padding: float,
-                       mask: Array | None = None) -> Array:
-        """Coordinate-major ``(d, N), (d, N) -> (N,)``: the same answers as ``steer_to``, batched."""
-        return discretized_steer_to_batch(self, a, b, world, padding, self.resolution, mask)
 
     def to_json(self) -> dict:
         return {"kind": "rigid_body", "length": self.length, "width": self.width,

@@ -17,7 +17,7 @@ The run folder (``--out``, default ``<out_dir>/<task>-<config hash>``) holds::
 
     config.yaml, run.json          the resolved config and the stage log
     data/<env>/env.json, D0..D3/   datasets (ntq_jax.data)
-    models/<env>/                  training output, ensemble/ (ntq_jax.train)
+    models/<env>/                  training output, ensemble/ (ntq_jax.training)
     eval/<env>/                    test queries, reference paths
     paths/<env>/<model>_<kind>[_nosteer].npz   every planned path
     results.json, results.csv, tables.md, tables.tex, figures/*.png
@@ -103,7 +103,7 @@ def run_pipeline(cfg, run: Path, *, progress: bool = True, figures: bool = True,
     from ntq_jax.report import write_report
     try:
         from ntq_jax import data as data_mod
-        from ntq_jax import train as train_mod
+        from ntq_jax import training as train_mod
     except ImportError as e:  # pragma: no cover - the modules exist in a full checkout
         raise PipelineError(f"a pipeline module is missing: {e}") from None
 
@@ -171,7 +171,7 @@ def main(argv=None) -> int:
                          "small widths, no gain at the paper's (BENCHMARKS.md); results differ "
                          "from a one-device run at float level. Default 1")
     args = ap.parse_args(argv)
-    from ntq_jax.train import use_cpu_devices
+    from ntq_jax.training import use_cpu_devices
     use_cpu_devices(args.cpu_devices)  # before any JAX operation
     if not args.no_compile_cache:
         artifacts.enable_compile_cache()

@@ -357,7 +357,7 @@ def predictor(ens: Ensemble, member: int | None = None, *,
     ``predictor(ens, m)(key, c, g) == predictor(ens)(key, c, g)[m]``.
 
     Args:
-        ens: an :class:`Ensemble` (e.g. from :func:`ntq_jax.train.load_ensemble`).
+        ens: an :class:`Ensemble` (e.g. from :func:`ntq_jax.training.load_ensemble`).
         member: a member index, or None for all members.
         deterministic: switch dropout off (for diagnostics only).
 

@@ -31,7 +31,7 @@ import yaml
 
 from ntq_jax import artifacts, config as C
 from ntq_jax import data as data_mod
-from ntq_jax import train as train_mod
+from ntq_jax import training
 from ntq_jax.envs import make_env
 from ntq_jax.evaluate import env_slug, evaluate_env
 from ntq_jax.report import write_report
@@ -116,8 +116,8 @@ def _run_env(cfg: C.Config, run: Path, name: str, env, *, progress, figures: boo
         log(f"[{name}] train: complete, loading {model_dir / 'ensemble'}")
     else:
         log(f"[{name}] train: {len(cfg.data.datasets)} PNets, {cfg.train.epochs} epochs")
-        train_mod.train_from_folder(data_dir, cfg, model_dir, progress=progress)
-    ens = train_mod.load_ensemble(model_dir)
+        training.train_from_folder(data_dir, cfg, model_dir, progress=progress)
+    ens = training.load_ensemble(model_dir)
     t2 = time.perf_counter()
     _mark(run, f"train/{slug}", seconds=round(t2 - t1, 1))
     # -- evaluation ------------------------------------------------------------

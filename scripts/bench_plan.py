@@ -81,7 +81,7 @@ def bench(env_name: str, *, queries: int, loop_queries: int, run=None, model: in
 
     env = make_env(env_name)
     if run is not None:
-        from ntq_jax.train import load_ensemble
+        from ntq_jax.training import load_ensemble
         cfg = C.load(Path(run) / "config.yaml", list(eval_overrides))
         ens = load_ensemble(Path(run) / "models" / env_slug(env_name))
         source = f"trained PNet_{model} of {run}"

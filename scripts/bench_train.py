@@ -47,7 +47,7 @@ import numpy as np
 def jax_training(datasets, env, model_cfg, train_cfg, seed, ids, stop_after=None,
                  shard=False) -> float:
     """Wall seconds of one ``train_ensemble`` call on ``datasets`` (members ``ids``)."""
-    from ntq_jax import train as T
+    from ntq_jax import training as T
 
     t = time.perf_counter()
     T.train_ensemble(datasets, env, model_cfg, train_cfg, seed=seed, member_ids=ids,
@@ -171,7 +171,7 @@ def main(argv=None) -> int:
 
     from ntq_jax import data as data_mod
     from ntq_jax import make_env, models
-    from ntq_jax import train as T
+    from ntq_jax import training as T
 
     T.use_cpu_devices(args.cpu_devices)  # before any JAX operation
     from ntq_jax.config import ModelConfig, TrainConfig

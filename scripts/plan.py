@@ -76,7 +76,7 @@ def plan_one(run, model: int, start, goal, *, env_name=None, steer: bool = True,
 
     from ntq_jax.evaluate import member_pnets
     from ntq_jax.neural_planner import PlannerOptions, plan_batch
-    from ntq_jax.train import CheckpointError, load_ensemble
+    from ntq_jax.training import CheckpointError, load_ensemble
 
     run = Path(run)
     cfg, env, env_name, slug = _load(run, env_name)

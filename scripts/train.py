@@ -8,7 +8,7 @@
 (``env.json`` beside ``D0/ .. D3/``). The output folder (default
 ``<data>/pnets``) receives ``checkpoints/``, ``history.jsonl``, ``history.csv``,
 ``curves.png``, ``config.json`` and, when training has finished, ``ensemble/``
-(load it with ``ntq_jax.train.load_ensemble(OUT)``). Interrupted (Ctrl-C,
+(load it with ``ntq_jax.training.load_ensemble(OUT)``). Interrupted (Ctrl-C,
 ``kill -9``)? Re-run the same command: it resumes from the latest checkpoint.
 A checkpoint written with another config, seed or data is refused with a clear
 message. The progress bar shows each member's latest minibatch loss.
@@ -56,7 +56,7 @@ def main(argv=None) -> int:
 
     import jax
 
-    from ntq_jax import train as T
+    from ntq_jax import training as T
 
     T.use_cpu_devices(args.cpu_devices)  # before any JAX operation
     print(f"training {cfg.model.hidden} PNets on {args.data} -> {out} "

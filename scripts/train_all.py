@@ -28,7 +28,7 @@ import time
 from ntq_jax import artifacts
 from ntq_jax.config import ConfigError
 from ntq_jax.pipeline import PipelineError, load_config, prepare_run, run_pipeline
-from ntq_jax.train import use_cpu_devices
+from ntq_jax.training import use_cpu_devices
 
 
 def main(argv=None) -> int:

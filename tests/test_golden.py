@@ -60,10 +60,7 @@ def _numbers(obj):
 
 
 def fingerprint_pipeline(run: Path) -> dict:
-    try:
-        from ntq_jax.training import load_ensemble
-    except ImportError:  # TEMP: before the refactor
-        from ntq_jax.train import load_ensemble
+    from ntq_jax.training import load_ensemble
 
     ens = load_ensemble(run / "models" / "point_2")
     import jax

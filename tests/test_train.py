@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from ntq_jax import make_env, models
-from ntq_jax import train as T
+from ntq_jax import training as T
 from ntq_jax.config import ModelConfig, TrainConfig
 from ntq_jax.data import straight_line_rows
 
@@ -194,7 +194,7 @@ import numpy as np
 sys.path.insert(0, {tests!r})
 from test_train import MODEL, TRAIN, SEED, PATHS, straight_paths
 from ntq_jax import make_env
-from ntq_jax import train as T
+from ntq_jax import training as T
 {prelude}
 env = make_env("point/0")
 datasets = [straight_paths(n, 100 + i) for i, n in enumerate(PATHS)]
@@ -204,16 +204,17 @@ def sharded_run(n_devices, out_file):
     # is spread over n_devices, saves the parameters to out_file
     import jax
     assert len(jax.devices()) == n_devices, jax.devices()
-    seen, place = [], T._place
+    from ntq_jax.training import devices
+    seen, place = [], devices.place
     def spy(tree, mesh, axis=0):
         r = place(tree, mesh, axis)
         seen.extend(len(x.sharding.device_set) for x in jax.tree.leaves(r))
         return r
-    T._place = spy
+    devices.place = spy
     try:
         ens_s, _ = T.train_ensemble(datasets, env, MODEL, TRAIN, seed=SEED, progress=False)
     finally:
-        T._place = place
+        devices.place = place
     assert set(seen) == {{n_devices}}, set(seen)
     np.savez(out_file, *[np.asarray(x) for x in jax.tree.leaves(ens_s.params)])
 """

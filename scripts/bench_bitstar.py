@@ -68,8 +68,10 @@ def main(argv=None) -> int:
     import numpy as np
 
     import ntq_jax
-    from ntq_jax.planners.ompl_bridge import (SOLVED, NumpyChecker, OmplProblem, plan_bitstar,
-                                              query_seeds)
+    from ntq_jax.planners.ompl_bridge import plan_bitstar, query_seeds
+    from ntq_jax.planners.ompl_checker import NumpyChecker
+    from ntq_jax.planners.ompl_worker import OmplProblem
+    from ntq_jax.types import PlanStatus
 
     env = ntq_jax.make_env(args.env)
     q = _nontrivial_queries(env, args.queries, args.seed)
@@ -86,9 +88,9 @@ def main(argv=None) -> int:
     for w in args.workers:
         res = plan_bitstar(env, q, time_budget=args.budget, workers=w, seed=args.seed)
         wall, start = res.info["wall_time"], res.info["startup_time"]
-        ok = res.status == SOLVED
+        ok = res.status == PlanStatus.SOLVED
         print(f"| {w} | {ok.sum()}/{len(q)} | {wall:.2f} | {start:.2f} | "
-              f"{res.solve_times.mean():.3f} | {len(q) / wall:.2f} | "
+              f"{res.info['solve_times'].mean():.3f} | {len(q) / wall:.2f} | "
               f"{len(q) / max(wall - start, 1e-9):.2f} | "
               f"{res.costs[ok].mean() if ok.any() else float('nan'):.3f} |", flush=True)
 

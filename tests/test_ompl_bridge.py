@@ -12,8 +12,14 @@ import numpy as np
 import pytest
 
 import ntq_jax as nj
-from ntq_jax.planners.ompl_bridge import (CHECK_CHUNK, CRASHED, INVALID, NO_PATH, SOLVED,
-                                          NumpyChecker, plan_bitstar, query_seeds)
+from ntq_jax.planners import ompl_bridge
+from ntq_jax.planners.ompl_bridge import PLAN_STATUS, BridgeOutcome, plan_bitstar, query_seeds
+from ntq_jax.planners.ompl_checker import NumpyChecker
+from ntq_jax.types import PlanStatus
+
+#: Candidate queries per draw in ``_easy_queries`` (and the row count of the test's own jitted
+#: checks: one compilation).
+POOL = 256
 
 needs_ompl = pytest.mark.skipif(importlib.util.find_spec("ompl") is None,
                                 reason="the PyPI package ompl is not installed")
@@ -128,9 +134,8 @@ def test_query_seeds_are_deterministic_and_positive():
 def _easy_queries(env, n_trivial, n_short, seed):
     """Random valid queries: ``n_trivial`` with a feasible straight connection, then the
     ``n_short`` shortest others (easy for BIT*, whatever the preset's obstacle layout)."""
-    q = np.stack([_valid_states(env, CHECK_CHUNK, seed),
-                  _valid_states(env, CHECK_CHUNK, seed + 100)], axis=1)
-    straight = np.asarray(env.steer_to(q[:, 0], q[:, 1]))  # the shape plan_bitstar compiles
+    q = np.stack([_valid_states(env, POOL, seed), _valid_states(env, POOL, seed + 100)], axis=1)
+    straight = np.asarray(env.steer_to(q[:, 0], q[:, 1]))
     dist = np.asarray(env.distance(q[:, 0], q[:, 1]))
     trivial = np.flatnonzero(straight)[:n_trivial]
     others = np.flatnonzero(~straight)
@@ -140,36 +145,41 @@ def _easy_queries(env, n_trivial, n_short, seed):
 
 
 def _check_result(env, queries, res, padding=None):
-    """Paths start/end exactly at the query, every segment passes env.steer_to at the
-    planning padding, costs are the sums of env.distance over the segments."""
+    """Statuses are the bridge's outcomes through PLAN_STATUS; paths start/end exactly at
+    the query, every segment passes env.steer_to at the planning padding, costs are the
+    sums of env.distance over the segments; unsolved rows have no path and cost inf."""
     pad = env.padding if padding is None else padding
-    solved = np.flatnonzero(res.status == SOLVED)
-    assert all(res.paths[i] is None for i in range(len(queries))
-               if res.status[i] not in (SOLVED, 4))
+    outcome = res.info["bitstar_status"]
+    assert outcome.dtype == np.int8 and res.status.dtype == np.int8
+    assert res.status.tolist() == [PLAN_STATUS[BridgeOutcome(o)] for o in outcome]
+    solved = np.flatnonzero(res.status == PlanStatus.SOLVED)
+    assert all(res.path(i) is None for i in range(len(queries)) if i not in solved)
+    assert np.isnan(np.delete(res.paths, solved, axis=0)).all()
+    assert (np.delete(res.lengths, solved) == 0).all()
     assert np.isinf(np.delete(res.costs, solved)).all()
     if not len(solved):
         return
     for i in solved:
-        path = res.paths[i]
+        path = res.path(i)
         assert path.dtype == np.float32 and path.ndim == 2 and path.shape[1] == env.dim
         assert len(path) >= 2
         np.testing.assert_array_equal(path[0], queries[i, 0])
         np.testing.assert_array_equal(path[-1], queries[i, 1])
-    a = np.concatenate([res.paths[i][:-1] for i in solved])
-    b = np.concatenate([res.paths[i][1:] for i in solved])
+    a = np.concatenate([res.path(i)[:-1] for i in solved])
+    b = np.concatenate([res.path(i)[1:] for i in solved])
     m = len(a)
-    fill = np.repeat(a[:1], max(CHECK_CHUNK, m) - m, 0)  # the shapes plan_bitstar compiled
+    fill = np.repeat(a[:1], max(POOL, m) - m, 0)  # one compiled shape
     ok = np.asarray(env.steer_to(np.concatenate([a, fill]), np.concatenate([b, fill]),
                                  padding=pad))[:m]
     assert ok.all()
     d = np.asarray(env.distance(np.concatenate([a, fill]), np.concatenate([b, fill])),
                    np.float64)[:m]
-    lengths = [len(res.paths[i]) - 1 for i in solved]
+    lengths = [res.lengths[i] - 1 for i in solved]
     costs = np.add.reduceat(d, np.cumsum([0] + lengths[:-1]))
     # float32 distances (XLA may round differently for different batch shapes)
     np.testing.assert_allclose(res.costs[solved], costs, rtol=1e-6)
     # BIT*'s own float64 length in OMPL's metric: the same metric as env.distance
-    np.testing.assert_allclose(res.planner_costs[solved], costs, rtol=1e-5)
+    np.testing.assert_allclose(res.info["planner_costs"][solved], costs, rtol=1e-5)
     # never shorter than the straight connection
     ch = NumpyChecker.from_env(env)
     direct = np.array([ch.distance(queries[i, 0], queries[i, 1]) for i in solved])
@@ -194,11 +204,14 @@ def rigid_batch():
 def test_bitstar_solves_easy_rigid_queries_and_flags_invalid_ones(rigid_batch):
     env, q, res = rigid_batch
     assert res.status.dtype == np.int8 and res.costs.dtype == np.float64
-    assert res.status.tolist() == [SOLVED] * 6 + [INVALID] * 2, res.info
-    assert res.paths[6] is None and res.paths[7] is None
+    assert res.status.tolist() == [PlanStatus.SOLVED] * 6 + [PlanStatus.INVALID] * 2, res.info
+    assert res.info["bitstar_status"].tolist() == ([BridgeOutcome.EXACT] * 6
+                                                   + [BridgeOutcome.BAD_QUERY] * 2)
+    assert res.path(6) is None and res.path(7) is None
     _check_result(env, q, res)
-    assert [len(p) for p in res.paths[:3]] == [2, 2, 2]  # direct connections
-    assert (res.solve_times[3:6] < 0.9).all()  # stop_on_first returned before the budget
+    assert res.lengths[:3].tolist() == [2, 2, 2]  # direct connections
+    assert (res.info["solve_times"][3:6] < 0.9).all()  # stop_on_first returned before the budget
+    assert res.info["rejected"] == 0
 
 
 @needs_ompl
@@ -206,7 +219,7 @@ def test_bitstar_solves_easy_arm_queries(capfd):
     env = nj.make_env("nlink/2")
     q = _easy_queries(env, n_trivial=2, n_short=3, seed=3)
     res = plan_bitstar(env, q, time_budget=1.0, workers=2, stop_on_first=True, seed=1)
-    assert res.status.tolist() == [SOLVED] * 5, res.info
+    assert res.status.tolist() == [PlanStatus.SOLVED] * 5, res.info
     _check_result(env, q, res)
     # the workers leave without nanobind's leak report, and OMPL's info logging is off
     out, err = capfd.readouterr()
@@ -219,19 +232,21 @@ def test_full_budget_keeps_improving_the_first_solution(rigid_batch):
     env, q, first = rigid_batch
     hard = q[3:5]  # two non-trivial queries, same seeds as in the batch (indices 3, 4)
     full = plan_bitstar(env, np.concatenate([q[:3], hard]), time_budget=0.4, workers=2, seed=2)
-    assert (full.status == SOLVED).all()
+    assert (full.status == PlanStatus.SOLVED).all()
     _check_result(env, np.concatenate([q[:3], hard]), full)
     # same seed: the same first solution, then only improvements
-    assert (full.planner_costs[3:] <= first.planner_costs[3:5] + 1e-9).all()
+    full_costs, first_costs = full.info["planner_costs"], first.info["planner_costs"]
+    assert (full_costs[3:] <= first_costs[3:5] + 1e-9).all()
     # not provably optimal: BIT* runs until the deadline (a direct connection returns at once)
-    assert (full.solve_times[3:] > 0.3).all() and (full.solve_times[:3] < 0.3).all()
+    times = full.info["solve_times"]
+    assert (times[3:] > 0.3).all() and (times[:3] < 0.3).all()
 
 
 @needs_ompl
 def test_a_killed_worker_does_not_lose_the_batch(rigid_batch):
     """The test hook makes the worker ``os._exit`` when it starts a query: query 1 on its
     first attempt only (retried in a fresh worker: solved), query 4 on every attempt
-    (CRASHED after one retry). Every other query is solved or flagged as before, and
+    (CRASHED after one retry: NO_PATH). Every other query is solved or flagged as before, and
     results are reproducible across runs, worker counts and retries (``stop_on_first``,
     seeded per query)."""
     env, q, ref = rigid_batch
@@ -240,29 +255,34 @@ def test_a_killed_worker_does_not_lose_the_batch(rigid_batch):
         res = plan_bitstar(env, q, time_budget=1.0, workers=2, stop_on_first=True, seed=2,
                            chunk_size=2, _crash_on={1: 1, 4: 2})
     assert not [w for w in caught if "plan_bitstar" in str(w.message)]
+    expected = ref.info["bitstar_status"].copy()
+    expected[4] = BridgeOutcome.CRASHED
+    assert res.info["bitstar_status"].tolist() == expected.tolist(), res.info
     expected = ref.status.copy()
-    expected[4] = CRASHED
+    expected[4] = PlanStatus.NO_PATH
     assert res.status.tolist() == expected.tolist(), res.info
-    assert res.paths[4] is None and res.costs[4] == np.inf and 4 in res.info["errors"]
+    assert res.path(4) is None and res.costs[4] == np.inf and 4 in res.info["errors"]
     assert res.info["worker_deaths"] == 3  # query 1 once, query 4 twice
     _check_result(env, q, res)
     for i in (0, 1, 2, 3, 5):
-        np.testing.assert_array_equal(res.paths[i], ref.paths[i])
+        np.testing.assert_array_equal(res.path(i), ref.path(i))
         assert res.costs[i] == ref.costs[i]
 
 
 @needs_ompl
 def test_no_path_is_a_status_not_an_exception():
-    """A goal walled off from the start: NO_PATH after the budget, nothing raised."""
+    """A goal walled off from the start: no path after the budget (TIMEOUT: BIT* is anytime,
+    so it proves nothing), nothing raised."""
     spec = {"name": "sealed", "robot": {"kind": "rigid_body", "length": 1.0, "width": 0.4},
             "bounds": [[0, 10], [0, 10]], "padding": 0.1,
             "boxes": [[7.5, 5, 0.2, 5]], "discs": []}
     env = nj.Env.from_json(spec)
     q = np.array([[[2, 5, 0], [8.8, 5, 0]], [[2, 2, 0], [4, 8, 1]]], np.float32)
     res = plan_bitstar(env, q, time_budget=0.3, workers=1, stop_on_first=True)
-    assert res.status.tolist() == [NO_PATH, SOLVED]
-    assert res.paths[0] is None and res.costs[0] == np.inf
-    assert res.solve_times[0] >= 0.25
+    assert res.status.tolist() == [PlanStatus.TIMEOUT, PlanStatus.SOLVED]
+    assert res.info["bitstar_status"].tolist() == [BridgeOutcome.NOT_FOUND, BridgeOutcome.EXACT]
+    assert res.path(0) is None and res.costs[0] == np.inf
+    assert res.info["solve_times"][0] >= 0.25
     _check_result(env, q, res)
 
 
@@ -273,4 +293,26 @@ def test_bad_arguments_raise_value_errors():
     with pytest.raises(ValueError, match="time_budget"):
         plan_bitstar(env, np.zeros((3, 2, 3)), time_budget=0)
     empty = plan_bitstar(env, np.zeros((0, 2, 3)), time_budget=1.0)
-    assert empty.status.shape == (0,) and empty.paths == []
+    assert empty.status.shape == (0,) and empty.paths.shape[0] == 0 and empty.lengths.shape == (0,)
+
+
+def test_a_found_path_that_fails_the_check_is_rejected_by_finalize():
+    """BIT*'s paths are verified once, by verify.finalize: a found path through an obstacle
+    becomes NO_PATH, counted in info["rejected"], with the bridge outcome REJECTED."""
+    env = nj.make_env("rigid/0")
+    good = _easy_queries(env, n_trivial=1, n_short=0, seed=11)[0]
+    a, b = _valid_states(env, 2, seed=4)
+    q = np.stack([good, [a, b], [a, b]]).astype(np.float32)
+    blocked = NumpyChecker.from_env(env, 0.0).is_valid_many(_uniform_states(env, 400, seed=5))
+    through = _uniform_states(env, 400, seed=5)[~blocked][0]  # a state inside an obstacle
+    results = ompl_bridge._Results.empty(3)
+    results.outcome[:] = [BridgeOutcome.EXACT, BridgeOutcome.EXACT, BridgeOutcome.CRASHED]
+    results.paths[0] = q[0].astype(np.float64)
+    results.planner_costs[0] = NumpyChecker.from_env(env).distance(*q[0])
+    results.paths[1] = np.stack([a, through, b]).astype(np.float64)
+    res = ompl_bridge._verified_result(env, q, env.padding, results, query_seeds(0, 3), 1.0)
+    assert res.status.tolist() == [PlanStatus.SOLVED, PlanStatus.NO_PATH, PlanStatus.NO_PATH]
+    assert res.info["bitstar_status"].tolist() == [BridgeOutcome.EXACT, BridgeOutcome.REJECTED,
+                                                   BridgeOutcome.CRASHED]
+    assert res.info["rejected"] == 1 and res.lengths.tolist() == [2, 0, 0]
+    _check_result(env, q, res)

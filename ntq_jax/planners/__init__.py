@@ -306,29 +306,12 @@ def _plan_visgraph(env, q, *, padding, seed, eps: float | None = None,
 # OMPL BIT*
 # ---------------------------------------------------------------------------
 
-def _plan_bitstar(env, q, *, padding, seed, time_budget: float = 1.0, workers: int = 0,
-                  **options) -> PlanResult:
-    from ntq_jax.planners import ompl_bridge as B
-
-    res = B.plan_bitstar(env, q, time_budget=time_budget, padding=padding, workers=workers,
-                         seed=seed, **options)
-    k, d = q.shape[0], q.shape[2]
-    status = np.select([res.status == B.SOLVED, res.status == B.NO_PATH, res.status == B.INVALID],
-                       [SOLVED, TIMEOUT, INVALID], NO_PATH).astype(np.int8)
-    lengths = np.array([len(p) if (p is not None and s == SOLVED) else 0
-                        for p, s in zip(res.paths, status)], np.int32)
-    paths = np.full((k, max(2, int(lengths.max(initial=0))), d), np.nan, np.float32)
-    for i in np.flatnonzero(lengths):
-        paths[i, :lengths[i]] = res.paths[i]
-    info = dict(res.info)
-    info.update(planner="bitstar", bitstar_status=res.status, solve_times=res.solve_times,
-                planner_costs=res.planner_costs, seeds=res.seeds, time_budget=time_budget)
-    return finalize(q, paths, lengths, status, info, env, padding)
+from ntq_jax.planners import ompl_bridge  # noqa: E402 (its plan_bitstar is the adapter)
 
 
 register_planner("astar", _plan_astar)
 register_planner("visgraph", _plan_visgraph)
-register_planner("bitstar", _plan_bitstar)
+register_planner("bitstar", ompl_bridge.plan_bitstar)
 
 __all__ = ["plan", "PlanResult", "register_planner", "available_planners", "check_paths",
            "valid_queries", "config_grid", "SOLVED", "NO_PATH", "TIMEOUT", "INVALID",

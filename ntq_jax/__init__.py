@@ -15,7 +15,7 @@ from ntq_jax.planners import PlanResult, plan, register_planner
 from ntq_jax.presets import PAPER_GAMMA, PRESETS
 from ntq_jax.queries import NON_TRIVIAL, NT_EXHAUSTED, UNIFORM, FreeSpaceTooSmall, GammaEstimate
 
-__version__ = "0.1.0"
+from ntq_jax.version import __version__
 
 __all__ = ["Env", "EnvError", "make_env", "World", "PRESETS", "PAPER_GAMMA", "GammaEstimate",
            "FreeSpaceTooSmall", "UNIFORM", "NON_TRIVIAL", "NT_EXHAUSTED", "plan", "PlanResult",

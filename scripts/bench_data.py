@@ -82,14 +82,14 @@ def main(argv=None) -> int:
 
     if args.rigid:
         from ntq_jax import queries as Q
+        from ntq_jax.data.pools import pool_sizes
 
         rcfg = C.load("configs/rigid.yaml")
         renv = make_env("rigid/0")
         kr = rcfg.data.k_train_for("rigid/0")
-        key = data._env_key(rcfg.seed, "rigid_0")
-        _, _, k_mix, _ = jax.random.split(key, 4)
+        k_mix = data.run_keys(rcfg.seed, "rigid_0").mix
         bits = [data.mixing_bits(k_mix, kr, sp.p_nt) for sp in rcfg.data.datasets]
-        n_pool = max(int((~b).sum()) for b in bits) + max(int(b.sum()) for b in bits)
+        n_pool = sum(pool_sizes(bits))
         t0 = time.perf_counter()
         Q.sample_nontrivial_queries(renv.robot, renv.world, jax.random.PRNGKey(0), kr,
                                     renv.padding, rcfg.sampling.n_max)

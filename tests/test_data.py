@@ -271,6 +271,31 @@ def test_obstacle_free_map_gives_an_empty_valid_d3(tmp_path):
     assert len(d0.inputs) == 12  # without pruning: one sample per straight path
 
 
+def test_a_custom_planners_paths_are_verified_and_bad_ones_recorded_unsolved(tmp_path):
+    """The straight segment through a wall fails verification: unsolved, counted, warned."""
+    env = Env.from_json({"name": "wall", "robot": {"kind": "point"},
+                         "bounds": [[0, 10], [0, 10]], "boxes": [[5, 5, 0.5, 4]], "padding": 0.0})
+    cfg = C.load(None, ["data.k_train=40", "data.gamma_queries=1000", "data.gamma_eval=false"])
+    returned = []
+
+    def keep(env, queries, *, padding, seed=0):
+        res = straight_line(env, queries, padding=padding, seed=seed)
+        returned.append((res, res.paths.copy(), res.status.copy()))
+        return res
+
+    with pytest.warns(RuntimeWarning, match="failed the independent check"):
+        s = data.generate_datasets(env, cfg, tmp_path, planner=keep, progress=False, figure=False)
+    for res, paths, status in returned:  # the planner's arrays are not modified
+        assert np.array_equal(res.paths, paths) and np.array_equal(res.status, status)
+    for d in data.load_datasets(tmp_path / "wall"):
+        q = np.asarray(d.queries)
+        free = np.asarray(env.steer_to(q[:, 0], q[:, 1]))
+        assert np.array_equal(np.asarray(d.solved), free)
+        assert d.meta["stats"]["rejected_paths"] == int((~free).sum())
+        assert s["datasets"][d.meta["name"]]["unsolved"] == int((~free).sum())
+    assert s["datasets"]["D2"]["rejected_paths"] == 40  # every non-trivial query is blocked
+
+
 @pytest.fixture()
 def copy_d3(point_run, tmp_path):
     import shutil

@@ -1,0 +1,360 @@
+"""Dataset generation (Alg. 2 of the paper, samples by includeData, Alg. 4): :func:`generate_datasets`.
+
+Usage::
+
+    from ntq_jax import config, data, make_env
+    cfg = config.load("configs/point_small.yaml")
+    summary = data.generate_datasets(make_env("point/0"), cfg, "runs/data", env_name="point/0")
+    d0, d1, d2, d3 = data.load_datasets("runs/data/point_0")
+
+Shared planning: the datasets draw their queries from two pools, each planned
+once, ``U`` (i.i.d. uniform queries) and ``N`` (i.i.d. non-trivial queries).
+Dataset ``j`` uses the prefixes ``U[:K - sum(b_j)]`` and ``N[:sum(b_j)]``,
+interleaved by its mixing bits ``b_j`` (:mod:`ntq_jax.data.pools`). The bits are
+independent of the pools, so every dataset's queries have exactly Alg. 2's
+distribution; only the datasets' joint distribution changes (they share
+queries). For the paper's D0..D3: D0 = ``U[:K]``, D2 = ``N[:K]``, D3 = D2 pruned,
+D1 about half of each, so ``2K`` queries are planned instead of ``4K``.
+``meta.json`` records each dataset's pool ranges (``sharing``).
+
+Resumable: the planning chunks stay in ``<env_dir>/.work/<fingerprint>/``
+(:mod:`ntq_jax.data.planning`) until the datasets are written (``meta.json``
+last, :mod:`ntq_jax.data.format`); a rerun reuses them, and a complete output
+of the same settings is left untouched. Stage timings: BENCHMARKS.md
+(``scripts/bench_data.py``).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import shutil
+import time
+import warnings
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+from typing import Callable, NamedTuple
+
+import jax
+import numpy as np
+
+from ntq_jax import artifacts
+from ntq_jax import queries as Q
+from ntq_jax.data.format import (FORMAT, FORMAT_VERSION, dataset_names, env_slug, is_complete,
+                                 plot_environment, write_dataset)
+from ntq_jax.data.include import include_data
+from ntq_jax.data.planning import PoolPlan, plan_pool, planner_options, resolve_planner
+from ntq_jax.data.pools import (Keys, Pools, mixing_bits, pool_index, pool_sizes, run_keys,
+                                sample_pools)
+from ntq_jax.progress import open_bar
+from ntq_jax.robots.batch import steer_to_pairs
+from ntq_jax.types import PlanResult
+from ntq_jax.version import __version__
+
+__all__ = ["RunSpec", "resolve_run", "estimate_gammas", "dataset_arrays", "dataset_stats",
+           "generate_datasets"]
+
+_NO_GAMMA = {"padding": 0.0, "gamma": None, "ci95": None, "queries": 0}
+_QUERY_KINDS = {"0": "uniform", "1": "non-trivial", "2": "non-trivial sampler exhausted (trivial)"}
+
+
+# ---------------------------------------------------------------------------
+# The run's settings
+# ---------------------------------------------------------------------------
+
+class RunSpec(NamedTuple):
+    """Everything one environment's generation follows from, resolved once."""
+
+    env_name: str
+    slug: str
+    env_dir: Path
+    names: list[str]     # D0, D1, ...
+    specs: list          # config.data.datasets
+    k: int               # queries per dataset
+    padding: float       # the data-generation geometry
+    prune_padding: float
+    plan_fn: Callable
+    planner_name: str
+    options: dict
+    verify: bool         # plan_fn is a user's callable: verify its results here
+    keys: Keys
+    bits: list[np.ndarray]
+    fingerprint: str
+
+    @property
+    def n_u(self) -> int:
+        return pool_sizes(self.bits)[0]
+
+    @property
+    def n_nt(self) -> int:
+        return pool_sizes(self.bits)[1]
+
+
+def resolve_run(env, config, out_dir, env_name: str | None, planner) -> RunSpec:
+    """The :class:`RunSpec` of ``generate_datasets``' arguments (paddings resolved here)."""
+    env_name = env_name or env.name
+    slug = env_slug(env_name)
+    dc = config.data
+    specs = list(dc.datasets)
+    k = dc.k_train_for(env_name)
+    pad, prune_pad = env.resolve_padding(None), env.resolve_padding(dc.prune_padding)
+    planner = config.planner.name if planner is None else planner
+    custom = callable(planner)
+    options = (dict(getattr(planner, "options", {}) or {}) if custom
+               else planner_options(config, env_name, str(planner)))
+    plan_fn, planner_name = resolve_planner(planner, options)
+    keys = run_keys(config.seed, slug)
+    bits = [mixing_bits(keys.mix, k, s.p_nt) for s in specs]
+    n_u, n_nt = pool_sizes(bits)
+    fp = artifacts.fingerprint({
+        "format": FORMAT_VERSION, "env": env.to_json(), "env_name": env_name, "seed": config.seed,
+        "pad": pad, "prune_pad": prune_pad, "planner": planner_name, "options": options,
+        "n_max": config.sampling.n_max, "n_u": n_u, "n_nt": n_nt, "k": k,
+        "datasets": [[s.p_nt, s.prune] for s in specs],
+        "gamma_queries": dc.gamma_queries, "gamma_eval": dc.gamma_eval,
+    }, default=artifacts.json_default)
+    return RunSpec(env_name, slug, Path(out_dir) / slug, dataset_names(len(specs)), specs, k,
+                   pad, prune_pad, plan_fn, planner_name, options, custom, keys, bits, fp)
+
+
+# ---------------------------------------------------------------------------
+# Steps
+# ---------------------------------------------------------------------------
+
+def estimate_gamma(env, key: jax.Array, n: int, padding: float, cache: Path) -> dict:
+    """gamma_nt at ``padding`` as a JSON-ready dict, cached in ``cache`` (a resumed run reads it)."""
+    if cache.is_file():
+        try:
+            return json.loads(cache.read_text())
+        except (OSError, json.JSONDecodeError):
+            pass
+    try:
+        e = env.gamma_nt(key, n, padding=padding)
+        out = {"padding": padding, "gamma": e.gamma, "ci95": list(e.ci95), "queries": e.queries}
+    except Q.FreeSpaceTooSmall as err:
+        out = {"padding": padding, "gamma": None, "ci95": None, "queries": 0, "error": str(err)}
+    artifacts.write_json(cache, out, default=artifacts.json_default)
+    return out
+
+
+def estimate_gammas(env, key: jax.Array, data_config, padding: float, work: Path
+                    ) -> tuple[dict, dict, float]:
+    """``(gamma_nt at padding, gamma_nt at 0 or none, seconds)`` (``data.gamma_eval``)."""
+    t0 = time.perf_counter()
+    n = data_config.gamma_queries
+    g_data = estimate_gamma(env, jax.random.fold_in(key, 0), n, padding, work / "gamma_data.json")
+    g_eval = (estimate_gamma(env, jax.random.fold_in(key, 1), n, 0.0, work / "gamma_eval.json")
+              if data_config.gamma_eval else dict(_NO_GAMMA))
+    return g_data, g_eval, time.perf_counter() - t0
+
+
+def dataset_arrays(env, pools: Pools, planned: PlanResult, idx: np.ndarray, prune: bool,
+                   prune_padding: float) -> dict[str, np.ndarray]:
+    """The arrays of the dataset made of pool rows ``idx`` (:data:`ARRAY_SPECS`)."""
+    solved = planned.solved[idx]
+    sel = idx[solved]
+    lens = planned.lengths[sel].astype(np.int32)
+    lmax = int(lens.max()) if len(lens) else 0
+    paths = (np.ascontiguousarray(planned.paths[sel, :lmax]) if len(sel)
+             else np.zeros((0, 0, env.dim), np.float32))
+    inputs, targets, pidx = include_data(env, paths, lens, prune=prune, padding=prune_padding)
+    return {"inputs": inputs, "targets": targets, "path_index": pidx,
+            "paths": paths.astype(np.float32), "path_lengths": lens,
+            "queries": pools.queries[idx].astype(np.float32),
+            "query_kind": pools.kind[idx].astype(np.int8), "solved": solved.astype(np.bool_)}
+
+
+def dataset_stats(arrays: dict, idx: np.ndarray, planned: PoolPlan, blocked: np.ndarray,
+                  prune: bool, g_data: dict, g_eval: dict) -> dict:
+    """The ``stats`` of a dataset's ``meta.json``."""
+    k, kind, solved = len(idx), arrays["query_kind"], arrays["solved"]
+    lens, samples = arrays["path_lengths"], len(arrays["inputs"])
+    sel = idx[solved]
+    segments = int(np.maximum(lens - 1, 0).sum())
+    nblk = int(blocked[idx].sum())
+    return {
+        "queries": k, "uniform": int((kind == Q.UNIFORM).sum()),
+        "non_trivial": int((kind == Q.NON_TRIVIAL).sum()),
+        "nt_exhausted": int((kind == Q.NT_EXHAUSTED).sum()),
+        "solved": int(solved.sum()), "unsolved": int(k - solved.sum()),
+        "rejected_paths": int(planned.rejected[idx].sum()),
+        "paths": int(len(sel)), "segments": segments, "samples": samples,
+        "pruned": segments - samples if prune else 0,
+        "fraction_pruned": (segments - samples) / segments if prune and segments else 0.0,
+        "mean_waypoints": float(lens.mean()) if len(lens) else 0.0,
+        "max_waypoints": int(lens.max()) if len(lens) else 0,
+        "blocked_fraction": nblk / k,
+        "blocked_fraction_ci95": list(Q.wilson_interval(nblk, k)) if k else [0.0, 1.0],
+        "mean_cost": float(planned.result.costs[sel].mean()) if len(sel) else None,
+        "gamma_nt": g_data["gamma"], "gamma_nt_eval": g_eval["gamma"],
+    }
+
+
+def dataset_warnings(env_name: str, name: str, stats: dict, prune: bool, n_max: int) -> list[str]:
+    """The ``warnings`` of a dataset's ``meta.json``; an empty dataset is also warned about."""
+    out = []
+    if stats["samples"] == 0:
+        why = ("(pruning removed every segment: no waypoint of any path is blocked from its goal, "
+               "e.g. a map without obstacles)" if prune and stats["segments"]
+               else "(no query was solved)" if not stats["paths"] else "(empty)")
+        out.append(f"{env_name} {name}: the dataset has no samples {why}; an empty, valid "
+                   "dataset was written")
+        warnings.warn(out[-1], RuntimeWarning, stacklevel=3)
+    if stats["nt_exhausted"]:
+        out.append(f"{env_name} {name}: {stats['nt_exhausted']} non-trivial draw(s) found no "
+                   f"blocked query in n_max={n_max} attempts and are trivial (query_kind 2)")
+    return out
+
+
+def sharing(run: RunSpec, j: int) -> dict:
+    """Dataset ``j``'s pool prefixes and the earlier datasets with the same queries."""
+    b = run.bits[j]
+    return {"uniform_pool": [0, int((~b).sum())], "nontrivial_pool": [0, int(b.sum())],
+            "same_queries_as": [run.names[i] for i in range(j) if np.array_equal(run.bits[i], b)]}
+
+
+def common_meta(env, config, run: RunSpec, g_data: dict, g_eval: dict) -> dict:
+    """The ``meta.json`` entries every dataset of the run shares."""
+    return {
+        "format": FORMAT, "format_version": FORMAT_VERSION, "env": env.name,
+        "env_name": run.env_name, "env_slug": run.slug, "seed": config.seed, "k_train": run.k,
+        "padding": run.padding, "prune_padding": run.prune_padding,
+        "planner": {"name": run.planner_name, "options": run.options},
+        "sampling": {"n_max": config.sampling.n_max}, "gamma_nt": g_data, "gamma_nt_eval": g_eval,
+        "package_version": __version__, "config_hash": config.hash(),
+        "fingerprint": run.fingerprint, "query_kind_values": _QUERY_KINDS,
+    }
+
+
+def write_figure(run: RunSpec) -> None:
+    """``<env_dir>/figure.png``; a failure is a warning (a figure must never cost the data)."""
+    try:
+        plot_environment(run.env_dir, out=run.env_dir / "figure.png")
+    except Exception as e:  # noqa: BLE001
+        warnings.warn(f"{run.env_name}: figure not written: {e}", RuntimeWarning, stacklevel=3)
+
+
+def _warn_rejected(run: RunSpec, planned: PoolPlan) -> None:
+    n = int(planned.rejected.sum())
+    if n:
+        warnings.warn(f"{run.env_name}: {n} planner path(s) failed the independent check (a "
+                      f"segment in collision at padding {run.padding}, or not finite); they are "
+                      "recorded as unsolved", RuntimeWarning, stacklevel=3)
+
+
+def _open_work(env, run: RunSpec) -> Path:
+    """Creates ``<env_dir>/.work/<fingerprint>/`` and writes ``env.json``."""
+    work = run.env_dir / ".work" / run.fingerprint
+    work.mkdir(parents=True, exist_ok=True)
+    artifacts.clean_tmp(work)
+    env.save_json(run.env_dir / "env.json")
+    return work
+
+
+def _already_complete(run: RunSpec, figure: bool) -> dict:
+    """The summary of a complete output; finishes an interrupted figure and clean-up."""
+    metas = {nm: json.loads((run.env_dir / nm / "meta.json").read_text()) for nm in run.names}
+    if figure and not (run.env_dir / "figure.png").is_file():
+        write_figure(run)
+    shutil.rmtree(run.env_dir / ".work", ignore_errors=True)
+    return {"env_dir": str(run.env_dir), "skipped": True, "fingerprint": run.fingerprint,
+            "timings": {}, "reused_queries": 0,
+            "datasets": {nm: m["stats"] for nm, m in metas.items()}}
+
+
+@contextlib.contextmanager
+def _timed(timings: dict, stage: str):
+    t0 = time.perf_counter()
+    yield
+    timings[stage] = timings.get(stage, 0.0) + time.perf_counter() - t0
+
+
+# ---------------------------------------------------------------------------
+# The orchestrator
+# ---------------------------------------------------------------------------
+
+def generate_datasets(env, config, out_dir, *, env_name: str | None = None, planner=None,
+                      progress=True, figure: bool = True) -> dict:
+    """Generates D0..D3 (``config.data.datasets``) for one environment (Alg. 2 + 4).
+
+    Writes ``<out_dir>/<env_slug>/env.json``, ``D<i>/`` (:mod:`ntq_jax.data.format`)
+    and ``figure.png``. Resumable: a rerun after an interruption reuses the
+    completed planning chunks; a complete, matching output is left untouched.
+
+    Args:
+        env: the :class:`ntq_jax.Env` (its padding is the data-generation geometry).
+        config: a :class:`ntq_jax.config.Config` (``seed``, ``sampling``, ``data``, ``planner``).
+        out_dir: the output root.
+        env_name: the name listed in ``config.envs`` (for per-env overrides and
+            the folder name); default ``env.name``.
+        planner: ``None`` (``config.planner.name``), a planner name, or a callable
+            ``(env, queries (K, 2, d), *, padding, seed) -> PlanResult`` (its
+            results are verified with :func:`ntq_jax.planners.verify.finalize`).
+        progress: progress bars per stage (:func:`ntq_jax.progress.open_bar`; True = tqdm).
+        figure: write the PNG figure.
+
+    Returns:
+        A summary dict: ``env_dir``, ``datasets`` (name -> statistics), ``timings``
+        (seconds per stage), ``reused_queries``, ``skipped`` (already complete),
+        ``fingerprint`` and (unless skipped) ``planned_queries``.
+    """
+    t_all = time.perf_counter()
+    run = resolve_run(env, config, out_dir, env_name, planner)
+    if is_complete(run.env_dir, run.names, run.fingerprint):
+        return _already_complete(run, figure)
+    work = _open_work(env, run)
+    timings: dict[str, float] = {}
+
+    # 1. the query pools U and N
+    with _timed(timings, "sample"):
+        pools = sample_pools(env, run.keys, run.n_u, run.n_nt, run.padding,
+                             config.sampling.n_max, progress, f"{run.slug}: sample queries")
+
+    with ThreadPoolExecutor(1, thread_name_prefix="ntq_jax-gamma") as gamma_thread:
+        # 2. gamma_nt of the map, in the background while the planner runs
+        gammas = gamma_thread.submit(estimate_gammas, env, run.keys.gamma, config.data,
+                                     run.padding, work)
+        # 3. planning (chunked, resumable, verified) and the blocked-ness of every query
+        with _timed(timings, "plan"):
+            planned = plan_pool(env, pools.queries, run.plan_fn, verify=run.verify,
+                                padding=run.padding, seed=config.seed, chunk=config.data.chunk,
+                                work=work, progress=progress,
+                                desc=f"{run.slug}: plan ({run.planner_name})")
+        _warn_rejected(run, planned)
+        with _timed(timings, "check"):
+            blocked = ~steer_to_pairs(env.robot, env.world, pools.queries[:, 0],
+                                      pools.queries[:, 1], run.padding)
+        with _timed(timings, "gamma_wait"):
+            g_data, g_eval, timings["gamma"] = gammas.result()
+        with open_bar(progress, desc=f"{run.slug}: gamma_nt", total=1, unit="estimate") as bar:
+            bar.update(1)
+
+    # 4. includeData per dataset, written with its metadata (meta.json last)
+    common = common_meta(env, config, run, g_data, g_eval)
+    summary: dict[str, dict] = {}
+    with open_bar(progress, desc=f"{run.slug}: includeData + write", total=len(run.specs),
+                  unit="dataset") as bar:
+        for j, (name, spec) in enumerate(zip(run.names, run.specs)):
+            with _timed(timings, "include"):
+                idx = pool_index(run.bits[j], pools.n_u)
+                arrays = dataset_arrays(env, pools, planned.result, idx, spec.prune,
+                                        run.prune_padding)
+            with _timed(timings, "write"):
+                stats = dataset_stats(arrays, idx, planned, blocked, spec.prune, g_data, g_eval)
+                warns = dataset_warnings(run.env_name, name, stats, spec.prune,
+                                         config.sampling.n_max)
+                write_dataset(run.env_dir / name, arrays, dict(
+                    common, name=name, p_nt=spec.p_nt, prune=spec.prune, stats=stats,
+                    sharing=sharing(run, j), warnings=warns))
+            summary[name] = stats
+            bar.update(1)
+
+    # 5. the figure; the datasets are complete: drop every work folder
+    if figure:
+        with _timed(timings, "figure"):
+            write_figure(run)
+    shutil.rmtree(run.env_dir / ".work", ignore_errors=True)
+    timings["total"] = time.perf_counter() - t_all
+    return {"env_dir": str(run.env_dir), "skipped": False, "fingerprint": run.fingerprint,
+            "timings": timings, "reused_queries": planned.reused, "datasets": summary,
+            "planned_queries": len(pools.queries)}

@@ -1,0 +1,190 @@
+"""Planning a query pool: the run's planner, in resumable chunks on disk.
+
+The planner runs over the pool in chunks of ``config.data.chunk`` queries; each
+chunk's verified :class:`ntq_jax.types.PlanResult` is written atomically with
+the queries it solved to ``<work>/plan_<start>_<stop>.npz``. A rerun reuses
+every completed chunk whose queries match (whatever the chunk size was then)
+and plans only the missing ranges. ``astar`` and ``visgraph`` are
+deterministic, so the result does not depend on the chunk size; BIT* stops on
+a time budget and is not (its per-chunk seed does not make it so), but its
+completed chunks are kept all the same.
+
+Results of the registry (:func:`ntq_jax.planners.plan`) are verified there; a
+user's planner callable is verified here, once, by
+:func:`ntq_jax.planners.verify.finalize`.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from typing import Callable, NamedTuple, Optional
+
+import numpy as np
+
+from ntq_jax import artifacts
+from ntq_jax.planners import plan
+from ntq_jax.planners.verify import finalize
+from ntq_jax.progress import open_bar
+from ntq_jax.types import PlanResult, PlanStatus
+
+__all__ = ["planner_options", "resolve_planner", "PoolPlan", "chunk_ranges", "plan_pool"]
+
+_CHUNK_FILE = re.compile(r"plan_(\d+)_(\d+)\.npz")
+_CHUNK_KEYS = ("queries", "paths", "lengths", "costs", "status", "rejected")
+
+
+def planner_options(config, env_name: str, name: str | None = None) -> dict:
+    """The keyword options passed to ``ntq_jax.planners.plan`` for planner ``name``.
+
+    ``name`` defaults to ``config.planner.name``.
+    """
+    pc = config.planner
+    name = name or pc.name
+    if name == "astar":
+        return {"resolution": pc.resolution}
+    if name == "bitstar":
+        return {"time_budget": pc.time_budget_for(env_name), "workers": pc.workers}
+    return {}
+
+
+def resolve_planner(planner, options: dict) -> tuple[Callable, str]:
+    """A callable ``(env, queries, *, padding, seed) -> PlanResult`` and its name.
+
+    Args:
+        planner: a name (``astar``, ``visgraph``, ``bitstar``, or any registered
+            one; solved and verified by ``ntq_jax.planners.plan``) or a callable
+            with that signature (e.g. a test's fake planner), returned as it is:
+            :func:`plan_pool` verifies its results (``verify=True``).
+        options: extra keyword options for a named planner.
+    """
+    if callable(planner):
+        return planner, getattr(planner, "__name__", "custom")
+    name = str(planner)
+
+    def run(env, queries, *, padding, seed=0):
+        return plan(env, queries, planner=name, padding=padding, seed=seed, **options)
+    return run, name
+
+
+class PoolPlan(NamedTuple):
+    """A planned pool, merged over its chunks.
+
+    Attributes:
+        result: the verified :class:`PlanResult` of every pooled query (``info`` empty).
+        rejected: ``(n,)`` bool, a path the planner reported solved failed
+            verification (only for planners verified here; it counts as unsolved).
+        reused: queries whose chunk was reused from disk.
+    """
+
+    result: PlanResult
+    rejected: np.ndarray
+    reused: int
+
+
+def chunk_seed(seed: int, start: int) -> int:
+    """The seed of the chunk starting at pool row ``start`` (distinct per chunk for BIT*)."""
+    return (int(seed) * 1_000_003 + start) % (2 ** 31 - 1)
+
+
+def _completed_chunks(work: Path, n: int) -> dict[int, tuple[int, Path]]:
+    """``start -> (stop, file)`` of the chunk files in ``work`` (the longest per start)."""
+    done: dict[int, tuple[int, Path]] = {}
+    for p in work.glob("plan_*_*.npz"):
+        m = _CHUNK_FILE.fullmatch(p.name)
+        if m:
+            lo, hi = int(m.group(1)), int(m.group(2))
+            if 0 <= lo < hi <= n and (lo not in done or done[lo][0] < hi):
+                done[lo] = (hi, p)
+    return done
+
+
+def chunk_ranges(n: int, chunk: int, done: dict[int, tuple[int, Path]]
+                 ) -> list[tuple[int, int, Optional[Path]]]:
+    """``(start, stop, file or None)`` covering ``0..n``: the completed chunks of
+    ``done`` where they start, new ranges of at most ``chunk`` rows between them."""
+    parts: list[tuple[int, int, Optional[Path]]] = []
+    starts = sorted(done)
+    i = 0
+    while i < n:
+        if i in done:
+            hi, p = done[i]
+            parts.append((i, hi, p))
+        else:
+            hi = min(i + chunk, min([s for s in starts if s > i] + [n]))
+            parts.append((i, hi, None))
+        i = hi
+    return parts
+
+
+def _load_chunk(path: Path, queries: np.ndarray) -> tuple[PlanResult, np.ndarray] | None:
+    z = artifacts.load_npz(path)
+    if z is None or any(k not in z for k in _CHUNK_KEYS) or not np.array_equal(z["queries"],
+                                                                               queries):
+        return None
+    return PlanResult(z["paths"], z["lengths"], z["costs"], z["status"], {}), z["rejected"]
+
+
+def _plan_chunk(env, queries: np.ndarray, plan_fn: Callable, verify: bool, padding: float,
+                seed: int) -> tuple[PlanResult, np.ndarray]:
+    raw = plan_fn(env, queries, padding=padding, seed=seed)
+    k, d = queries.shape[0], queries.shape[2]
+    if not verify:
+        return raw, np.zeros(k, bool)
+    paths = np.asarray(raw.paths, np.float32)
+    if paths.ndim != 3 or paths.shape[0] != k or paths.shape[2] != d:
+        raise ValueError(f"planner returned paths of shape {paths.shape}, expected ({k}, L, {d})")
+    status = np.asarray(raw.status, np.int8)
+    res = finalize(queries, paths, np.asarray(raw.lengths, np.int32), status, dict(raw.info),
+                   env, padding)
+    return res, (status == PlanStatus.SOLVED) & ~res.solved
+
+
+def _merge(parts, results, n: int, d: int) -> tuple[PlanResult, np.ndarray]:
+    width = max([r.paths.shape[1] for r, _ in results] + [2])
+    paths = np.full((n, width, d), np.nan, np.float32)
+    lengths = np.zeros(n, np.int32)
+    costs = np.full(n, np.inf)
+    status = np.zeros(n, np.int8)
+    rejected = np.zeros(n, bool)
+    for (lo, hi, _), (r, rej) in zip(parts, results):
+        paths[lo:hi, : r.paths.shape[1]] = r.paths
+        lengths[lo:hi], costs[lo:hi], status[lo:hi], rejected[lo:hi] = (r.lengths, r.costs,
+                                                                        r.status, rej)
+    return PlanResult(paths, lengths, costs, status, {}), rejected
+
+
+def plan_pool(env, pool: np.ndarray, plan_fn: Callable, *, verify: bool, padding: float,
+              seed: int, chunk: int, work: Path, progress=None, desc: str = "plan") -> PoolPlan:
+    """Plans ``pool`` ``(n, 2, d)`` in chunks, reusing the completed chunk files in ``work``.
+
+    Args:
+        plan_fn: ``(env, queries, *, padding, seed) -> PlanResult`` (:func:`resolve_planner`).
+        verify: verify ``plan_fn``'s results with ``verify.finalize`` (a user's
+            callable; the registry's planners verify their own).
+        padding: the planning clearance (a number).
+        seed: the run's seed (each chunk gets :func:`chunk_seed`).
+        chunk: queries per new chunk.
+        work: the folder of the chunk files.
+        progress: a progress bar request (:func:`ntq_jax.progress.open_bar`).
+    """
+    n, d = len(pool), pool.shape[2]
+    parts = chunk_ranges(n, chunk, _completed_chunks(work, n))
+    results, reused = [], 0
+    with open_bar(progress, desc=desc, total=n, unit="query") as bar:
+        for lo, hi, path in parts:
+            got = _load_chunk(path, pool[lo:hi]) if path is not None else None
+            if got is not None:
+                reused += hi - lo
+            else:
+                if path is not None:  # stale or damaged: plan again
+                    path.unlink(missing_ok=True)
+                got = _plan_chunk(env, pool[lo:hi], plan_fn, verify, padding, chunk_seed(seed, lo))
+                res, rej = got
+                artifacts.save_npz(work / f"plan_{lo:09d}_{hi:09d}.npz", queries=pool[lo:hi],
+                                   paths=res.paths, lengths=res.lengths, costs=res.costs,
+                                   status=res.status, rejected=rej)
+            results.append(got)
+            bar.update(hi - lo)
+    result, rejected = _merge(parts, results, n, d)
+    return PoolPlan(result, rejected, reused)

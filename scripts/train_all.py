@@ -99,7 +99,8 @@ def run_pipeline(cfg, run: Path, *, progress: bool = True, figures: bool = True,
                  log=print) -> dict:
     """Runs every stage for every environment; returns the report's file paths."""
     from ntq_jax import make_env
-    from ntq_jax.evaluate import env_slug, evaluate_env
+    from ntq_jax.data import env_slug
+    from ntq_jax.evaluate import evaluate_env
     from ntq_jax.report import write_report
     try:
         from ntq_jax import data as data_mod

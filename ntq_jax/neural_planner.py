@@ -8,8 +8,9 @@ Contract: :func:`plan_batch` plans ``queries`` ``(K, 2, d)`` in an
 metric and a :class:`ntq_jax.types.PlanCause` (names in
 :data:`ntq_jax.types.CAUSE_NAMES`):
 
-* ``SUCCESS``: the path joins start and goal and every segment passes
-  ``steer_to`` on the evaluation geometry (``eval_padding``);
+* ``SUCCESS``: the path runs from the start to the goal (without steerTo: to
+  within ``delta`` of it) and every segment passes ``steer_to`` on the
+  evaluation geometry (``eval_padding``);
 * ``NO_PATH``: the goal was not reached within ``n_plan`` PNet steps (Alg. 1's
   empty path);
 * ``INFEASIBLE``: reached, but still in collision after replanning;
@@ -17,7 +18,8 @@ metric and a :class:`ntq_jax.types.PlanCause` (names in
   geometry, or not finite.
 
 The result is deterministic given the key. One implementation serves every
-robot: it only uses the robot's kernels (:mod:`ntq_jax.robots.batch`). The
+robot: it only uses the robot's kernels (:mod:`ntq_jax.robots.batch`) and the
+package's path shortcutting (:mod:`ntq_jax.planners.smoothing`). The
 algorithm (coarse plan, lazy states contraction, feasibility check, neural
 replanning; the variant without steerTo) is described step by step in
 :func:`plan_batch`; its jitted steps are in :mod:`ntq_jax.neural_steps`, this

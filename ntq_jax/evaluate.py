@@ -16,22 +16,26 @@ Metrics per (environment, model, test query kind, steerTo):
   queries both solved (and the same against the visibility-graph optimum for
   point robots);
 * planning time per query (batched wall time / K_test, compile time apart);
-* failures by cause: ``no_path`` (goal not reached within N_plan),
-  ``infeasible`` (in collision after replanning), ``invalid_query``, and
-  ``reference_failed`` (queries the reference planner did not solve).
+* failures by cause (:data:`ntq_jax.types.CAUSE_NAMES`): ``no_path``,
+  ``infeasible``, ``invalid_query``, and ``reference_failed`` (queries the
+  reference planner did not solve).
 
-Files (all written atomically; a complete file is reused on a rerun)::
+Files (written atomically; a complete file made from the same inputs, as its
+fingerprint says, is reused on a rerun)::
 
     <run>/eval/<env_slug>/queries.npz          test queries (uniform, nontrivial)
     <run>/eval/<env_slug>/reference.npz        reference (and optimum) paths and costs
     <run>/paths/<env_slug>/<model>_<uniform|nontrivial>[_nosteer].npz
         queries, paths (NaN padded), lengths, success, costs, cause, ref_costs,
         opt_costs, pnet_calls, replans, seconds, compile_seconds, fingerprint
+
+Measured evaluation times: BENCHMARKS.md, "Neural planner evaluation".
 """
 
 from __future__ import annotations
 
-import hashlib
+import dataclasses
+import functools
 import json
 import time
 import zlib
@@ -43,22 +47,15 @@ import jax.numpy as jnp
 import numpy as np
 from jax.tree_util import Partial
 
-from ntq_jax import artifacts
+from ntq_jax import artifacts, models
 from ntq_jax import neural_planner as NP
-from ntq_jax.types import PlanStatus
+from ntq_jax.data import env_slug
+from ntq_jax.planners import plan
+from ntq_jax.planners.verify import check_paths
 from ntq_jax.queries import wilson_interval
+from ntq_jax.types import CAUSE_NAMES, QUERY_KINDS, PlanCause, PlanStatus
 
 EVAL_TAG = 0x7E57  # key tag of the test queries (training uses other streams)
-KINDS = ("uniform", "nontrivial")
-
-
-def env_slug(name: str) -> str:
-    """Folder name of an environment (the same rule as :func:`ntq_jax.data.env_slug`)."""
-    try:
-        from ntq_jax.data import env_slug as _slug
-        return _slug(name)
-    except ImportError:  # pragma: no cover
-        return str(name).replace("/", "_")
 
 
 def model_name(member: int) -> str:
@@ -71,31 +68,15 @@ def paths_file(run_dir, slug: str, member: int, kind: str, steer: bool) -> Path:
 
 
 # ---------------------------------------------------------------------------
-# Atomic files
-# ---------------------------------------------------------------------------
-
-def load_npz(path: Path, fingerprint: str | None = None) -> dict | None:
-    """The arrays of a complete ``.npz`` (None if absent, unreadable or of another run)."""
-    path = Path(path)
-    if not path.is_file():
-        return None
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            out = {k: z[k] for k in z.files}
-    except Exception:  # noqa: BLE001 - a corrupt or partial file is recomputed
-        return None
-    if fingerprint is not None and str(out.get("fingerprint", "")) != fingerprint:
-        return None
-    return out
-
-
-
-
-# ---------------------------------------------------------------------------
 # PNets from an ensemble
 # ---------------------------------------------------------------------------
 
-_APPLY: dict = {}
+@functools.lru_cache(maxsize=8)
+def _member_apply(graphdef) -> Callable:
+    """One apply function per graphdef, so ensembles of one architecture share a compilation."""
+    def fn(params, m, key, current, goal):
+        return models.apply_member(graphdef, params, jax.random.fold_in(key, m), current, goal)
+    return fn
 
 
 def member_pnets(ens) -> list[Partial]:
@@ -105,20 +86,10 @@ def member_pnets(ens) -> list[Partial]:
     key ``fold_in(key, m)``), but the members share one apply function, so the
     neural planner compiles once for the whole ensemble.
     """
-    from ntq_jax import models
-
-    graphdef = ens.graphdef
     try:
-        fn = _APPLY.get(graphdef)
+        fn = _member_apply(ens.graphdef)
     except TypeError:  # unhashable graphdef: no sharing across ensembles
-        fn = None
-    if fn is None:
-        def fn(params, m, key, current, goal):
-            return models.apply_member(graphdef, params, jax.random.fold_in(key, m), current, goal)
-        try:
-            _APPLY[graphdef] = fn
-        except TypeError:
-            pass
+        fn = _member_apply.__wrapped__(ens.graphdef)
     return [Partial(fn, models.unstack_state(ens.params, m), jnp.uint32(m))
             for m in range(ens.num_members)]
 
@@ -135,73 +106,65 @@ def test_queries(env, cfg, slug: str, out_dir: Path) -> dict[str, np.ndarray]:
     """``{"uniform": (K, 2, d), "nontrivial": (K, 2, d)}``, cached in ``queries.npz``."""
     ev = cfg.eval
     qpad = env.resolve_padding(ev.query_padding)
-    fp = _fp(slug, ev.k_test, qpad, cfg.seed, cfg.sampling.n_max, env.to_json())
-    f = Path(out_dir) / "queries.npz"
-    got = load_npz(f, fp)
-    if got is not None:
-        return {k: got[k] for k in KINDS}
-    key = jax.random.fold_in(jax.random.fold_in(jax.random.key(cfg.seed), EVAL_TAG), _tag(slug))
-    out = {}
-    for i, kind in enumerate(KINDS):
-        q, _ = env.sample_queries(jax.random.fold_in(key, i), ev.k_test, float(i), padding=qpad,
-                                  n_max=cfg.sampling.n_max)
-        out[kind] = np.asarray(q, np.float32)
-    artifacts.save_npz(f, fingerprint=fp, query_padding=qpad, **out)
-    return out
+    fp = artifacts.fingerprint(slug, ev.k_test, qpad, cfg.seed, cfg.sampling.n_max, env.to_json())
+
+    def compute():
+        key = jax.random.fold_in(jax.random.fold_in(jax.random.key(cfg.seed), EVAL_TAG),
+                                 _tag(slug))
+        out = {"query_padding": qpad}
+        for i, kind in enumerate(QUERY_KINDS):
+            q, _ = env.sample_queries(jax.random.fold_in(key, i), ev.k_test, float(i),
+                                      padding=qpad, n_max=cfg.sampling.n_max)
+            out[kind] = np.asarray(q, np.float32)
+        return out
+
+    got = artifacts.compute_or_load(Path(out_dir) / "queries.npz", fp, compute)
+    return {k: got[k] for k in QUERY_KINDS}
 
 
 def reference_plans(env, cfg, env_name: str, slug: str, queries: dict, out_dir: Path,
                     planner: Callable | None = None) -> dict:
-    """Reference (and, for point robots, optimum) costs and paths on padding 0, cached."""
+    """Reference (and, for point robots, optimum) costs and paths on padding 0, cached.
+
+    ``planner`` (optional) replaces ``cfg.planner``: a callable ``(env, q, *,
+    padding, seed)`` returning a :class:`ntq_jax.types.PlanResult`. The optimum is
+    the visibility graph's (``ntq_jax.plan(env, q, "visgraph", padding=0.0)``).
+    """
     name = cfg.planner.name if planner is None else getattr(planner, "__name__", "custom")
-    fp = _fp(slug, name, cfg.planner, {k: v.tobytes().hex()[:64] for k, v in queries.items()},
-             {k: len(v) for k, v in queries.items()})
-    f = Path(out_dir) / "reference.npz"
-    got = load_npz(f, fp)
-    if got is not None:
-        return got
-    out: dict = {"fingerprint": fp, "planner": name}
-    for kind in KINDS:
-        q = queries[kind]
-        t0 = time.perf_counter()
-        res = _run_reference(env, q, cfg, env_name, planner)
-        out[f"{kind}_seconds"] = time.perf_counter() - t0
-        out[f"{kind}_costs"] = np.asarray(res.costs, np.float64)
-        out[f"{kind}_status"] = np.asarray(res.status, np.int8)
-        out[f"{kind}_paths"] = np.asarray(res.paths, np.float32)
-        out[f"{kind}_lengths"] = np.asarray(getattr(res, "lengths", None) if hasattr(res, "lengths")
-                                            else res.path_lengths, np.int32)
-        if env.robot.kind == "point":
-            opt = _visgraph(env, q)
-            out[f"{kind}_opt_costs"] = np.asarray(opt.costs, np.float64)
-    artifacts.save_npz(f, **out)
-    return load_npz(f)
+    fp = artifacts.fingerprint(slug, name, cfg.planner,
+                               {k: v.tobytes().hex()[:64] for k, v in queries.items()},
+                               {k: len(v) for k, v in queries.items()})
+
+    def compute():
+        out: dict = {"planner": name}
+        for kind in QUERY_KINDS:
+            q = queries[kind]
+            t0 = time.perf_counter()
+            res = _run_reference(env, q, cfg, env_name, planner)
+            out[f"{kind}_seconds"] = time.perf_counter() - t0
+            out[f"{kind}_costs"] = np.asarray(res.costs, np.float64)
+            out[f"{kind}_status"] = np.asarray(res.status, np.int8)
+            out[f"{kind}_paths"] = np.asarray(res.paths, np.float32)
+            out[f"{kind}_lengths"] = np.asarray(res.lengths, np.int32)
+            if env.robot.kind == "point":
+                opt = plan(env, q, "visgraph", padding=0.0)
+                out[f"{kind}_opt_costs"] = np.asarray(opt.costs, np.float64)
+        return out
+
+    return artifacts.compute_or_load(Path(out_dir) / "reference.npz", fp, compute)
 
 
 def _run_reference(env, q, cfg, env_name, planner):
     if planner is not None:
         return planner(env, q, padding=0.0, seed=cfg.seed)
-    from ntq_jax.planners import plan
     pc = cfg.planner
     if pc.name == "astar":
         opts = {"resolution": pc.resolution}
     elif pc.name == "bitstar":
-        budget = (pc.eval_time_budget_for(env_name) if hasattr(pc, "eval_time_budget_for")
-                  else pc.eval_time_budget)
-        opts = {"time_budget": budget, "workers": pc.workers}
+        opts = {"time_budget": pc.eval_time_budget_for(env_name), "workers": pc.workers}
     else:
         opts = {}
     return plan(env, q, pc.name, padding=0.0, seed=cfg.seed, **opts)
-
-
-def _visgraph(env, q):
-    from ntq_jax.planners.visgraph import plan_visgraph
-    return plan_visgraph(env, q, padding=0.0)
-
-
-def _fp(*parts) -> str:
-    blob = json.dumps(parts, sort_keys=True, default=str).encode()
-    return hashlib.sha256(blob).hexdigest()[:16]
 
 
 # ---------------------------------------------------------------------------
@@ -214,16 +177,18 @@ def metrics(success: np.ndarray, costs: np.ndarray, cause: np.ndarray, ref_costs
     k = int(len(success))
     s = int(np.sum(success))
     lo, hi = wilson_interval(s, k)
-    ref_ok = (ref_status == PlanStatus.SOLVED) & np.isfinite(ref_costs) & (ref_costs > 0)
+    ref_solved = ref_status == PlanStatus.SOLVED
+    ref_ok = ref_solved & np.isfinite(ref_costs) & (ref_costs > 0)
     both = success & ref_ok
     out = {
         "k_test": k, "successes": s, "success_ratio": s / k if k else float("nan"),
         "success_ci95": [lo, hi],
         "cost_ratio": float(np.mean(costs[both] / ref_costs[both])) if both.any() else None,
         "cost_ratio_n": int(both.sum()),
-        "failures": {NP.CAUSES[c]: int(np.sum(cause == c)) for c in NP.CAUSES if c != NP.SUCCESS},
-        "reference_failed": int(np.sum(~(ref_status == PlanStatus.SOLVED))),
-        "reference_success_ratio": float(np.mean(ref_status == PlanStatus.SOLVED)) if k else float("nan"),
+        "failures": {CAUSE_NAMES[c]: int(np.sum(cause == c)) for c in PlanCause
+                     if c != PlanCause.SUCCESS},
+        "reference_failed": int(np.sum(~ref_solved)),
+        "reference_success_ratio": float(np.mean(ref_solved)) if k else float("nan"),
     }
     if opt_costs is not None:
         ok = success & np.isfinite(opt_costs) & (opt_costs > 0)
@@ -255,13 +220,71 @@ def _gamma(env, cfg, data_env_dir, slug: str, out_dir: Path) -> dict:
     e = env.gamma_nt(key, cfg.eval.gamma_queries, padding=0.0)
     g = {"gamma": float(e.gamma), "ci95": [float(x) for x in e.ci95], "queries": int(e.queries),
          "source": "eval"}
-    artifacts.write_text(f, json.dumps(g))
+    artifacts.write_json(f, g, indent=None)
     return g
 
 
 # ---------------------------------------------------------------------------
 # One environment
 # ---------------------------------------------------------------------------
+
+@dataclasses.dataclass(frozen=True)
+class _EnvEval:
+    """What every (model, query kind, steerTo) cell of one environment shares."""
+
+    env: object
+    cfg: object
+    run_dir: Path
+    env_name: str
+    slug: str
+    queries: dict
+    ref: dict
+    gamma: dict
+    log: Callable[[str], None]
+
+
+def _plan_cell(ctx: _EnvEval, pnet, m: int, kind: str, steer) -> dict:
+    """Neural plans of one cell, as saved in its paths file."""
+    cfg, q = ctx.cfg, ctx.queries[kind]
+    key = jax.random.fold_in(jax.random.fold_in(jax.random.key(cfg.seed), EVAL_TAG + 2),
+                             _tag(f"{ctx.slug}/{m}/{kind}/{steer}"))
+    opts = NP.PlannerOptions.from_config(cfg.eval, steer=steer)
+    res = NP.plan_batch(ctx.env, pnet, q, key, opts, chunk=cfg.eval.chunk)
+    out = dict(queries=q, paths=res.paths, lengths=res.lengths, success=res.success,
+               costs=res.costs, cause=res.cause, pnet_calls=res.pnet_calls, replans=res.replans,
+               ref_costs=ctx.ref[f"{kind}_costs"], ref_status=ctx.ref[f"{kind}_status"],
+               seconds=res.seconds, compile_seconds=res.compile_seconds)
+    if f"{kind}_opt_costs" in ctx.ref:
+        out["opt_costs"] = ctx.ref[f"{kind}_opt_costs"]
+    ctx.log(f"  {ctx.slug} {model_name(m)} {kind:10s} steer={steer!s:5s}: success "
+            f"{res.success.mean():.3f}, {res.seconds / max(len(q), 1) * 1e3:.2f} "
+            f"ms/query (+{res.compile_seconds:.1f} s compile)")
+    return out
+
+
+def _cell(ctx: _EnvEval, pnet, m: int, kind: str, steer) -> dict:
+    """The result row of one (model, query kind, steerTo) cell, planned or loaded."""
+    cfg, k = ctx.cfg, max(len(ctx.queries[kind]), 1)
+    f = paths_file(ctx.run_dir, ctx.slug, m, kind, steer)
+    fp = artifacts.fingerprint(cfg.hash(), ctx.slug, m, kind, steer, str(ctx.ref["fingerprint"]),
+                               NP.ALGORITHM_VERSION)
+    got = artifacts.compute_or_load(f, fp, lambda: _plan_cell(ctx, pnet, m, kind, steer))
+    specs = [dict(p_nt=d.p_nt, prune=d.prune) for d in cfg.data.datasets]
+    row = {
+        "task": cfg.task, "env": ctx.env_name, "env_slug": ctx.slug, "model": model_name(m),
+        "member": m, "dataset": specs[m] if m < len(specs) else None,
+        "query_kind": kind, "steer": bool(steer),
+        "gamma_nt": ctx.gamma.get("gamma"), "gamma_nt_ci95": ctx.gamma.get("ci95"),
+        "reference_planner": str(ctx.ref["planner"]),
+        "seconds_per_query": float(got["seconds"]) / k,
+        "compile_seconds": float(got["compile_seconds"]),
+        "reference_seconds_per_query": float(ctx.ref[f"{kind}_seconds"]) / k,
+        "paths_file": str(f.relative_to(ctx.run_dir)),
+    }
+    row.update(metrics(got["success"], got["costs"], got["cause"], got["ref_costs"],
+                       got["ref_status"], got.get("opt_costs")))
+    return row
+
 
 def evaluate_env(env, ensemble, cfg, run_dir, *, env_name: str, data_env_dir=None,
                  planner: Callable | None = None, members: Sequence[int] | None = None,
@@ -288,65 +311,54 @@ def evaluate_env(env, ensemble, cfg, run_dir, *, env_name: str, data_env_dir=Non
     slug = env_slug(env_name)
     run_dir = Path(run_dir)
     out_dir = run_dir / "eval" / slug
-    pnets = member_pnets(ensemble) if hasattr(ensemble, "params") else list(ensemble)
-    members = list(range(len(pnets))) if members is None else list(members)
+    pnets = list(ensemble) if isinstance(ensemble, (list, tuple)) else member_pnets(ensemble)
+    members = list(range(len(pnets)) if members is None else members)
     queries = test_queries(env, cfg, slug, out_dir)
-    ref = reference_plans(env, cfg, env_name, slug, queries, out_dir, planner)
-    gamma = _gamma(env, cfg, data_env_dir, slug, out_dir)
-    specs = [dict(p_nt=d.p_nt, prune=d.prune) for d in cfg.data.datasets]
-    rows = []
-    for steer in cfg.eval.steer:
-        opts = NP.PlannerOptions.from_config(cfg.eval, steer=steer)
-        for m in members:
-            for ki, kind in enumerate(KINDS):
-                q = queries[kind]
-                f = paths_file(run_dir, slug, m, kind, steer)
-                fp = _fp(cfg.hash(), slug, m, kind, steer, str(ref["fingerprint"]),
-                         NP.ALGORITHM_VERSION)
-                got = load_npz(f, fp)
-                if got is None:
-                    key = jax.random.fold_in(jax.random.fold_in(
-                        jax.random.key(cfg.seed), EVAL_TAG + 2), _tag(f"{slug}/{m}/{kind}/{steer}"))
-                    res = NP.plan_batch(env, pnets[m], q, key, opts, chunk=cfg.eval.chunk)
-                    got = dict(fingerprint=fp, queries=q, paths=res.paths, lengths=res.lengths,
-                               success=res.success, costs=res.costs, cause=res.cause,
-                               pnet_calls=res.pnet_calls, replans=res.replans,
-                               ref_costs=ref[f"{kind}_costs"], ref_status=ref[f"{kind}_status"],
-                               seconds=res.seconds, compile_seconds=res.compile_seconds)
-                    if f"{kind}_opt_costs" in ref:
-                        got["opt_costs"] = ref[f"{kind}_opt_costs"]
-                    artifacts.save_npz(f, **got)
-                    log(f"  {slug} {model_name(m)} {kind:10s} steer={steer!s:5s}: success "
-                        f"{res.success.mean():.3f}, {res.seconds / max(len(q), 1) * 1e3:.2f} "
-                        f"ms/query (+{res.compile_seconds:.1f} s compile)")
-                row = {
-                    "task": cfg.task, "env": env_name, "env_slug": slug, "model": model_name(m),
-                    "member": m, "dataset": specs[m] if m < len(specs) else None,
-                    "query_kind": kind, "steer": bool(steer),
-                    "gamma_nt": gamma.get("gamma"), "gamma_nt_ci95": gamma.get("ci95"),
-                    "reference_planner": str(ref["planner"]),
-                    "seconds_per_query": float(got["seconds"]) / max(len(q), 1),
-                    "compile_seconds": float(got["compile_seconds"]),
-                    "reference_seconds_per_query": float(ref[f"{kind}_seconds"]) / max(len(q), 1),
-                    "paths_file": str(f.relative_to(run_dir)),
-                }
-                row.update(metrics(got["success"], got["costs"], got["cause"], got["ref_costs"],
-                                   got["ref_status"], got.get("opt_costs")))
-                rows.append(row)
-    return rows
+    ctx = _EnvEval(env, cfg, run_dir, env_name, slug, queries,
+                   reference_plans(env, cfg, env_name, slug, queries, out_dir, planner),
+                   _gamma(env, cfg, data_env_dir, slug, out_dir), log)
+    return [_cell(ctx, pnets[m], m, kind, steer)
+            for steer in cfg.eval.steer
+            for m in members
+            for kind in QUERY_KINDS]
 
 
-def recheck_paths(env, npz_path) -> np.ndarray:
-    """Independent re-check of a saved paths file: success rows collision-free at padding 0.
+def recheck_paths(env, npz_path, *, delta: float | None = None, atol: float = 1e-5
+                  ) -> np.ndarray:
+    """Independent re-check of the successes of a saved paths file, on the evaluation geometry.
 
-    Returns ``(K,)`` bool: for every success, every segment passes ``env.steer_to``
-    at padding 0 and the path joins the query's start to its goal (or ends within
-    the file's ``delta`` for the variant without steerTo); True for non-successes.
+    A success passes when its path has at least 2 states, all finite, every
+    segment passes ``env.steer_to`` at padding 0
+    (:func:`ntq_jax.planners.verify.check_paths`), it starts at the query's start
+    and ends at the query's goal (every coordinate within ``atol``). A file of the
+    variant without steerTo (``*_nosteer.npz``) records a success when the path's
+    last state is within ``delta`` (Euclidean, in state space) of the goal, which
+    it does not reach: its goal check is ``||end - goal||_2 <= delta + atol``, and
+    ``delta`` (the run's ``eval.delta``) is then required.
+
+    Returns:
+        ``(K,)`` bool: False for the successes that fail the check, True elsewhere.
+
+    Raises:
+        FileNotFoundError: ``npz_path`` is not a complete ``.npz``.
+        ValueError: a file without steerTo and no ``delta``.
     """
-    z = load_npz(npz_path)
+    z = artifacts.load_npz(npz_path)
+    if z is None:
+        raise FileNotFoundError(f"{npz_path} is not a complete .npz file")
+    nosteer = Path(npz_path).stem.endswith("_nosteer")
+    if nosteer and delta is None:
+        raise ValueError(f"{npz_path} is of the variant without steerTo: pass its delta")
+    rows = np.flatnonzero(z["success"])
+    paths, n, q = z["paths"][rows], z["lengths"][rows], z["queries"][rows].astype(np.float64)
+    free, _ = check_paths(env, paths, n, 0.0)
+    start = paths[:, 0].astype(np.float64)
+    end = paths[np.arange(len(rows)), np.maximum(n - 1, 0)].astype(np.float64)
+    at_start = np.all(np.abs(start - q[:, 0]) <= atol, axis=1)
+    if nosteer:
+        at_goal = np.linalg.norm(end - q[:, 1], axis=1) <= delta + atol
+    else:
+        at_goal = np.all(np.abs(end - q[:, 1]) <= atol, axis=1)
     ok = np.ones(len(z["success"]), bool)
-    for i in np.flatnonzero(z["success"]):
-        p = z["paths"][i, : z["lengths"][i]]
-        free = np.asarray(env.steer_to(p[:-1], p[1:], padding=0.0))
-        ok[i] = bool(free.all()) and np.allclose(p[0], z["queries"][i, 0], atol=1e-5)
+    ok[rows] = free & at_start & at_goal
     return ok

@@ -33,7 +33,8 @@ from ntq_jax import artifacts, config as C
 from ntq_jax import data as data_mod
 from ntq_jax import training
 from ntq_jax.envs import make_env
-from ntq_jax.evaluate import env_slug, evaluate_env
+from ntq_jax.data import env_slug
+from ntq_jax.evaluate import evaluate_env
 from ntq_jax.report import write_report
 from ntq_jax.version import __version__
 

@@ -21,11 +21,11 @@ from typing import Sequence
 import numpy as np
 
 from ntq_jax import artifacts
+from ntq_jax.types import QUERY_KINDS
 
 __all__ = ["draw_map", "draw_arm", "dataset_figure", "curves_figure", "success_figure",
            "examples_figure", "queries_figure", "query_figure"]
 
-KINDS = ("uniform", "nontrivial")
 KIND_TITLE = {"uniform": "Uniform Query", "nontrivial": "Non-trivial Query"}
 
 
@@ -198,7 +198,7 @@ def success_figure(rows, path: Path, steer: bool = True) -> Path | None:
     models = sorted({r["model"] for r in rows}, key=lambda s: int(s.split("_")[-1]))
     fig, axes = plt.subplots(1, 2, figsize=(11, 3.8), sharey=True)
     width = 0.8 / max(len(models), 1)
-    for ax, kind in zip(axes, KINDS):
+    for ax, kind in zip(axes, QUERY_KINDS):
         for j, m in enumerate(models):
             ys, lo, hi = [], [], []
             for e in envs:
@@ -271,7 +271,7 @@ def queries_figure(env, queries: dict | None, path: Path) -> Path | None:
     plt = _plt()
     ej = env.to_json()
     fig, axes = plt.subplots(1, 2, figsize=(8, 4))
-    for ax, kind in zip(axes, KINDS):
+    for ax, kind in zip(axes, QUERY_KINDS):
         draw_map(ax, ej)
         qq = queries[kind]
         ax.scatter(qq[:, 0, 0], qq[:, 0, 1], s=4, c="green", label="start")

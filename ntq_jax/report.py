@@ -1,37 +1,33 @@
-"""Reports of an evaluation: results files, the paper's tables and figures.
+"""Reports of an evaluation: the paper's tables from the result rows.
 
-:func:`write_report` takes the result rows of :func:`ntq_jax.evaluate.evaluate_env`
-and writes, into the run folder (atomically):
+:func:`tables_md`, :func:`tables_tex` and :func:`results_csv` turn the result
+rows of :func:`ntq_jax.evaluate.evaluate_env` into text: one table per task and
+steerTo variant laid out as the paper's Tables I-IV (model rows PNet_0..PNet_3;
+uniform and non-trivial columns; success ratio and cost ratio), one block per
+environment with gamma_nt in its heading; the Markdown adds the 95% intervals,
+the cost ratio to the exact optimum (point robots), timings and failures; the
+CSV has one line per row.
 
-* ``results.json`` (rows plus run metadata) and ``results.csv`` (one row per
-  environment, model, test query kind and steerTo variant);
-* ``tables.md`` and ``tables.tex``: one table per task and steerTo variant laid
-  out as the paper's Tables I-IV (model rows PNet_0..PNet_3; uniform and
-  non-trivial columns; success ratio and cost ratio), one block per
-  environment with gamma_nt in its heading; the Markdown adds the 95% intervals,
-  the cost ratio to the exact optimum (point robots), timings and failures;
-* ``figures/success_ratio[_nosteer].png`` (bars with 95% intervals),
-  ``figures/examples_<env>.png`` (neural paths beside the reference on the map)
-  and ``figures/queries_<env>.png`` (the test query distributions).
+:func:`write_report` writes, into the run folder (atomically), ``results.json``
+(rows plus run metadata), ``results.csv``, ``tables.md``, ``tables.tex`` and the
+figures of :mod:`ntq_jax.plotting`: ``figures/success_ratio[_nosteer].png``,
+``figures/examples_<env>.png`` and ``figures/queries_<env>.png``.
 """
 
 from __future__ import annotations
 
 import csv
 import io
-import json
 import math
 from pathlib import Path
-from typing import Sequence
-
-import numpy as np
 
 from ntq_jax import artifacts, plotting
-from ntq_jax.evaluate import KINDS, load_npz
+from ntq_jax.data import env_slug
+from ntq_jax.presets import PAPER_GAMMA
+from ntq_jax.types import QUERY_KINDS
 
 TITLES = {"point": "Point robot planning", "rigid": "Rigid body planning",
           "nlink": "n-link manipulator planning"}
-KIND_TITLE = {"uniform": "Uniform Query", "nontrivial": "Non-trivial Query"}
 CSV_FIELDS = ["task", "env", "model", "query_kind", "steer", "k_test", "successes",
               "success_ratio", "success_ci95_lo", "success_ci95_hi", "cost_ratio", "cost_ratio_n",
               "cost_ratio_opt", "seconds_per_query", "compile_seconds",
@@ -63,7 +59,6 @@ def _models(block):
 
 
 def _gamma_heading(env, block) -> tuple[str, str]:
-    from ntq_jax.presets import PAPER_GAMMA
     r = next(iter(block.values()))
     g = r.get("gamma_nt")
     paper = PAPER_GAMMA.get(env)
@@ -75,6 +70,20 @@ def _gamma_heading(env, block) -> tuple[str, str]:
         md += f" (paper {paper:.3f})"
     tex = f"Environment {env.replace('_', '-')}, $\\gamma_\\mathrm{{nt}}={_f(g)}$"
     return md, tex
+
+
+def _cells(block, model, cell) -> list[str]:
+    """The table cells of ``model``: ``cell(row)`` (two cells) per query kind, "-" if absent."""
+    out = []
+    for kind in QUERY_KINDS:
+        r = block.get((model, kind))
+        out += ["-", "-"] if r is None else cell(r)
+    return out
+
+
+def _md_cells(r) -> list[str]:
+    lo, hi = r["success_ci95"]
+    return [f"{_f(r['success_ratio'])} [{lo:.3f}, {hi:.3f}]", _f(r["cost_ratio"])]
 
 
 def tables_md(rows) -> str:
@@ -91,21 +100,13 @@ def tables_md(rows) -> str:
                     "| Non-trivial cost ratio |",
                     "|---|---|---|---|---|"]
             for m in _models(block):
-                cells = []
-                for kind in KINDS:
-                    r = block.get((m, kind))
-                    if r is None:
-                        cells += ["-", "-"]
-                        continue
-                    lo, hi = r["success_ci95"]
-                    cells += [f"{_f(r['success_ratio'])} [{lo:.3f}, {hi:.3f}]", _f(r["cost_ratio"])]
-                out.append(f"| {m} | " + " | ".join(cells) + " |")
+                out.append(f"| {m} | " + " | ".join(_cells(block, m, _md_cells)) + " |")
             out.append("")
             # extras: optimum ratio, timings, failures
             out += ["| Model | kind | cost ratio to optimum | ms / query | compile s | no path | "
                     "infeasible | invalid | reference failed |", "|---|---|---|---|---|---|---|---|---|"]
             for m in _models(block):
-                for kind in KINDS:
+                for kind in QUERY_KINDS:
                     r = block.get((m, kind))
                     if r is None:
                         continue
@@ -135,10 +136,7 @@ def tables_tex(rows) -> str:
                     "\t\t& {success ratio} & {cost ratio} & {success ratio} & {cost ratio} \\\\",
                     "\t\t\\midrule"]
             for m in _models(block):
-                cells = []
-                for kind in KINDS:
-                    r = block.get((m, kind))
-                    cells += ["-", "-"] if r is None else [_f(r["success_ratio"]), _f(r["cost_ratio"])]
+                cells = _cells(block, m, lambda r: [_f(r["success_ratio"]), _f(r["cost_ratio"])])
                 idx = m.split("_")[-1]
                 out.append(f"\t\t$\\mathsf{{PNet}}_{idx}$ & " + " & ".join(cells) + " \\\\")
             out += ["\t\t\\bottomrule", "\t\\end{tabular}"]
@@ -174,38 +172,36 @@ def write_report(run_dir, rows: list[dict], envs: dict | None = None, meta: dict
         meta: run metadata stored in ``results.json``.
         figures: write the PNG figures.
     """
-    from ntq_jax.evaluate import env_slug
     run_dir = Path(run_dir)
-    out = {}
-    out["results.json"] = run_dir / "results.json"
-    artifacts.write_text(out["results.json"], json.dumps({"meta": meta or {}, "rows": rows}, indent=1,
-                                               default=str))
-    out["results.csv"] = run_dir / "results.csv"
+    out = {name: run_dir / name
+           for name in ("results.json", "results.csv", "tables.md", "tables.tex")}
+    artifacts.write_json(out["results.json"], {"meta": meta or {}, "rows": rows}, indent=1,
+                         default=str)
     artifacts.write_text(out["results.csv"], results_csv(rows))
-    out["tables.md"] = run_dir / "tables.md"
     artifacts.write_text(out["tables.md"], tables_md(rows))
-    out["tables.tex"] = run_dir / "tables.tex"
     artifacts.write_text(out["tables.tex"], tables_tex(rows))
     if figures:
-        figs = run_dir / "figures"
-        for steer in sorted({r["steer"] for r in rows}, reverse=True):
-            p = plotting.success_figure(rows, figs / f"success_ratio{'' if steer else '_nosteer'}.png", steer)
-            if p:
-                out[p.name] = p
-        for name, env in (envs or {}).items():
-            slug = env_slug(name)
-            models = sorted({r["model"] for r in rows if r["env"] == name},
-                            key=lambda s: int(s.split("_")[-1]))
-            steer = any(r["steer"] for r in rows if r["env"] == name)
-            suffix = "" if steer else "_nosteer"
-            saved = {m: load_npz(run_dir / "paths" / slug / f"{m}_nontrivial{suffix}.npz")
-                     for m in models}
-            p = plotting.examples_figure(env, load_npz(run_dir / "eval" / slug / "reference.npz"),
-                                         saved, figs / f"examples_{slug}.png")
-            if p:
-                out[p.name] = p
-            p = plotting.queries_figure(env, load_npz(run_dir / "eval" / slug / "queries.npz"),
-                                        figs / f"queries_{slug}.png")
-            if p:
-                out[p.name] = p
+        out.update(_figures(run_dir, rows, envs or {}))
     return out
+
+
+def _figures(run_dir: Path, rows: list[dict], envs: dict) -> dict:
+    """The report's figures (:mod:`ntq_jax.plotting`): ``{file name: path}`` of those written."""
+    figs = run_dir / "figures"
+    written = []
+    for steer in sorted({r["steer"] for r in rows}, reverse=True):
+        written.append(plotting.success_figure(
+            rows, figs / f"success_ratio{'' if steer else '_nosteer'}.png", steer))
+    for name, env in envs.items():
+        slug = env_slug(name)
+        steer = any(r["steer"] for r in rows if r["env"] == name)
+        mine = [r for r in rows if r["env"] == name and r["steer"] == steer
+                and r["query_kind"] == "nontrivial"]
+        saved = {r["model"]: artifacts.load_npz(run_dir / r["paths_file"])
+                 for r in sorted(mine, key=lambda r: int(r["model"].split("_")[-1]))}
+        eval_dir = run_dir / "eval" / slug
+        written.append(plotting.examples_figure(env, artifacts.load_npz(eval_dir / "reference.npz"),
+                                                saved, figs / f"examples_{slug}.png"))
+        written.append(plotting.queries_figure(env, artifacts.load_npz(eval_dir / "queries.npz"),
+                                               figs / f"queries_{slug}.png"))
+    return {p.name: p for p in written if p}

@@ -15,7 +15,8 @@ from typing import Any, NamedTuple, Protocol
 
 import numpy as np
 
-__all__ = ["PlanStatus", "PlanCause", "STATUS_NAMES", "CAUSE_NAMES", "PlanResult", "PlannerFn"]
+__all__ = ["PlanStatus", "PlanCause", "STATUS_NAMES", "CAUSE_NAMES", "QUERY_KINDS", "PlanResult",
+           "PlannerFn"]
 
 
 class PlanStatus(enum.IntEnum):
@@ -38,6 +39,9 @@ class PlanCause(enum.IntEnum):
 
 STATUS_NAMES = {s: s.name.lower() for s in PlanStatus}
 CAUSE_NAMES = {c: c.name.lower() for c in PlanCause}
+
+#: The two test-query sets of an evaluation, in table order (names in its saved files).
+QUERY_KINDS = ("uniform", "nontrivial")
 
 
 class PlanResult(NamedTuple):

@@ -35,18 +35,40 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def planner_at(rev: str):
-    """The ``ntq_jax.neural_planner`` module of git revision ``rev``, as a separate module."""
-    src = subprocess.run(["git", "-C", str(ROOT), "show", f"{rev}:ntq_jax/neural_planner.py"],
-                         check=True, capture_output=True, text=True).stdout
-    path = Path(tempfile.mkdtemp()) / "neural_planner_at_rev.py"
+def _git_show(rev: str, path: str) -> str | None:
+    r = subprocess.run(["git", "-C", str(ROOT), "show", f"{rev}:{path}"], capture_output=True,
+                       text=True)
+    return r.stdout if r.returncode == 0 else None
+
+
+def _load_source(name: str, src: str):
+    path = Path(tempfile.mkdtemp()) / f"{name}.py"
     path.write_text(src)
-    name = f"neural_planner_{rev}"
     spec = importlib.util.spec_from_file_location(name, path)
     mod = importlib.util.module_from_spec(spec)
     sys.modules[name] = mod
     spec.loader.exec_module(mod)
     return mod
+
+
+def planner_at(rev: str):
+    """The ``ntq_jax.neural_planner`` module of git revision ``rev``, as a separate module
+    (with that revision's ``ntq_jax.neural_steps``, where it has one)."""
+    src = _git_show(rev, "ntq_jax/neural_planner.py")
+    if src is None:
+        raise SystemExit(f"git revision {rev!r} has no ntq_jax/neural_planner.py")
+    steps = _git_show(rev, "ntq_jax/neural_steps.py")
+    if steps is None:
+        return _load_source(f"neural_planner_{rev}", src)
+    current = sys.modules.get("ntq_jax.neural_steps")
+    sys.modules["ntq_jax.neural_steps"] = _load_source(f"neural_steps_{rev}", steps)
+    try:  # the revision's planner binds the revision's steps at import
+        return _load_source(f"neural_planner_{rev}", src)
+    finally:
+        if current is None:
+            del sys.modules["ntq_jax.neural_steps"]
+        else:
+            sys.modules["ntq_jax.neural_steps"] = current
 
 
 def against(env, pnet, q, key, cfg, other, repeats: int) -> dict:
@@ -76,7 +98,8 @@ def bench(env_name: str, *, queries: int, loop_queries: int, run=None, model: in
 
     from ntq_jax import config as C
     from ntq_jax import make_env, models
-    from ntq_jax.evaluate import env_slug, member_pnets
+    from ntq_jax.data import env_slug
+    from ntq_jax.evaluate import member_pnets
     from ntq_jax.neural_planner import PlannerOptions, plan_batch
 
     env = make_env(env_name)

@@ -32,7 +32,7 @@ class PlanError(ValueError):
 def _load(run: Path, env_name: str | None):
     from ntq_jax import config as C
     from ntq_jax import make_env
-    from ntq_jax.evaluate import env_slug
+    from ntq_jax.data import env_slug
     cfg_f = run / "config.yaml"
     if not cfg_f.is_file():
         raise PlanError(f"{run} is not a run folder (no config.yaml); pass the folder printed by "
@@ -129,7 +129,7 @@ def main(argv=None) -> int:
         artifacts.enable_compile_cache()
     from ntq_jax.config import ConfigError
     from ntq_jax.envs import EnvError
-    from ntq_jax.neural_planner import CAUSES
+    from ntq_jax.types import CAUSE_NAMES
     try:
         res, env, png = plan_one(args.run, args.model, args.start, args.goal, env_name=args.env,
                                  steer=not args.no_steer, seed=args.seed, png=args.png)
@@ -137,7 +137,7 @@ def main(argv=None) -> int:
         print(f"error: {e}", file=sys.stderr)
         return 2
     path = res.path(0)
-    print(f"{env.name}, PNet_{args.model}: {CAUSES[int(res.cause[0])]}")
+    print(f"{env.name}, PNet_{args.model}: {CAUSE_NAMES[int(res.cause[0])]}")
     for row in path:
         print("  " + " ".join(f"{v:.4f}" for v in row))
     print(f"cost: {res.costs[0]:.4f}" if res.success[0] else "cost: inf (no collision-free path)")

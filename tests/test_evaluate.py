@@ -11,17 +11,18 @@ import jax
 import numpy as np
 import pytest
 
-from ntq_jax import artifacts, config, make_env
+from ntq_jax import Env, artifacts, config, make_env
 from ntq_jax import evaluate as E
 from ntq_jax import report as R
-from ntq_jax.neural_planner import INFEASIBLE, NO_PATH, SUCCESS
 from ntq_jax.queries import wilson_interval
+from ntq_jax.types import QUERY_KINDS, PlanCause
 
 
 def test_metrics_by_hand():
     success = np.array([True, True, True, False, False])
     costs = np.array([2.0, 3.0, 5.0, np.inf, np.inf])
-    cause = np.array([SUCCESS, SUCCESS, SUCCESS, NO_PATH, INFEASIBLE], np.int8)
+    cause = np.array([PlanCause.SUCCESS, PlanCause.SUCCESS, PlanCause.SUCCESS, PlanCause.NO_PATH,
+                      PlanCause.INFEASIBLE], np.int8)
     ref = np.array([1.0, 2.0, np.inf, 1.0, 1.0])
     status = np.array([0, 0, 2, 0, 0], np.int8)  # the reference timed out on query 2
     opt = np.array([1.0, 1.5, 4.0, 1.0, 1.0])
@@ -111,7 +112,7 @@ def _row(env, model, kind, steer, s, k=50, cost=1.05):
 def test_report_layout(tmp_path):
     rows = [_row(e, f"PNet_{m}", kind, steer, 40 + m)
             for steer in (True, False) for e in ("point/0", "point/3")
-            for m in range(4) for kind in E.KINDS]
+            for m in range(4) for kind in QUERY_KINDS]
     out = R.write_report(tmp_path, rows, envs=None, meta={"seed": 0})
     assert out and all(Path(f).is_file() for f in out.values())
     md = (tmp_path / "tables.md").read_text()
@@ -133,7 +134,32 @@ def test_report_layout(tmp_path):
 def test_npz_roundtrip_rejects_other_fingerprints(tmp_path):
     f = tmp_path / "a.npz"
     artifacts.save_npz(f, fingerprint="abc", x=np.arange(3))
-    assert E.load_npz(f, "abc")["x"].tolist() == [0, 1, 2]
-    assert E.load_npz(f, "other") is None
+    assert artifacts.load_npz(f, "abc")["x"].tolist() == [0, 1, 2]
+    assert artifacts.load_npz(f, "other") is None
     f.write_bytes(b"truncated")
-    assert E.load_npz(f) is None
+    assert artifacts.load_npz(f) is None
+
+
+def test_recheck_paths_checks_collisions_start_and_goal(tmp_path):
+    env = Env.from_json({"name": "box", "robot": {"kind": "point"}, "bounds": [[0, 10], [0, 10]],
+                         "boxes": [[5.0, 5.0, 1.0, 1.0]], "padding": 0.0})
+    q = np.array([[[1, 1], [9, 1]]] * 5, np.float32)
+    paths = np.full((5, 3, 2), np.nan, np.float32)
+    paths[0, :2] = [[1, 1], [9, 1]]                # good
+    paths[1, :3] = [[1, 1], [5, 5], [9, 1]]        # through the box
+    paths[2, :2] = [[1, 1], [8, 1]]                # does not end at the goal
+    paths[3, :2] = [[1, 2], [9, 1]]                # does not start at the start
+    paths[4, :3] = [[1, 1], [5, 5], [9, 1]]        # through the box, but not a success
+    lengths = np.array([2, 3, 2, 2, 3], np.int32)
+    success = np.array([True, True, True, True, False])
+    f = E.paths_file(tmp_path, "box", 0, "uniform", True)
+    artifacts.save_npz(f, queries=q, paths=paths, lengths=lengths, success=success)
+    assert E.recheck_paths(env, f).tolist() == [True, False, False, False, True]
+    # without steerTo a success stops within delta of the goal, which it does not reach
+    g = E.paths_file(tmp_path, "box", 0, "uniform", False)
+    paths[2, :2] = [[1, 1], [8.5, 1]]              # 0.5 from the goal
+    artifacts.save_npz(g, queries=q, paths=paths, lengths=lengths, success=success)
+    assert E.recheck_paths(env, g, delta=1.0).tolist() == [True, False, True, False, True]
+    assert E.recheck_paths(env, g, delta=0.4).tolist() == [True, False, False, False, True]
+    with pytest.raises(ValueError, match="delta"):
+        E.recheck_paths(env, g)

@@ -25,10 +25,11 @@ from shapely.geometry import LineString, Point, box as shapely_box
 from shapely.ops import unary_union
 
 from ntq_jax import Env
-from ntq_jax.neural_planner import (INFEASIBLE, INVALID_QUERY, NO_PATH, SUCCESS, PlannerOptions,
-                                    _contract, plan_batch, repair_windows)
+from ntq_jax.neural_planner import PlannerOptions, plan_batch, repair_windows, splice
+from ntq_jax.neural_steps import contract
 from ntq_jax.planners.visgraph import VisGraph
 from ntq_jax.robots.batch import steer_to_cm
+from ntq_jax.types import PlanCause
 
 ORACLE, SEEKER, CAUTIOUS, BROKEN, STAY = range(5)
 BOUNDS = [[0.0, 10.0], [0.0, 10.0]]
@@ -136,7 +137,7 @@ def run(name, mode, queries, opts=OPTS, key=0, **kw):
 
 def test_straight_shot_needs_no_pnet():
     q, res = run("straight", STAY, [[[1, 2], [9, 8]], [[2, 8], [8, 2]]])
-    assert np.all(res.success) and np.all(res.cause == SUCCESS)
+    assert np.all(res.success) and np.all(res.cause == PlanCause.SUCCESS)
     assert np.all(res.lengths == 2) and np.all(res.pnet_calls == 0)
     np.testing.assert_allclose(res.costs, np.linalg.norm(q[:, 1] - q[:, 0], axis=1), rtol=1e-5)
 
@@ -151,14 +152,14 @@ def test_one_wall_oracle_finds_the_optimum():
 def test_one_wall_seeker_walks_through_and_is_infeasible():
     q, res = run("wall", SEEKER, [[[2, 5], [8, 5]]])
     assert not np.any(res.success)
-    assert np.all(res.cause == INFEASIBLE)  # reached the goal, through the wall; no repair
+    assert np.all(res.cause == PlanCause.INFEASIBLE)  # reached the goal, through the wall; no repair
     assert np.all(res.replans == OPTS.replan_rounds)
 
 
 def test_dead_end():
     queries = [[[5, 4], [5, 9]], [[4, 3], [6, 8]]]
     _, res = run("deadend", CAUTIOUS, queries)
-    assert np.all(res.cause == NO_PATH) and not np.any(res.success)
+    assert np.all(res.cause == PlanCause.NO_PATH) and not np.any(res.success)
     assert np.all(res.pnet_calls == OPTS.n_plan)
     q, res = run("deadend", ORACLE, queries)
     assert np.all(res.success)
@@ -170,7 +171,7 @@ def test_replanning_repairs_a_broken_path():
     kw = dict(jump=((s, g, jump), NO_JUMP))
     no_replan = PlannerOptions(n_plan=12, replan_rounds=0, replan_steps=8)
     _, res = run("wall", BROKEN, [[s, g]], opts=no_replan, **kw)
-    assert np.all(res.cause == INFEASIBLE)
+    assert np.all(res.cause == PlanCause.INFEASIBLE)
     np.testing.assert_allclose(res.paths[0, :3], [s, jump, g])  # the broken coarse path
     q, res = run("wall", BROKEN, [[s, g]], **kw)
     assert np.all(res.success) and np.all(res.replans == 1)
@@ -182,7 +183,7 @@ def test_one_round_repairs_every_blocked_segment():
     kw = dict(jump=((s, g, j1), (j1, g, j2)))
     q, res = run("twowalls", BROKEN, [[s, g]], opts=PlannerOptions(n_plan=12, replan_rounds=0,
                                                                   replan_steps=8), **kw)
-    assert np.all(res.cause == INFEASIBLE)
+    assert np.all(res.cause == PlanCause.INFEASIBLE)
     np.testing.assert_allclose(res.paths[0, :4], [s, j1, j2, g])
     q, res = run("twowalls", BROKEN, [[s, g]], **kw)
     assert np.all(res.success) and np.all(res.replans == 1)
@@ -197,10 +198,10 @@ def test_without_steer_to():
     np.testing.assert_allclose(res.paths[0, 7], [8, 1], atol=1e-5)
     # a trivial query a non-moving model cannot solve without steerTo (the paper's Fig. 5)
     _, res = run("straight", STAY, [[[1, 1], [9, 1]]], opts=nosteer)
-    assert np.all(res.cause == NO_PATH) and np.all(res.pnet_calls == 12)
+    assert np.all(res.cause == PlanCause.NO_PATH) and np.all(res.pnet_calls == 12)
     # reaching the goal through a wall is not a success
     _, res = run("wall", SEEKER, [[[2, 5], [8, 5]]], opts=nosteer)
-    assert np.all(res.cause == INFEASIBLE)
+    assert np.all(res.cause == PlanCause.INFEASIBLE)
 
 
 def test_bidirectional_and_invalid_queries():
@@ -209,7 +210,7 @@ def test_bidirectional_and_invalid_queries():
                  opts=bi)
     assert res.success[0] and res.success[1]
     assert np.all(res.costs[:2] >= optimum("deadend", q[:2]) * (1 - 1e-4))
-    assert res.cause[2] == INVALID_QUERY  # the start is inside the cup's top wall
+    assert res.cause[2] == PlanCause.INVALID_QUERY  # the start is inside the cup's top wall
 
 
 def test_batched_equals_one_by_one_and_noise_is_keyed():
@@ -239,7 +240,7 @@ def test_lazy_states_contraction():
     top = [[2, 5], [3, 8.5], [4, 8.6], [4.4, 8.2], [5.6, 8.2], [7, 7], [8, 5]]
     p[1, :7] = top
     n = np.array([6, 7], np.int32)
-    fn = jax.jit(_contract, static_argnames=("robot", "padding"))
+    fn = jax.jit(contract, static_argnames=("robot", "padding"))
     q, m = fn(env.robot, env.world, jnp.asarray(p), jnp.asarray(n), 0.0, jnp.ones(2, bool))
     q, m = np.asarray(q), np.asarray(m)
     assert m[0] == 2
@@ -273,3 +274,32 @@ def test_repair_windows_cover_every_blocked_segment_without_overlap(data):
         assert not ok[ia + 1:ib].any()
     for (ia1, _), (_, ib2) in zip(wins, wins[1:]):
         assert ib2 <= ia1
+
+
+def test_splice_replaces_a_window_and_refuses_to_overflow():
+    path = np.full((6, 2), np.nan, np.float32)
+    path[:4] = [[0, 0], [1, 1], [2, 2], [3, 3]]
+    sub = np.array([[1, 1], [1.5, 0], [2.5, 0], [3, 3]], np.float32)  # runs from path[1] to path[3]
+    out, n = splice(path, 4, 1, 3, sub)
+    assert n == 5
+    np.testing.assert_array_equal(out[:5], [[0, 0], [1, 1], [1.5, 0], [2.5, 0], [3, 3]])
+    assert np.all(np.isnan(out[5:]))
+    assert not np.shares_memory(out, path) and np.isnan(path[4:]).all()  # the input is kept
+    assert splice(path, 4, 1, 2, np.zeros((5, 2), np.float32)) is None  # 1 + 5 + 1 > 6 rows
+
+
+def _stay(key, current, goal):
+    return current
+
+
+def test_compiled_stages_are_bounded(monkeypatch):
+    from ntq_jax import neural_steps
+    monkeypatch.setattr(neural_steps, "COMPILED_CACHE_SIZE", 2)
+    env = make("straight")
+    q = np.asarray([[[1, 2], [9, 8]]], np.float32)
+    for n_plan in (1, 2, 3):  # one compiled stage (coarse) per option set
+        res = plan_batch(env, _stay, q, jax.random.key(0),
+                         PlannerOptions(n_plan=n_plan, replan_rounds=0))
+        assert res.success[0] and len(neural_steps._COMPILED) <= 2
+    sigs = list(neural_steps._COMPILED)
+    assert [s[2].n_plan for s in sigs] == [2, 3]  # the least recently used went first

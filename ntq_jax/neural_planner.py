@@ -24,7 +24,7 @@ algorithm (coarse plan, lazy states contraction, feasibility check, neural
 replanning; the variant without steerTo) is described step by step in
 :func:`plan_batch`; its jitted steps are in :mod:`ntq_jax.neural_steps`, this
 module drives them over chunks of queries. Measured throughput: BENCHMARKS.md,
-"Neural planner evaluation" (``scripts/bench_plan.py``).
+"Neural planner evaluation" (``benchmarks/bench_plan.py``).
 """
 
 from __future__ import annotations

@@ -21,7 +21,7 @@ Resumable: the planning chunks stay in ``<env_dir>/.work/<fingerprint>/``
 (:mod:`ntq_jax.data.planning`) until the datasets are written (``meta.json``
 last, :mod:`ntq_jax.data.format`); a rerun reuses them, and a complete output
 of the same settings is left untouched. Stage timings: BENCHMARKS.md
-(``scripts/bench_data.py``).
+(``benchmarks/bench_data.py``).
 """
 
 from __future__ import annotations

@@ -21,7 +21,7 @@ Determinism: before each query the worker re-seeds OMPL with
 depend on which worker solves the query. With ``stop_on_first=True`` results
 are reproducible run to run; with the full budget (default) they depend on how
 far BIT* gets before the wall-clock deadline. Throughput and callback costs:
-``scripts/bench_bitstar.py`` and BENCHMARKS.md.
+``benchmarks/bench_bitstar.py`` and BENCHMARKS.md.
 """
 
 from __future__ import annotations

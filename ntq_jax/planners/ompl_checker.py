@@ -10,7 +10,7 @@ as ``Env.is_valid`` / ``Env.steer_to``, except within float32 rounding of a
 tangency (tested in ``tests/test_ompl_bridge.py``). The planner's paths are
 verified afterwards with the package's own kernels
 (:func:`ntq_jax.planners.verify.finalize`). Pure NumPy: the BIT* workers import
-it. Per-call costs: ``scripts/bench_bitstar.py`` and BENCHMARKS.md.
+it. Per-call costs: ``benchmarks/bench_bitstar.py`` and BENCHMARKS.md.
 """
 
 from __future__ import annotations

@@ -6,7 +6,7 @@ option or ``XLA_FLAGS=--xla_force_host_platform_device_count``), the member
 axis of every stacked array is sharded over the largest such ``D`` with a
 ``NamedSharding`` (:func:`member_mesh`, :func:`place`): 4 members on 4 devices
 one each, on 2 devices two each. Otherwise everything runs on one device.
-The measured effect on a CPU is in BENCHMARKS.md (``scripts/bench_train.py``).
+The measured effect on a CPU is in BENCHMARKS.md (``benchmarks/bench_train.py``).
 """
 
 from __future__ import annotations

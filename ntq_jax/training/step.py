@@ -8,7 +8,7 @@ no-op when the member is inactive, i.e. has finished its epochs);
 validation loss. :func:`train_chunk` returns the compiled chunk of a config
 from a small bounded cache. Randomness is explicit: member ``m``'s dropout
 key at global step ``g`` is ``fold_in(dropout_keys[m], g)``. Throughput:
-BENCHMARKS.md (``scripts/bench_train.py``).
+BENCHMARKS.md (``benchmarks/bench_train.py``).
 """
 
 from __future__ import annotations

@@ -3,9 +3,9 @@
 sharded over one CPU device per core) vs four sequential single-model trainings
 vs the same MLP in PyTorch (CPU), same architecture, data and batch size.
 
-    python scripts/bench_train.py                       # quick widths 256-256-128-64
-    python scripts/bench_train.py --hidden 1280,1024,896,768,512,384,256,256,128,64,32
-    python scripts/bench_train.py --data runs/x/data/point_0   # real D0..D3 (data.py)
+    python benchmarks/bench_train.py                       # quick widths 256-256-128-64
+    python benchmarks/bench_train.py --hidden 1280,1024,896,768,512,384,256,256,128,64,32
+    python benchmarks/bench_train.py --data runs/x/data/point_0   # real D0..D3 (data.py)
 
 Data: by default four synthetic datasets of straight-line paths in the point/0
 workspace (rows ``(current, goal) -> next``) with ``--rows`` rows each, the

@@ -1,8 +1,8 @@
 #!/usr/bin/env python
 """Benchmark the OMPL BIT* bridge: batch throughput and the cost of BIT*'s Python callbacks.
 
-    python scripts/bench_bitstar.py                       # rigid/0, 8 queries, 1 s budget
-    python scripts/bench_bitstar.py --env nlink/4 --queries 8 --budget 2
+    python benchmarks/bench_bitstar.py                       # rigid/0, 8 queries, 1 s budget
+    python benchmarks/bench_bitstar.py --env nlink/4 --queries 8 --budget 2
 
 1. Throughput: ``plan_bitstar`` on the same non-trivial queries (no straight
    connection, so BIT* uses its whole budget) with 1 and 2 worker processes.

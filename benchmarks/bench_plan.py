@@ -3,9 +3,9 @@
 
 Examples::
 
-    python scripts/bench_plan.py                         # point/0, 500 queries
-    python scripts/bench_plan.py --env rigid/0 --env nlink/4 --loop-queries 100
-    python scripts/bench_plan.py --run runs/point-xxxx --env point/3   # a trained PNet_3
+    python benchmarks/bench_plan.py                         # point/0, 500 queries
+    python benchmarks/bench_plan.py --env rigid/0 --env nlink/4 --loop-queries 100
+    python benchmarks/bench_plan.py --run runs/point-xxxx --env point/3   # a trained PNet_3
 
 The same compiled planner (:func:`ntq_jax.neural_planner.plan_batch`, the
 evaluation options of the config) plans the same test queries (half uniform,

@@ -3,9 +3,9 @@
 
 Examples::
 
-    python scripts/bench_data.py                       # point/0, K = 3000, grid A*
-    python scripts/bench_data.py --planner visgraph
-    python scripts/bench_data.py --rigid               # + projected BIT* wall time, rigid/0
+    python benchmarks/bench_data.py                       # point/0, K = 3000, grid A*
+    python benchmarks/bench_data.py --planner visgraph
+    python benchmarks/bench_data.py --rigid               # + projected BIT* wall time, rigid/0
 
 Each run starts from an empty output folder in a fresh process, so the wall
 time includes JAX compilation, query sampling, planning, the path checks,

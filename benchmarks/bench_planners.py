@@ -18,7 +18,7 @@ cut. Its timings are for the same grids and queries; its paths are not
 comparable cost-wise.
 
 Usage:
-    python scripts/bench_planners.py [--env point/3] [--resolution 0.1]
+    python benchmarks/bench_planners.py [--env point/3] [--resolution 0.1]
         [--queries 1000] [--repeats 5] [--heapq-queries 1000] [--seed 0]
         [--random-boxes K]   # a random 20x20 map of K inflated boxes instead of --env
         [--visgraph-queries 100000] [--plan-queries 1000]

@@ -17,9 +17,9 @@ are quoted, so the ratios stay meaningful on a busy machine:
 * memory flatness: peak RSS (VmHWM) of a fresh process running ``gamma_nt`` over
   10^7 and over 10^9 queries.
 
-    python scripts/bench_steer.py                 # full run, a few minutes
-    python scripts/bench_steer.py --quick         # < 1 minute, smaller sizes, no 10^9 run
-    python scripts/bench_steer.py --skip-1e9 --json bench.json
+    python benchmarks/bench_steer.py                 # full run, a few minutes
+    python benchmarks/bench_steer.py --quick         # < 1 minute, smaller sizes, no 10^9 run
+    python benchmarks/bench_steer.py --skip-1e9 --json bench.json
 """
 
 from __future__ import annotations
@@ -258,8 +258,7 @@ def bench_gamma_1e9(env) -> list[dict]:
 
 
 _CHILD = """
-import json, sys, jax
-sys.path.insert(0, {root!r})
+import json, jax
 import ntq_jax as nj
 env = nj.Env.from_json({spec!r})
 est = env.gamma_nt(jax.random.key(0), {n}, padding=0.0)
@@ -271,10 +270,9 @@ print(json.dumps({{"vmhwm_kb": int(status["VmHWM"].split()[0]), "seconds": est.s
 
 def bench_memory(sizes: tuple[int, int]) -> list[dict]:
     """Peak RSS of a fresh process running gamma_nt over each size (VmHWM at its end)."""
-    root = str(Path(__file__).resolve().parents[1])
     out = {}
     for n in sizes:
-        res = subprocess.run([sys.executable, "-c", _CHILD.format(root=root, spec=MAP, n=n)],
+        res = subprocess.run([sys.executable, "-c", _CHILD.format(spec=MAP, n=n)],
                              capture_output=True, text=True, check=True)
         out[n] = json.loads(res.stdout.strip().splitlines()[-1])
     lo, hi = sizes

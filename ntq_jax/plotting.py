@@ -18,10 +18,11 @@ import math
 from pathlib import Path
 from typing import Sequence
 
+import jax
 import numpy as np
 
 from ntq_jax import artifacts
-from ntq_jax.types import QUERY_KINDS
+from ntq_jax.types import QUERY_KINDS, PlanStatus
 
 __all__ = ["draw_map", "draw_arm", "dataset_figure", "curves_figure", "success_figure",
            "examples_figure", "queries_figure", "query_figure"]
@@ -82,8 +83,6 @@ def draw_map(ax, spec: dict, padded: bool = False, joint_space: bool | None = No
 
 def draw_arm(ax, env, path: np.ndarray):
     """The arm of ``env`` at every state of ``path`` (start green, goal blue, between magenta)."""
-    import jax
-
     fk = jax.vmap(env.robot.forward_kinematics)(np.asarray(path, np.float32))
     n = len(path)
     for t, pts in enumerate(np.asarray(fk, np.float64)):
@@ -234,8 +233,6 @@ def examples_figure(env, reference: dict | None, saved: dict, path: Path,
         saved: ``{model name: saved paths file arrays}`` for the non-trivial queries.
         path: the PNG to write.
     """
-    from ntq_jax.types import PlanStatus
-
     saved = {m: z for m, z in saved.items() if z is not None}
     if reference is None or not saved:
         return None

@@ -171,8 +171,13 @@ def edges_apart(b, others, margin):
             and np.min(np.abs(ey[:, None] - np.array(oy)[None])) > margin)
 
 
+def clear_of_cage(b, c, a=1.2):
+    """Box ``b`` stays out of the inside (half side ``a``) of the cage centred at ``c``."""
+    return abs(b[0] - c[0]) >= b[2] + a or abs(b[1] - c[1]) >= b[3] + a
+
+
 def generic_map(seed, n_boxes, margin=0.05):
-    """Random boxes in general position (edges pairwise > margin apart) plus a cage."""
+    """Random boxes in general position (edges pairwise > margin apart) plus a cage with a free inside."""
     rng = np.random.default_rng(seed)
     while True:
         c = rng.uniform(3, SIDE - 3, 2)
@@ -181,7 +186,8 @@ def generic_map(seed, n_boxes, margin=0.05):
             break
     while len(boxes) < n_boxes + 4:
         b = (*rng.uniform(0.5, SIDE - 0.5, 2), *rng.uniform(0.3, 2.5, 2))
-        if all(edges_apart(x, [y for y in boxes + [b] if y is not x], margin) for x in boxes + [b]):
+        if clear_of_cage(b, c) and all(edges_apart(x, [y for y in boxes + [b] if y is not x], margin)
+                                       for x in boxes + [b]):
             boxes.append(tuple(float(v) for v in b))
     return boxes, c
 

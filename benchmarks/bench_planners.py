@@ -49,12 +49,11 @@ import sys
 import time
 from pathlib import Path
 
+import jax
 import numpy as np
 
-
-import jax
-
-from ntq_jax.planners.astar import SOLVED, astar, prepare_grid
+from ntq_jax.planners.astar import astar, prepare_grid
+from ntq_jax.types import PlanStatus
 
 SQ2 = math.sqrt(2.0)
 
@@ -193,7 +192,7 @@ def bench(occ, starts, goals, args, label):
     status = np.asarray(res.status)
     cost = np.asarray(res.cost)
     print(f"JAX A*: first call (compile + run) {t_first:.2f} s; prepare_grid {t_prep * 1e3:.1f} ms "
-          f"(first {t_prep_first:.2f} s); solved {np.sum(status == SOLVED)}/{n}, "
+          f"(first {t_prep_first:.2f} s); solved {np.sum(status == PlanStatus.SOLVED)}/{n}, "
           f"statuses {np.bincount(status, minlength=4).tolist()}")
     rows.append(("JAX A* (JPS, batched)", t_jax, t_jax_min, n))
 
@@ -213,7 +212,7 @@ def bench(occ, starts, goals, args, label):
         run_pyastar()  # warm-up
         t_py, t_py_min, paths = timed(run_pyastar, args.repeats)
         found = np.array([p is not None for p in paths])
-        agree = np.mean(found == (status == SOLVED))
+        agree = np.mean(found == (status == PlanStatus.SOLVED))
         print(f"pyastar2d: found {found.sum()}/{n} (agrees with JAX on reachability for "
               f"{agree:.1%}); its graph allows corner cutting and diagonal steps cost 1")
         rows.append(("pyastar2d (C++)", t_py, t_py_min, n))

@@ -10,6 +10,8 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import dijkstra
 
 from ntq_jax.planners import astar as A
+from ntq_jax.planners.grid_graph import prepare_grid
+from ntq_jax.types import PlanStatus
 
 SQ2 = math.sqrt(2.0)
 MOVES = [(-1, 0), (1, 0), (0, -1), (0, 1), (-1, -1), (-1, 1), (1, -1), (1, 1)]
@@ -78,7 +80,7 @@ def check_paths(occ, res, starts, goals):
     path, plen = np.asarray(res.path), np.asarray(res.path_len)
     wps, nwp = np.asarray(res.waypoints), np.asarray(res.num_waypoints)
     for i in range(len(status)):
-        if status[i] != A.SOLVED:
+        if status[i] != PlanStatus.SOLVED:
             assert plen[i] == 0 and nwp[i] == 0 and np.all(path[i] == -1) and np.isinf(cost[i])
             continue
         p = path[i, :plen[i]]
@@ -134,9 +136,9 @@ def test_costs_equal_dijkstra(name):
     dist = dijkstra(reference_graph(occ), indices=starts[:, 0] * w + starts[:, 1])
     ref = dist[np.arange(n), goals[:, 0] * w + goals[:, 1]]
     status, cost = np.asarray(res.status), np.asarray(res.cost)
-    assert not np.any(status == A.CAPACITY) and not np.any(status == A.INVALID)
-    np.testing.assert_array_equal(status == A.SOLVED, np.isfinite(ref))
-    np.testing.assert_array_equal(status == A.NO_PATH, np.isinf(ref))
+    assert not np.any(status == PlanStatus.TIMEOUT) and not np.any(status == PlanStatus.INVALID)
+    np.testing.assert_array_equal(status == PlanStatus.SOLVED, np.isfinite(ref))
+    np.testing.assert_array_equal(status == PlanStatus.NO_PATH, np.isinf(ref))
     np.testing.assert_allclose(cost, ref, rtol=1e-5, atol=1e-4)
     check_paths(occ, res, starts, goals)
     if name.startswith("walls"):
@@ -152,7 +154,8 @@ def test_invalid_trivial_and_unreachable_queries():
     goals = np.array([[5, 5], [0, 0], [0, 50], [0, 0], [0, 0], [0, 0], [3, 3], [59, 44], [2, 45],
                       [0, 0]])
     res = solve(occ, starts, goals)
-    np.testing.assert_array_equal(res.status, [2, 2, 1, 2, 2, 2, 0, 0, 2, 2])
+    S, N, I = PlanStatus.SOLVED, PlanStatus.NO_PATH, PlanStatus.INVALID
+    np.testing.assert_array_equal(res.status, [I, I, N, I, I, I, S, S, I, I])
     assert float(res.cost[6]) == 0.0 and int(res.path_len[6]) == 1
     np.testing.assert_array_equal(res.path[6, 0], [3, 3])
     np.testing.assert_allclose(float(res.cost[7]), 15 + 44 * SQ2, rtol=1e-6)
@@ -168,7 +171,7 @@ def test_no_corner_cutting():
     goals = np.array([[1, 1], [0, 0], [11, 11]])
     res = solve(occ, starts, goals)
     np.testing.assert_allclose(np.asarray(res.cost)[:2], [2.0, 1.0])  # not sqrt(2): (0, 1) is occupied
-    assert int(res.status[2]) == A.NO_PATH and np.isinf(float(res.cost[2]))
+    assert int(res.status[2]) == PlanStatus.NO_PATH and np.isinf(float(res.cost[2]))
     check_paths(occ, res, starts, goals)
 
 
@@ -179,11 +182,11 @@ def test_capacity_is_reported_not_raised():
     full = solve(occ, starts, goals)
     small = solve(occ, starts, goals, open_capacity=6, max_path_len=60, max_waypoints=6)
     st, st_full = np.asarray(small.status), np.asarray(full.status)
-    assert np.any(st == A.CAPACITY) and np.any(st == A.SOLVED)
-    ok = st == A.SOLVED
+    assert np.any(st == PlanStatus.TIMEOUT) and np.any(st == PlanStatus.SOLVED)
+    ok = st == PlanStatus.SOLVED
     np.testing.assert_array_equal(np.asarray(small.cost)[ok], np.asarray(full.cost)[ok])
-    assert np.all(np.isin(st[st_full == A.SOLVED], [A.SOLVED, A.CAPACITY]))
-    assert np.all(st[st_full != A.SOLVED] == st_full[st_full != A.SOLVED])
+    assert np.all(np.isin(st[st_full == PlanStatus.SOLVED], [PlanStatus.SOLVED, PlanStatus.TIMEOUT]))
+    assert np.all(st[st_full != PlanStatus.SOLVED] == st_full[st_full != PlanStatus.SOLVED])
     check_paths(occ, small, starts, goals)
 
 
@@ -194,7 +197,7 @@ def test_one_compilation_per_shape():
     for k in range(3):
         occ = random_box_map(rng, 60, 90, 5 + k)
         starts, goals = sample_queries(rng, occ, CHUNK)
-        res = counted(A.prepare_grid(occ), starts, goals)
+        res = counted(prepare_grid(occ), starts, goals)
         np.testing.assert_array_equal(res.cost, solve(occ, starts, goals).cost)
     size = A.astar._cache_size()
     for k in range(3):

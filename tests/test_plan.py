@@ -14,7 +14,7 @@ import jax
 
 import ntq_jax
 from ntq_jax import Env, PlanResult, make_env, plan, register_planner
-from ntq_jax.planners import (INVALID, NO_PATH, SOLVED, TIMEOUT, available_planners)
+from ntq_jax.planners import PlanStatus, available_planners
 from ntq_jax.planners.astar import astar
 
 
@@ -37,7 +37,7 @@ def assert_contract(env, q, res: PlanResult, padding):
     assert res.paths.shape[2] == d
     assert res.lengths.dtype == np.int32 and res.lengths.shape == (k,)
     assert res.costs.dtype == np.float64 and res.status.dtype == np.int8
-    solved = res.status == SOLVED
+    solved = res.status == PlanStatus.SOLVED
     assert np.all(res.lengths[solved] >= 2) and np.all(res.lengths[~solved] == 0)
     assert np.all(np.isinf(res.costs[~solved])) and np.all(np.isfinite(res.costs[solved]))
     assert np.all(np.isnan(res.paths[~solved]))
@@ -106,7 +106,8 @@ def test_invalid_and_unreachable_queries_are_statuses_not_exceptions(planner):
                   [[4, 4], [4, 4]]],         # start == goal
                  np.float32)
     res = plan(env, q, planner)
-    assert res.status.tolist() == [NO_PATH, INVALID, INVALID, INVALID, INVALID, SOLVED, SOLVED]
+    S, N, I = PlanStatus.SOLVED, PlanStatus.NO_PATH, PlanStatus.INVALID
+    assert res.status.tolist() == [N, I, I, I, I, S, S]
     assert_contract(env, q, res, env.padding)
     assert res.costs[6] == 0.0
     np.testing.assert_allclose(res.costs[5], np.hypot(3, 10), rtol=1e-6)
@@ -119,17 +120,17 @@ def test_bitstar_adapter_statuses():
     q = q[np.argsort(~bad)]  # the invalid one first if there is one
     res = plan(env, q, "bitstar", time_budget=0.5, workers=1, stop_on_first=True)
     assert_contract(env, q, res, env.padding)
-    assert set(res.status.tolist()) <= {SOLVED, TIMEOUT, INVALID}
+    assert set(res.status.tolist()) <= {PlanStatus.SOLVED, PlanStatus.TIMEOUT, PlanStatus.INVALID}
     assert "bitstar_status" in res.info
     if bad.any():
-        assert res.status[0] == INVALID
+        assert res.status[0] == PlanStatus.INVALID
 
 
 def test_bitstar_all_invalid_starts_no_worker():
     env = wall_env()
     q = np.array([[[10, 10], [3, 3]]], np.float32)
     res = plan(env, q, "bitstar", time_budget=0.2)
-    assert res.status.tolist() == [INVALID] and res.info["workers"] == 0
+    assert res.status.tolist() == [PlanStatus.INVALID] and res.info["workers"] == 0
 
 
 def test_two_link_arm_configuration_space_astar():
@@ -187,3 +188,27 @@ def test_no_recompilation_across_batch_sizes(point3, queries):
         plan(point3, np.concatenate([queries[longest:longest + 1], queries[:k]]), "astar")
     assert [f._cache_size() for f in fns] == before
     assert shortcut._cache_size() == sc
+
+
+def test_planner_caches_are_bounded_and_do_not_keep_environments_alive():
+    import gc
+    import weakref
+
+    from ntq_jax.planners import config_grid
+    from ntq_jax.planners.env_cache import EnvCache
+
+    env = wall_env()
+    grid = config_grid(env, 0.1, 0.8)
+    assert config_grid(env, 0.1, 0.8) is grid  # built once per (env, settings)
+    q = np.array([[[3, 5], [6, 15]]], np.float32)
+    assert plan(env, q, "astar").solved.all() and plan(env, q, "visgraph").solved.all()
+    alive = weakref.ref(env)
+    del env, grid
+    gc.collect()
+    assert alive() is None
+
+    cache, built = EnvCache(per_env=2), []
+    other = wall_env()
+    for key in (1, 2, 1, 3, 1, 2):
+        cache.get(other, key, lambda k=key: built.append(k) or k)
+    assert built == [1, 2, 3, 2]  # at most 2 settings per env, least recently used dropped

@@ -59,7 +59,7 @@ def test_matches_plain_python_reference_on_random_polylines(seed, padding):
     env = random_env(seed % 1000, padding=padding)
     rng = np.random.default_rng(seed)
     paths, lengths = polyline_batch(rng, 12, 9)
-    out, n_out, ok = shortcut_paths(env, paths, lengths, padding=padding)
+    out, n_out, ok = shortcut_paths(env.robot, env.world, paths, lengths, padding)
     ref = reference_batch(env, paths, lengths, padding)
     for i, (rp, rok) in enumerate(ref):
         assert n_out[i] == len(rp), (i, n_out[i], len(rp))
@@ -74,7 +74,7 @@ def test_astar_paths_properties_and_reference():
     q = np.asarray(q)
     raw = plan(env, q, "astar", smooth=False)
     assert raw.solved.all()
-    paths, lengths, ok = shortcut_paths(env, raw.paths, raw.lengths)
+    paths, lengths, ok = shortcut_paths(env.robot, env.world, raw.paths, raw.lengths, env.padding)
     assert ok.all()
     # start and goal kept exactly
     np.testing.assert_array_equal(paths[:, 0], q[:, 0])
@@ -102,7 +102,7 @@ def test_blocked_input_is_flagged_and_trivial_paths_kept():
     paths[0, :2] = [a, b]
     paths[1, :1] = [a]
     paths[2, :2] = [a, a]
-    out, n, ok = shortcut_paths(env, paths, np.array([2, 1, 2]), padding=0.0)
+    out, n, ok = shortcut_paths(env.robot, env.world, paths, np.array([2, 1, 2]), 0.0)
     assert n.tolist() == [2, 1, 2]
     assert ok.tolist() == [False, True, True]
     np.testing.assert_array_equal(out[0, :2], [a, b])
@@ -111,17 +111,17 @@ def test_blocked_input_is_flagged_and_trivial_paths_kept():
 def test_one_compilation_per_bucket():
     env = random_env(1)
     rng = np.random.default_rng(0)
-    shortcut_paths(env, *polyline_batch(rng, 9, 7))
+    shortcut_paths(env.robot, env.world, *polyline_batch(rng, 9, 7), env.padding)
     before = shortcut._cache_size()
     for b, l in [(10, 8), (16, 6), (200, 16)]:  # same path buffer (16), chunks of 128
-        shortcut_paths(env, *polyline_batch(rng, b, l))
+        shortcut_paths(env.robot, env.world, *polyline_batch(rng, b, l), env.padding)
     assert shortcut._cache_size() == before
     other = random_env(2)  # same obstacle count: world is traced, no recompilation
-    shortcut_paths(other, *polyline_batch(rng, 9, 7))
+    shortcut_paths(other.robot, other.world, *polyline_batch(rng, 9, 7), other.padding)
     assert shortcut._cache_size() == before
 
 
 def test_bad_shapes_rejected():
     env = random_env(1)
     with pytest.raises(ValueError, match="paths must be"):
-        shortcut_paths(env, np.zeros((2, 3, 3), np.float32), np.array([3, 3]))
+        shortcut_paths(env.robot, env.world, np.zeros((2, 3, 3), np.float32), np.array([3, 3]), 0.0)

@@ -32,8 +32,8 @@ from shapely.ops import unary_union
 import jax
 
 from ntq_jax import Env, make_env
-from ntq_jax.planners.visgraph import (INVALID, NO_PATH, SOLVED, VisGraph, benchmark_visgraph,
-                                       obstacle_vertices)
+from ntq_jax.planners.visgraph import VisGraph, benchmark_visgraph, obstacle_vertices
+from ntq_jax.types import PlanStatus
 
 TAU = 1e-4  # oracle ambiguity band (workspace units), >> float32 rounding of the kernel
 SIDE = 20.0
@@ -171,8 +171,13 @@ def edges_apart(b, others, margin):
             and np.min(np.abs(ey[:, None] - np.array(oy)[None])) > margin)
 
 
+def clear_of_cage(b, c, a=1.2):
+    """Box ``b`` stays out of the inside (half side ``a``) of the cage centred at ``c``."""
+    return abs(b[0] - c[0]) >= b[2] + a or abs(b[1] - c[1]) >= b[3] + a
+
+
 def generic_map(seed, n_boxes, margin=0.05):
-    """Random boxes in general position (edges pairwise > margin apart) plus a cage."""
+    """Random boxes in general position (edges pairwise > margin apart) plus a cage with a free inside."""
     rng = np.random.default_rng(seed)
     while True:
         c = rng.uniform(3, SIDE - 3, 2)
@@ -181,7 +186,8 @@ def generic_map(seed, n_boxes, margin=0.05):
             break
     while len(boxes) < n_boxes + 4:
         b = (*rng.uniform(0.5, SIDE - 0.5, 2), *rng.uniform(0.3, 2.5, 2))
-        if all(edges_apart(x, [y for y in boxes + [b] if y is not x], margin) for x in boxes + [b]):
+        if clear_of_cage(b, c) and all(edges_apart(x, [y for y in boxes + [b] if y is not x], margin)
+                                       for x in boxes + [b]):
             boxes.append(tuple(float(v) for v in b))
     return boxes, c
 
@@ -211,8 +217,8 @@ def check_paths(env, res, queries, padding):
     """Paths start/end at the query exactly, are collision-free, and costs are their lengths."""
     a, b = [], []
     for i in range(len(queries)):
-        if res.status[i] != SOLVED:
-            assert res.path_lengths[i] == 0 and np.isinf(res.costs[i])
+        if res.status[i] != PlanStatus.SOLVED:
+            assert res.lengths[i] == 0 and np.isinf(res.costs[i])
             assert np.all(np.isnan(res.paths[i]))
             continue
         p = res.path(i)
@@ -253,12 +259,12 @@ def test_lengths_equal_bruteforce_oracle_on_lattice_maps(boxes, seed):
     check_paths(env, res, q, 0.0)
     ref = Oracle(box_polys(boxes), graph.nodes, "closed").lengths(q)
     lo, hi = ref[:, 0], ref[:, 1]
-    assert np.all(res.status != INVALID)
+    assert np.all(res.status != PlanStatus.INVALID)
     assert np.all(res.costs >= lo - 1e-4), (res.costs, lo)
     assert np.all(res.costs <= hi + 1e-4), (res.costs, hi)
     unambiguous = lo == hi
     np.testing.assert_allclose(res.costs[unambiguous], lo[unambiguous], rtol=1e-6, atol=1e-4)
-    assert np.all((res.status == NO_PATH) <= np.isinf(lo))
+    assert np.all((res.status == PlanStatus.NO_PATH) <= np.isinf(lo))
 
 
 @HSET
@@ -277,14 +283,14 @@ def test_padding0_is_the_true_optimum_within_eps_bound(seed):
     oracle = Oracle(polys, box_corners(np.asarray(env.world.boxes, np.float64), bounds), "closure")
     ref = oracle.lengths(q)
     opt, bends = ref[:, 0], ref[:, 2]
-    np.testing.assert_array_equal(res.status == SOLVED, np.isfinite(opt))
+    np.testing.assert_array_equal(res.status == PlanStatus.SOLVED, np.isfinite(opt))
     ok = np.isfinite(opt)
     assert np.all(res.costs[ok] >= opt[ok] - 1e-4)
     assert np.all(res.costs[ok] <= opt[ok] + 2 * math.sqrt(2) * graph.eps * bends[ok] + 1e-4)
     # the walled-in goals are unreachable from outside, reachable from inside (direct)
-    assert np.all(res.status[-5:-1] == NO_PATH) and res.status[-1] == SOLVED
-    assert res.path_lengths[-1] == 2
-    assert np.any(res.path_lengths == 2) and np.any(res.path_lengths > 2)
+    assert np.all(res.status[-5:-1] == PlanStatus.NO_PATH) and res.status[-1] == PlanStatus.SOLVED
+    assert res.lengths[-1] == 2
+    assert np.any(res.lengths == 2) and np.any(res.lengths > 2)
 
 
 @HSET
@@ -323,12 +329,12 @@ def test_padded_and_disc_maps_between_inscribed_and_circumscribed_optima(seed):
     lo = Oracle(inner, polygon_vertices(unary_union(inner), bounds), "closure").lengths(q)[:, 0]
     up = Oracle(outer, polygon_vertices(unary_union(outer), bounds), "closure").lengths(q)
     hi, bends = up[:, 0], up[:, 2]
-    solved = res.status == SOLVED
-    assert np.all(res.status != INVALID)
+    solved = res.status == PlanStatus.SOLVED
+    assert np.all(res.status != PlanStatus.INVALID)
     assert np.all(res.costs[solved] >= lo[solved] - 1e-4)
     assert np.all(np.isfinite(lo[solved]))
     assert np.all(res.costs <= hi + slack * (bends + 2) + 1e-4)
-    assert np.all(res.status[-5:-1] == NO_PATH) and res.status[-1] == SOLVED
+    assert np.all(res.status[-5:-1] == PlanStatus.NO_PATH) and res.status[-1] == PlanStatus.SOLVED
 
 
 def test_single_disc_matches_analytic_wrap_length():
@@ -352,7 +358,7 @@ def test_single_disc_matches_analytic_wrap_length():
 
     m = max(3, math.ceil(2 * math.pi / graph.arc_step - 1e-9))
     low, high = wrap(r + pad), wrap((r + pad) / math.cos(math.pi / m) + graph.eps)
-    assert np.all(res.status == SOLVED)
+    assert np.all(res.status == PlanStatus.SOLVED)
     assert np.all(res.costs >= low - 1e-4)
     assert np.all(res.costs <= high + 1e-4)
     assert graph.delta == pytest.approx((r + pad) * (1 / math.cos(math.pi / m) - 1))
@@ -368,10 +374,11 @@ def test_invalid_queries_and_empty_maps():
                   [[1, 1], [19, 19]],          # around the box
                   [[1, 1], [1, 1]]], np.float32)  # zero length
     res = graph.plan(q)
-    np.testing.assert_array_equal(res.status, [INVALID, INVALID, INVALID, INVALID, SOLVED, SOLVED])
+    S, I = PlanStatus.SOLVED, PlanStatus.INVALID
+    np.testing.assert_array_equal(res.status, [I, I, I, I, S, S])
     check_paths(env, res, q, 0.0)
-    assert res.costs[5] == 0.0 and res.path_lengths[5] == 2
-    assert res.path_list()[0] is None
+    assert res.costs[5] == 0.0 and res.lengths[5] == 2
+    assert res.path(0) is None
     empty = VisGraph.build(make_point_env([]), 0.0)
     assert empty.num_nodes == 0
     r2 = empty.plan(q[4:])

@@ -22,18 +22,20 @@ Vectorisation: a batch of ``B`` NaN-padded paths ``(B, L, d)`` with lengths
 path, the connections from its current waypoint to all ``L`` waypoints (masked
 to the later ones) as one coordinate-major batch of ``B * L`` segments through
 :func:`ntq_jax.robots.batch.steer_to_cm`, and stops when every path reached its
-goal. Shapes are static: :func:`shortcut_paths` pads ``B`` and ``L`` to powers
-of two, so one program serves many calls.
+goal. Shapes are static: :func:`shortcut_paths` runs any batch in chunks of a
+fixed size with the path buffer padded to a power of two, so one program
+serves many calls. :func:`shortcut_batch` is the traceable core (the neural
+planner calls it inside its own jitted code). Measurements: BENCHMARKS.md.
 """
 
 from __future__ import annotations
-
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
+from ntq_jax.batching import bucket_size, padded_chunks
 from ntq_jax.geometry import KERNEL_COMPILER_OPTIONS, World
 from ntq_jax.robots.batch import steer_to_cm
 
@@ -98,13 +100,9 @@ shortcut = jax.jit(shortcut_batch, static_argnames=("robot", "padding"),
 shortcut.__doc__ = shortcut_batch.__doc__
 
 
-def _pow2(n: int, lo: int) -> int:
-    return max(lo, 1 << (max(int(n), 1) - 1).bit_length())
-
-
-def shortcut_paths(env, paths, lengths, *, padding: float | None = None,
+def shortcut_paths(robot, world: World, paths, lengths, padding: float, *,
                    chunk_size: int = 128) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Shortcuts a batch of NaN-padded paths in ``env`` (greedy farthest-visible rule).
+    """Shortcuts a batch of NaN-padded paths (greedy farthest-visible rule), any batch size.
 
     The batch is processed in chunks of exactly ``chunk_size`` paths (the last
     one padded with empty paths) and the path buffer is padded to a power of
@@ -112,10 +110,10 @@ def shortcut_paths(env, paths, lengths, *, padding: float | None = None,
     one compiled program per buffer size.
 
     Args:
-        env: an :class:`ntq_jax.Env`.
+        robot, world: the geometry.
         paths: ``(B, L, d)`` waypoints, start first; rows after ``lengths[b]`` are ignored.
         lengths: ``(B,)`` int waypoint counts.
-        padding: planning clearance (default: the environment's padding).
+        padding: planning clearance (a number).
         chunk_size: paths per jitted call.
 
     Returns:
@@ -123,38 +121,27 @@ def shortcut_paths(env, paths, lengths, *, padding: float | None = None,
         with ``L' <= L`` the longest smoothed path (at least 2 when B > 0); ``ok``
         is False where an input connection was blocked (see the module docstring).
     """
-    pad = env.resolve_padding(padding)
+    d = robot.dim
     p = np.asarray(paths, np.float32)
     n_in = np.asarray(lengths, np.int64).reshape(-1)
-    if p.ndim != 3 or p.shape[2] != env.dim or p.shape[0] != n_in.shape[0]:
-        raise ValueError(f"paths must be (B, L, {env.dim}) with lengths (B,), got {p.shape} "
+    if p.ndim != 3 or p.shape[2] != d or p.shape[0] != n_in.shape[0]:
+        raise ValueError(f"paths must be (B, L, {d}) with lengths (B,), got {p.shape} "
                          f"and {n_in.shape}")
     bsz = p.shape[0]
     if bsz == 0:
-        return np.zeros((0, 2, env.dim), np.float32), np.zeros(0, np.int32), np.zeros(0, bool)
-    n_in = np.clip(n_in, 0, p.shape[1])
-    lmax = int(n_in.max())
-    lp = _pow2(lmax, 16)
+        return np.zeros((0, 2, d), np.float32), np.zeros(0, np.int32), np.zeros(0, bool)
     chunk = int(chunk_size)
     if chunk < 1:
         raise ValueError(f"chunk_size must be >= 1, got {chunk_size}")
-    out = np.full((bsz, lp, env.dim), np.nan, np.float32)
-    n_out = np.zeros(bsz, np.int32)
-    ok = np.zeros(bsz, bool)
-    pending = []
-    for lo in range(0, bsz, chunk):
-        m = min(chunk, bsz - lo)
-        buf = np.full((chunk, lp, env.dim), np.nan, np.float32)
-        w = min(lp, p.shape[1])
-        buf[:m, :w] = p[lo:lo + m, :w]
-        lens = np.zeros(chunk, np.int32)
-        lens[:m] = n_in[lo:lo + m]
-        pending.append((lo, m, shortcut(env.robot, env.world, jnp.asarray(buf),
-                                        jnp.asarray(lens), pad)))
-    for lo, m, (o, nn, k) in pending:
-        out[lo:lo + m] = np.asarray(o)[:m]
-        n_out[lo:lo + m] = np.asarray(nn)[:m]
-        ok[lo:lo + m] = np.asarray(k)[:m]
+    n_in = np.clip(n_in, 0, p.shape[1]).astype(np.int32)
+    lp = bucket_size(int(n_in.max()), 16)
+    buf = np.full((bsz, lp, d), np.nan, np.float32)  # the path buffer of every chunk
+    w = min(lp, p.shape[1])
+    buf[:, :w] = p[:, :w]
+    # padding rows are empty paths (length 0): never checked, dropped below
+    pending = [(m, shortcut(robot, world, jnp.asarray(b), jnp.asarray(n), padding))
+               for _, m, (b, n), _ in padded_chunks([buf, n_in], chunk, fill=0)]
+    out, n_out, ok = (np.concatenate([np.asarray(r[i])[:m] for m, r in pending]) for i in range(3))
     width = max(2, int(n_out.max()))
     return out[:, :width], n_out, ok
 
@@ -187,4 +174,4 @@ def shortcut_reference(steer, path: np.ndarray) -> tuple[np.ndarray, bool]:
     return path[keep], ok
 
 
-__all__ = ["shortcut", "shortcut_paths", "shortcut_reference"]
+__all__ = ["shortcut_batch", "shortcut", "shortcut_paths", "shortcut_reference"]

@@ -11,10 +11,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from ntq_jax.robots.batch import CHECK_CHUNK, distances, steer_to_pairs, valid_states
+from ntq_jax.robots.batch import distances, steer_to_pairs, valid_states
 from ntq_jax.types import PlanResult, PlanStatus
 
-__all__ = ["CHECK_CHUNK", "valid_queries", "check_paths", "finalize"]
+__all__ = ["valid_queries", "check_paths", "finalize"]
+
 
 def valid_queries(env, q: np.ndarray, padding: float) -> np.ndarray:
     """``(K,)`` bool: start and goal finite and valid at ``padding``."""

@@ -1,86 +1,43 @@
-"""Visibility-graph shortest paths for a point robot: the point-robot cost reference.
+"""The ``"visgraph"`` planner: visibility-graph shortest paths for the point robot (the cost reference).
 
 Usage::
 
     graph = VisGraph.build(env, padding=0.0)   # once per environment and padding
-    res = graph.plan(queries)                  # queries (N, 2, 2): start, goal
-    res.costs, res.status, res.paths, res.path_lengths
+    res = graph.plan(queries)                  # queries (N, 2, 2): start, goal -> PlanResult
+    res = plan_visgraph(env, queries, padding=0.0)   # cached graph + the exact check
 
-How it works
-------------
-*Per environment* (:meth:`VisGraph.build`): the graph nodes are the vertices
-of the obstacles (below), each pushed out by a tiny ``eps``, kept when they are
-valid states; every pair of nodes is tested for visibility with the package's
-one exact segment kernel (:func:`ntq_jax.robots.batch.steer_to_cm`, the kernel
-behind ``env.steer_to``, in both directions); all-pairs shortest paths and
-their node sequences (``routes``) are computed with scipy.
+*Per environment* (:meth:`VisGraph.build`): the nodes are the obstacle
+vertices pushed outwards by a tiny ``eps`` (valid states only); node pairs are
+tested with the package's one segment kernel (``env.steer_to``, both
+directions); all-pairs shortest paths and their node sequences come from scipy.
+*Per batch* (:meth:`VisGraph.plan`, one jitted call per chunk): start -> goal,
+start -> node and node -> goal visibility with the same kernel, then
+``cost = min(|s - g| if visible, min_ij |s - n_i| + D[i, j] + |n_j - g|)``; the
+path is ``s, route(i*, j*), g``. The selection runs in float32; the reported
+cost is the float64 sum of the returned path's segment lengths. Every segment
+of a returned path was checked in the direction it is travelled, at the
+planning padding, with the returned float32 coordinates.
 
-*Per batch of queries* (:meth:`VisGraph.plan`, one jitted call per chunk):
-start and goal validity, start -> goal, start -> node and node -> goal
-visibility (``N x V`` segment checks, the same kernel), then
+Exactness (``L*(p)``: the shortest length among paths farther than ``p`` from
+every obstacle, ``L`` the returned cost, ``k`` the bends of the optimal path;
+always ``L >= L*(p)`` up to rounding, since every path is feasible):
 
-    cost = min(|s - g| if s sees g,  min_i (|s - n_i| + min_j (D[i, j] + |n_j - g|)))
+* boxes at padding 0 (the evaluation geometry): ``L*(0) <= L <= L*(0) + 2
+  sqrt(2) eps k``, assuming general position at the ``eps`` scale (a gap
+  narrower than ``~2 eps`` may be missed). Default ``eps = 5e-5 x`` the
+  workspace extent.
+* curved boundaries (discs; box corners when ``p > 0``): each arc of radius
+  ``R`` is replaced by its circumscribed polygon (tangents every ``beta <=
+  arc_step``); visibility is still decided against the true padded obstacles.
+  The polygons stick out by at most ``delta = R (1 / cos(beta / 2) - 1)``
+  (``graph.delta``), so ``L <= L*_delta + 2 sqrt(2) eps k`` with ``L*_delta``
+  the optimum among obstacles grown by the polygons; a passage narrower than
+  ``delta`` may be missed.
 
-with the inner minimum as one broadcast reduction ``(N, V, V)``; the path is
-``s, routes[i*, j*], g``. The selection runs in float32 (ties within ~1e-6
-relative may pick either path); the reported cost is the float64 sum of the
-returned path's segment lengths. Every segment of a returned path was checked
-by the exact kernel in the direction it is travelled, at the planning padding,
-with the very float32 coordinates that are returned, so
-``env.steer_to(path[:-1], path[1:], padding)`` holds on every solved path.
-
-What is exact and what is approximated
---------------------------------------
-Let ``L*(p)`` be the true shortest length (infimum) among paths whose every
-point is farther than ``p`` from every obstacle (the package's collision
-definition) and ``L`` the returned cost. Always (every returned path is
-feasible): ``L >= L*(p)`` up to float rounding.
-
-* **Boxes at padding 0 (the evaluation geometry): exact up to eps.** The free
-  space is the workspace minus closed boxes; a shortest path bends only at box
-  corners. The nodes are the corners moved diagonally outwards by ``eps`` in
-  x and y (a path through a true corner touches the box, a collision under
-  the closed-set test). Each bend then moves by ``sqrt(2) eps``, so, with
-  ``k`` the number of bends of the optimal path,
-
-      L*(0) <= L <= L*(0) + 2 sqrt(2) eps k
-
-  (the first-order excess is at most ``2 eps`` per bend since a path turns by
-  at most 90 degrees at a box corner). This assumes general position at the
-  ``eps`` scale: gaps between obstacles wider than ``~2 eps`` and no visibility
-  decided within float32 rounding (``~1e-5`` on a 20 x 20 map); a gap narrower
-  than ``eps`` may be missed (then ``L`` is larger, or the query is reported
-  as having no path). Default ``eps = 5e-5 x`` the workspace extent (1e-3 on
-  the 20 x 20 presets: at most 0.0028 per bend).
-* **Curved boundaries (discs, and box corners when padding p > 0):
-  circumscribed polygons.** The free-space boundary there is a circular arc of
-  radius ``R`` (``R = p`` around a box corner, ``r + p`` around a disc), which
-  the true shortest path wraps. Each arc is replaced by its circumscribed
-  polygon: tangent lines every ``beta <= arc_step`` radians (a box corner's
-  quarter turn is split into ``ceil((pi/2) / arc_step)`` equal steps, a disc
-  into ``m = ceil(2 pi / arc_step)``), whose vertices at radius
-  ``R / cos(beta / 2)`` (plus ``eps``) are the nodes. Visibility is still
-  decided against the TRUE padded obstacles, so paths stay feasible. The
-  polygons lie inside the obstacles grown by ``delta = R (1 / cos(beta/2) - 1)``
-  (``graph.delta``; 0.0157 for p = 0.8 and the default ``arc_step = pi/8``),
-  so
-
-      L*(p) <= L <= L*_delta + 2 sqrt(2) eps k
-
-  where ``L*_delta`` is the exact optimum with the box corners rounded at
-  radius ``p / cos(beta/2)`` and the disc radii ``(r + p) / cos(pi/m) - p``.
-  The excess is small unless ``delta`` closes a passage (then the query may
-  come back longer, or as having no path). Smaller ``arc_step`` tightens the
-  bound at the price of more nodes (``4 ceil(pi/2 / arc_step)`` per box).
-
-Statuses: ``SOLVED = 0``, ``NO_PATH = 1`` (no path in the graph: unreachable,
-see above for approximations), ``INVALID = 2`` (start or goal not a valid
-state at the planning padding, or not finite). Unsolved queries have
-``cost = inf``, ``path_length = 0`` and an all-NaN path row.
-
-Cost per query: ``2 V`` segment checks (each against every obstacle) and a
-``V x V`` min-plus reduction; ``V`` = number of nodes (4 per box at padding 0).
-:func:`benchmark_visgraph` measures the throughput.
+Statuses are :class:`ntq_jax.types.PlanStatus` values: SOLVED, NO_PATH (no
+path in the graph), INVALID (start or goal not a valid state at the planning
+padding, or not finite); unsolved queries have ``cost = inf``, length 0 and an
+all-NaN path row. Measurements: BENCHMARKS.md ("Classical planners").
 """
 
 from __future__ import annotations
@@ -95,13 +52,14 @@ import jax.numpy as jnp
 import numpy as np
 from scipy.sparse.csgraph import shortest_path
 
+from ntq_jax.batching import bucket_size, map_chunks
 from ntq_jax.geometry import KERNEL_COMPILER_OPTIONS, World
-from ntq_jax.robots.batch import is_valid_cm, steer_to_cm
+from ntq_jax.planners.env_cache import EnvCache
+from ntq_jax.planners.verify import finalize
+from ntq_jax.robots.batch import is_valid_cm, steer_to_cm, steer_to_pairs, valid_states
+from ntq_jax.types import PlanResult, PlanStatus
 
 Array = jax.Array
-
-SOLVED, NO_PATH, INVALID = 0, 1, 2
-STATUS_NAMES = {SOLVED: "solved", NO_PATH: "no_path", INVALID: "invalid"}
 
 #: Default node offset, relative to the workspace's larger side.
 DEFAULT_EPS_REL = 5e-5
@@ -193,35 +151,6 @@ def _routes(pred: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return routes, length.astype(np.int32)
 
 
-@functools.partial(jax.jit, static_argnames=("robot", "padding"),
-                   compiler_options=KERNEL_COMPILER_OPTIONS)
-def _pair_visibility(robot, world: World, a_cm: Array, b_cm: Array, padding: float) -> Array:
-    return steer_to_cm(robot, world, a_cm, b_cm, padding)
-
-
-@functools.partial(jax.jit, static_argnames=("robot", "padding"),
-                   compiler_options=KERNEL_COMPILER_OPTIONS)
-def _points_valid(robot, world: World, p_cm: Array, padding: float) -> Array:
-    return is_valid_cm(robot, world, p_cm, padding)
-
-
-def _bucket(n: int) -> int:
-    """Pads batch sizes to powers of two (>= 64) so repeated calls reuse compiled kernels."""
-    return max(64, 1 << (max(n, 1) - 1).bit_length())
-
-
-def _padded_call(fn, env, padding: float, *points: np.ndarray) -> np.ndarray:
-    """Calls a jitted ``fn(robot, world, *points_cm, padding)`` on ``(M, 2)`` arrays padded to a bucket."""
-    m = len(points[0])
-    size = _bucket(m)
-    cms = []
-    for p in points:
-        buf = np.zeros((2, size), np.float32)
-        buf[:, :m] = p.T
-        cms.append(jnp.asarray(buf))
-    return np.asarray(fn(env.robot, env.world, *cms, padding))[:m]
-
-
 # ---------------------------------------------------------------------------
 # Queries (jitted, one call per chunk)
 # ---------------------------------------------------------------------------
@@ -266,7 +195,8 @@ def _solve(robot, world: World, nodes_cm: Array, dist: Array, routes: Array, rou
     last = jnp.argmin(dist[first] + dg, axis=1).astype(jnp.int32)
     via = valid & ~direct & jnp.isfinite(jnp.min(total, axis=1))
     solved = valid & (direct | via)
-    status = jnp.where(~valid, INVALID, jnp.where(solved, SOLVED, NO_PATH)).astype(jnp.int8)
+    status = jnp.where(~valid, PlanStatus.INVALID,
+                       jnp.where(solved, PlanStatus.SOLVED, PlanStatus.NO_PATH)).astype(jnp.int8)
     inner = jnp.where(via, route_len[first, last], 0)
     length = jnp.where(solved, inner + 2, 0)
     # waypoint k: 0 -> start, 1..inner -> route nodes, inner + 1 -> goal, then NaN
@@ -286,36 +216,6 @@ def _solve(robot, world: World, nodes_cm: Array, dist: Array, routes: Array, rou
 # ---------------------------------------------------------------------------
 # Public API
 # ---------------------------------------------------------------------------
-
-@dataclasses.dataclass(frozen=True)
-class VisGraphResult:
-    """Per-query results of :meth:`VisGraph.plan` (N queries).
-
-    Attributes:
-        paths: ``(N, L, 2)`` float32 waypoints, start first and goal last (exactly
-            the query's float32 start and goal), NaN after ``path_lengths[i]`` rows.
-        path_lengths: ``(N,)`` int32 number of waypoints (``>= 2`` if solved, else 0).
-        costs: ``(N,)`` float64 sum of the path's segment lengths; ``inf`` unless solved.
-        status: ``(N,)`` int8: :data:`SOLVED` 0, :data:`NO_PATH` 1, :data:`INVALID` 2.
-    """
-
-    paths: np.ndarray
-    path_lengths: np.ndarray
-    costs: np.ndarray
-    status: np.ndarray
-
-    @property
-    def solved(self) -> np.ndarray:
-        return self.status == SOLVED
-
-    def path(self, i: int) -> np.ndarray | None:
-        """Query ``i``'s path ``(L_i, 2)``, or None unless solved."""
-        return self.paths[i, :self.path_lengths[i]] if self.status[i] == SOLVED else None
-
-    def path_list(self) -> list:
-        """All paths as a list of ``(L_i, 2)`` arrays (None for unsolved queries)."""
-        return [self.path(i) for i in range(len(self.status))]
-
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class VisGraph:
@@ -381,15 +281,15 @@ class VisGraph:
             raise ValueError(f"arc_step must be in (0, pi/2], got {arc_step!r}")
         cand = obstacle_vertices(env.world, pad, eps, arc_step).astype(np.float32)
         if len(cand):
-            keep = _padded_call(_points_valid, env, pad, cand)
+            keep = valid_states(env.robot, env.world, cand, pad)
             cand = np.unique(cand[keep], axis=0)  # coincident corners: one node
         nodes = np.ascontiguousarray(cand)
         v = len(nodes)
         ii, jj = np.triu_indices(v, 1)
         visible = np.zeros((v, v), bool)
         if len(ii):
-            vis = (_padded_call(_pair_visibility, env, pad, nodes[ii], nodes[jj])
-                   & _padded_call(_pair_visibility, env, pad, nodes[jj], nodes[ii]))
+            vis = (steer_to_pairs(env.robot, env.world, nodes[ii], nodes[jj], pad)
+                   & steer_to_pairs(env.robot, env.world, nodes[jj], nodes[ii], pad))
             visible[ii, jj] = visible[jj, ii] = vis
         n64 = nodes.astype(np.float64)
         edge = np.linalg.norm(n64[:, None] - n64[None], axis=-1)
@@ -411,24 +311,13 @@ class VisGraph:
         return VisGraph(env.robot, env.world, pad, float(eps), float(arc_step), float(delta),
                         nodes, visible, dist, routes, route_len)
 
-    def plan(self, queries, *, chunk_size: int = 8192) -> VisGraphResult:
-        """Shortest paths for a batch of queries.
+    def _padded_tables(self) -> tuple[Array, Array, Array, Array]:
+        """``(nodes_cm, dist, routes, route_len)`` padded to multiples of ``NODE_PAD`` for :func:`_solve`.
 
-        Args:
-            queries: ``(N, 2, 2)`` (start, goal) points; cast to float32.
-            chunk_size: queries per jitted call (batches are padded to a power
-                of two up to this size, so repeated calls reuse the compiled code).
-
-        Returns:
-            A :class:`VisGraphResult`.
+        Padding nodes are NaN (never visible), so maps with similar node counts
+        share the compiled code; routes are padded by repeating their last node.
         """
-        q = np.asarray(queries, np.float32)
-        if q.ndim != 3 or q.shape[1:] != (2, 2):
-            raise ValueError(f"queries must have shape (N, 2, 2), got {q.shape}")
-        n = q.shape[0]
         v = self.num_nodes
-        # Pad the node set to a multiple of NODE_PAD with NaN nodes (never visible), so maps
-        # with similar node counts share the compiled code.
         vp = max(NODE_PAD, -(-v // NODE_PAD) * NODE_PAD)
         r0 = self.routes.shape[-1] if v else 1
         r = max(NODE_PAD, -(-r0 // NODE_PAD) * NODE_PAD)  # route buffer: same bucketing
@@ -438,42 +327,90 @@ class VisGraph:
         dist32[:v, :v] = self.dist
         routes = np.zeros((vp, vp, r), np.int32)
         routes[:v, :v, :r0] = self.routes
-        routes[:v, :v, r0:] = self.routes[:, :, -1:]  # padded by repeating the last node
+        routes[:v, :v, r0:] = self.routes[:, :, -1:]
         route_len = np.zeros((vp, vp), np.int32)
         route_len[:v, :v] = self.route_len
-        graph = [jnp.asarray(a) for a in (nodes_cm, dist32, routes, route_len)]
-        status = np.zeros(n, np.int8)
-        via = np.zeros(n, bool)
-        first = np.zeros(n, np.int32)
-        last = np.zeros(n, np.int32)
-        length = np.zeros(n, np.int32)
-        paths = np.empty((n, r + 2, 2), np.float32)
-        size = _bucket(min(n, chunk_size))
-        for lo in range(0, n, size):
-            hi = min(lo + size, n)
-            part = np.zeros((size, 2, 2), np.float32)
-            part[: hi - lo] = q[lo:hi]
-            out = _solve(self.robot, self.world, *graph, jnp.asarray(part[:, 0].T),
-                         jnp.asarray(part[:, 1].T), self.padding)
-            for dst, src in zip((status, via, first, last, length, paths), out):
-                dst[lo:hi] = np.asarray(src)[: hi - lo]
+        return tuple(jnp.asarray(a) for a in (nodes_cm, dist32, routes, route_len))
+
+    def plan(self, queries, *, chunk_size: int = 8192) -> PlanResult:
+        """Shortest paths for a batch of queries.
+
+        Args:
+            queries: ``(N, 2, 2)`` (start, goal) points; cast to float32.
+            chunk_size: queries per jitted call (batches are padded to a power
+                of two up to this size, so repeated calls reuse the compiled code).
+
+        Returns:
+            A :class:`PlanResult` (costs as described in the module docstring;
+            ``info``: ``planner``, ``nodes``, ``exact``, ``delta``).
+        """
+        q = np.asarray(queries, np.float32)
+        if q.ndim != 3 or q.shape[1:] != (2, 2):
+            raise ValueError(f"queries must have shape (N, 2, 2), got {q.shape}")
+        tables = self._padded_tables()
+        width = tables[2].shape[-1] + 2
+        empty = (np.zeros(0, np.int8), np.zeros(0, bool), np.zeros(0, np.int32),
+                 np.zeros(0, np.int32), np.zeros(0, np.int32), np.zeros((0, width, 2), np.float32))
+        status, via, first, last, length, paths = map_chunks(
+            lambda part: _solve(self.robot, self.world, *tables, jnp.asarray(part[:, 0].T),
+                                jnp.asarray(part[:, 1].T), self.padding),
+            q, chunk=bucket_size(min(q.shape[0], chunk_size), 64), empty=empty)
         # float64 costs: |s - n_first| + dist[first, last] + |n_last - g|, or |s - g|
         s64, g64 = q[:, 0].astype(np.float64), q[:, 1].astype(np.float64)
         costs = np.linalg.norm(g64 - s64, axis=1)
-        if v:
+        if self.num_nodes:
             nodes64 = self.nodes.astype(np.float64)
             f, l = np.where(via, first, 0), np.where(via, last, 0)
             graph_cost = (np.linalg.norm(nodes64[f] - s64, axis=1) + self.dist[f, l]
                           + np.linalg.norm(g64 - nodes64[l], axis=1))
             costs = np.where(via, graph_cost, costs)
-        costs = np.where(status == SOLVED, costs, np.inf)
+        costs = np.where(status == PlanStatus.SOLVED, costs, np.inf)
         width = max(2, int(length.max(initial=0)))
-        return VisGraphResult(np.ascontiguousarray(paths[:, :width]), length, costs, status)
+        info = {"planner": "visgraph", "nodes": self.num_nodes, "exact": self.exact,
+                "delta": self.delta}
+        return PlanResult(np.ascontiguousarray(paths[:, :width]), length, costs, status, info)
 
 
-def plan_visgraph(env, queries, *, padding: float | None = None, **build_options) -> VisGraphResult:
-    """One-shot helper: ``VisGraph.build(env, padding, **build_options).plan(queries)``."""
-    return VisGraph.build(env, padding, **build_options).plan(queries)
+_GRAPHS = EnvCache(per_env=4)
+
+
+def plan_visgraph(env, queries, *, padding: float | None = None, seed: int = 0,
+                  eps: float | None = None, arc_step: float | None = None,
+                  chunk_size: int = 8192) -> PlanResult:
+    """Plans on ``env``'s visibility graph (built once per environment and settings, cached
+    while ``env`` lives) and verifies every path (the registry's ``"visgraph"``).
+
+    Args:
+        env: a point-robot environment.
+        queries: ``(N, 2, 2)`` (start, goal) points.
+        padding: clearance; ``None`` = the environment's padding, ``0.0`` = the
+            evaluation geometry (exact for boxes).
+        seed: unused (deterministic).
+        eps, arc_step: :meth:`VisGraph.build` options (``None``: the defaults).
+        chunk_size: queries per jitted call.
+
+    Returns:
+        A :class:`PlanResult` checked by :func:`ntq_jax.planners.verify.finalize`.
+
+    Raises:
+        ValueError: not a point robot.
+    """
+    del seed  # deterministic
+    if env.robot.kind != "point":
+        raise ValueError(f"the 'visgraph' planner is for the point robot only; {env.name} has a "
+                         f"{env.robot.kind!r} robot: use 'bitstar' (or 'astar' for the 2-link arm)")
+    pad = env.resolve_padding(padding)
+    q = np.asarray(queries, np.float32)
+    step = DEFAULT_ARC_STEP if arc_step is None else arc_step
+    t0 = time.perf_counter()
+    graph = _GRAPHS.get(env, (pad, eps, step),
+                        lambda: VisGraph.build(env, pad, eps=eps, arc_step=step))
+    t1 = time.perf_counter()
+    res = graph.plan(q, chunk_size=int(chunk_size))
+    info = dict(res.info, build_time=t1 - t0, plan_time=time.perf_counter() - t1)
+    out = finalize(q, res.paths, res.lengths, res.status, info, env, pad)
+    info["time"] = time.perf_counter() - t0
+    return out
 
 
 # ---------------------------------------------------------------------------
@@ -509,8 +446,8 @@ def benchmark_visgraph(env, n: int = 100_000, *, padding: float = 0.0, seed: int
     return {"env": env.name, "padding": pad, "nodes": graph.num_nodes, "build_s": build_s,
             "n": n, "plan_s": best, "queries_per_s": n / best,
             "solved": float(np.mean(res.solved)),
-            "direct": float(np.mean(res.path_lengths == 2)), "devices": jax.device_count()}
+            "direct": float(np.mean(res.lengths == 2)), "devices": jax.device_count()}
 
 
-__all__ = ["VisGraph", "VisGraphResult", "plan_visgraph", "obstacle_vertices",
-           "benchmark_visgraph", "SOLVED", "NO_PATH", "INVALID", "STATUS_NAMES"]
+__all__ = ["VisGraph", "plan_visgraph", "obstacle_vertices", "benchmark_visgraph",
+           "DEFAULT_ARC_STEP", "DEFAULT_EPS_REL"]

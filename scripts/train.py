@@ -36,10 +36,9 @@ def main(argv=None) -> int:
     ap.add_argument("--no-shard", action="store_true",
                     help="never shard the member axis over devices")
     ap.add_argument("--cpu-devices", type=int, default=1,
-                    help="JAX CPU devices to create (one per core, e.g. 2 on 2 cores): the "
-                         "members then train on separate cores; measured 1.17x faster at "
-                         "small widths, no gain at the paper's (BENCHMARKS.md); results differ "
-                         "from a one-device run at float level. Default 1")
+                    help="JAX CPU devices to create (one per core): the members train on "
+                         "separate cores (speed: BENCHMARKS.md); results then differ from a "
+                         "one-device run at float level. Default 1")
     ap.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     args = ap.parse_args(argv)
 

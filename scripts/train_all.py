@@ -44,10 +44,9 @@ def main(argv=None) -> int:
                     help="do not use JAX's persistent compilation cache")
     ap.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     ap.add_argument("--cpu-devices", type=int, default=1,
-                    help="JAX CPU devices to create (one per core, e.g. 2 on 2 cores): the "
-                         "four PNets then train on separate cores; measured 1.17x faster at "
-                         "small widths, no gain at the paper's (BENCHMARKS.md); results differ "
-                         "from a one-device run at float level. Default 1")
+                    help="JAX CPU devices to create (one per core): the four PNets train on "
+                         "separate cores (speed: BENCHMARKS.md); results then differ from a "
+                         "one-device run at float level. Default 1")
     args = ap.parse_args(argv)
     use_cpu_devices(args.cpu_devices)  # before any JAX operation
     if not args.no_compile_cache:

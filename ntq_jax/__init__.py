@@ -6,7 +6,8 @@ Public API (stable):
   ``sample_queries``, ``gamma_nt``, ``to_json`` (each geometry method takes
   ``padding=``: default the environment's, ``0`` for the evaluation geometry).
 * :func:`plan` ``(env, queries, planner="astar" | "visgraph" | "bitstar", **options)``
-  -> :class:`PlanResult` (paths, lengths, costs, status); :func:`register_planner`.
+  -> :class:`PlanResult` (paths, lengths, costs, :class:`PlanStatus` per query);
+  :func:`register_planner`; :class:`PlanCause` (the neural planner's outcomes).
 """
 
 from ntq_jax.envs import Env, EnvError, make_env
@@ -14,9 +15,9 @@ from ntq_jax.geometry import World
 from ntq_jax.planners import PlanResult, plan, register_planner
 from ntq_jax.presets import PAPER_GAMMA, PRESETS
 from ntq_jax.queries import NON_TRIVIAL, NT_EXHAUSTED, UNIFORM, FreeSpaceTooSmall, GammaEstimate
-
+from ntq_jax.types import PlanCause, PlanStatus
 from ntq_jax.version import __version__
 
 __all__ = ["Env", "EnvError", "make_env", "World", "PRESETS", "PAPER_GAMMA", "GammaEstimate",
            "FreeSpaceTooSmall", "UNIFORM", "NON_TRIVIAL", "NT_EXHAUSTED", "plan", "PlanResult",
-           "register_planner", "__version__"]
+           "PlanStatus", "PlanCause", "register_planner", "__version__"]

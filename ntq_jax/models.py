@@ -120,15 +120,9 @@ class ModelSpec:
 
 
 def periodic_dims(robot) -> tuple[bool, ...]:
-    """Which coordinates of ``robot``'s state wrap around (see the module docstring).
-
-    A robot may declare ``periodic`` itself; otherwise the rigid body's ``theta``
-    (index 2) is periodic and nothing else is (the arm's joints do not wrap).
-    """
-    own = getattr(robot, "periodic", None)
-    if own is not None:
-        return tuple(bool(v) for v in own)
-    return tuple(robot.kind == "rigid_body" and k == 2 for k in range(robot.dim))
+    """Which coordinates of ``robot``'s state wrap around (the robot's own ``periodic``;
+    see the module docstring)."""
+    return tuple(bool(v) for v in robot.periodic)
 
 
 class PNet(nnx.Module):

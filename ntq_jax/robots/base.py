@@ -28,6 +28,11 @@ class Robot(Protocol):
     kind: str
     dim: int
 
+    @property
+    def periodic(self) -> tuple[bool, ...]:
+        """``(d,)`` which state coordinates are angles that wrap around (the PNet's loss uses
+        the shortest arc there)."""
+
     def config_bounds(self, world: World) -> tuple[Array, Array]:
         """``(low, high)``, each ``(d,)``: the box that uniform sampling draws from."""
 

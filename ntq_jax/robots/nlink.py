@@ -55,6 +55,11 @@ class NLinkArm(DiscretizedSteering):
     def reach(self) -> float:
         return float(sum(self.link_lengths))
 
+    @property
+    def periodic(self) -> tuple[bool, ...]:
+        """Which state coordinates wrap around: joint angles in [-pi, pi] do not wrap (as in the paper)."""
+        return (False,) * len(self.link_lengths)
+
     def config_bounds(self, world: World):
         n = self.dim
         return jnp.full((n,), -jnp.pi, jnp.float32), jnp.full((n,), jnp.pi, jnp.float32)

@@ -20,6 +20,11 @@ class PointRobot:
     kind: str = dataclasses.field(default="point", init=False)
     dim: int = dataclasses.field(default=2, init=False)
 
+    @property
+    def periodic(self) -> tuple[bool, ...]:
+        """Which state coordinates wrap around: positions only."""
+        return (False, False)
+
     def config_bounds(self, world: World):
         return world.bounds[:, 0], world.bounds[:, 1]
 

@@ -52,6 +52,11 @@ class RigidBody(DiscretizedSteering):
     def half_diagonal(self) -> float:
         return 0.5 * math.hypot(self.length, self.width)
 
+    @property
+    def periodic(self) -> tuple[bool, ...]:
+        """Which state coordinates wrap around: theta wraps around."""
+        return (False, False, True)
+
     def config_bounds(self, world: World):
         lo = jnp.concatenate([world.bounds[:, 0], jnp.array([-jnp.pi], jnp.float32)])
         hi = jnp.concatenate([world.bounds[:, 1], jnp.array([jnp.pi], jnp.float32)])

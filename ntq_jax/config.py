@@ -151,13 +151,19 @@ class PlannerEnvOverride:
             _check(v is None or v > 0, f"{p}.{k}", f"must be > 0 or null, got {v}")
 
 
+PLANNERS = ("astar", "visgraph", "bitstar", "roadmap")
+
+
 @dataclasses.dataclass(frozen=True)
 class PlannerConfig:
     """Classical planner used to solve training queries and as the evaluation reference.
 
     Attributes:
-        name: ``astar`` (grid A* + smoothing), ``visgraph`` or ``bitstar``.
+        name: ``astar`` (grid A* + smoothing), ``visgraph``, ``bitstar`` or ``roadmap``.
         resolution: grid resolution of A* (workspace units per cell).
+        milestones: roadmap size (``roadmap``; doubled on each growth round).
+        neighbors: roadmap neighbours per milestone (``null``: PRM*'s rule).
+        grow_rounds: roadmap growth rounds for unconnected queries.
         time_budget: BIT* seconds per query during data generation.
         eval_time_budget: BIT* seconds per query at evaluation.
         workers: BIT* worker processes (0 = number of cores).
@@ -167,14 +173,22 @@ class PlannerConfig:
 
     name: str = "astar"
     resolution: float = 0.1
+    milestones: int = 20_000
+    neighbors: Optional[int] = None
+    grow_rounds: int = 2
     time_budget: float = 3.0
     eval_time_budget: float = 2.0
     workers: int = 0
     per_env: tuple[PlannerEnvOverride, ...] = ()
 
     def validate(self, p: str):
-        _check(self.name in ("astar", "visgraph", "bitstar"), f"{p}.name",
-               f"must be one of astar, visgraph, bitstar; got {self.name!r}")
+        _check(self.name in PLANNERS, f"{p}.name",
+               f"must be one of {', '.join(PLANNERS)}; got {self.name!r}")
+        _check(self.milestones >= 2, f"{p}.milestones", f"must be >= 2, got {self.milestones}")
+        _check(self.neighbors is None or self.neighbors >= 1, f"{p}.neighbors",
+               f"must be >= 1 or null, got {self.neighbors}")
+        _check(0 <= self.grow_rounds <= 8, f"{p}.grow_rounds",
+               f"must be in [0, 8], got {self.grow_rounds}")
         _check(self.resolution > 0, f"{p}.resolution", f"must be > 0, got {self.resolution}")
         _check(self.time_budget > 0, f"{p}.time_budget", f"must be > 0, got {self.time_budget}")
         _check(self.eval_time_budget > 0, f"{p}.eval_time_budget",

@@ -49,7 +49,7 @@ from jax.tree_util import Partial
 
 from ntq_jax import artifacts, models
 from ntq_jax import neural_planner as NP
-from ntq_jax.data import env_slug
+from ntq_jax.data import env_slug, planner_options, resolve_planner
 from ntq_jax.planners import plan
 from ntq_jax.planners.verify import check_paths
 from ntq_jax.queries import wilson_interval
@@ -140,7 +140,7 @@ def reference_plans(env, cfg, env_name: str, slug: str, queries: dict, out_dir: 
         for kind in QUERY_KINDS:
             q = queries[kind]
             t0 = time.perf_counter()
-            res = _run_reference(env, q, cfg, env_name, planner)
+            res = _run_reference(env, q, cfg, env_name, planner, out_dir)
             out[f"{kind}_seconds"] = time.perf_counter() - t0
             out[f"{kind}_costs"] = np.asarray(res.costs, np.float64)
             out[f"{kind}_status"] = np.asarray(res.status, np.int8)
@@ -154,17 +154,13 @@ def reference_plans(env, cfg, env_name: str, slug: str, queries: dict, out_dir: 
     return artifacts.compute_or_load(Path(out_dir) / "reference.npz", fp, compute)
 
 
-def _run_reference(env, q, cfg, env_name, planner):
+def _run_reference(env, q, cfg, env_name, planner, out_dir: Path):
     if planner is not None:
         return planner(env, q, padding=0.0, seed=cfg.seed)
-    pc = cfg.planner
-    if pc.name == "astar":
-        opts = {"resolution": pc.resolution}
-    elif pc.name == "bitstar":
-        opts = {"time_budget": pc.eval_time_budget_for(env_name), "workers": pc.workers}
-    else:
-        opts = {}
-    return plan(env, q, pc.name, padding=0.0, seed=cfg.seed, **opts)
+    name = cfg.planner.name
+    run, _ = resolve_planner(name, planner_options(cfg, env_name, name, evaluation=True),
+                             cache_dir=Path(out_dir) / "roadmap")
+    return run(env, q, padding=0.0, seed=cfg.seed)
 
 
 # ---------------------------------------------------------------------------

@@ -102,7 +102,8 @@ def resolve_run(env, config, out_dir, env_name: str | None, planner) -> RunSpec:
     custom = callable(planner)
     options = (dict(getattr(planner, "options", {}) or {}) if custom
                else planner_options(config, env_name, str(planner)))
-    plan_fn, planner_name = resolve_planner(planner, options)
+    plan_fn, planner_name = resolve_planner(planner, options,
+                                            cache_dir=Path(out_dir) / slug / "roadmap")
     keys = run_keys(config.seed, slug)
     bits = [mixing_bits(keys.mix, k, s.p_nt) for s in specs]
     n_u, n_nt = pool_sizes(bits)

@@ -34,21 +34,28 @@ _CHUNK_FILE = re.compile(r"plan_(\d+)_(\d+)\.npz")
 _CHUNK_KEYS = ("queries", "paths", "lengths", "costs", "status", "rejected")
 
 
-def planner_options(config, env_name: str, name: str | None = None) -> dict:
+def planner_options(config, env_name: str, name: str | None = None, *,
+                    evaluation: bool = False) -> dict:
     """The keyword options passed to ``ntq_jax.planners.plan`` for planner ``name``.
 
-    ``name`` defaults to ``config.planner.name``.
+    ``name`` defaults to ``config.planner.name``; ``evaluation`` picks BIT*'s
+    evaluation budget instead of the data-generation one.
     """
     pc = config.planner
     name = name or pc.name
     if name == "astar":
         return {"resolution": pc.resolution}
     if name == "bitstar":
-        return {"time_budget": pc.time_budget_for(env_name), "workers": pc.workers}
+        budget = pc.eval_time_budget_for(env_name) if evaluation else pc.time_budget_for(env_name)
+        return {"time_budget": budget, "workers": pc.workers}
+    if name == "roadmap":
+        return {"milestones": pc.milestones, "k": pc.neighbors, "grow_rounds": pc.grow_rounds,
+                "roadmap_seed": config.seed}
     return {}
 
 
-def resolve_planner(planner, options: dict) -> tuple[Callable, str]:
+def resolve_planner(planner, options: dict, cache_dir: Path | None = None
+                    ) -> tuple[Callable, str]:
     """A callable ``(env, queries, *, padding, seed) -> PlanResult`` and its name.
 
     Args:
@@ -57,13 +64,16 @@ def resolve_planner(planner, options: dict) -> tuple[Callable, str]:
             with that signature (e.g. a test's fake planner), returned as it is:
             :func:`plan_pool` verifies its results (``verify=True``).
         options: extra keyword options for a named planner.
+        cache_dir: where the ``roadmap`` planner keeps its roadmaps (not part of
+            ``options``, which are recorded in the datasets' metadata).
     """
     if callable(planner):
         return planner, getattr(planner, "__name__", "custom")
     name = str(planner)
+    extra = {"cache_dir": cache_dir} if name == "roadmap" and cache_dir is not None else {}
 
     def run(env, queries, *, padding, seed=0):
-        return plan(env, queries, planner=name, padding=padding, seed=seed, **options)
+        return plan(env, queries, planner=name, padding=padding, seed=seed, **options, **extra)
     return run, name
 
 

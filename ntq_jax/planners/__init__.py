@@ -52,7 +52,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ntq_jax.planners import astar, ompl_bridge, visgraph
+from ntq_jax.planners import astar, ompl_bridge, roadmap, visgraph
 from ntq_jax.planners.astar import config_grid
 from ntq_jax.planners.verify import check_paths, finalize, valid_queries
 from ntq_jax.types import STATUS_NAMES, PlannerFn, PlanResult, PlanStatus
@@ -112,6 +112,7 @@ def plan(env, queries, planner: str = "astar", *, padding: float | None = None, 
 register_planner("astar", astar.plan_astar)
 register_planner("visgraph", visgraph.plan_visgraph)
 register_planner("bitstar", ompl_bridge.plan_bitstar)
+register_planner("roadmap", roadmap.plan_roadmap)
 
 __all__ = ["plan", "register_planner", "available_planners", "PlanResult", "PlanStatus",
            "STATUS_NAMES", "check_paths", "valid_queries", "finalize", "config_grid"]

@@ -33,6 +33,11 @@ class Robot(Protocol):
         """``(d,)`` which state coordinates are angles that wrap around (the PNet's loss uses
         the shortest arc there)."""
 
+    @property
+    def metric_weights(self) -> tuple[float, ...]:
+        """``(d,)`` per-coordinate weights ``w`` such that the Euclidean distance of
+        ``w * q`` (angles on the circle) approximates the cost metric."""
+
     def config_bounds(self, world: World) -> tuple[Array, Array]:
         """``(low, high)``, each ``(d,)``: the box that uniform sampling draws from."""
 

@@ -60,6 +60,11 @@ class NLinkArm(DiscretizedSteering):
         """Which state coordinates wrap around: joint angles in [-pi, pi] do not wrap (as in the paper)."""
         return (False,) * len(self.link_lengths)
 
+    @property
+    def metric_weights(self) -> tuple[float, ...]:
+        """Per-coordinate weights of the cost metric (for nearest-neighbour embeddings)."""
+        return (1.0,) * len(self.link_lengths)
+
     def config_bounds(self, world: World):
         n = self.dim
         return jnp.full((n,), -jnp.pi, jnp.float32), jnp.full((n,), jnp.pi, jnp.float32)

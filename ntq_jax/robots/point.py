@@ -25,6 +25,11 @@ class PointRobot:
         """Which state coordinates wrap around: positions only."""
         return (False, False)
 
+    @property
+    def metric_weights(self) -> tuple[float, ...]:
+        """Per-coordinate weights of the cost metric (for nearest-neighbour embeddings)."""
+        return (1.0, 1.0)
+
     def config_bounds(self, world: World):
         return world.bounds[:, 0], world.bounds[:, 1]
 

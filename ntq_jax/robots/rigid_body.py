@@ -57,6 +57,11 @@ class RigidBody(DiscretizedSteering):
         """Which state coordinates wrap around: theta wraps around."""
         return (False, False, True)
 
+    @property
+    def metric_weights(self) -> tuple[float, ...]:
+        """Per-coordinate weights of the cost metric (for nearest-neighbour embeddings)."""
+        return (1.0, 1.0, float(self.angle_weight))
+
     def config_bounds(self, world: World):
         lo = jnp.concatenate([world.bounds[:, 0], jnp.array([-jnp.pi], jnp.float32)])
         hi = jnp.concatenate([world.bounds[:, 1], jnp.array([jnp.pi], jnp.float32)])

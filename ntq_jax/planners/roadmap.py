@@ -1,0 +1,302 @@
+"""The ``"roadmap"`` planner: one probabilistic roadmap per environment, searched for every query.
+
+All queries of a dataset live in one environment, so a roadmap built once
+amortises every collision check over thousands of queries (PRM*, Karaman and
+Frazzoli 2011):
+
+1. **Build** (:func:`build_roadmap`): ``milestones`` valid states sampled at the
+   planning padding; each joined to its ``k`` nearest neighbours under the
+   robot's metric (default the PRM* rule ``k = ceil(e (1 + 1/d) log N)``;
+   neighbours found by a KD-tree on the embedding ``metric_weights * q`` with
+   the periodic coordinates on a circle, then re-ranked by the exact metric);
+   every edge checked with the package's one batched ``steer_to`` and weighted
+   by the metric. Deterministic for ``roadmap_seed``; cached per environment
+   in memory and, with ``cache_dir``, on disk keyed by a fingerprint of the
+   map, robot, padding and settings.
+2. **Query** (:func:`plan_roadmap`, registered as ``"roadmap"``): each start is
+   joined to the nearest milestones it reaches by ``steer_to`` (start to
+   milestone), each goal to those that reach it (milestone to goal), and the
+   start to its goal when the straight connection is free. Starts only have
+   outgoing and goals only incoming edges, so every query is solved on the
+   roadmap alone, independently of the other queries of the batch (and of the
+   chunking). Dijkstra (``scipy.sparse.csgraph``) from batches of starts; the
+   node sequence is shortcut (:mod:`ntq_jax.planners.smoothing`) and verified
+   (:mod:`ntq_jax.planners.verify`).
+3. **Growth**: a query whose ends are not connected is retried on a roadmap
+   with twice the milestones (another sample), at most ``grow_rounds`` times,
+   then reported ``NO_PATH``. Nothing loops unboundedly.
+
+Measurements against BIT*: BENCHMARKS.md ("Roadmap planner").
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+from typing import NamedTuple
+
+import jax
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import dijkstra
+from scipy.spatial import cKDTree
+
+from ntq_jax import artifacts
+from ntq_jax.geometry import World
+from ntq_jax.planners.env_cache import EnvCache
+from ntq_jax.planners.smoothing import shortcut_paths
+from ntq_jax.planners.verify import finalize, valid_queries
+from ntq_jax.queries import sample_states
+from ntq_jax.robots.batch import distances, steer_to_pairs
+from ntq_jax.types import PlanResult, PlanStatus
+
+__all__ = ["Roadmap", "MetricIndex", "prm_star_k", "build_roadmap", "roadmap_for", "plan_roadmap",
+           "DEFAULT_MILESTONES", "ALGORITHM_VERSION"]
+
+ALGORITHM_VERSION = 1  # bump when a roadmap built from the same settings changes
+DEFAULT_MILESTONES = 20_000
+SEARCH_CHUNK = 128  # Dijkstra sources per call: (chunk, nodes) distance and predecessor rows
+
+
+class Roadmap(NamedTuple):
+    """A checked roadmap: ``milestones (N, d)`` float32; ``edges (E, 2)`` int32 pairs
+    ``i < j`` whose connection ``m_i -> m_j`` passed ``steer_to``; ``costs (E,)``
+    float64 their lengths in the robot's metric."""
+
+    milestones: np.ndarray
+    edges: np.ndarray
+    costs: np.ndarray
+
+
+class MetricIndex:
+    """k nearest neighbours of ``points`` under a robot's metric.
+
+    A KD-tree on ``metric_weights * (q - lo)`` with each periodic coordinate on a
+    circle (the tree's periodic box) finds ``oversample * k`` candidates; the
+    exact metric (``robot.distance``) picks the ``k`` nearest of them.
+    """
+
+    def __init__(self, robot, world: World, points: np.ndarray, oversample: int = 2):
+        lo, hi = (np.asarray(v, np.float64) for v in robot.config_bounds(world))
+        w = np.asarray(robot.metric_weights, np.float64)
+        periodic = np.asarray(robot.periodic, bool)
+        span = w * (hi - lo)
+        # a non-periodic box larger than twice the span never wraps a distance
+        self._box = np.where(periodic, span, 2.0 * span + 1.0)
+        self._lo, self._w, self._robot, self._oversample = lo, w, robot, int(oversample)
+        self.points = np.asarray(points, np.float32)
+        self._tree = cKDTree(self._embed(self.points), boxsize=self._box)
+
+    def _embed(self, x: np.ndarray) -> np.ndarray:
+        return np.mod(self._w * (np.asarray(x, np.float64) - self._lo), self._box)
+
+    def query(self, x: np.ndarray, k: int, exclude_self: bool = False
+              ) -> tuple[np.ndarray, np.ndarray]:
+        """``(idx (M, k) int64, dist (M, k) float64)``, nearest first, by the exact metric."""
+        x = np.asarray(x, np.float32)
+        n = len(self.points)
+        k = min(k, n - int(exclude_self))
+        m = min(n, self._oversample * k + int(exclude_self))
+        _, idx = self._tree.query(self._embed(x), m)
+        idx = idx.reshape(len(x), m)
+        if exclude_self:  # drop the point itself (the nearest, or a duplicate at distance 0)
+            rows = np.arange(len(x))[:, None]
+            idx = np.where(idx == rows, idx[:, -1:], idx)[:, :m]
+        a = np.repeat(x, m, axis=0)
+        dist = distances(self._robot, a, self.points[idx.reshape(-1)]).astype(np.float64)
+        dist = dist.reshape(len(x), m)
+        order = np.argsort(dist, axis=1, kind="stable")[:, :k]
+        return np.take_along_axis(idx, order, 1), np.take_along_axis(dist, order, 1)
+
+
+def prm_star_k(n: int, d: int) -> int:
+    """PRM*'s neighbour count ``ceil(e (1 + 1/d) log n)`` (at least 1)."""
+    return max(1, math.ceil(math.e * (1.0 + 1.0 / d) * math.log(max(n, 2))))
+
+
+def build_roadmap(robot, world: World, padding: float, *, milestones: int, k: int,
+                  key: jax.Array) -> Roadmap:
+    """Samples ``milestones`` valid states and keeps the free edges to their ``k`` nearest."""
+    states = sample_states(robot, world, key, int(milestones), padding)
+    index = MetricIndex(robot, world, states)
+    nbr, _ = index.query(states, k, exclude_self=True)
+    i = np.repeat(np.arange(len(states)), nbr.shape[1])
+    j = nbr.reshape(-1)
+    pairs = np.unique(np.stack([np.minimum(i, j), np.maximum(i, j)], 1), axis=0)
+    pairs = pairs[pairs[:, 0] != pairs[:, 1]]
+    a, b = states[pairs[:, 0]], states[pairs[:, 1]]
+    free = steer_to_pairs(robot, world, a, b, padding)
+    edges = pairs[free].astype(np.int32)
+    costs = distances(robot, a[free], b[free]).astype(np.float64)
+    return Roadmap(states, edges, costs)
+
+
+_MEMORY = EnvCache(per_env=4)
+
+
+def roadmap_for(env, padding: float, *, milestones: int, k: int, roadmap_seed: int,
+                round_: int = 0, cache_dir: str | Path | None = None) -> Roadmap:
+    """The roadmap of ``env`` for these settings: from memory, from ``cache_dir``, or built.
+
+    Round ``r`` uses ``milestones * 2**r`` milestones and its own sample.
+    """
+    n = int(milestones) * 2 ** int(round_)
+    key = jax.random.fold_in(jax.random.key(int(roadmap_seed)), int(round_))
+    robot, world = env.robot, env.world
+
+    def build() -> dict:
+        rm = build_roadmap(robot, world, padding, milestones=n, k=int(k), key=key)
+        return rm._asdict()
+
+    def load() -> Roadmap:
+        if cache_dir is None:
+            return Roadmap(**build())
+        fp = artifacts.fingerprint(ALGORITHM_VERSION, env.to_json(), float(padding), n, int(k),
+                                   int(roadmap_seed), int(round_))
+        got = artifacts.compute_or_load(Path(cache_dir) / f"roadmap_{fp}.npz", fp, build)
+        return Roadmap(*(np.asarray(got[f]) for f in Roadmap._fields))
+
+    return _MEMORY.get(env, (float(padding), n, int(k), int(roadmap_seed), int(round_),
+                             None if cache_dir is None else str(cache_dir)), load)
+
+
+# ---------------------------------------------------------------------------
+# Queries
+# ---------------------------------------------------------------------------
+
+def _attach(robot, world, index: MetricIndex, points: np.ndarray, k: int, padding: float,
+            outgoing: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Edges between ``points`` and the nearest milestones they see: ``(point row,
+    milestone, cost)``; ``outgoing``: point -> milestone, else milestone -> point."""
+    idx, _ = index.query(points, k)
+    rows = np.repeat(np.arange(len(points)), idx.shape[1])
+    ms = index.points[idx.reshape(-1)]
+    p = points[rows]
+    a, b = (p, ms) if outgoing else (ms, p)
+    free = steer_to_pairs(robot, world, a, b, padding)
+    cost = distances(robot, a[free], b[free]).astype(np.float64)
+    return rows[free], idx.reshape(-1)[free], cost
+
+
+def _node_paths(pred: np.ndarray, src: np.ndarray, dst: np.ndarray) -> list[np.ndarray]:
+    """Node sequences ``src -> dst`` per row from Dijkstra's predecessor rows."""
+    rows = np.arange(len(src))
+    cur = dst.copy()
+    trail = [cur.copy()]
+    active = cur != src
+    while active.any():
+        cur = np.where(active, pred[rows, cur], cur)
+        trail.append(cur.copy())
+        active &= cur != src
+    trail = np.stack(trail, 1)  # (rows, hops + 1), dst first, repeated src at the end
+    return [t[: int(np.argmax(t == s)) + 1][::-1] for t, s in zip(trail, src)]
+
+
+def _search(robot, world, rm: Roadmap, q: np.ndarray, k: int, padding: float
+            ) -> list[np.ndarray | None]:
+    """Per query, the states of its shortest roadmap path (start ... goal), or None."""
+    n, nq = len(rm.milestones), len(q)
+    index = MetricIndex(robot, world, rm.milestones)
+    s_row, s_m, s_c = _attach(robot, world, index, q[:, 0], k, padding, outgoing=True)
+    g_row, g_m, g_c = _attach(robot, world, index, q[:, 1], k, padding, outgoing=False)
+    direct = steer_to_pairs(robot, world, q[:, 0], q[:, 1], padding)
+    d_row = np.flatnonzero(direct)
+    d_c = distances(robot, q[d_row, 0], q[d_row, 1]).astype(np.float64)
+    start, goal = n + np.arange(nq), n + nq + np.arange(nq)  # node ids
+    e0, e1 = rm.edges[:, 0].astype(np.int64), rm.edges[:, 1].astype(np.int64)
+    src = np.concatenate([e0, e1, start[s_row], g_m, start[d_row]])
+    dst = np.concatenate([e1, e0, s_m, goal[g_row], goal[d_row]])
+    w = np.concatenate([rm.costs, rm.costs, s_c, g_c, d_c])
+    w = np.maximum(w, 1e-12)  # csgraph drops explicit zeros (coincident states)
+    graph = coo_matrix((w, (src, dst)), shape=(n + 2 * nq,) * 2).tocsr()
+    nodes = np.concatenate([rm.milestones, q[:, 0], q[:, 1]])
+    out: list[np.ndarray | None] = [None] * nq
+    for lo in range(0, nq, SEARCH_CHUNK):
+        rows = np.arange(lo, min(nq, lo + SEARCH_CHUNK))
+        dist, pred = dijkstra(graph, directed=True, indices=start[rows],
+                              return_predecessors=True)
+        reached = np.isfinite(dist[np.arange(len(rows)), goal[rows]])
+        hit = rows[reached]
+        seqs = _node_paths(pred[reached], start[hit], goal[hit])
+        for i, seq in zip(hit, seqs):
+            out[i] = nodes[seq]
+    return out
+
+
+def _pack(paths: list[np.ndarray | None], d: int) -> tuple[np.ndarray, np.ndarray]:
+    """NaN-padded ``(K, L, d)`` paths and ``(K,)`` lengths (0 for None)."""
+    lengths = np.array([0 if p is None else len(p) for p in paths], np.int32)
+    out = np.full((len(paths), max(2, int(lengths.max(initial=0))), d), np.nan, np.float32)
+    for i, p in enumerate(paths):
+        if p is not None:
+            out[i, :len(p)] = p
+    return out, lengths
+
+
+def plan_roadmap(env, queries, *, padding: float | None = None, seed: int = 0,
+                 milestones: int = DEFAULT_MILESTONES, k: int | None = None,
+                 grow_rounds: int = 2, roadmap_seed: int = 0, smooth: bool = True,
+                 smooth_chunk: int = 128, cache_dir: str | Path | None = None) -> PlanResult:
+    """Plans every query on the environment's roadmap (the registry's ``"roadmap"``).
+
+    Args:
+        env: the environment (any robot).
+        queries: ``(K, 2, d)`` (start, goal) states.
+        padding: planning clearance (None: the environment's padding).
+        seed: unused: the roadmap depends on ``roadmap_seed`` only, so a query's
+            path does not depend on the batch or chunk it is planned in.
+        milestones: roadmap size of the first round (doubled at each growth round).
+        k: neighbours per milestone and candidate milestones per query end
+            (None: :func:`prm_star_k`).
+        grow_rounds: extra rounds on larger roadmaps for unconnected queries.
+        roadmap_seed: seed of the milestone sample.
+        smooth: shortcut the roadmap paths; ``smooth_chunk``: paths per call.
+        cache_dir: a folder to keep built roadmaps in (reused when the map, robot,
+            padding and settings match).
+
+    Returns:
+        A verified :class:`PlanResult`; unconnected after the last round: NO_PATH.
+    """
+    del seed
+    padding = env.resolve_padding(padding)
+    q = np.asarray(queries, np.float32)
+    t0 = time.perf_counter()
+    nq, d = q.shape[0], q.shape[2]
+    status = np.full(nq, PlanStatus.NO_PATH, np.int8)
+    status[~valid_queries(env, q, padding)] = PlanStatus.INVALID
+    kk = prm_star_k(milestones, d) if k is None else int(k)
+    info: dict = {"planner": "roadmap", "k": kk, "rounds": 0, "build_time": 0.0,
+                  "search_time": 0.0}
+    paths: list[np.ndarray | None] = [None] * nq
+    for r in range(int(grow_rounds) + 1):
+        todo = np.flatnonzero((status == PlanStatus.NO_PATH)
+                              & np.array([p is None for p in paths]))
+        if not len(todo):
+            break
+        tb = time.perf_counter()
+        rm = roadmap_for(env, padding, milestones=milestones, k=kk, roadmap_seed=roadmap_seed,
+                         round_=r, cache_dir=cache_dir)
+        ts = time.perf_counter()
+        for i, p in zip(todo, _search(env.robot, env.world, rm, q[todo], kk, padding)):
+            paths[i] = p
+        info["rounds"] = r + 1
+        info["build_time"] += ts - tb
+        info["search_time"] += time.perf_counter() - ts
+        info[f"round{r}"] = {"milestones": len(rm.milestones), "edges": len(rm.edges),
+                             "queries": len(todo)}
+    found = np.array([p is not None for p in paths], bool)
+    status[found] = PlanStatus.SOLVED
+    out, lengths = _pack(paths, d)
+    t1 = time.perf_counter()
+    if smooth and found.any():
+        sp, sl, _ = shortcut_paths(env.robot, env.world, out[found], lengths[found], padding,
+                                   chunk_size=int(smooth_chunk))
+        out = np.full((nq, sp.shape[1], d), np.nan, np.float32)
+        out[found], lengths[found] = sp, sl
+    t2 = time.perf_counter()
+    info["smooth_time"] = t2 - t1
+    res = finalize(q, out, lengths, status, info, env, padding)
+    info["check_time"] = time.perf_counter() - t2
+    info["time"] = time.perf_counter() - t0
+    return res

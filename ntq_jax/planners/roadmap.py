@@ -32,7 +32,9 @@ Measurements against BIT*: BENCHMARKS.md ("Roadmap planner").
 from __future__ import annotations
 
 import math
+import os
 import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import NamedTuple
 
@@ -193,8 +195,8 @@ def _node_paths(pred: np.ndarray, src: np.ndarray, dst: np.ndarray) -> list[np.n
     return [t[: int(np.argmax(t == s)) + 1][::-1] for t, s in zip(trail, src)]
 
 
-def _search(robot, world, rm: Roadmap, q: np.ndarray, k: int, padding: float
-            ) -> list[np.ndarray | None]:
+def _search(robot, world, rm: Roadmap, q: np.ndarray, k: int, padding: float, threads: int
+             ) -> list[np.ndarray | None]:
     """Per query, the states of its shortest roadmap path (start ... goal), or None."""
     n, nq = len(rm.milestones), len(q)
     index = MetricIndex(robot, world, rm.milestones)
@@ -211,16 +213,20 @@ def _search(robot, world, rm: Roadmap, q: np.ndarray, k: int, padding: float
     w = np.maximum(w, 1e-12)  # csgraph drops explicit zeros (coincident states)
     graph = coo_matrix((w, (src, dst)), shape=(n + 2 * nq,) * 2).tocsr()
     nodes = np.concatenate([rm.milestones, q[:, 0], q[:, 1]])
-    out: list[np.ndarray | None] = [None] * nq
-    for lo in range(0, nq, SEARCH_CHUNK):
-        rows = np.arange(lo, min(nq, lo + SEARCH_CHUNK))
+
+    def solve(rows: np.ndarray) -> list[tuple[int, np.ndarray]]:
         dist, pred = dijkstra(graph, directed=True, indices=start[rows],
                               return_predecessors=True)
         reached = np.isfinite(dist[np.arange(len(rows)), goal[rows]])
         hit = rows[reached]
-        seqs = _node_paths(pred[reached], start[hit], goal[hit])
-        for i, seq in zip(hit, seqs):
-            out[i] = nodes[seq]
+        return list(zip(hit, _node_paths(pred[reached], start[hit], goal[hit])))
+
+    out: list[np.ndarray | None] = [None] * nq
+    chunks = [np.arange(lo, min(nq, lo + SEARCH_CHUNK)) for lo in range(0, nq, SEARCH_CHUNK)]
+    with ThreadPoolExecutor(max(1, min(threads, len(chunks)))) as pool:  # Dijkstra frees the GIL
+        for found in pool.map(solve, chunks):
+            for i, seq in found:
+                out[i] = nodes[seq]
     return out
 
 
@@ -237,7 +243,8 @@ def _pack(paths: list[np.ndarray | None], d: int) -> tuple[np.ndarray, np.ndarra
 def plan_roadmap(env, queries, *, padding: float | None = None, seed: int = 0,
                  milestones: int = DEFAULT_MILESTONES, k: int | None = None,
                  grow_rounds: int = 2, roadmap_seed: int = 0, smooth: bool = True,
-                 smooth_chunk: int = 128, cache_dir: str | Path | None = None) -> PlanResult:
+                 smooth_chunk: int = 128, cache_dir: str | Path | None = None,
+                 threads: int | None = None) -> PlanResult:
     """Plans every query on the environment's roadmap (the registry's ``"roadmap"``).
 
     Args:
@@ -254,6 +261,7 @@ def plan_roadmap(env, queries, *, padding: float | None = None, seed: int = 0,
         smooth: shortcut the roadmap paths; ``smooth_chunk``: paths per call.
         cache_dir: a folder to keep built roadmaps in (reused when the map, robot,
             padding and settings match).
+        threads: Dijkstra threads (None: the CPU count); the result does not depend on it.
 
     Returns:
         A verified :class:`PlanResult`; unconnected after the last round: NO_PATH.
@@ -278,7 +286,9 @@ def plan_roadmap(env, queries, *, padding: float | None = None, seed: int = 0,
         rm = roadmap_for(env, padding, milestones=milestones, k=kk, roadmap_seed=roadmap_seed,
                          round_=r, cache_dir=cache_dir)
         ts = time.perf_counter()
-        for i, p in zip(todo, _search(env.robot, env.world, rm, q[todo], kk, padding)):
+        found = _search(env.robot, env.world, rm, q[todo], kk, padding,
+                        threads=(os.cpu_count() or 1) if threads is None else int(threads))
+        for i, p in zip(todo, found):
             paths[i] = p
         info["rounds"] = r + 1
         info["build_time"] += ts - tb

@@ -195,6 +195,16 @@ def metrics(success: np.ndarray, costs: np.ndarray, cause: np.ndarray, ref_costs
     return out
 
 
+def _data_planner(cfg, data_env_dir) -> str:
+    """The planner that made the datasets (their metadata), else the config's."""
+    for meta in sorted(Path(data_env_dir).glob("D*/meta.json")) if data_env_dir else []:
+        try:
+            return str(json.loads(meta.read_text())["planner"]["name"])
+        except (OSError, KeyError, TypeError, json.JSONDecodeError):
+            continue
+    return cfg.planner.name
+
+
 def _gamma(env, cfg, data_env_dir, slug: str, out_dir: Path) -> dict:
     """gamma_nt on the evaluation geometry: from the dataset metadata, else estimated."""
     if data_env_dir is not None:
@@ -236,6 +246,7 @@ class _EnvEval:
     queries: dict
     ref: dict
     gamma: dict
+    data_planner: str
     log: Callable[[str], None]
 
 
@@ -271,7 +282,7 @@ def _cell(ctx: _EnvEval, pnet, m: int, kind: str, steer) -> dict:
         "member": m, "dataset": specs[m] if m < len(specs) else None,
         "query_kind": kind, "steer": bool(steer),
         "gamma_nt": ctx.gamma.get("gamma"), "gamma_nt_ci95": ctx.gamma.get("ci95"),
-        "reference_planner": str(ctx.ref["planner"]),
+        "reference_planner": str(ctx.ref["planner"]), "data_planner": ctx.data_planner,
         "seconds_per_query": float(got["seconds"]) / k,
         "compile_seconds": float(got["compile_seconds"]),
         "reference_seconds_per_query": float(ctx.ref[f"{kind}_seconds"]) / k,
@@ -312,7 +323,8 @@ def evaluate_env(env, ensemble, cfg, run_dir, *, env_name: str, data_env_dir=Non
     queries = test_queries(env, cfg, slug, out_dir)
     ctx = _EnvEval(env, cfg, run_dir, env_name, slug, queries,
                    reference_plans(env, cfg, env_name, slug, queries, out_dir, planner),
-                   _gamma(env, cfg, data_env_dir, slug, out_dir), log)
+                   _gamma(env, cfg, data_env_dir, slug, out_dir),
+                   _data_planner(cfg, data_env_dir), log)
     return [_cell(ctx, pnets[m], m, kind, steer)
             for steer in cfg.eval.steer
             for m in members

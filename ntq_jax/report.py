@@ -32,8 +32,8 @@ CSV_FIELDS = ["task", "env", "model", "query_kind", "steer", "k_test", "successe
               "success_ratio", "success_ci95_lo", "success_ci95_hi", "cost_ratio", "cost_ratio_n",
               "cost_ratio_opt", "seconds_per_query", "compile_seconds",
               "reference_seconds_per_query", "failures_no_path", "failures_infeasible",
-              "failures_invalid_query", "reference_failed", "reference_planner", "gamma_nt",
-              "paths_file"]
+              "failures_invalid_query", "reference_failed", "reference_planner", "data_planner",
+              "gamma_nt", "paths_file"]
 
 
 def _f(x, nd=3) -> str:
@@ -94,7 +94,8 @@ def tables_md(rows) -> str:
             md, _ = _gamma_heading(env, block)
             any_row = next(iter(block.values()))
             out += [f"### {md}", "",
-                    f"K_test = {any_row['k_test']} per query kind; reference planner: "
+                    f"K_test = {any_row['k_test']} per query kind; data planner: "
+                    f"{any_row.get('data_planner', '-')}; reference planner: "
                     f"{any_row['reference_planner']}; success ratio with its 95% Wilson interval.", "",
                     "| Model | Uniform success ratio | Uniform cost ratio | Non-trivial success ratio "
                     "| Non-trivial cost ratio |",

@@ -29,6 +29,8 @@ TINY = ["envs=[point/2]", "data.k_train=40", "data.gamma_queries=2000", "data.ga
         "eval.replan_rounds=2", "eval.replan_steps=6", "eval.gamma_queries=2000"]
 ARM = ["envs=[nlink/2]", "data.k_train=30", "data.gamma_queries=2000", "planner.name=astar",
        "planner.resolution=0.05"]
+# result fields added after the recording (not part of the golden record)
+NEW_KEYS = {"data_planner"}
 TIME_KEYS = {"seconds", "compile_seconds", "seconds_per_query", "reference_seconds_per_query",
              "time", "timings"}
 
@@ -53,7 +55,7 @@ def _numbers(obj):
     """The JSON tree without wall-clock fields and file paths."""
     if isinstance(obj, dict):
         return {k: _numbers(v) for k, v in sorted(obj.items())
-                if k not in TIME_KEYS and not k.endswith("_file")}
+                if k not in TIME_KEYS | NEW_KEYS and not k.endswith("_file")}
     if isinstance(obj, list):
         return [_numbers(v) for v in obj]
     return obj

@@ -7,6 +7,7 @@ Usage::
     res = ntq_jax.plan(env, queries)                         # grid A* + shortcutting
     res = ntq_jax.plan(env, queries, "visgraph", padding=0)  # exact point-robot optimum
     res = ntq_jax.plan(env, queries, "bitstar", time_budget=2.0, workers=2)
+    res = ntq_jax.plan(env, queries, "roadmap", milestones=20_000)  # any robot, many queries
 
 Every planner takes ``queries`` ``(K, 2, d)`` (start, goal) and returns a
 :class:`PlanResult` with, per query, a NaN-padded path (start first and goal
@@ -43,6 +44,12 @@ Planners
     and the other ``plan_bitstar`` options. BIT* is anytime: no solution within
     the budget is a TIMEOUT, not a proof that there is none (the bridge's own
     outcomes map to statuses in ``ompl_bridge.PLAN_STATUS``).
+
+``"roadmap"`` (any robot; many queries in one environment)
+    :func:`ntq_jax.planners.roadmap.plan_roadmap`: a PRM* roadmap built once per
+    environment and settings (cached in memory, and on disk with ``cache_dir``),
+    Dijkstra per query, shortcutting. Options: ``milestones`` (default 20,000),
+    ``k`` (default PRM*'s rule), ``grow_rounds``, ``roadmap_seed``, ``cache_dir``.
 
 Register your own with :func:`register_planner`. Measurements: BENCHMARKS.md
 ("Classical planners").

@@ -5,7 +5,7 @@ Public API (stable):
 * :func:`make_env` -> :class:`Env` with ``is_valid``, ``steer_to``,
   ``sample_queries``, ``gamma_nt``, ``to_json`` (each geometry method takes
   ``padding=``: default the environment's, ``0`` for the evaluation geometry).
-* :func:`plan` ``(env, queries, planner="astar" | "visgraph" | "bitstar", **options)``
+* :func:`plan` ``(env, queries, planner="astar" | "visgraph" | "bitstar" | "roadmap", **options)``
   -> :class:`PlanResult` (paths, lengths, costs, :class:`PlanStatus` per query);
   :func:`register_planner`; :class:`PlanCause` (the neural planner's outcomes).
 """

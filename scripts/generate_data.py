@@ -31,7 +31,7 @@ def main(argv=None) -> int:
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help="config override, e.g. --set data.k_train=100 (repeatable)")
     ap.add_argument("--planner", default=None,
-                    help="planner name overriding planner.name (astar, visgraph, bitstar)")
+                    help="planner name overriding planner.name (astar, visgraph, bitstar, roadmap)")
     ap.add_argument("--no-progress", action="store_true", help="no progress bars")
     ap.add_argument("--no-figure", action="store_true", help="skip the PNG figures")
     args = ap.parse_args(argv)

@@ -145,6 +145,35 @@ def loadavg() -> list[float]:
     return [round(x, 2) for x in os.getloadavg()]
 
 
+class LoadSampler:
+    """Samples the 1-minute load average every ``every`` seconds in a thread (``with`` block)."""
+
+    def __init__(self, every: float = 15.0):
+        import threading
+        self.every, self.samples = every, []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+
+    def _run(self):
+        while True:
+            self.samples.append(os.getloadavg()[0])
+            if self._stop.wait(self.every):
+                return
+
+    def __enter__(self):
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc):
+        self._stop.set()
+        self._thread.join()
+
+    def summary(self) -> dict:
+        xs = self.samples
+        return {"mean": round(sum(xs) / len(xs), 2), "max": round(max(xs), 2),
+                "n": len(xs), "every_s": self.every} if xs else {}
+
+
 def children_cpu() -> float:
     """User + system CPU seconds of this process's exited, waited-for children."""
     r = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -252,7 +281,8 @@ def stage_bitstar(env, args, out: Path) -> None:
     load0 = loadavg()
     cpu0 = children_cpu()
     t0 = time.perf_counter()
-    res = ntq_jax.plan(env, q, "bitstar", time_budget=budget, workers=WORKERS, seed=0)
+    with LoadSampler() as sampler:
+        res = ntq_jax.plan(env, q, "bitstar", time_budget=budget, workers=WORKERS, seed=0)
     wall = time.perf_counter() - t0
     cpu = children_cpu() - cpu0
     load1 = loadavg()
@@ -275,6 +305,7 @@ def stage_bitstar(env, args, out: Path) -> None:
         "n_errors": len(info.get("errors", {}) or {}),
         "n_rejected": int(info.get("rejected", 0)),
         "loadavg_before": load0, "loadavg_after": load1,
+        "loadavg_during": sampler.summary(),   # 1-minute figure, sampled every 15 s
         **machine(),
         **result_lists(res),
     }
@@ -312,7 +343,10 @@ def stage_roadmap(env, args, out: Path) -> None:
         "query_sha256": qhash, "seed": 0,
         "wall_time": round(walls[0], 3), "wall_per_query": round(walls[0] / len(q), 5),
         "wall_times": [round(w, 3) for w in walls],
-        "build_time": infos[0].get("build_time"), "query_time": infos[0].get("query_time"),
+        # build vs query: the planner's own split when its info has one, else wall - build
+        "build_time": infos[0].get("build_time"),
+        "query_time": infos[0].get("query_time", round(walls[0] - infos[0]["build_time"], 3)
+                                   if infos[0].get("build_time") is not None else None),
         "info": infos[0], "info_repeats": infos[1:],
         "peak_rss_bytes": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024,
         "loadavg_before": load0, "loadavg_after": load1,
@@ -468,6 +502,8 @@ def stage_report(envs: list[str], args, out: Path) -> str:
                          f"query {f(row.get('query_r'), '{:.2f}')} s; options {r.get('options')}.")
         budget = b["time_budget"] if b else None
         load = (f"{row['load_b'][0][0]:.1f} / {row['load_b'][1][0]:.1f}" if b else "—")
+        if b and b.get("loadavg_during"):
+            load += f" (mean {b['loadavg_during']['mean']:.1f})"
         lines.append(
             f"| {name} | {row.get('n', r['n_queries'] if r else '—')} | {f(budget, '{:g}')} | "
             f"{f(row.get('succ_b'), '{:.3f}')} | {f(row.get('succ_r'), '{:.3f}')} | "
@@ -477,8 +513,8 @@ def stage_report(envs: list[str], args, out: Path) -> str:
             f"{_yes(row.get('goal_succ'))} | "
             f"{_yes(row.get('goal_med'))} | {_yes(row.get('goal_p90'))} |")
     lines += ["", "BIT* load average: the 1-minute figure of os.getloadavg() before and after "
-              "the map's run (2 cores). BIT* CPU/budget: CPU seconds its worker processes used "
-              "/ (queries x budget); BIT* stops on wall-clock time, so below ~1 it had less "
+              "the map's run (2 cores; mean: sampled every 15 s during it). BIT* CPU/budget: "
+              "CPU seconds its worker processes used / (queries x budget); BIT* stops on wall-clock time, so below ~1 it had less "
               "than a core per worker (other load) and explored less than on an idle machine."]
     lines += ["", "## Pools and memory", "",
               "| map | measurement | queries | plan s | goal s | met | solved | peak RSS GiB |",

@@ -452,8 +452,11 @@ def compare(b: dict | None, r: dict | None) -> dict:
                    cpu_b=b.get("workers_cpu_per_budget"))
     if r is not None:
         sr = np.asarray(r["status"]) == 0
+        build, query = r.get("build_time"), r.get("query_time")
+        if query is None and build is not None:
+            query = r["wall_time"] - build
         row.update(succ_r=float(sr.mean()), wall_r=r["wall_per_query"],
-                   build_r=r.get("build_time"), query_r=r.get("query_time"))
+                   build_r=build, query_r=query)
     if b is not None and r is not None:
         if b["query_sha256"] != r["query_sha256"]:
             row["mismatch"] = True

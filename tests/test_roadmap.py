@@ -130,5 +130,11 @@ def test_metric_index_matches_brute_force_under_the_rigid_metric():
         np.testing.assert_allclose(np.sort(d)[:5], dist[i], rtol=1e-6)
 
 
+def test_bad_options_are_one_clear_error():
+    env = nj.make_env("point/0")
+    with pytest.raises(ValueError, match="milestones must be >= 2"):
+        nj.plan(env, _queries(env, 2), "roadmap", milestones=1)
+
+
 def test_prm_star_k():
     assert R.prm_star_k(20_000, 3) == 36 and R.prm_star_k(20_000, 6) == 32

@@ -267,6 +267,9 @@ def plan_roadmap(env, queries, *, padding: float | None = None, seed: int = 0,
         A verified :class:`PlanResult`; unconnected after the last round: NO_PATH.
     """
     del seed
+    if int(milestones) < 2 or (k is not None and int(k) < 1) or not 0 <= int(grow_rounds) <= 8:
+        raise ValueError(f"roadmap: milestones must be >= 2, k >= 1 or None and grow_rounds in "
+                         f"[0, 8]; got milestones={milestones}, k={k}, grow_rounds={grow_rounds}")
     padding = env.resolve_padding(padding)
     q = np.asarray(queries, np.float32)
     t0 = time.perf_counter()

@@ -24,7 +24,6 @@ import argparse
 import statistics
 import sys
 import time
-from pathlib import Path
 
 
 

@@ -45,9 +45,7 @@ import argparse
 import heapq
 import math
 import statistics
-import sys
 import time
-from pathlib import Path
 
 import jax
 import numpy as np

@@ -318,7 +318,6 @@ def stage_bitstar(env, args, out: Path) -> None:
 
 
 def stage_roadmap(env, args, out: Path) -> None:
-    import numpy as np
     import ntq_jax
     from ntq_jax import artifacts
 

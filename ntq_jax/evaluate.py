@@ -132,7 +132,7 @@ def reference_plans(env, cfg, env_name: str, slug: str, queries: dict, out_dir: 
     """
     name = cfg.planner.name if planner is None else getattr(planner, "__name__", "custom")
     fp = artifacts.fingerprint(slug, name, cfg.planner,
-                               {k: v.tobytes().hex()[:64] for k, v in queries.items()},
+                               {k: artifacts.array_digest(v) for k, v in queries.items()},
                                {k: len(v) for k, v in queries.items()})
 
     def compute():

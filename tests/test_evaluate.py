@@ -94,6 +94,10 @@ def test_reference_is_cached_and_has_the_optimum(tmp_path, cfg):
     assert fake.calls == 2
     again = E.reference_plans(env, cfg, "point/1", "point_1", q, tmp_path, fake)
     assert fake.calls == 2 and str(again["planner"]) == "fake"
+    changed = {k: v.copy() for k, v in q.items()}
+    changed["nontrivial"][-1, 1, 0] += 1e-3  # only the last query's goal: a new reference
+    E.reference_plans(env, cfg, "point/1", "point_1", changed, tmp_path, fake)
+    assert fake.calls == 4
     # the visibility-graph optimum: never longer than the straight line on trivial queries,
     # strictly longer on the non-trivial ones
     assert np.all(ref["uniform_opt_costs"] >= ref["uniform_costs"] - 1e-4)

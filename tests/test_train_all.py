@@ -58,6 +58,8 @@ def test_run_folder_contents(run):
         assert r["gamma_nt"] is not None
     md = (run / "tables.md").read_text()
     assert "## Point robot planning" in md and "Environment point/2, gamma_nt" in md
+    assert "data planner: astar; reference planner: astar" in md
+    assert all(r["data_planner"] == "astar" for r in rows)
     for m in range(4):
         assert f"| PNet_{m} |" in md
     assert (run / "tables.tex").read_text().count("\\begin{tabular}") == 1

@@ -21,18 +21,15 @@ def bucket_size(n: int, minimum: int = 1) -> int:
 
 
 def pad_rows(a: np.ndarray, rows: int, fill=0) -> np.ndarray:
-    """``a`` with its first axis padded to ``rows``: ``fill`` values, or ``fill="first"``
-    to repeat ``a[0]``; ``a`` itself when it already has ``rows`` rows."""
+    """``a`` with its first axis padded to ``rows`` with ``fill`` values (``a`` itself when
+    it already has ``rows`` rows)."""
     a = np.asarray(a)
     n = a.shape[0]
     if n == rows:
         return a
     if n > rows:
         raise ValueError(f"cannot pad {n} rows down to {rows}")
-    if isinstance(fill, str) and fill == "first":
-        extra = np.repeat(a[:1], rows - n, axis=0)
-    else:
-        extra = np.full((rows - n,) + a.shape[1:], fill, a.dtype)
+    extra = np.full((rows - n,) + a.shape[1:], fill, a.dtype)
     return np.concatenate([a, extra])
 
 
@@ -41,7 +38,7 @@ def padded_chunks(arrays: Sequence[np.ndarray], chunk: int, fill=0
     """Yields ``(lo, m, padded, mask)`` for consecutive row chunks of ``arrays``.
 
     ``padded`` are the rows ``lo:lo+m`` of every array padded to exactly
-    ``chunk`` rows (see :func:`pad_rows` for ``fill``); ``mask`` ``(chunk,)``
+    ``chunk`` rows with ``fill``; ``mask`` ``(chunk,)``
     is True on the ``m`` real rows.
     """
     if chunk < 1:

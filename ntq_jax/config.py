@@ -296,7 +296,10 @@ class EvalConfig:
         k_test: test queries of each kind (uniform and non-trivial).
         n_plan: PNet steps per plan (Alg. 1).
         steer: evaluate with steerTo (True) and/or without (False).
-        delta: goal tolerance of the variant without steerTo.
+        delta: goal tolerance of the variant without steerTo, in the robot's cost
+            metric (Euclidean for the point robot and the arm's joints;
+            ``||dp|| + angle_weight * |dtheta|`` on the shortest arc for the rigid
+            body).
         replan_rounds: neural replanning rounds.
         replan_steps: PNet predictions per repaired segment in a replanning round.
         bidirectional: MPNet's bidirectional coarse plan instead of Alg. 1's forward one.

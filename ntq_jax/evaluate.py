@@ -53,6 +53,7 @@ from ntq_jax.data import env_slug, planner_options, resolve_planner
 from ntq_jax.planners import plan
 from ntq_jax.planners.verify import check_paths
 from ntq_jax.queries import wilson_interval
+from ntq_jax.robots.batch import distances
 from ntq_jax.types import CAUSE_NAMES, QUERY_KINDS, PlanCause, PlanStatus
 
 EVAL_TAG = 0x7E57  # key tag of the test queries (training uses other streams)
@@ -340,8 +341,9 @@ def recheck_paths(env, npz_path, *, delta: float | None = None, atol: float = 1e
     (:func:`ntq_jax.planners.verify.check_paths`), it starts at the query's start
     and ends at the query's goal (every coordinate within ``atol``). A file of the
     variant without steerTo (``*_nosteer.npz``) records a success when the path's
-    last state is within ``delta`` (Euclidean, in state space) of the goal, which
-    it does not reach: its goal check is ``||end - goal||_2 <= delta + atol``, and
+    last state is within ``delta`` of the goal in the robot's cost metric
+    (``env.robot.distance``; the rigid body's angle wraps), which it does not
+    reach: its goal check is ``distance(end, goal) <= delta + atol``, and
     ``delta`` (the run's ``eval.delta``) is then required.
 
     Returns:
@@ -364,7 +366,7 @@ def recheck_paths(env, npz_path, *, delta: float | None = None, atol: float = 1e
     end = paths[np.arange(len(rows)), np.maximum(n - 1, 0)].astype(np.float64)
     at_start = np.all(np.abs(start - q[:, 0]) <= atol, axis=1)
     if nosteer:
-        at_goal = np.linalg.norm(end - q[:, 1], axis=1) <= delta + atol
+        at_goal = distances(env.robot, end, q[:, 1]) <= delta + atol
     else:
         at_goal = np.all(np.abs(end - q[:, 1]) <= atol, axis=1)
     ok = np.ones(len(z["success"]), bool)

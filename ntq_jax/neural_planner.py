@@ -9,8 +9,8 @@ metric and a :class:`ntq_jax.types.PlanCause` (names in
 :data:`ntq_jax.types.CAUSE_NAMES`):
 
 * ``SUCCESS``: the path runs from the start to the goal (without steerTo: to
-  within ``delta`` of it) and every segment passes ``steer_to`` on the
-  evaluation geometry (``eval_padding``);
+  within ``delta`` of it in the robot's metric) and every segment passes
+  ``steer_to`` on the evaluation geometry (``eval_padding``);
 * ``NO_PATH``: the goal was not reached within ``n_plan`` PNet steps (Alg. 1's
   empty path);
 * ``INFEASIBLE``: reached, but still in collision after replanning;
@@ -45,7 +45,7 @@ from ntq_jax.types import PlanCause
 
 Array = jax.Array
 
-ALGORITHM_VERSION = 3  # bump when planning results change (saved evaluations are then redone)
+ALGORITHM_VERSION = 4  # bump when planning results change (saved evaluations are then redone)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -55,7 +55,9 @@ class PlannerOptions:
     Attributes:
         n_plan: PNet iterations of the coarse plan (``N_plan`` of Alg. 1).
         steer: use ``steerTo`` (Alg. 1); False is the paper's variant without it.
-        delta: goal tolerance of the variant without steerTo (``||.||_2`` in state space).
+        delta: goal tolerance of the variant without steerTo, in the robot's cost metric
+            (``robot.distance``: Euclidean for the point robot and the arm's joints;
+            ``||dp|| + angle_weight * |dtheta|`` on the shortest arc for the rigid body).
         replan_rounds: neural replanning rounds (0 disables replanning).
         replan_steps: PNet predictions per repaired segment.
         bidirectional: MPNet's bidirectional coarse plan instead of Alg. 1's forward one.
@@ -344,9 +346,9 @@ def plan_batch(env, pnet: Callable, queries, key: Array,
        grow alternately from the start and from the goal, each predicting towards
        the other's end, until their ends connect (``n_plan`` predictions in all).
        **Without steerTo** (``steer=False``, Section V): only PNet steps, stopping
-       once ``||pi_end - goal||_2 <= delta``; the goal is not appended, so the path
-       ends within ``delta`` of it. This variant has no contraction and no
-       replanning (both need the steering function).
+       once ``distance(pi_end, goal) <= delta`` in the robot's metric; the goal
+       is not appended, so the path ends within ``delta`` of it. This variant
+       has no contraction and no replanning (both need the steering function).
     2. **Lazy states contraction** (MPNet): from each kept state jump to the
        farthest later state it can ``steerTo``.
     3. **Feasibility** at ``eval_padding``: every segment checked by ``steer_to``.

@@ -115,13 +115,18 @@ def _connect(robot, world, pnet, key, a: Array, b: Array, active: Array, steps: 
 
 
 def _forward(robot, world, pnet, key, starts, goals, active, opts, length):
-    """Alg. 1's coarse plan (with or without steerTo), all queries stepping together."""
+    """Alg. 1's coarse plan (with or without steerTo), all queries stepping together.
+
+    Without steerTo a query is reached once its path's end (the start included)
+    is within ``opts.delta`` of the goal in the robot's metric (``robot.distance``);
+    the goal is not appended.
+    """
     num, d = starts.shape
     rows = jnp.arange(num)
     p = jnp.full((num, length, d), jnp.nan, starts.dtype).at[:, 0].set(starts)
 
-    def near(x):
-        return jnp.sqrt(jnp.sum((x - goals) ** 2, axis=1)) <= opts.delta
+    def near(x):  # within delta of the goal in the robot's metric (angles wrap)
+        return jax.vmap(robot.distance)(x, goals) <= opts.delta
 
     def cond(c):
         return (c[0] < opts.n_plan) & jnp.any(~c[4])

@@ -167,3 +167,22 @@ def test_recheck_paths_checks_collisions_start_and_goal(tmp_path):
     assert E.recheck_paths(env, g, delta=0.4).tolist() == [True, False, False, False, True]
     with pytest.raises(ValueError, match="delta"):
         E.recheck_paths(env, g)
+
+
+def test_recheck_without_steer_to_uses_the_robots_metric(tmp_path):
+    """Rigid body: theta pi and -pi are one heading; the angle counts angle_weight (0.5)."""
+    env = Env.from_json({"name": "open", "robot": {"kind": "rigid_body"},
+                         "bounds": [[0, 10], [0, 10]], "boxes": [[9.5, 9.5, 0.1, 0.1]],
+                         "padding": 0.0})
+    q = np.array([[[2, 2, 0], [8, 2, -np.pi]], [[2, 5, 0], [8, 5, 0.0]],
+                  [[2, 8, 0], [8, 8, 0.0]]], np.float32)
+    paths = np.full((3, 2, 3), np.nan, np.float32)
+    paths[0] = [[2, 2, 0], [8, 2, np.pi]]          # 0 from the goal, 2 pi in raw coordinates
+    paths[1] = [[2, 5, 0], [7.6, 5, 0.7]]          # 0.4 + 0.35 = 0.75 (Euclidean 0.81)
+    paths[2] = [[2, 8, 0], [7.5, 8, 0.0]]          # 0.5: Euclidean and metric agree
+    f = E.paths_file(tmp_path, "open", 0, "uniform", False)
+    artifacts.save_npz(f, queries=q, paths=paths, lengths=np.full(3, 2, np.int32),
+                       success=np.ones(3, bool))
+    assert E.recheck_paths(env, f, delta=0.78).tolist() == [True, True, True]
+    assert E.recheck_paths(env, f, delta=0.6).tolist() == [True, False, True]
+    assert E.recheck_paths(env, f, delta=0.1).tolist() == [True, False, False]

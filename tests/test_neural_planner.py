@@ -204,6 +204,32 @@ def test_without_steer_to():
     assert np.all(res.cause == PlanCause.INFEASIBLE)
 
 
+def _flip_to_pi(key, current, goal):
+    """Jumps onto the goal's position with theta = +pi (the goal's -pi, the same heading)."""
+    return goal.at[:, 2].set(jnp.pi)
+
+
+def _rigid_env():
+    return Env.from_json({"name": "rigid-open", "robot": {"kind": "rigid_body"},
+                          "bounds": BOUNDS, "boxes": [[5.0, 5.0, 0.5, 0.5]] + DUMMY,
+                          "padding": 0.0})
+
+
+def test_without_steer_to_delta_is_in_the_robots_metric():
+    """theta = pi and -pi are one heading: a prediction there is at distance 0, not 2 pi."""
+    env = _rigid_env()
+    nosteer = PlannerOptions(n_plan=5, steer=False, delta=0.1)
+    q = np.asarray([[[2, 2, 0], [8, 2, -np.pi]]], np.float32)
+    res = plan_batch(env, _flip_to_pi, q, jax.random.key(0), nosteer)
+    assert res.success[0] and res.cause[0] == PlanCause.SUCCESS
+    assert res.lengths[0] == 2 and res.pnet_calls[0] == 1
+    np.testing.assert_allclose(res.path(0), [[2, 2, 0], [8, 2, np.pi]], atol=1e-6)
+    # the cost is that of the path's own segment (6 + 0.5 * pi), without the zero gap
+    np.testing.assert_allclose(res.costs[0], 6 + 0.5 * np.pi, rtol=1e-5)
+    # Euclidean in raw coordinates the same prediction would be 2 pi away: never reached
+    assert np.linalg.norm(res.path(0)[-1] - q[0, 1]) > 6
+
+
 def test_bidirectional_and_invalid_queries():
     bi = PlannerOptions(n_plan=12, replan_rounds=2, replan_steps=8, bidirectional=True)
     q, res = run("deadend", ORACLE, [[[5, 4], [5, 9]], [[4, 3], [6, 8]], [[5, 6.2], [1, 1]]],

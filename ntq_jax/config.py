@@ -299,7 +299,7 @@ class EvalConfig:
         delta: goal tolerance of the variant without steerTo, in the robot's cost
             metric (Euclidean for the point robot and the arm's joints;
             ``||dp|| + angle_weight * |dtheta|`` on the shortest arc for the rigid
-            body).
+            body); a start already within it is reached with a path of one state.
         replan_rounds: neural replanning rounds.
         replan_steps: PNet predictions per repaired segment in a replanning round.
         bidirectional: MPNet's bidirectional coarse plan instead of Alg. 1's forward one.

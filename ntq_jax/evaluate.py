@@ -53,7 +53,7 @@ from ntq_jax.data import env_slug, planner_options, resolve_planner
 from ntq_jax.planners import plan
 from ntq_jax.planners.verify import check_paths
 from ntq_jax.queries import wilson_interval
-from ntq_jax.robots.batch import distances
+from ntq_jax.robots.batch import distances, valid_states
 from ntq_jax.types import CAUSE_NAMES, QUERY_KINDS, PlanCause, PlanStatus
 
 EVAL_TAG = 0x7E57  # key tag of the test queries (training uses other streams)
@@ -343,8 +343,10 @@ def recheck_paths(env, npz_path, *, delta: float | None = None, atol: float = 1e
     variant without steerTo (``*_nosteer.npz``) records a success when the path's
     last state is within ``delta`` of the goal in the robot's cost metric
     (``env.robot.distance``; the rigid body's angle wraps), which it does not
-    reach: its goal check is ``distance(end, goal) <= delta + atol``, and
-    ``delta`` (the run's ``eval.delta``) is then required.
+    reach: its goal check is ``distance(end, goal) <= delta + atol``, ``delta``
+    (the run's ``eval.delta``) is then required, and a path of one state (a start
+    already within ``delta`` of the goal) passes when that state is finite and
+    valid at padding 0.
 
     Returns:
         ``(K,)`` bool: False for the successes that fail the check, True elsewhere.
@@ -366,6 +368,9 @@ def recheck_paths(env, npz_path, *, delta: float | None = None, atol: float = 1e
     end = paths[np.arange(len(rows)), np.maximum(n - 1, 0)].astype(np.float64)
     at_start = np.all(np.abs(start - q[:, 0]) <= atol, axis=1)
     if nosteer:
+        single = np.flatnonzero(n == 1)  # one state: no segment, the state itself is checked
+        free[single] = (np.isfinite(start[single]).all(axis=1)
+                        & valid_states(env.robot, env.world, start[single], 0.0))
         at_goal = distances(env.robot, end, q[:, 1]) <= delta + atol
     else:
         at_goal = np.all(np.abs(end - q[:, 1]) <= atol, axis=1)

@@ -346,9 +346,12 @@ def plan_batch(env, pnet: Callable, queries, key: Array,
        grow alternately from the start and from the goal, each predicting towards
        the other's end, until their ends connect (``n_plan`` predictions in all).
        **Without steerTo** (``steer=False``, Section V): only PNet steps, stopping
-       once ``distance(pi_end, goal) <= delta`` in the robot's metric; the goal
-       is not appended, so the path ends within ``delta`` of it. This variant
-       has no contraction and no replanning (both need the steering function).
+       once ``distance(pi_end, goal) <= delta`` in the robot's metric (the start
+       is tested first); the goal is not appended, so the path ends within
+       ``delta`` of it and its cost is that of its own segments. A start already
+       within ``delta`` is reached with a path of one state (no segment, cost 0).
+       This variant has no contraction and no replanning (both need the
+       steering function).
     2. **Lazy states contraction** (MPNet): from each kept state jump to the
        farthest later state it can ``steerTo``.
     3. **Feasibility** at ``eval_padding``: every segment checked by ``steer_to``.

@@ -119,7 +119,7 @@ def _forward(robot, world, pnet, key, starts, goals, active, opts, length):
 
     Without steerTo a query is reached once its path's end (the start included)
     is within ``opts.delta`` of the goal in the robot's metric (``robot.distance``);
-    the goal is not appended.
+    the goal is not appended, so a start already that close keeps a path of one state.
     """
     num, d = starts.shape
     rows = jnp.arange(num)
@@ -161,13 +161,15 @@ def _contract_and_check(robot, world, opts, p, n, mask, do_contract: bool):
     """Contraction (if ``do_contract``) and the feasibility check of the rows ``mask``.
 
     Returns ``(p, n, feasible, blocked)``: ``blocked (N, L-1)`` are the segments in
-    collision at ``eval_padding``; ``feasible`` rows have >= 2 states and none.
+    collision at ``eval_padding``; ``feasible`` rows have none. A path of one state
+    (without steerTo, a start within ``delta`` of the goal) has no segment and is
+    feasible: its state is the query's start, already checked valid.
     """
     if do_contract:
         p, n = contract(robot, world, p, n, opts.plan_padding, mask)
     free, seg = _segments(robot, world, p, n, opts.eval_padding, mask)
     blocked = seg & ~free
-    feasible = mask & (n >= 2) & ~jnp.any(blocked, axis=1)
+    feasible = mask & (n >= 1) & ~jnp.any(blocked, axis=1)
     return p, n, feasible, blocked
 
 

@@ -167,6 +167,15 @@ def test_recheck_paths_checks_collisions_start_and_goal(tmp_path):
     assert E.recheck_paths(env, g, delta=0.4).tolist() == [True, False, False, False, True]
     with pytest.raises(ValueError, match="delta"):
         E.recheck_paths(env, g)
+    # a start already within delta: the one-state path passes if its state is valid
+    one = np.full((2, 3, 2), np.nan, np.float32)
+    one[:, 0] = [[1, 1], [4.5, 5]]                 # free; inside the box
+    q1 = np.array([[[1, 1], [1.5, 1]], [[4.5, 5], [4.5, 5.5]]], np.float32)
+    h = E.paths_file(tmp_path, "box", 1, "uniform", False)
+    artifacts.save_npz(h, queries=q1, paths=one, lengths=np.ones(2, np.int32),
+                       success=np.ones(2, bool))
+    assert E.recheck_paths(env, h, delta=1.0).tolist() == [True, False]
+    assert E.recheck_paths(env, h, delta=0.4).tolist() == [False, False]
 
 
 def test_recheck_without_steer_to_uses_the_robots_metric(tmp_path):

@@ -230,6 +230,27 @@ def test_without_steer_to_delta_is_in_the_robots_metric():
     assert np.linalg.norm(res.path(0)[-1] - q[0, 1]) > 6
 
 
+def test_without_steer_to_a_start_within_delta_is_solved():
+    """A start already within delta of the goal is reached like a last prediction would be."""
+    nosteer = PlannerOptions(n_plan=12, steer=False, delta=1.0)
+    q, res = run("straight", STAY, [[[1, 1], [1.5, 1.5]], [[8, 8], [8, 9]]], opts=nosteer)
+    assert np.all(res.success) and np.all(res.cause == PlanCause.SUCCESS)
+    assert np.all(res.lengths == 1) and np.all(res.pnet_calls == 0)
+    np.testing.assert_array_equal(res.paths[:, 0], q[:, 0])
+    np.testing.assert_array_equal(res.costs, 0.0)
+    # the same in the rigid body's metric: theta pi and -pi at one position
+    env = _rigid_env()
+    rq = np.asarray([[[2, 2, np.pi], [2, 2, -np.pi]], [[2, 8, 0.1], [2.2, 8, -0.1]],
+                     [[5, 5, 0], [5.3, 5, 0]]], np.float32)
+    res = plan_batch(env, _stay, rq, jax.random.key(0), nosteer)
+    assert res.success[:2].all() and np.all(res.lengths[:2] == 1)
+    # a start inside the box stays an invalid query, however close the goal
+    assert res.cause[2] == PlanCause.INVALID_QUERY and not res.success[2]
+    # with steerTo the same start gets the goal appended: two states
+    res = plan_batch(env, _stay, rq[:2], jax.random.key(0), PlannerOptions(n_plan=3))
+    assert res.success.all() and np.all(res.lengths == 2)
+
+
 def test_bidirectional_and_invalid_queries():
     bi = PlannerOptions(n_plan=12, replan_rounds=2, replan_steps=8, bidirectional=True)
     q, res = run("deadend", ORACLE, [[[5, 4], [5, 9]], [[4, 3], [6, 8]], [[5, 6.2], [1, 1]]],

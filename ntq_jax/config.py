@@ -304,7 +304,13 @@ class EvalConfig:
         replan_steps: PNet predictions per repaired segment in a replanning round.
         bidirectional: MPNet's bidirectional coarse plan instead of Alg. 1's forward one.
         query_padding: padding at which test queries are sampled (valid and
-            non-trivial); 0 = the evaluation geometry, null = the environment's.
+            non-trivial); 0 = the evaluation geometry (default), null = the
+            environment's. Training data lives at the environment's padding, so
+            at 0 some test queries have an endpoint inside that band, where no
+            training state lies: every result row also reports the success of the
+            "in band" queries (both endpoints valid at the environment's padding)
+            and of the "out of band" ones apart (``n_in_band``,
+            ``success_in_band``, ``success_out_band`` and their intervals).
         gamma_queries: uniform queries for gamma_nt (padding 0) in the table
             headings when the dataset metadata has none.
         chunk: test queries per jitted planner call.

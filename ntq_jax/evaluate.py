@@ -18,7 +18,13 @@ Metrics per (environment, model, test query kind, steerTo):
 * planning time per query (batched wall time / K_test, compile time apart);
 * failures by cause (:data:`ntq_jax.types.CAUSE_NAMES`): ``no_path``,
   ``infeasible``, ``invalid_query``, and ``reference_failed`` (queries the
-  reference planner did not solve).
+  reference planner did not solve);
+* the success ratio of the in-band and of the out-of-band test queries apart
+  (:func:`band_metrics`): test queries are sampled at ``eval.query_padding``
+  (default 0, the evaluation geometry) while the training data lives at the
+  environment's padding, so a query is "in band" when both its endpoints are
+  valid at the environment's padding (states like those training saw) and "out
+  of band" when one lies inside the padding band.
 
 Files (written atomically; a complete file made from the same inputs, as its
 fingerprint says, is reused on a rerun)::
@@ -196,6 +202,42 @@ def metrics(success: np.ndarray, costs: np.ndarray, cause: np.ndarray, ref_costs
     return out
 
 
+def in_band(env, queries: np.ndarray) -> np.ndarray:
+    """``(K,)`` bool: both endpoints of ``queries (K, 2, d)`` valid at the environment's padding.
+
+    These are the test queries whose states lie where training data can lie
+    (the data is generated at ``env.padding``); the others have an endpoint
+    inside the padding band around the obstacles (or are invalid anyway).
+    """
+    q = np.asarray(queries, np.float32)
+    k, d = q.shape[0], q.shape[2]
+    ok = valid_states(env.robot, env.world, q.reshape(2 * k, d), env.padding)
+    return ok.reshape(k, 2).all(axis=1)
+
+
+def band_metrics(success: np.ndarray, band: np.ndarray) -> dict:
+    """Success of the in-band and out-of-band queries apart, with 95% Wilson intervals.
+
+    Args:
+        success: ``(K,)`` bool per query.
+        band: ``(K,)`` bool, True for the in-band queries (:func:`in_band`).
+
+    Returns:
+        ``n_in_band``, ``n_out_band``, ``successes_in_band``, ``successes_out_band``,
+        ``success_in_band``, ``success_out_band`` (ratios, NaN for an empty part)
+        and ``success_in_band_ci95``, ``success_out_band_ci95``.
+    """
+    success, band = np.asarray(success, bool), np.asarray(band, bool)
+    out: dict = {}
+    for name, part in (("in_band", band), ("out_band", ~band)):
+        n, s = int(part.sum()), int((success & part).sum())
+        lo, hi = wilson_interval(s, n)
+        out.update({f"n_{name}": n, f"successes_{name}": s,
+                    f"success_{name}": s / n if n else float("nan"),
+                    f"success_{name}_ci95": [lo, hi]})
+    return out
+
+
 def _data_planner(cfg, data_env_dir) -> str:
     """The planner that made the datasets (their metadata), else the config's."""
     for meta in sorted(Path(data_env_dir).glob("D*/meta.json")) if data_env_dir else []:
@@ -248,6 +290,7 @@ class _EnvEval:
     ref: dict
     gamma: dict
     data_planner: str
+    in_band: dict  # {query kind: (K,) bool}, see in_band()
     log: Callable[[str], None]
 
 
@@ -291,6 +334,8 @@ def _cell(ctx: _EnvEval, pnet, m: int, kind: str, steer) -> dict:
     }
     row.update(metrics(got["success"], got["costs"], got["cause"], got["ref_costs"],
                        got["ref_status"], got.get("opt_costs")))
+    row["band_padding"] = float(ctx.env.padding)
+    row.update(band_metrics(got["success"], ctx.in_band[kind]))
     return row
 
 
@@ -325,7 +370,8 @@ def evaluate_env(env, ensemble, cfg, run_dir, *, env_name: str, data_env_dir=Non
     ctx = _EnvEval(env, cfg, run_dir, env_name, slug, queries,
                    reference_plans(env, cfg, env_name, slug, queries, out_dir, planner),
                    _gamma(env, cfg, data_env_dir, slug, out_dir),
-                   _data_planner(cfg, data_env_dir), log)
+                   _data_planner(cfg, data_env_dir),
+                   {kind: in_band(env, q) for kind, q in queries.items()}, log)
     return [_cell(ctx, pnets[m], m, kind, steer)
             for steer in cfg.eval.steer
             for m in members

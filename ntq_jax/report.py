@@ -5,8 +5,10 @@ rows of :func:`ntq_jax.evaluate.evaluate_env` into text: one table per task and
 steerTo variant laid out as the paper's Tables I-IV (model rows PNet_0..PNet_3;
 uniform and non-trivial columns; success ratio and cost ratio), one block per
 environment with gamma_nt in its heading; the Markdown adds the 95% intervals,
-the cost ratio to the exact optimum (point robots), timings and failures; the
-CSV has one line per row.
+and a detail table with the cost ratio to the exact optimum (point robots),
+timings, failures, and the success of the in-band and out-of-band test queries
+apart (both endpoints valid at the environment's data padding, or not; see
+:func:`ntq_jax.evaluate.band_metrics`); the CSV has one line per row.
 
 :func:`write_report` writes, into the run folder (atomically), ``results.json``
 (rows plus run metadata), ``results.csv``, ``tables.md``, ``tables.tex`` and the
@@ -33,7 +35,9 @@ CSV_FIELDS = ["task", "env", "model", "query_kind", "steer", "k_test", "successe
               "cost_ratio_opt", "seconds_per_query", "compile_seconds",
               "reference_seconds_per_query", "failures_no_path", "failures_infeasible",
               "failures_invalid_query", "reference_failed", "reference_planner", "data_planner",
-              "gamma_nt", "paths_file"]
+              "gamma_nt", "band_padding", "n_in_band", "n_out_band", "success_in_band",
+              "success_in_band_ci95_lo", "success_in_band_ci95_hi", "success_out_band",
+              "success_out_band_ci95_lo", "success_out_band_ci95_hi", "paths_file"]
 
 
 def _f(x, nd=3) -> str:
@@ -86,6 +90,18 @@ def _md_cells(r) -> list[str]:
     return [f"{_f(r['success_ratio'])} [{lo:.3f}, {hi:.3f}]", _f(r["cost_ratio"])]
 
 
+def _band_cells(r) -> list[str]:
+    """Detail cells: in-band count, then the in-band and out-of-band success ("-" if absent)."""
+    if r.get("n_in_band") is None:
+        return ["-", "-", "-"]
+    out = [f"{r['n_in_band']} / {r['n_in_band'] + r['n_out_band']}"]
+    for part in ("in_band", "out_band"):
+        lo, hi = r[f"success_{part}_ci95"]
+        out.append(f"{_f(r[f'success_{part}'])} [{lo:.3f}, {hi:.3f}]"
+                   if r[f"n_{part}"] else "-")
+    return out
+
+
 def tables_md(rows) -> str:
     out = ["# Results", ""]
     for (task, steer), envs in _groups(rows).items():
@@ -103,9 +119,13 @@ def tables_md(rows) -> str:
             for m in _models(block):
                 out.append(f"| {m} | " + " | ".join(_cells(block, m, _md_cells)) + " |")
             out.append("")
-            # extras: optimum ratio, timings, failures
-            out += ["| Model | kind | cost ratio to optimum | ms / query | compile s | no path | "
-                    "infeasible | invalid | reference failed |", "|---|---|---|---|---|---|---|---|---|"]
+            # extras: optimum ratio, timings, failures, in-band / out-of-band success
+            band = any_row.get("band_padding")
+            out += [(f"Detail. In band: test queries with both endpoints valid at the "
+                     f"environment's data padding ({_f(band, 2)}); out of band: the others."), "",
+                    "| Model | kind | cost ratio to optimum | ms / query | compile s | no path | "
+                    "infeasible | invalid | reference failed | in band | success in band | "
+                    "success out of band |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
             for m in _models(block):
                 for kind in QUERY_KINDS:
                     r = block.get((m, kind))
@@ -115,7 +135,8 @@ def tables_md(rows) -> str:
                     out.append(f"| {m} | {kind} | {_f(r.get('cost_ratio_opt'))} | "
                                f"{r['seconds_per_query'] * 1e3:.2f} | {r['compile_seconds']:.1f} | "
                                f"{fl.get('no_path', 0)} | {fl.get('infeasible', 0)} | "
-                               f"{fl.get('invalid_query', 0)} | {r['reference_failed']} |")
+                               f"{fl.get('invalid_query', 0)} | {r['reference_failed']} | "
+                               + " | ".join(_band_cells(r)) + " |")
             out.append("")
     return "\n".join(out)
 
@@ -152,6 +173,10 @@ def results_csv(rows) -> str:
     for r in rows:
         flat = dict(r)
         flat["success_ci95_lo"], flat["success_ci95_hi"] = r["success_ci95"]
+        for part in ("in_band", "out_band"):
+            if f"success_{part}_ci95" in r:
+                lo_hi = r[f"success_{part}_ci95"]
+                flat[f"success_{part}_ci95_lo"], flat[f"success_{part}_ci95_hi"] = lo_hi
         for k, v in r["failures"].items():
             flat[f"failures_{k}"] = v
         w.writerow(flat)

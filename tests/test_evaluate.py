@@ -135,6 +135,33 @@ def test_report_layout(tmp_path):
     assert not list(tmp_path.rglob("*.tmp*"))
 
 
+def test_report_shows_in_band_and_out_of_band_success(tmp_path):
+    rows = [_row("point/0", f"PNet_{m}", kind, True, 40) for m in range(2) for kind in QUERY_KINDS]
+    band = np.arange(50) < 30
+    for r in rows:
+        r["band_padding"] = 0.8
+        r.update(E.band_metrics(np.arange(50) < 40, band))  # 30/30 in band, 10/20 out
+    rows[-1] = {k: v for k, v in rows[-1].items() if "band" not in k}  # a row from before
+    R.write_report(tmp_path, rows, figures=False)
+    md = (tmp_path / "tables.md").read_text()
+    assert "data padding (0.80)" in md
+    lo, hi = wilson_interval(10, 20)
+    detail = f"| 30 / 50 | 1.000 [{wilson_interval(30, 30)[0]:.3f}, 1.000] | 0.500 [{lo:.3f}, {hi:.3f}] |"
+    assert md.count(detail) == 3
+    assert md.count("| 0 | - | - | - |") == 1  # the old row: reference failed 0, no band fields
+    assert md.count("| PNet_1 | 0.800 [") == 1  # the paper-layout table is unchanged
+    lines = (tmp_path / "results.csv").read_text().strip().splitlines()
+    head = lines[0].split(",")
+    first = dict(zip(head, lines[1].split(",")))
+    assert first["n_in_band"] == "30" and first["n_out_band"] == "20"
+    assert float(first["success_out_band"]) == 0.5
+    assert float(first["success_out_band_ci95_lo"]) == pytest.approx(lo)
+    assert dict(zip(head, lines[-1].split(",")))["n_in_band"] == ""
+    back = json.loads((tmp_path / "results.json").read_text())["rows"][0]
+    assert back["successes_in_band"] == 30
+    assert back["success_in_band_ci95"] == pytest.approx(list(wilson_interval(30, 30)))
+
+
 def test_npz_roundtrip_rejects_other_fingerprints(tmp_path):
     f = tmp_path / "a.npz"
     artifacts.save_npz(f, fingerprint="abc", x=np.arange(3))
@@ -195,3 +222,36 @@ def test_recheck_without_steer_to_uses_the_robots_metric(tmp_path):
     assert E.recheck_paths(env, f, delta=0.78).tolist() == [True, True, True]
     assert E.recheck_paths(env, f, delta=0.6).tolist() == [True, False, True]
     assert E.recheck_paths(env, f, delta=0.1).tolist() == [True, False, False]
+
+
+def test_band_metrics_by_hand():
+    success = np.array([True, True, False, True, False, True])
+    band = np.array([True, False, False, True, True, True])
+    m = E.band_metrics(success, band)
+    assert (m["n_in_band"], m["n_out_band"]) == (4, 2)
+    assert (m["successes_in_band"], m["successes_out_band"]) == (3, 1)
+    assert m["success_in_band"] == pytest.approx(0.75) and m["success_out_band"] == 0.5
+    assert m["success_in_band_ci95"] == pytest.approx(list(wilson_interval(3, 4)))
+    assert m["success_out_band_ci95"] == pytest.approx(list(wilson_interval(1, 2)))
+    empty = E.band_metrics(success, np.ones(6, bool))
+    assert empty["n_out_band"] == 0 and np.isnan(empty["success_out_band"])
+    assert empty["success_in_band"] == pytest.approx(4 / 6)
+
+
+def test_in_band_partitions_the_test_queries(tmp_path, cfg):
+    """point/1's test queries are sampled at padding 0; in band = both endpoints valid at 0.8."""
+    env = make_env("point/1")
+    assert env.padding > 0
+    q = E.test_queries(env, cfg, "point_1", tmp_path)
+    for kind in QUERY_KINDS:
+        band = E.in_band(env, q[kind])
+        assert band.shape == (len(q[kind]),) and band.dtype == bool
+        ok = np.asarray(env.is_valid(q[kind].reshape(-1, 2))).reshape(-1, 2)  # env padding
+        np.testing.assert_array_equal(band, ok.all(axis=1))
+        success = np.arange(len(band)) % 3 != 0
+        m = E.band_metrics(success, band)
+        assert m["n_in_band"] + m["n_out_band"] == len(band)
+        assert m["successes_in_band"] + m["successes_out_band"] == success.sum()
+    # the non-trivial queries hug the obstacles: some have an endpoint in the band
+    assert not E.in_band(env, q["nontrivial"]).all()
+    assert E.in_band(env, q["uniform"]).any()

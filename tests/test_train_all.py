@@ -17,6 +17,7 @@ import pytest
 from shapely.geometry import LineString, Point, box as shapely_box
 from shapely.ops import unary_union
 
+from ntq_jax import make_env
 from ntq_jax.pipeline import PipelineError, load_config, prepare_run, run_pipeline
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -56,6 +57,15 @@ def test_run_folder_contents(run):
         lo, hi = r["success_ci95"]
         assert lo <= r["success_ratio"] <= hi
         assert r["gamma_nt"] is not None
+        # in band / out of band: a partition of the test queries and of the successes
+        assert r["band_padding"] == 0.8 and r["n_in_band"] + r["n_out_band"] == 16
+        assert r["successes_in_band"] + r["successes_out_band"] == r["successes"]
+    queries = np.load(run / "eval" / "point_2" / "queries.npz")
+    env = make_env("point/2")
+    for kind in ("uniform", "nontrivial"):
+        q = queries[kind]
+        band = np.asarray(env.is_valid(q.reshape(-1, 2), padding=0.8)).reshape(-1, 2).all(axis=1)
+        assert {r["n_in_band"] for r in rows if r["query_kind"] == kind} == {int(band.sum())}
     md = (run / "tables.md").read_text()
     assert "## Point robot planning" in md and "Environment point/2, gamma_nt" in md
     assert "data planner: astar; reference planner: astar" in md

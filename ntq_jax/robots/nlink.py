@@ -4,13 +4,17 @@
   angle ``q_1 + ... + q_k`` from the x axis, from ``base``.
 * Valid when every joint is in ``[-pi, pi]``, every joint position is inside
   the workspace and every link segment is farther than ``padding`` from every
-  obstacle (exact segment tests). Self-collision is not checked (as in the paper).
+  obstacle (exact segment tests). Links are not tested against each other (the
+  paper does not say; we read the planar arm as links in stacked planes that may cross).
 * Steering: straight line in joint space; cost metric: Euclidean joint distance
   (OMPL's RealVector metric, which BIT* minimises).
 * ``steer_to`` checks states at most ``resolution`` apart (Euclidean, radians).
   Between two checked states a point at distance ``r`` from the base moves at
   most ``r * sqrt(n) * resolution <= reach * sqrt(n) * resolution`` in the
   workspace, so penetrations deeper than that are always found.
+* ``certified_steer_to_batch`` (:mod:`ntq_jax.robots.certified`) proves every
+  configuration of a motion clear instead, from :meth:`NLinkArm.clearance`
+  and the sweep bound ``sum_j R_j |dq_j|`` (``R_j`` the reach beyond joint j).
 """
 
 from __future__ import annotations
@@ -24,12 +28,13 @@ import jax.numpy as jnp
 from ntq_jax import geometry
 from ntq_jax.geometry import World
 from ntq_jax.robots.base import DiscretizedSteering
+from ntq_jax.robots.certified import CertifiedSteering
 
 Array = jax.Array
 
 
 @dataclasses.dataclass(frozen=True)
-class NLinkArm(DiscretizedSteering):
+class NLinkArm(DiscretizedSteering, CertifiedSteering):
     """Planar serial arm with revolute joints."""
 
     link_lengths: tuple[float, ...] = (3.0, 3.0)
@@ -104,6 +109,29 @@ class NLinkArm(DiscretizedSteering):
                                             world, padding, check_bounds=False)
             ok = ok & geometry.in_bounds(xs[k + 1], ys[k + 1], world.bounds)
         return ok
+
+    def clearance(self, q: Array, world: World, padding: float) -> Array:
+        """Distance of the links to the nearest obstacle minus ``padding``, or of a joint to
+        the workspace boundary if smaller (negative outside); ``> 0`` iff ``q`` is valid,
+        -1 for non-finite ``q`` or a joint outside ``[-pi, pi]``."""
+        xs, ys = self.joint_xy(q)
+        c = geometry.wall_clearance(xs[0], ys[0], world.bounds)
+        for k in range(self.dim):
+            c = jnp.minimum(c, geometry.segment_clearance(xs[k], ys[k], xs[k + 1], ys[k + 1], world)
+                            - padding)
+            c = jnp.minimum(c, geometry.wall_clearance(xs[k + 1], ys[k + 1], world.bounds))
+        ok = jnp.all(jnp.isfinite(q)) & jnp.all(jnp.abs(q) <= jnp.pi) & jnp.isfinite(c)
+        return jnp.where(ok, c, -1.0)
+
+    def sweep_bound(self, a: Array, b: Array) -> Array:
+        """Upper bound on how far any point of the arm moves from ``a`` to ``b``:
+        ``sum_j R_j |dq_j|``, ``R_j`` the total length of links ``j..n``."""
+        total = jnp.float32(0.0)
+        reach = 0.0
+        for j in reversed(range(self.dim)):
+            reach += self.link_lengths[j]
+            total = total + reach * jnp.abs(b[j] - a[j])
+        return total
 
     def interpolate(self, a: Array, b: Array, t: Array) -> Array:
         return a + t * (b - a)

@@ -14,6 +14,9 @@
   ``resolution * max(1, R / angle_weight)`` with ``R`` the half diagonal, so a
   collision that penetrates deeper than that is always found; narrower
   grazes can be missed (the usual discretised check, as in OMPL and MPNet).
+* ``certified_steer_to_batch`` (:mod:`ntq_jax.robots.certified`) proves every
+  configuration of a motion clear instead, from :meth:`RigidBody.clearance`
+  and the sweep bound ``|dp| + r_max |dtheta|`` (``r_max`` the half diagonal).
 """
 
 from __future__ import annotations
@@ -27,12 +30,13 @@ import jax.numpy as jnp
 from ntq_jax import geometry
 from ntq_jax.geometry import World
 from ntq_jax.robots.base import DiscretizedSteering, wrap_angle
+from ntq_jax.robots.certified import CertifiedSteering
 
 Array = jax.Array
 
 
 @dataclasses.dataclass(frozen=True)
-class RigidBody(DiscretizedSteering):
+class RigidBody(DiscretizedSteering, CertifiedSteering):
     """Rectangle robot in SE(2)."""
 
     length: float = 1.5
@@ -78,6 +82,23 @@ class RigidBody(DiscretizedSteering):
     def distance(self, a: Array, b: Array) -> Array:
         dx, dy = b[0] - a[0], b[1] - a[1]
         return jnp.sqrt(dx * dx + dy * dy) + self.angle_weight * jnp.abs(wrap_angle(b[2] - a[2]))
+
+    def clearance(self, q: Array, world: World, padding: float) -> Array:
+        """Distance of the footprint to the nearest obstacle minus ``padding``, or to the
+        workspace boundary if smaller (negative outside); ``> 0`` iff ``q`` is valid, -1 for
+        non-finite ``q``."""
+        hl, hw = 0.5 * self.length, 0.5 * self.width
+        c = geometry.rect_clearance(q, hl, hw, world) - padding
+        xs, ys = geometry.rect_corners(q[0], q[1], q[2], hl, hw)
+        for px, py in zip(xs, ys):
+            c = jnp.minimum(c, geometry.wall_clearance(px, py, world.bounds))
+        return jnp.where(jnp.isfinite(q[0] + q[1] + q[2]) & jnp.isfinite(c), c, -1.0)
+
+    def sweep_bound(self, a: Array, b: Array) -> Array:
+        """Upper bound on how far any point of the body moves from ``a`` to ``b``:
+        ``|dp| + r_max |dtheta|`` (shortest arc)."""
+        dx, dy = b[0] - a[0], b[1] - a[1]
+        return jnp.sqrt(dx * dx + dy * dy) + self.half_diagonal * jnp.abs(wrap_angle(b[2] - a[2]))
 
     def to_json(self) -> dict:
         return {"kind": "rigid_body", "length": self.length, "width": self.width,

@@ -14,12 +14,17 @@ are quoted, so the ratios stay meaningful on a busy machine:
 * rigid-body and 6-link-arm motion checks per second (``Env.steer_to`` on random
   valid pairs of a preset, at the preset's padding), against ``jax.vmap`` of the
   one-query kernel;
+* point-robot ``Env.steer_to`` on ``make_env("point/3")`` (padding 0, 10^7 queries)
+  with NumPy input (float32 as NumPy allocates it, and float64) side by side with
+  the same queries as device arrays, and with the copy-then-call path
+  (``jnp.asarray`` first, what NumPy input cost before it was read in place);
 * memory flatness: peak RSS (VmHWM) of a fresh process running ``gamma_nt`` over
   10^7 and over 10^9 queries.
 
     python benchmarks/bench_steer.py                 # full run, a few minutes
     python benchmarks/bench_steer.py --quick         # < 1 minute, smaller sizes, no 10^9 run
     python benchmarks/bench_steer.py --skip-1e9 --json bench.json
+    python benchmarks/bench_steer.py --only numpy    # just the NumPy-input comparison
 """
 
 from __future__ import annotations
@@ -52,7 +57,8 @@ MAP = {"name": "bench7", "robot": {"kind": "point"}, "bounds": [[0, 20], [0, 20]
        "discs": [], "padding": 0.8}
 
 GOALS = {"steer_qps": 3e8, "steer_vs_loop": 1e5, "steer_vs_numpy": 100.0, "gamma_cps": 1.5e8,
-         "gamma_1e9_seconds": 10.0, "rigid_cps": 1e5, "arm_cps": 2.5e5, "rss_ratio": 1.10}
+         "gamma_1e9_seconds": 10.0, "rigid_cps": 1e5, "arm_cps": 2.5e5, "rss_ratio": 1.10,
+         "steer_numpy_qps": 5e8}
 
 
 # ---------------------------------------------------------------------------
@@ -189,6 +195,40 @@ def bench_point_steer(env, n: int, n_numpy: int, n_loop: int, reps: int) -> list
             {"name": f"ratio API / coordinate-major, pad {padding:g}", "ratio": t["cm"] / t["api"]},
         ]
     return rows
+
+
+def bench_numpy_steer(name: str, n: int, reps: int) -> list[dict]:
+    """``Env.steer_to`` with NumPy input against the same queries as device arrays."""
+    env = nj.make_env(name)
+    rng = np.random.default_rng(0)
+    lo, hi = np.asarray(env.world.bounds[:, 0]), np.asarray(env.world.bounds[:, 1])
+    a64 = lo + rng.random((n, 2)) * (hi - lo)
+    b64 = lo + rng.random((n, 2)) * (hi - lo)
+    a_np, b_np = a64.astype(np.float32), b64.astype(np.float32)  # NumPy's own allocations
+    a_dev, b_dev = jax.block_until_ready((jax.device_put(a_np), jax.device_put(b_np)))
+    t = interleaved({
+        "device": lambda: env.steer_to(a_dev, b_dev, padding=0),
+        "numpy": lambda: env.steer_to(a_np, b_np, padding=0),
+        "numpy64": lambda: env.steer_to(a64, b64, padding=0),
+        "copy": lambda: env.steer_to(jnp.asarray(a_np), jnp.asarray(b_np), padding=0),
+    }, reps)
+    cores = interleaved.cores
+    want = np.asarray(env.steer_to(a_dev, b_dev, padding=0))
+    same = {k: f"{int(np.sum(np.asarray(env.steer_to(x, y, padding=0)) == want))}/{n}"
+            for k, (x, y) in {"numpy": (a_np, b_np), "numpy64": (a64, b64)}.items()}
+    phase = f"data at 64-byte phase {a_np.ctypes.data % 64}/{b_np.ctypes.data % 64}"
+    return [
+        {"name": f"steer {name} pad 0, device arrays (N,2) float32", "n": n,
+         "per_second": n / t["device"], "cores": cores["device"]},
+        {"name": f"steer {name} pad 0, NumPy float32 (N,2), {phase}", "n": n,
+         "per_second": n / t["numpy"], "goal": GOALS["steer_numpy_qps"], "cores": cores["numpy"],
+         "same_as_device": same["numpy"]},
+        {"name": f"steer {name} pad 0, NumPy float64 (N,2)", "n": n,
+         "per_second": n / t["numpy64"], "cores": cores["numpy64"], "same_as_device": same["numpy64"]},
+        {"name": f"steer {name} pad 0, jnp.asarray copy then call (float32)", "n": n,
+         "per_second": n / t["copy"], "cores": cores["copy"]},
+        {"name": f"ratio NumPy float32 / device, {name}", "ratio": t["device"] / t["numpy"]},
+    ]
 
 
 # ---------------------------------------------------------------------------
@@ -346,6 +386,8 @@ def main(argv=None) -> int:
                     help="skip the 1e9-query gamma_nt runs (memory check uses 1e7 vs 1e8)")
     ap.add_argument("--reps", type=int, default=None, help="interleaved repeats (default 7, quick 3)")
     ap.add_argument("--json", type=Path, default=None, help="also write all rows as JSON")
+    ap.add_argument("--only", choices=("numpy",), default=None,
+                    help="run only one part: numpy = the NumPy-input steer_to comparison")
     args = ap.parse_args(argv)
     quick = args.quick
     skip_1e9 = args.skip_1e9 or quick
@@ -358,6 +400,9 @@ def main(argv=None) -> int:
           f"load average {load0[0]:.2f} at start; map {env.name}: {env.world.num_boxes} boxes, "
           f"padding {env.padding}")
     rows = []
+    rows += bench_numpy_steer("point/3", n=10**7, reps=reps if not quick else 5)
+    if args.only == "numpy":
+        return _report(args, argv, rows, t_start, load0)
     rows += bench_point_steer(env, n=10**7, n_numpy=10**6 if not quick else 3 * 10**5,
                               n_loop=2000 if not quick else 300, reps=reps)
     rows += bench_gamma(env, n=10**8 if not quick else 2 * 10**7, reps=3 if not quick else 2)
@@ -368,9 +413,16 @@ def main(argv=None) -> int:
     rows += bench_motions("nlink/6", n=10**5 if not quick else 10**4, reps=reps if not quick else 2,
                           goal=GOALS["arm_cps"])
     rows += bench_memory((10**7, 10**9) if not skip_1e9 else (10**7, 10**8))
+    return _report(args, argv, rows, t_start, load0)
+
+
+def _report(args, argv, rows, t_start, load0) -> int:
     load1 = os.getloadavg()
     print()
     print_table(rows)
+    for r in rows:
+        if "same_as_device" in r:
+            print(f"answers equal to the device-array answers: {r['same_as_device']}  ({r['name']})")
     print(f"\nload average {load0[0]:.2f} -> {load1[0]:.2f}; total {time.time() - t_start:.0f} s. "
           "cores = process CPU time / wall time during the measurement (2 = both cores of this "
           "machine); the machine is shared, so compare the side-by-side ratios.")

@@ -32,6 +32,7 @@ from ntq_jax import artifacts, geometry, queries as Q
 from ntq_jax.geometry import World
 from ntq_jax.presets import PRESETS
 from ntq_jax.robots import Robot, robot_from_json
+from ntq_jax.robots import batch as _batch
 from ntq_jax.robots.batch import distance_batch, is_valid_batch, steer_to_batch
 
 Array = jax.Array
@@ -72,26 +73,68 @@ class Env:
         return p
 
     def _states(self, x, what: str) -> Array:
-        x = jnp.asarray(x, jnp.float32)
+        if not (isinstance(x, jax.Array) and x.dtype == jnp.float32):
+            x = jnp.asarray(x, jnp.float32)
         if x.ndim != 2 or x.shape[1] != self.dim:
             raise ValueError(f"{what} must have shape (N, {self.dim}) for {self.name} "
                              f"({self.robot.kind}), got {tuple(x.shape)}")
         return x
 
+    def _host_states(self, *xs) -> tuple[int, list, list] | None:
+        """Large NumPy float inputs, split for the ``*_split`` kernels (read in place); else None."""
+        rows = [_batch.host_rows(x, self.dim) for x in xs]
+        if any(r is None for r in rows) or any(r.shape != rows[0].shape for r in rows):
+            return None
+        return _batch.split_host_rows(rows)
+
     def is_valid(self, states, padding: float | None = None) -> Array:
-        """``(N, d) -> (N,)`` bool: in bounds and clear of obstacles (False for NaN/inf)."""
-        return is_valid_batch(self.robot, self.world, self._states(states, "states"),
-                              self.resolve_padding(padding))
+        """``(N, d) -> (N,)`` bool: in bounds and clear of obstacles (False for NaN/inf).
+
+        ``states`` may be a JAX array, a NumPy array or a nested list. A large
+        float32 C-contiguous NumPy array is read in place, without a copy to the
+        device; for NumPy input the call returns once the answer is computed, so
+        the array may be modified afterwards. Other float dtypes and layouts are
+        converted to float32 (round to nearest) first.
+        """
+        p = self.resolve_padding(padding)
+        host = self._host_states(states)
+        if host is not None:
+            k, (head,), (bulk,) = host
+            return _batch.is_valid_batch_split(self.robot, self.world, head, bulk, p, k
+                                               ).block_until_ready()
+        return is_valid_batch(self.robot, self.world, self._states(states, "states"), p)
 
     def steer_to(self, a, b, padding: float | None = None) -> Array:
-        """``(N, d), (N, d) -> (N,)`` bool: True where the straight connection is collision-free."""
+        """``(N, d), (N, d) -> (N,)`` bool: True where the straight connection is collision-free.
+
+        ``a`` and ``b`` may be JAX arrays, NumPy arrays or nested lists; the
+        answer is a JAX array in every case. Large float32 C-contiguous NumPy
+        arrays are read in place, without a copy to the device, so NumPy input
+        runs at nearly the speed of device input; for NumPy input the call
+        returns once the answer is computed, so the arrays may be modified
+        afterwards. Other float dtypes and layouts are converted to float32
+        (round to nearest) first.
+        """
+        p = self.resolve_padding(padding)
+        host = self._host_states(a, b)
+        if host is not None:
+            k, (ha, hb), (ba, bb) = host
+            return _batch.steer_to_batch_split(self.robot, self.world, ha, hb, ba, bb, p, k
+                                               ).block_until_ready()
         a, b = self._states(a, "a"), self._states(b, "b")
         if a.shape != b.shape:
             raise ValueError(f"a and b must have the same shape, got {a.shape} and {b.shape}")
-        return steer_to_batch(self.robot, self.world, a, b, self.resolve_padding(padding))
+        return steer_to_batch(self.robot, self.world, a, b, p)
 
     def distance(self, a, b) -> Array:
-        """``(N, d), (N, d) -> (N,)``: the robot's cost metric."""
+        """``(N, d), (N, d) -> (N,)``: the robot's cost metric.
+
+        Input as for :meth:`steer_to` (large NumPy arrays are read in place).
+        """
+        host = self._host_states(a, b)
+        if host is not None:
+            k, (ha, hb), (ba, bb) = host
+            return _batch.distance_batch_split(self.robot, ha, hb, ba, bb, k).block_until_ready()
         return distance_batch(self.robot, self._states(a, "a"), self._states(b, "b"))
 
     def rasterize(self, resolution: float, padding: float | None = None) -> np.ndarray:

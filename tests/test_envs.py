@@ -150,3 +150,100 @@ def test_measure_gamma_script_json(tmp_path):
     assert res["ci95"][0] <= res["gamma"] <= res["ci95"][1]
     assert res["non_trivial"] == round(res["gamma"] * res["queries"])
     assert "gamma_nt =" in r.stdout
+
+
+# ---------------------------------------------------------------------------
+# NumPy input (read in place when large; see ntq_jax.robots.batch.split_host_rows)
+
+# Dyadic boxes and coordinates on a 1/16 grid: every product and sum in the exact
+# segment test is exact in float32, so the answers cannot depend on how the
+# compiler rounds (fused multiply-adds) and must agree bit for bit across layouts.
+_DYADIC = {"name": "dyadic", "robot": {"kind": "point"}, "bounds": [[0, 20], [0, 20]],
+           "boxes": [[10, 4, 0.5, 4], [10, 15, 0.5, 5], [4, 10, 4, 0.25], [15, 10, 2.5, 0.75]],
+           "discs": [], "padding": 0.5}
+
+
+def _grid_pairs(n, seed, dim=2, lo=-1, hi=21):
+    rng = np.random.default_rng(seed)
+    a = rng.integers(lo * 16, hi * 16, (n, dim)) / 16.0
+    b = rng.integers(lo * 16, hi * 16, (n, dim)) / 16.0
+    return a.astype(np.float32), b.astype(np.float32)
+
+
+def _unaligned(x, phase):
+    """A C-contiguous copy of ``x`` whose data starts ``phase`` bytes past a 64-byte boundary."""
+    buf = np.empty(x.nbytes + 128, np.uint8)
+    off = -buf.ctypes.data % 64 + phase
+    out = buf[off:off + x.nbytes].view(x.dtype).reshape(x.shape)
+    out[...] = x
+    return out
+
+
+@pytest.mark.parametrize("min_rows", [64, None])
+def test_numpy_input_matches_device_input(monkeypatch, min_rows):
+    from ntq_jax.robots import batch
+    if min_rows is not None:  # small arrays through the in-place path too
+        monkeypatch.setattr(batch, "HOST_MIN_ROWS", min_rows)
+    env = nj.Env.from_json(_DYADIC)
+    n = 3 * batch.HOST_MIN_ROWS + 5
+    a, b = _grid_pairs(n, seed=1)
+    dev_a, dev_b = jax.device_put(a), jax.device_put(b)
+    for padding in (0.0, None):
+        want = np.asarray(env.steer_to(dev_a, dev_b, padding=padding))
+        assert 0.05 < want.mean() < 0.95
+        valid = np.asarray(env.is_valid(dev_a, padding=padding))
+        dist = np.asarray(env.distance(dev_a, dev_b))
+        wide = np.concatenate([a, b], axis=1)
+        inputs = {
+            "float32": (a, b),
+            "float64": (a.astype(np.float64), b.astype(np.float64)),
+            "strided rows": (np.repeat(a, 2, axis=0)[::2], np.repeat(b, 2, axis=0)[::2]),
+            "column slice": (wide[:, :2], wide[:, 2:]),
+            "fortran order": (np.asfortranarray(a), np.asfortranarray(b)),
+            "lists": (a.tolist(), b.tolist()),
+        }
+        for pa in (0, 8, 16, 24, 32, 48, 56):  # every row phase, a and b in and out of step
+            inputs[f"phase {pa}"] = (_unaligned(a, pa), _unaligned(b, (pa + 16) % 64))
+        for name, (x, y) in inputs.items():
+            before = [np.array(v, copy=True) for v in (x, y)]
+            got = env.steer_to(x, y, padding=padding)
+            assert isinstance(got, jax.Array) and got.dtype == bool and got.shape == (n,), name
+            np.testing.assert_array_equal(np.asarray(got), want, err_msg=name)
+            np.testing.assert_array_equal(np.asarray(env.is_valid(x, padding=padding)), valid,
+                                          err_msg=name)
+            np.testing.assert_array_equal(np.asarray(env.distance(x, y)), dist, err_msg=name)
+            for v, w in zip((x, y), before):
+                np.testing.assert_array_equal(np.asarray(v), w, err_msg=f"{name}: input modified")
+
+
+def test_numpy_input_may_be_modified_after_the_call(monkeypatch):
+    from ntq_jax.robots import batch
+    monkeypatch.setattr(batch, "HOST_MIN_ROWS", 64)
+    env = nj.Env.from_json(_DYADIC)
+    a, b = _grid_pairs(4096, seed=2)
+    want = np.asarray(env.steer_to(jax.device_put(a), jax.device_put(b)))
+    got = env.steer_to(a, b)
+    a[:] = -5.0  # out of bounds: every answer would become False
+    np.testing.assert_array_equal(np.asarray(got), want)
+
+
+def test_numpy_input_on_a_preset_and_the_rigid_body(monkeypatch):
+    from ntq_jax.robots import batch
+    monkeypatch.setattr(batch, "HOST_MIN_ROWS", 64)
+    for name in ("point/3", "rigid/1"):
+        env = nj.make_env(name)
+        s = np.asarray(env.sample_states(jax.random.key(0), 2 * 3000), np.float32)
+        a, b = _unaligned(s[:3000], 16), _unaligned(s[3000:], 48)
+        want = np.asarray(env.steer_to(jax.device_put(a), jax.device_put(b), padding=0))
+        np.testing.assert_array_equal(np.asarray(env.steer_to(a, b, padding=0)), want, err_msg=name)
+        np.testing.assert_array_equal(np.asarray(env.is_valid(a)),
+                                      np.asarray(env.is_valid(jax.device_put(a))), err_msg=name)
+
+
+def test_numpy_input_shape_errors():
+    env = nj.make_env("point/3")
+    a = np.zeros((100_000, 2), np.float32)
+    with pytest.raises(ValueError, match="same shape"):
+        env.steer_to(a, a[1:])
+    with pytest.raises(ValueError, match=r"shape \(N, 2\)"):
+        env.steer_to(np.zeros((100_000, 3), np.float32), np.zeros((100_000, 3), np.float32))

@@ -98,3 +98,103 @@ def distances(robot, a, b, chunk: int = CHECK_CHUNK) -> np.ndarray:
     b = np.asarray(b, np.float32).reshape(-1, robot.dim)
     return map_chunks(lambda x, y: distance_batch(robot, x, y), a, b, chunk=chunk,
                       empty=np.zeros(0, np.float32))
+
+
+# ---------------------------------------------------------------------------
+# NumPy input without a host-to-device copy
+#
+# On the CPU backend a float32 NumPy array whose data starts on a
+# HOST_ALIGN-byte boundary is handed to XLA without a copy; any other array is
+# copied first, which for large batches costs several times the kernel itself.
+# Arrays from NumPy's allocator usually start 16 bytes past such a boundary, so
+# the rows are split: the first ``k < HOST_HEAD`` rows (a small copy, padded to
+# HOST_HEAD rows so that one shape serves every ``k``) and the rest, which
+# starts on the boundary and is used in place. One compiled call evaluates both
+# parts and concatenates the answers.
+
+HOST_ALIGN = 64  # bytes
+HOST_HEAD = 16  # rows: a row of 4*d bytes reaches the boundary within 16 rows
+HOST_MIN_ROWS = 1 << 16  # smaller batches take the ordinary (copying) path
+_CAST_CHUNK_ROWS = 1 << 16
+
+
+def _aligned_empty(shape: tuple[int, ...], dtype=np.float32) -> np.ndarray:
+    """An uninitialised C-contiguous array whose data starts on a HOST_ALIGN boundary."""
+    nbytes = int(np.prod(shape)) * np.dtype(dtype).itemsize
+    buf = np.empty(nbytes + HOST_ALIGN, np.uint8)
+    off = -buf.ctypes.data % HOST_ALIGN
+    return buf[off:off + nbytes].view(dtype).reshape(shape)
+
+
+def host_rows(x, dim: int) -> np.ndarray | None:
+    """``x`` as a C-contiguous float32 NumPy ``(N, dim)`` array for :func:`split_host_rows`.
+
+    Returns ``x`` itself when it already is one, an aligned float32 copy of a
+    NumPy float array of another dtype or layout (one pass, cast as
+    ``jnp.asarray(x, jnp.float32)`` casts: round to nearest), and None for
+    anything else (not a NumPy float array, another shape, or fewer than
+    :data:`HOST_MIN_ROWS` rows): the caller's ordinary path handles those.
+    """
+    if (not isinstance(x, np.ndarray) or x.dtype.kind != "f" or x.dtype.itemsize > 8
+            or x.ndim != 2 or x.shape[1] != dim or x.shape[0] < HOST_MIN_ROWS):
+        return None
+    if x.dtype == np.float32 and x.dtype.isnative and x.flags.c_contiguous:
+        return x
+    out = _aligned_empty(x.shape)
+    for lo in range(0, x.shape[0], _CAST_CHUNK_ROWS):  # chunks stay in cache
+        np.copyto(out[lo:lo + _CAST_CHUNK_ROWS], x[lo:lo + _CAST_CHUNK_ROWS], casting="unsafe")
+    return out
+
+
+def split_host_rows(arrays: list[np.ndarray]) -> tuple[int, list[np.ndarray], list[Array]]:
+    """Splits same-shape ``(N, d)`` float32 C-contiguous arrays for the ``*_split`` kernels.
+
+    Returns ``(k, heads, bulks)``: ``heads[i]`` is a ``(HOST_HEAD, d)`` copy whose
+    first ``k`` rows are ``arrays[i][:k]`` (the rest zero), and ``bulks[i]`` is
+    ``arrays[i][k:]`` on the device, sharing the NumPy memory when it is aligned.
+    ``k`` is chosen so that every array's bulk is aligned when possible, else the
+    first array's (the others are then copied by ``jax.device_put``). The bulks
+    read the callers' memory in place: wait for the results before the arrays
+    may change or be freed.
+    """
+    n, d = arrays[0].shape
+    row = 4 * d
+
+    def aligned_from(x, k):
+        return (x.ctypes.data + k * row) % HOST_ALIGN == 0
+
+    ks = range(min(HOST_HEAD, n))
+    k = next((k for k in ks if all(aligned_from(x, k) for x in arrays)), None)
+    if k is None:
+        k = next((k for k in ks if aligned_from(arrays[0], k)), 0)
+    heads = []
+    for x in arrays:
+        h = np.zeros((HOST_HEAD, d), np.float32)
+        h[:k] = x[:k]
+        heads.append(h)
+    bulks = [jax.device_put(x[k:], may_alias=True) for x in arrays]
+    return k, heads, bulks
+
+
+@functools.partial(_kernel_jit, static_argnames=("robot", "padding", "k"))
+def steer_to_batch_split(robot, world: World, head_a: Array, head_b: Array, bulk_a: Array,
+                         bulk_b: Array, padding: float, k: int) -> Array:
+    """:func:`steer_to_batch` of the rows ``head[:k]`` followed by ``bulk`` (see :func:`split_host_rows`)."""
+    head = robot.steer_to_batch(head_a.T, head_b.T, world, padding)[:k]
+    return jax.numpy.concatenate([head, robot.steer_to_batch(bulk_a.T, bulk_b.T, world, padding)])
+
+
+@functools.partial(_kernel_jit, static_argnames=("robot", "padding", "k"))
+def is_valid_batch_split(robot, world: World, head: Array, bulk: Array, padding: float,
+                         k: int) -> Array:
+    """:func:`is_valid_batch` of the rows ``head[:k]`` followed by ``bulk``."""
+    return jax.numpy.concatenate([is_valid_cm(robot, world, head.T, padding)[:k],
+                            is_valid_cm(robot, world, bulk.T, padding)])
+
+
+@functools.partial(_kernel_jit, static_argnames=("robot", "k"))
+def distance_batch_split(robot, head_a: Array, head_b: Array, bulk_a: Array, bulk_b: Array,
+                         k: int) -> Array:
+    """:func:`distance_batch` of the rows ``head[:k]`` followed by ``bulk``."""
+    dist = jax.vmap(robot.distance, in_axes=(1, 1))
+    return jax.numpy.concatenate([dist(head_a.T, head_b.T)[:k], dist(bulk_a.T, bulk_b.T)])

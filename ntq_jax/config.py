@@ -314,6 +314,14 @@ class EvalConfig:
         gamma_queries: uniform queries for gamma_nt (padding 0) in the table
             headings when the dataset metadata has none.
         chunk: test queries per jitted planner call.
+        motion_check: how the evaluation decides that a path is collision-free:
+            ``certified`` (default: every configuration of every segment proven
+            clear, so a success is a collision-free path) or ``discretized``
+            (states the robot's ``resolution`` apart, what the paper does; it can
+            miss a shallow clip between two checked states). Used for the neural
+            planner's feasibility check (success) and to verify the reference
+            planner's paths; the planner's own steerTo keeps the discretised check.
+            The point robot's check is exact either way.
     """
 
     k_test: int = 500
@@ -326,8 +334,11 @@ class EvalConfig:
     query_padding: Optional[float] = 0.0
     gamma_queries: int = 200_000
     chunk: int = 1024
+    motion_check: str = "certified"
 
     def validate(self, p: str):
+        _check(self.motion_check in ("discretized", "certified"), f"{p}.motion_check",
+               f"must be certified or discretized, got {self.motion_check!r}")
         _check(self.k_test >= 1, f"{p}.k_test", f"must be >= 1, got {self.k_test}")
         _check(self.n_plan >= 1, f"{p}.n_plan", f"must be >= 1, got {self.n_plan}")
         _check(len(self.steer) >= 1, f"{p}.steer", "must list at least one of true, false")

@@ -104,8 +104,13 @@ class Env:
                                                ).block_until_ready()
         return is_valid_batch(self.robot, self.world, self._states(states, "states"), p)
 
-    def steer_to(self, a, b, padding: float | None = None) -> Array:
+    def steer_to(self, a, b, padding: float | None = None, check: str = "discretized") -> Array:
         """``(N, d), (N, d) -> (N,)`` bool: True where the straight connection is collision-free.
+
+        ``check``: ``"discretized"`` (default; the paper's check: states at most
+        the robot's ``resolution`` apart, exact for the point robot) or
+        ``"certified"`` (True only when every configuration of the motion is
+        proven clear; see :mod:`ntq_jax.robots.certified`).
 
         ``a`` and ``b`` may be JAX arrays, NumPy arrays or nested lists; the
         answer is a JAX array in every case. Large float32 C-contiguous NumPy
@@ -116,15 +121,16 @@ class Env:
         (round to nearest) first.
         """
         p = self.resolve_padding(padding)
+        _batch.motion_check(self.robot, check)  # an unknown check fails here
         host = self._host_states(a, b)
         if host is not None:
             k, (ha, hb), (ba, bb) = host
-            return _batch.steer_to_batch_split(self.robot, self.world, ha, hb, ba, bb, p, k
-                                               ).block_until_ready()
+            return _batch.steer_to_batch_split(self.robot, self.world, ha, hb, ba, bb, p, k,
+                                               check).block_until_ready()
         a, b = self._states(a, "a"), self._states(b, "b")
         if a.shape != b.shape:
             raise ValueError(f"a and b must have the same shape, got {a.shape} and {b.shape}")
-        return steer_to_batch(self.robot, self.world, a, b, p)
+        return steer_to_batch(self.robot, self.world, a, b, p, check)
 
     def distance(self, a, b) -> Array:
         """``(N, d), (N, d) -> (N,)``: the robot's cost metric.

@@ -138,7 +138,7 @@ def reference_plans(env, cfg, env_name: str, slug: str, queries: dict, out_dir: 
     the visibility graph's (``ntq_jax.plan(env, q, "visgraph", padding=0.0)``).
     """
     name = cfg.planner.name if planner is None else getattr(planner, "__name__", "custom")
-    fp = artifacts.fingerprint(slug, name, cfg.planner,
+    fp = artifacts.fingerprint(slug, name, cfg.planner, cfg.eval.motion_check,
                                {k: artifacts.array_digest(v) for k, v in queries.items()},
                                {k: len(v) for k, v in queries.items()})
 
@@ -378,13 +378,13 @@ def evaluate_env(env, ensemble, cfg, run_dir, *, env_name: str, data_env_dir=Non
             for kind in QUERY_KINDS]
 
 
-def recheck_paths(env, npz_path, *, delta: float | None = None, atol: float = 1e-5
-                  ) -> np.ndarray:
+def recheck_paths(env, npz_path, *, delta: float | None = None, atol: float = 1e-5,
+                  check: str = "certified") -> np.ndarray:
     """Independent re-check of the successes of a saved paths file, on the evaluation geometry.
 
     A success passes when its path has at least 2 states, all finite, every
-    segment passes ``env.steer_to`` at padding 0
-    (:func:`ntq_jax.planners.verify.check_paths`), it starts at the query's start
+    segment passes the motion check ``check`` at padding 0 (default: the
+    certified one; :func:`ntq_jax.planners.verify.check_paths`), it starts at the query's start
     and ends at the query's goal (every coordinate within ``atol``). A file of the
     variant without steerTo (``*_nosteer.npz``) records a success when the path's
     last state is within ``delta`` of the goal in the robot's cost metric
@@ -409,7 +409,7 @@ def recheck_paths(env, npz_path, *, delta: float | None = None, atol: float = 1e
         raise ValueError(f"{npz_path} is of the variant without steerTo: pass its delta")
     rows = np.flatnonzero(z["success"])
     paths, n, q = z["paths"][rows], z["lengths"][rows], z["queries"][rows].astype(np.float64)
-    free, _ = check_paths(env, paths, n, 0.0)
+    free, _ = check_paths(env, paths, n, 0.0, check)
     start = paths[:, 0].astype(np.float64)
     end = paths[np.arange(len(rows)), np.maximum(n - 1, 0)].astype(np.float64)
     at_start = np.all(np.abs(start - q[:, 0]) <= atol, axis=1)

@@ -41,6 +41,7 @@ from jax.tree_util import Partial
 from ntq_jax.batching import bucket_size, pad_rows, padded_chunks
 from ntq_jax.geometry import World
 from ntq_jax.neural_steps import Stages, cost_jit
+from ntq_jax.robots.certified import MOTION_CHECKS
 from ntq_jax.types import PlanCause
 
 Array = jax.Array
@@ -64,6 +65,11 @@ class PlannerOptions:
         contract: lazy states contraction after the coarse plan and after each repair.
         plan_padding: clearance of the planner's own steerTo calls.
         eval_padding: clearance of the feasibility check (0 = the evaluation geometry).
+        eval_check: the motion check of the feasibility check (and so of success and
+            of which segments replanning repairs): ``"certified"`` (every
+            configuration proven clear; :mod:`ntq_jax.robots.certified`) or
+            ``"discretized"`` (states ``resolution`` apart, the paper's check). The
+            planner's own steerTo calls use the discretised check, as in the paper.
     """
 
     n_plan: int = 50
@@ -75,8 +81,11 @@ class PlannerOptions:
     contract: bool = True
     plan_padding: float = 0.0
     eval_padding: float = 0.0
+    eval_check: str = "certified"
 
     def __post_init__(self):
+        if self.eval_check not in MOTION_CHECKS:
+            raise ValueError(f"eval_check must be one of {MOTION_CHECKS}, got {self.eval_check!r}")
         if self.n_plan < 1:
             raise ValueError(f"n_plan must be >= 1, got {self.n_plan}")
         if not (self.delta > 0 and math.isfinite(self.delta)):
@@ -101,7 +110,7 @@ class PlannerOptions:
         return PlannerOptions(
             n_plan=ev.n_plan, steer=ev.steer[0] if steer is None else bool(steer),
             delta=ev.delta, replan_rounds=ev.replan_rounds, replan_steps=ev.replan_steps,
-            bidirectional=ev.bidirectional)
+            bidirectional=ev.bidirectional, eval_check=ev.motion_check)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -34,9 +34,10 @@ COMPILED_CACHE_SIZE = 64  # compiled stages kept (the least recently used is dro
 # Building blocks (inside jit)
 # ---------------------------------------------------------------------------
 
-def _steer(robot, world, a: Array, b: Array, padding: float, mask: Array) -> Array:
-    """``(M, d), (M, d) -> (M,)`` via the package's one steer_to kernel; unmasked = False."""
-    return steer_to_cm(robot, world, a.T, b.T, padding, mask)
+def _steer(robot, world, a: Array, b: Array, padding: float, mask: Array,
+           check: str = "discretized") -> Array:
+    """``(M, d), (M, d) -> (M,)`` via the package's batched motion check; unmasked = False."""
+    return steer_to_cm(robot, world, a.T, b.T, padding, mask, check=check)
 
 
 def _rows(x: Array, idx: Array) -> Array:
@@ -56,12 +57,13 @@ def _join(a: Array, na: Array, b: Array, nb: Array, length: int) -> tuple[Array,
     return out, na + nb
 
 
-def _segments(robot, world, p: Array, n: Array, padding: float, mask: Array):
+def _segments(robot, world, p: Array, n: Array, padding: float, mask: Array,
+              check: str = "discretized"):
     """Per-segment freedom ``(N, L-1)`` and the segment mask (existing segments of masked rows)."""
     num, length, d = p.shape
     seg = (jnp.arange(length - 1)[None, :] < (n - 1)[:, None]) & mask[:, None]
     free = _steer(robot, world, p[:, :-1].reshape(-1, d), p[:, 1:].reshape(-1, d), padding,
-                  seg.reshape(-1)).reshape(num, length - 1)
+                  seg.reshape(-1), check).reshape(num, length - 1)
     return free, seg
 
 
@@ -167,7 +169,7 @@ def _contract_and_check(robot, world, opts, p, n, mask, do_contract: bool):
     """
     if do_contract:
         p, n = contract(robot, world, p, n, opts.plan_padding, mask)
-    free, seg = _segments(robot, world, p, n, opts.eval_padding, mask)
+    free, seg = _segments(robot, world, p, n, opts.eval_padding, mask, opts.eval_check)
     blocked = seg & ~free
     feasible = mask & (n >= 1) & ~jnp.any(blocked, axis=1)
     return p, n, feasible, blocked

@@ -39,19 +39,23 @@ def planner_options(config, env_name: str, name: str | None = None, *,
     """The keyword options passed to ``ntq_jax.planners.plan`` for planner ``name``.
 
     ``name`` defaults to ``config.planner.name``; ``evaluation`` picks BIT*'s
-    evaluation budget instead of the data-generation one.
+    evaluation budget instead of the data-generation one, and the evaluation's
+    motion check (``config.eval.motion_check``) for the planner's checks and the
+    verification of its paths. Data generation keeps the planners' default, the
+    discretised check (the paper's), at the data padding.
     """
     pc = config.planner
     name = name or pc.name
+    extra = {"check": config.eval.motion_check} if evaluation else {}
     if name == "astar":
-        return {"resolution": pc.resolution}
+        return {"resolution": pc.resolution, **extra}
     if name == "bitstar":
         budget = pc.eval_time_budget_for(env_name) if evaluation else pc.time_budget_for(env_name)
-        return {"time_budget": budget, "workers": pc.workers}
+        return {"time_budget": budget, "workers": pc.workers, **extra}
     if name == "roadmap":
         return {"milestones": pc.milestones, "k": pc.neighbors, "grow_rounds": pc.grow_rounds,
-                "roadmap_seed": config.seed}
-    return {}
+                "roadmap_seed": config.seed, **extra}
+    return extra
 
 
 def resolve_planner(planner, options: dict, cache_dir: Path | None = None

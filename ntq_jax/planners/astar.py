@@ -281,7 +281,8 @@ _NEIGH = np.array([(0, 0), (0, 1), (1, 0), (0, -1), (-1, 0), (1, 1), (1, -1), (-
                   np.int64)
 
 
-def _snap(robot, world, grid: ConfigGrid, pts: np.ndarray, padding: float, to_cell: bool):
+def _snap(robot, world, grid: ConfigGrid, pts: np.ndarray, padding: float, to_cell: bool,
+          check: str = "discretized"):
     """Per point, the nearest free cell of its 3x3 neighbourhood joined to it by steer_to
     (point -> centre, or centre -> point with ``to_cell``).
 
@@ -313,7 +314,8 @@ def _snap(robot, world, grid: ConfigGrid, pts: np.ndarray, padding: float, to_ce
         if not len(idx):
             continue
         p, cen = pts[idx], centre[idx, c]
-        vis = steer_to_pairs(robot, world, *((cen, p) if to_cell else (p, cen)), padding)
+        vis = steer_to_pairs(robot, world, *((cen, p) if to_cell else (p, cen)), padding,
+                             check=check)
         best[idx[vis]] = c[vis]
     cells = np.where(best[:, None] >= 0, cand[np.arange(n), np.maximum(best, 0)], -1)
     return cells
@@ -337,7 +339,7 @@ def _cell_paths(grid: ConfigGrid, q: np.ndarray, cells: np.ndarray, plen: np.nda
 
 def plan_astar(env, queries, *, padding: float, seed: int = 0, resolution: float = 0.1,
                smooth: bool = True, chunk_size: int = 1024, smooth_chunk: int = 128,
-               **astar_options) -> PlanResult:
+               check: str = "discretized", **astar_options) -> PlanResult:
     """Grid A* + shortcutting for a 2-D configuration space (the registry's ``"astar"``).
 
     Args:
@@ -349,6 +351,8 @@ def plan_astar(env, queries, *, padding: float, seed: int = 0, resolution: float
         smooth: shortcut the grid paths (greedy farthest-visible rule).
         chunk_size: queries per :func:`astar` call; ``smooth_chunk``: paths per
             shortcutting call.
+        check: the motion check of the snapping, the shortcuts and the final
+            verification (see :func:`ntq_jax.robots.batch.motion_check`).
         **astar_options: :func:`astar` options (``open_capacity``, ``max_path_len``, ...).
 
     Returns:
@@ -365,8 +369,8 @@ def plan_astar(env, queries, *, padding: float, seed: int = 0, resolution: float
     valid = valid_queries(env, q, padding)
     status[~valid] = PlanStatus.INVALID
     idx = np.flatnonzero(valid)
-    s_cell = _snap(env.robot, env.world, grid, q[idx, 0], padding, to_cell=False)  # start -> centre
-    g_cell = _snap(env.robot, env.world, grid, q[idx, 1], padding, to_cell=True)   # centre -> goal
+    s_cell = _snap(env.robot, env.world, grid, q[idx, 0], padding, False, check)  # start -> centre
+    g_cell = _snap(env.robot, env.world, grid, q[idx, 1], padding, True, check)   # centre -> goal
     snapped = (s_cell[:, 0] >= 0) & (g_cell[:, 0] >= 0)
     info["unsnapped"] = int((~snapped).sum())
     idx, s_cell, g_cell = idx[snapped], s_cell[snapped], g_cell[snapped]
@@ -382,14 +386,14 @@ def plan_astar(env, queries, *, padding: float, seed: int = 0, resolution: float
     paths, lengths = _cell_paths(grid, q[idx], np.asarray(res.path)[ok], np.asarray(res.path_len)[ok])
     if smooth and len(idx):
         paths, lengths, _ = shortcut_paths(env.robot, env.world, paths, lengths, padding,
-                                           chunk_size=int(smooth_chunk))
+                                           chunk_size=int(smooth_chunk), check=check)
     t3 = time.perf_counter()
     info["smooth_time"] = t3 - t2
     full_paths = np.full((k, paths.shape[1], d), np.nan, np.float32)
     full_len = np.zeros(k, np.int32)
     full_paths[idx] = paths
     full_len[idx] = lengths
-    out = finalize(q, full_paths, full_len, status, info, env, padding)
+    out = finalize(q, full_paths, full_len, status, info, env, padding, check)
     info["check_time"] = time.perf_counter() - t3
     info["time"] = time.perf_counter() - t0
     return out

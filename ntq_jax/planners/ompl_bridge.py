@@ -71,6 +71,7 @@ def plan_bitstar(env, queries, *, padding: float | None = None, seed: int = 0,
                  time_budget: float = 1.0, workers: int = 0, stop_on_first: bool = False,
                  chunk_size: int | None = None, ompl_log_level: str = "error",
                  hang_timeout: float | None = None, startup_timeout: float = 300.0,
+                 check: str = "discretized",
                  _crash_on: Mapping[int, int] | None = None) -> PlanResult:
     """Solves a batch of queries with OMPL's BIT* in parallel worker processes.
 
@@ -89,6 +90,9 @@ def plan_bitstar(env, queries, *, padding: float | None = None, seed: int = 0,
         hang_timeout: a worker stuck on one query longer than this is killed and
             treated as crashed (default ``3 * time_budget + 30`` s).
         startup_timeout: seconds a new worker may take to import and get ready.
+        check: the motion check of the final verification of BIT*'s paths (BIT*
+            itself checks motions with our discretised check); see
+            :func:`ntq_jax.robots.batch.motion_check`.
         _crash_on: test hook, ``{query index: attempts}``: the worker calls
             ``os._exit`` when it starts that query on attempt ``< attempts``
             (``1`` = crash once, then solved on retry; ``2`` = CRASHED).
@@ -128,7 +132,7 @@ def plan_bitstar(env, queries, *, padding: float | None = None, seed: int = 0,
         pool = _WorkerPool(worker_args, q, seeds, todo, min(workers, len(todo)), chunk_size,
                            hang, startup_timeout, results)
         pool.run()
-    res = _verified_result(env, q, pad, results, seeds, time_budget)
+    res = _verified_result(env, q, pad, results, seeds, time_budget, check)
     res.info["wall_time"] = time.perf_counter() - t_wall
     return res
 
@@ -170,7 +174,7 @@ class _Results:
 
 
 def _verified_result(env, q: np.ndarray, pad: float, r: _Results, seeds: np.ndarray,
-              time_budget: float) -> PlanResult:
+                     time_budget: float, check: str = "discretized") -> PlanResult:
     """The workers' raw paths verified by :func:`finalize`, statuses through PLAN_STATUS."""
     k, d = q.shape[0], q.shape[2]
     status = np.array([PLAN_STATUS[BridgeOutcome(o)] for o in r.outcome], np.int8)
@@ -182,7 +186,7 @@ def _verified_result(env, q: np.ndarray, pad: float, r: _Results, seeds: np.ndar
     info = dict(r.info)
     info.update(planner="bitstar", bitstar_status=r.outcome, solve_times=r.solve_times,
                 planner_costs=r.planner_costs, seeds=seeds, time_budget=time_budget)
-    res = finalize(q, paths, lengths, status, info, env, pad)
+    res = finalize(q, paths, lengths, status, info, env, pad, check)
     # a path BIT* found that fails the package's steer_to: finalize made it NO_PATH
     r.outcome[(r.outcome == BridgeOutcome.EXACT) & ~res.solved] = BridgeOutcome.REJECTED
     return res

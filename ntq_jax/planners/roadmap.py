@@ -118,7 +118,7 @@ def prm_star_k(n: int, d: int) -> int:
 
 
 def build_roadmap(robot, world: World, padding: float, *, milestones: int, k: int,
-                  key: jax.Array) -> Roadmap:
+                  key: jax.Array, check: str = "discretized") -> Roadmap:
     """Samples ``milestones`` valid states and keeps the free edges to their ``k`` nearest."""
     states = sample_states(robot, world, key, int(milestones), padding)
     index = MetricIndex(robot, world, states)
@@ -128,7 +128,7 @@ def build_roadmap(robot, world: World, padding: float, *, milestones: int, k: in
     pairs = np.unique(np.stack([np.minimum(i, j), np.maximum(i, j)], 1), axis=0)
     pairs = pairs[pairs[:, 0] != pairs[:, 1]]
     a, b = states[pairs[:, 0]], states[pairs[:, 1]]
-    free = steer_to_pairs(robot, world, a, b, padding)
+    free = steer_to_pairs(robot, world, a, b, padding, check=check)
     edges = pairs[free].astype(np.int32)
     costs = distances(robot, a[free], b[free]).astype(np.float64)
     return Roadmap(states, edges, costs)
@@ -138,7 +138,8 @@ _MEMORY = EnvCache(per_env=4)
 
 
 def roadmap_for(env, padding: float, *, milestones: int, k: int, roadmap_seed: int,
-                round_: int = 0, cache_dir: str | Path | None = None) -> Roadmap:
+                round_: int = 0, cache_dir: str | Path | None = None,
+                check: str = "discretized") -> Roadmap:
     """The roadmap of ``env`` for these settings: from memory, from ``cache_dir``, or built.
 
     Round ``r`` uses ``milestones * 2**r`` milestones and its own sample.
@@ -148,19 +149,21 @@ def roadmap_for(env, padding: float, *, milestones: int, k: int, roadmap_seed: i
     robot, world = env.robot, env.world
 
     def build() -> dict:
-        rm = build_roadmap(robot, world, padding, milestones=n, k=int(k), key=key)
+        rm = build_roadmap(robot, world, padding, milestones=n, k=int(k), key=key, check=check)
         return rm._asdict()
 
     def load() -> Roadmap:
         if cache_dir is None:
             return Roadmap(**build())
+        # the discretised check's fingerprint is the one from before ``check`` existed
+        extra = () if check == "discretized" else (check,)
         fp = artifacts.fingerprint(ALGORITHM_VERSION, env.to_json(), float(padding), n, int(k),
-                                   int(roadmap_seed), int(round_))
+                                   int(roadmap_seed), int(round_), *extra)
         got = artifacts.compute_or_load(Path(cache_dir) / f"roadmap_{fp}.npz", fp, build)
         return Roadmap(*(np.asarray(got[f]) for f in Roadmap._fields))
 
     return _MEMORY.get(env, (float(padding), n, int(k), int(roadmap_seed), int(round_),
-                             None if cache_dir is None else str(cache_dir)), load)
+                             None if cache_dir is None else str(cache_dir), check), load)
 
 
 # ---------------------------------------------------------------------------
@@ -168,7 +171,7 @@ def roadmap_for(env, padding: float, *, milestones: int, k: int, roadmap_seed: i
 # ---------------------------------------------------------------------------
 
 def _attach(robot, world, index: MetricIndex, points: np.ndarray, k: int, padding: float,
-            outgoing: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+            outgoing: bool, check: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Edges between ``points`` and the nearest milestones they see: ``(point row,
     milestone, cost)``; ``outgoing``: point -> milestone, else milestone -> point."""
     idx, _ = index.query(points, k)
@@ -176,7 +179,7 @@ def _attach(robot, world, index: MetricIndex, points: np.ndarray, k: int, paddin
     ms = index.points[idx.reshape(-1)]
     p = points[rows]
     a, b = (p, ms) if outgoing else (ms, p)
-    free = steer_to_pairs(robot, world, a, b, padding)
+    free = steer_to_pairs(robot, world, a, b, padding, check=check)
     cost = distances(robot, a[free], b[free]).astype(np.float64)
     return rows[free], idx.reshape(-1)[free], cost
 
@@ -195,14 +198,14 @@ def _node_paths(pred: np.ndarray, src: np.ndarray, dst: np.ndarray) -> list[np.n
     return [t[: int(np.argmax(t == s)) + 1][::-1] for t, s in zip(trail, src)]
 
 
-def _search(robot, world, rm: Roadmap, q: np.ndarray, k: int, padding: float, threads: int
-             ) -> list[np.ndarray | None]:
+def _search(robot, world, rm: Roadmap, q: np.ndarray, k: int, padding: float, threads: int,
+            check: str) -> list[np.ndarray | None]:
     """Per query, the states of its shortest roadmap path (start ... goal), or None."""
     n, nq = len(rm.milestones), len(q)
     index = MetricIndex(robot, world, rm.milestones)
-    s_row, s_m, s_c = _attach(robot, world, index, q[:, 0], k, padding, outgoing=True)
-    g_row, g_m, g_c = _attach(robot, world, index, q[:, 1], k, padding, outgoing=False)
-    direct = steer_to_pairs(robot, world, q[:, 0], q[:, 1], padding)
+    s_row, s_m, s_c = _attach(robot, world, index, q[:, 0], k, padding, True, check)
+    g_row, g_m, g_c = _attach(robot, world, index, q[:, 1], k, padding, False, check)
+    direct = steer_to_pairs(robot, world, q[:, 0], q[:, 1], padding, check=check)
     d_row = np.flatnonzero(direct)
     d_c = distances(robot, q[d_row, 0], q[d_row, 1]).astype(np.float64)
     start, goal = n + np.arange(nq), n + nq + np.arange(nq)  # node ids
@@ -244,7 +247,7 @@ def plan_roadmap(env, queries, *, padding: float | None = None, seed: int = 0,
                  milestones: int = DEFAULT_MILESTONES, k: int | None = None,
                  grow_rounds: int = 2, roadmap_seed: int = 0, smooth: bool = True,
                  smooth_chunk: int = 128, cache_dir: str | Path | None = None,
-                 threads: int | None = None) -> PlanResult:
+                 threads: int | None = None, check: str = "discretized") -> PlanResult:
     """Plans every query on the environment's roadmap (the registry's ``"roadmap"``).
 
     Args:
@@ -262,6 +265,9 @@ def plan_roadmap(env, queries, *, padding: float | None = None, seed: int = 0,
         cache_dir: a folder to keep built roadmaps in (reused when the map, robot,
             padding and settings match).
         threads: Dijkstra threads (None: the CPU count); the result does not depend on it.
+        check: the motion check of the edges, the shortcuts and the final
+            verification, ``"discretized"`` (the paper's) or ``"certified"`` (see
+            :func:`ntq_jax.robots.batch.motion_check`).
 
     Returns:
         A verified :class:`PlanResult`; unconnected after the last round: NO_PATH.
@@ -287,10 +293,11 @@ def plan_roadmap(env, queries, *, padding: float | None = None, seed: int = 0,
             break
         tb = time.perf_counter()
         rm = roadmap_for(env, padding, milestones=milestones, k=kk, roadmap_seed=roadmap_seed,
-                         round_=r, cache_dir=cache_dir)
+                         round_=r, cache_dir=cache_dir, check=check)
         ts = time.perf_counter()
         found = _search(env.robot, env.world, rm, q[todo], kk, padding,
-                        threads=(os.cpu_count() or 1) if threads is None else int(threads))
+                        threads=(os.cpu_count() or 1) if threads is None else int(threads),
+                        check=check)
         for i, p in zip(todo, found):
             paths[i] = p
         info["rounds"] = r + 1
@@ -304,12 +311,12 @@ def plan_roadmap(env, queries, *, padding: float | None = None, seed: int = 0,
     t1 = time.perf_counter()
     if smooth and found.any():
         sp, sl, _ = shortcut_paths(env.robot, env.world, out[found], lengths[found], padding,
-                                   chunk_size=int(smooth_chunk))
+                                   chunk_size=int(smooth_chunk), check=check)
         out = np.full((nq, sp.shape[1], d), np.nan, np.float32)
         out[found], lengths[found] = sp, sl
     t2 = time.perf_counter()
     info["smooth_time"] = t2 - t1
-    res = finalize(q, out, lengths, status, info, env, padding)
+    res = finalize(q, out, lengths, status, info, env, padding, check)
     info["check_time"] = time.perf_counter() - t2
     info["time"] = time.perf_counter() - t0
     return res

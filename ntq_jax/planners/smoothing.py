@@ -42,7 +42,8 @@ from ntq_jax.robots.batch import steer_to_cm
 Array = jax.Array
 
 
-def shortcut_batch(robot, world: World, paths: Array, lengths: Array, padding: float):
+def shortcut_batch(robot, world: World, paths: Array, lengths: Array, padding: float,
+                   check: str = "discretized"):
     """Greedy farthest-visible shortcutting of a batch of paths (traceable, static shapes).
 
     Args:
@@ -51,6 +52,7 @@ def shortcut_batch(robot, world: World, paths: Array, lengths: Array, padding: f
         paths: ``(B, L, d)`` float32 waypoints, NaN-padded after ``lengths[b]``.
         lengths: ``(B,)`` int32 waypoint counts (0 or 1: returned as they are).
         padding: clearance of the planning geometry (static).
+        check: the motion check (static; see :func:`ntq_jax.robots.batch.motion_check`).
 
     Returns:
         ``(out (B, L, d), out_lengths (B,) int32, ok (B,) bool)``: the shortcut
@@ -72,7 +74,7 @@ def shortcut_batch(robot, world: World, paths: Array, lengths: Array, padding: f
         a = pts[:, rows, cur]  # (d, B)
         a_b = jnp.broadcast_to(a[:, :, None], (d, b, l)).reshape(d, b * l)
         cand = (j > cur[:, None]) & (j < lengths[:, None]) & ~done[:, None]
-        vis = steer_to_cm(robot, world, a_b, flat, padding, mask=cand.reshape(-1))
+        vis = steer_to_cm(robot, world, a_b, flat, padding, mask=cand.reshape(-1), check=check)
         vis = vis.reshape(b, l) & cand
         far = jnp.max(jnp.where(vis, j, -1), axis=1)
         seen = far > cur
@@ -95,13 +97,13 @@ def shortcut_batch(robot, world: World, paths: Array, lengths: Array, padding: f
     return out, n, ok
 
 
-shortcut = jax.jit(shortcut_batch, static_argnames=("robot", "padding"),
+shortcut = jax.jit(shortcut_batch, static_argnames=("robot", "padding", "check"),
                    compiler_options=KERNEL_COMPILER_OPTIONS)
 shortcut.__doc__ = shortcut_batch.__doc__
 
 
 def shortcut_paths(robot, world: World, paths, lengths, padding: float, *,
-                   chunk_size: int = 128) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                   chunk_size: int = 128, check: str = "discretized") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Shortcuts a batch of NaN-padded paths (greedy farthest-visible rule), any batch size.
 
     The batch is processed in chunks of exactly ``chunk_size`` paths (the last
@@ -115,6 +117,7 @@ def shortcut_paths(robot, world: World, paths, lengths, padding: float, *,
         lengths: ``(B,)`` int waypoint counts.
         padding: planning clearance (a number).
         chunk_size: paths per jitted call.
+        check: the motion check (see :func:`ntq_jax.robots.batch.motion_check`).
 
     Returns:
         ``(paths (B, L', d) float32 NaN-padded, lengths (B,) int32, ok (B,) bool)``
@@ -139,7 +142,7 @@ def shortcut_paths(robot, world: World, paths, lengths, padding: float, *,
     w = min(lp, p.shape[1])
     buf[:, :w] = p[:, :w]
     # padding rows are empty paths (length 0): never checked, dropped below
-    pending = [(m, shortcut(robot, world, jnp.asarray(b), jnp.asarray(n), padding))
+    pending = [(m, shortcut(robot, world, jnp.asarray(b), jnp.asarray(n), padding, check))
                for _, m, (b, n), _ in padded_chunks([buf, n_in], chunk, fill=0)]
     out, n_out, ok = (np.concatenate([np.asarray(r[i])[:m] for m, r in pending]) for i in range(3))
     width = max(2, int(n_out.max()))

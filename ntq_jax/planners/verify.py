@@ -1,7 +1,7 @@
 """The one path checker: every planned path is verified here, with the package's steer_to.
 
 :func:`check_paths` verifies NaN-padded paths segment by segment with the
-exact batched ``steer_to`` and computes their costs; :func:`finalize` turns a
+batched ``steer_to`` (the discretised or the certified motion check) and computes their costs; :func:`finalize` turns a
 planner's raw output into the :class:`ntq_jax.types.PlanResult` contract
 (exact endpoints, verified SOLVED rows, NaN padding). Both return new arrays;
 neither mutates its inputs.
@@ -25,13 +25,17 @@ def valid_queries(env, q: np.ndarray, padding: float) -> np.ndarray:
     return ok.reshape(k, 2).all(axis=1) & np.isfinite(flat).all(axis=1).reshape(k, 2).all(axis=1)
 
 
-def check_paths(env, paths: np.ndarray, lengths: np.ndarray, padding: float):
+def check_paths(env, paths: np.ndarray, lengths: np.ndarray, padding: float,
+                check: str = "discretized"):
     """Verifies NaN-padded paths with the exact kernel and computes their costs.
 
     Args:
         env: the environment.
         paths: ``(K, L, d)`` float32; lengths ``(K,)`` waypoint counts.
         padding: planning clearance.
+        check: the motion check of every segment, ``"discretized"`` (the paper's)
+            or ``"certified"`` (every configuration proven clear); see
+            :func:`ntq_jax.robots.batch.motion_check`.
 
     Returns:
         ``(ok (K,) bool, costs (K,) float64)``: ``ok`` where the path has at least 2
@@ -46,7 +50,7 @@ def check_paths(env, paths: np.ndarray, lengths: np.ndarray, padding: float):
     a = paths[rows, cols]
     b = paths[rows, cols + 1]
     finite = np.isfinite(a).all(1) & np.isfinite(b).all(1)
-    free = steer_to_pairs(env.robot, env.world, a, b, padding)
+    free = steer_to_pairs(env.robot, env.world, a, b, padding, check=check)
     if env.robot.kind == "point":
         dist = np.linalg.norm(b.astype(np.float64) - a.astype(np.float64), axis=1)
     else:
@@ -60,11 +64,11 @@ def check_paths(env, paths: np.ndarray, lengths: np.ndarray, padding: float):
 
 
 def finalize(q: np.ndarray, paths: np.ndarray, lengths: np.ndarray, status: np.ndarray,
-             info: dict, env, padding: float) -> PlanResult:
+             info: dict, env, padding: float, check: str = "discretized") -> PlanResult:
     """A planner's raw output as a verified :class:`PlanResult`.
 
     Rows with ``status == SOLVED`` get the query's exact endpoints and are checked
-    with :func:`check_paths`; a path that fails becomes NO_PATH (counted in
+    with :func:`check_paths` (motion check ``check``); a path that fails becomes NO_PATH (counted in
     ``info["rejected"]``). Non-solved rows are NaN with length 0 and cost inf.
     """
     k, d = q.shape[0], q.shape[2]
@@ -79,7 +83,7 @@ def finalize(q: np.ndarray, paths: np.ndarray, lengths: np.ndarray, status: np.n
     rows = np.flatnonzero(lengths >= 2)
     out[rows, 0] = q[rows, 0]  # planners must return the exact states; enforce it
     out[rows, lengths[rows] - 1] = q[rows, 1]
-    ok, costs = check_paths(env, out, lengths, padding)
+    ok, costs = check_paths(env, out, lengths, padding, check)
     status = status.astype(np.int8).copy()
     rejected = (status == PlanStatus.SOLVED) & ~ok
     status[rejected] = PlanStatus.NO_PATH

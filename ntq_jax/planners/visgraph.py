@@ -376,7 +376,7 @@ _GRAPHS = EnvCache(per_env=4)
 
 def plan_visgraph(env, queries, *, padding: float | None = None, seed: int = 0,
                   eps: float | None = None, arc_step: float | None = None,
-                  chunk_size: int = 8192) -> PlanResult:
+                  chunk_size: int = 8192, check: str = "discretized") -> PlanResult:
     """Plans on ``env``'s visibility graph (built once per environment and settings, cached
     while ``env`` lives) and verifies every path (the registry's ``"visgraph"``).
 
@@ -388,6 +388,8 @@ def plan_visgraph(env, queries, *, padding: float | None = None, seed: int = 0,
         seed: unused (deterministic).
         eps, arc_step: :meth:`VisGraph.build` options (``None``: the defaults).
         chunk_size: queries per jitted call.
+        check: the motion check of the final verification (for the point robot both
+            checks are the exact segment test).
 
     Returns:
         A :class:`PlanResult` checked by :func:`ntq_jax.planners.verify.finalize`.
@@ -408,7 +410,7 @@ def plan_visgraph(env, queries, *, padding: float | None = None, seed: int = 0,
     t1 = time.perf_counter()
     res = graph.plan(q, chunk_size=int(chunk_size))
     info = dict(res.info, build_time=t1 - t0, plan_time=time.perf_counter() - t1)
-    out = finalize(q, res.paths, res.lengths, res.status, info, env, pad)
+    out = finalize(q, res.paths, res.lengths, res.status, info, env, pad, check)
     info["time"] = time.perf_counter() - t0
     return out
 

@@ -24,6 +24,7 @@ import numpy as np
 
 from ntq_jax.batching import map_chunks
 from ntq_jax.geometry import KERNEL_COMPILER_OPTIONS, World
+from ntq_jax.robots.certified import MOTION_CHECKS
 
 Array = jax.Array
 
@@ -36,10 +37,26 @@ def is_valid_batch(robot, world: World, states: Array, padding: float) -> Array:
     return jax.vmap(robot.is_valid, in_axes=(1, None, None))(states.T, world, padding)
 
 
-@functools.partial(_kernel_jit, static_argnames=("robot", "padding"))
-def steer_to_batch(robot, world: World, a: Array, b: Array, padding: float) -> Array:
+def motion_check(robot, check: str):
+    """The coordinate-major batched motion check ``check`` of ``robot``.
+
+    ``"discretized"``: ``robot.steer_to_batch`` (states ``resolution`` apart, the
+    paper's check; exact for the point robot). ``"certified"``:
+    ``robot.certified_steer_to_batch`` (every configuration proven clear, see
+    :mod:`ntq_jax.robots.certified`; the point robot's exact test is already that).
+    """
+    if check == "discretized":
+        return robot.steer_to_batch
+    if check == "certified":
+        return robot.certified_steer_to_batch
+    raise ValueError(f"check must be one of {MOTION_CHECKS}, got {check!r}")
+
+
+@functools.partial(_kernel_jit, static_argnames=("robot", "padding", "check"))
+def steer_to_batch(robot, world: World, a: Array, b: Array, padding: float,
+                   check: str = "discretized") -> Array:
     """``(N, d), (N, d) -> (N,)`` bool, True where the connection is collision-free."""
-    return robot.steer_to_batch(a.T, b.T, world, padding)
+    return motion_check(robot, check)(a.T, b.T, world, padding)
 
 
 @functools.partial(_kernel_jit, static_argnames=("robot",))
@@ -54,33 +71,37 @@ def is_valid_cm(robot, world: World, states_cm: Array, padding: float) -> Array:
 
 
 def steer_to_cm(robot, world: World, a_cm: Array, b_cm: Array, padding: float,
-                mask: Array | None = None) -> Array:
+                mask: Array | None = None, check: str = "discretized") -> Array:
     """Coordinate-major ``(d, N), (d, N) -> (N,)``, for use inside other jitted code.
 
     ``mask`` (optional, ``(N,)`` bool): only these connections are checked, the
-    others are reported blocked (False) without any work.
+    others are reported blocked (False) without any work. ``check``: see
+    :func:`motion_check`.
     """
-    return robot.steer_to_batch(a_cm, b_cm, world, padding, mask)
+    return motion_check(robot, check)(a_cm, b_cm, world, padding, mask)
 
 
 STEER_CHUNK = 8192  # pairs per compiled call of steer_to_pairs
 CHECK_CHUNK = 2048  # states per compiled call of valid_states / distances
 
 
-@functools.partial(_kernel_jit, static_argnames=("robot", "padding"))
-def _steer_masked(robot, world: World, a: Array, b: Array, mask: Array, padding: float) -> Array:
-    return steer_to_cm(robot, world, a.T, b.T, padding, mask=mask)
+@functools.partial(_kernel_jit, static_argnames=("robot", "padding", "check"))
+def _steer_masked(robot, world: World, a: Array, b: Array, mask: Array, padding: float,
+                  check: str) -> Array:
+    return steer_to_cm(robot, world, a.T, b.T, padding, mask=mask, check=check)
 
 
 def steer_to_pairs(robot, world: World, a, b, padding: float,
-                   chunk: int = STEER_CHUNK) -> np.ndarray:
+                   chunk: int = STEER_CHUNK, check: str = "discretized") -> np.ndarray:
     """``steer_to`` over any number of ``(N, d)`` pairs in fixed-size compiled chunks.
 
-    Returns ``(N,)`` bool (host), True where the straight connection is collision-free.
+    Returns ``(N,)`` bool (host), True where the straight connection is
+    collision-free by the motion check ``check`` (see :func:`motion_check`).
     """
+    motion_check(robot, check)  # an unknown check fails here, before any work
     a = np.asarray(a, np.float32).reshape(-1, robot.dim)
     b = np.asarray(b, np.float32).reshape(-1, robot.dim)
-    return map_chunks(lambda x, y, m: _steer_masked(robot, world, x, y, m, padding), a, b,
+    return map_chunks(lambda x, y, m: _steer_masked(robot, world, x, y, m, padding, check), a, b,
                       chunk=chunk, with_mask=True).astype(bool)
 
 
@@ -176,12 +197,13 @@ def split_host_rows(arrays: list[np.ndarray]) -> tuple[int, list[np.ndarray], li
     return k, heads, bulks
 
 
-@functools.partial(_kernel_jit, static_argnames=("robot", "padding", "k"))
+@functools.partial(_kernel_jit, static_argnames=("robot", "padding", "k", "check"))
 def steer_to_batch_split(robot, world: World, head_a: Array, head_b: Array, bulk_a: Array,
-                         bulk_b: Array, padding: float, k: int) -> Array:
+                         bulk_b: Array, padding: float, k: int, check: str = "discretized") -> Array:
     """:func:`steer_to_batch` of the rows ``head[:k]`` followed by ``bulk`` (see :func:`split_host_rows`)."""
-    head = robot.steer_to_batch(head_a.T, head_b.T, world, padding)[:k]
-    return jax.numpy.concatenate([head, robot.steer_to_batch(bulk_a.T, bulk_b.T, world, padding)])
+    steer = motion_check(robot, check)
+    head = steer(head_a.T, head_b.T, world, padding)[:k]
+    return jax.numpy.concatenate([head, steer(bulk_a.T, bulk_b.T, world, padding)])
 
 
 @functools.partial(_kernel_jit, static_argnames=("robot", "padding", "k"))

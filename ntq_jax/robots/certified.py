@@ -45,10 +45,12 @@ from ntq_jax.robots.base import _longest_first
 
 Array = jax.Array
 
-CERT_LANES = 512  # lanes of the work queue
+CERT_LANES = 512  # lanes of the work queue's first phase
 CERT_POINTS = 8  # configurations each lane evaluates per iteration
 CERT_GROWTH = 1.5  # initial step of the sweep: CERT_GROWTH * c(front) / D (see certified_steer_to_batch)
-CERT_MAX_STEPS = 1024  # iterations per motion before it is reported blocked
+CERT_PHASE_STEPS = 48  # iterations per motion in the wide first phase
+CERT_TAIL_LANES = 32  # lanes of the second phase (the few motions the first left undecided)
+CERT_MAX_STEPS = 1024  # iterations per motion in all before it is reported blocked
 CERT_MARGIN = 1e-3  # workspace units: float32 safety margin of the free test
 
 MOTION_CHECKS = ("discretized", "certified")  # the values of every ``check=`` argument
@@ -67,6 +69,8 @@ class CertifiedSteering:
 def certified_steer_to_batch(robot, a: Array, b: Array, world: World, padding: float,
                              mask: Array | None = None, *, lanes: int = CERT_LANES,
                              points: int = CERT_POINTS, growth: float = CERT_GROWTH,
+                             phase_steps: int = CERT_PHASE_STEPS,
+                             tail_lanes: int = CERT_TAIL_LANES,
                              max_steps: int = CERT_MAX_STEPS,
                              margin: float = CERT_MARGIN) -> Array:
     """Certified ``steer_to`` over a coordinate-major batch ``(d, N), (d, N) -> (N,)`` bool.
@@ -84,14 +88,21 @@ def certified_steer_to_batch(robot, a: Array, b: Array, world: World, padding: f
     to the goal is proven, blocked as soon as an evaluated configuration is
     invalid. The first iteration of a motion spreads its points evenly over
     ``[0, 1]`` (most blocked motions are found there); later ones step
-    ``h = growth * c(front) / D``, the spacing that the clearance at the front
-    alone nearly proves, so free space is crossed in a few large steps and the
-    steps shrink only where the robot passes close to an obstacle.
+    ``h = g c(front) / D`` with ``g`` starting at ``growth``, halved after an
+    iteration that proves nothing (``g <= 1`` always proves the first piece, so
+    the sweep cannot stall) and doubled after one that proves every piece. Free
+    space is crossed in a few large steps; the steps shrink only where the robot
+    passes close to an obstacle.
+
+    Two phases keep the tail short: ``lanes`` lanes give each motion up to
+    ``phase_steps`` iterations; the few left undecided (long passes close to
+    obstacles) continue where they stopped on ``tail_lanes`` lanes, up to
+    ``max_steps`` iterations in all, and are reported blocked if still
+    undecided.
     """
     d, num = a.shape
     if num == 0:
         return jnp.zeros((0,), bool)
-    lanes = min(lanes, num)
     clear = jax.vmap(robot.clearance, in_axes=(1, None, None))
     ca, cb = clear(a, world, padding), clear(b, world, padding)
     dist = jax.vmap(robot.sweep_bound, in_axes=(1, 1))(a, b)
@@ -100,65 +111,99 @@ def certified_steer_to_batch(robot, a: Array, b: Array, world: World, padding: f
         ok = ok & mask
     easy = ok & (ca + cb > dist + margin)
     hard = ok & ~easy
-    # the queue: hard motions, longest sweep first (a rough cost order that keeps the tail short)
-    order = _longest_first(jnp.where(hard, 1 + jnp.minimum(dist * 64.0, 2.0 ** 30).astype(jnp.int32), 0))
-    work = jnp.sum(hard, dtype=jnp.int32)
+    sweep = _Sweep(robot, a, b, world, padding, cb, dist, points, margin)
+    g0 = jnp.full((num,), growth, a.dtype)
+    free, left, lo, clo, g = sweep.run(hard, jnp.zeros((num,), a.dtype), ca, g0, True,
+                                       min(lanes, num), phase_steps)
+    if max_steps > phase_steps:
+        free2, left, _, _, _ = sweep.run(left, lo, clo, g, False, min(tail_lanes, num),
+                                         max_steps - phase_steps)
+        free = free | free2
+    return easy | free
 
-    interpolate = jax.vmap(jax.vmap(robot.interpolate, in_axes=(None, None, 0), out_axes=1),
-                           in_axes=(1, 1, 1), out_axes=2)
-    clear2 = jax.vmap(jax.vmap(robot.clearance, in_axes=(1, None, None)), in_axes=(1, None, None))
-    ks = jnp.arange(1, points + 1, dtype=a.dtype)[:, None]  # (points, 1)
 
-    def ahead(pos, lo, clo, g, first):
-        """The next ``points`` configurations of each lane's sweep and their clearances."""
-        i = order[jnp.minimum(pos, num - 1)]
-        step = jnp.minimum(g * clo / jnp.maximum(dist[i], 1e-30), (1.0 - lo) / points)
-        step = jnp.where(first, 1.0 / (points + 1), step)
-        ts = jnp.minimum(lo + step * ks, 1.0)  # (points, lanes)
-        ap = jnp.stack([a[j][i] for j in range(d)])
-        bp = jnp.stack([b[j][i] for j in range(d)])
-        return ts, clear2(interpolate(ap, bp, ts), world, padding)
+class _Sweep:
+    """The sweep's work queue over one batch of motions (see :func:`certified_steer_to_batch`)."""
 
-    def cond(carry):
-        return jnp.any(carry[1] < work)
+    def __init__(self, robot, a, b, world, padding, cb, dist, points, margin):
+        self.a, self.b, self.world, self.padding = a, b, world, padding
+        self.cb, self.dist, self.points, self.margin = cb, dist, points, margin
+        self.interpolate = jax.vmap(jax.vmap(robot.interpolate, in_axes=(None, None, 0), out_axes=1),
+                                    in_axes=(1, 1, 1), out_axes=2)
+        self.clear = jax.vmap(jax.vmap(robot.clearance, in_axes=(1, None, None)), in_axes=(1, None, None))
+        self.ks = jnp.arange(1, points + 1, dtype=a.dtype)[:, None]  # (points, 1)
 
-    def body(carry):
-        # ``ts, cs`` come from the end of the previous iteration: as loop-carried values
-        # they are computed once, where XLA would otherwise fuse the clearance into each
-        # of its consumers below and compute it several times
-        head, pos, lo, clo, g, steps, ts, cs, out = carry
-        live = pos < work
-        i = order[jnp.minimum(pos, num - 1)]
-        di = dist[i]
-        steps = steps + 1
-        hit = jnp.any(~(cs > 0), axis=0)
-        moving = jnp.ones_like(live)
-        moved = jnp.zeros_like(steps)
-        for k in range(points):  # move the front over the proven leading pieces
-            moving = moving & (clo + cs[k] > di * (ts[k] - lo) + margin)
-            lo, clo = jnp.where(moving, ts[k], lo), jnp.where(moving, cs[k], clo)
-            moved = moved + moving
-        # the step adapts: a step at growth g <= 1 is always proven (as c(front) > 0), so
-        # halving it after an iteration without progress cannot stall; it grows back when
-        # every piece was proven
-        g = jnp.where(moved == 0, 0.5 * g, jnp.where(moved == points, jnp.minimum(2.0 * g, 4.0 * growth), g))
-        free = live & ~hit & (clo + cb[i] > di * (1.0 - lo) + margin)
-        done = live & (free | hit | (steps >= max_steps))
-        out = out.at[jnp.where(done, i, num)].set(free, mode="drop")
-        # decided lanes take the next motions of the queue
-        pos = jnp.where(done, head + jnp.cumsum(done, dtype=jnp.int32) - 1, pos)
-        head = head + jnp.sum(done, dtype=jnp.int32)
-        j = order[jnp.minimum(pos, num - 1)]
-        lo = jnp.where(done, 0.0, lo)
-        clo = jnp.where(done, ca[j], clo)
-        g = jnp.where(done, growth, g)
-        steps = jnp.where(done, 0, steps)
-        return (head, pos, lo, clo, g, steps) + ahead(pos, lo, clo, g, done) + (out,)
+    def ahead(self, i, lo, clo, g, first):
+        """The next ``points`` configurations of the sweeps of motions ``i`` and their clearances."""
+        step = jnp.minimum(g * clo / jnp.maximum(self.dist[i], 1e-30), (1.0 - lo) / self.points)
+        step = jnp.where(first, 1.0 / (self.points + 1), step)
+        ts = jnp.minimum(lo + step * self.ks, 1.0)  # (points, lanes)
+        d = self.a.shape[0]
+        ap = jnp.stack([self.a[j][i] for j in range(d)])
+        bp = jnp.stack([self.b[j][i] for j in range(d)])
+        return ts, self.clear(self.interpolate(ap, bp, ts), self.world, self.padding)
 
-    pos = jnp.arange(lanes, dtype=jnp.int32)
-    lo = jnp.zeros((lanes,), a.dtype)
-    clo = ca[order[pos]]
-    g = jnp.full((lanes,), growth, a.dtype)
-    steps = jnp.zeros((lanes,), jnp.int32)
-    init = (jnp.int32(lanes), pos, lo, clo, g, steps) + ahead(pos, lo, clo, g, pos >= 0) + (easy,)
-    return jax.lax.while_loop(cond, body, init)[8]
+    def run(self, todo, lo0, clo0, g0, first: bool, lanes: int, max_steps: int):
+        """Sweeps the motions ``todo`` from their fronts ``lo0`` (clearance ``clo0``, step
+        factor ``g0``) for up to ``max_steps`` iterations each.
+
+        Returns ``(free, undecided, lo, clo, g)``, each ``(N,)``: the motions proven
+        free, those still undecided, and where their sweeps stopped.
+        """
+        num = todo.shape[0]
+        order = _longest_first(
+            jnp.where(todo, 1 + jnp.minimum(self.dist * 64.0, 2.0 ** 30).astype(jnp.int32), 0))
+        work = jnp.sum(todo, dtype=jnp.int32)
+        points, margin, dist, cb = self.points, self.margin, self.dist, self.cb
+
+        def motion(pos):
+            return order[jnp.minimum(pos, num - 1)]
+
+        def cond(carry):
+            return jnp.any(carry[1] < work)
+
+        def body(carry):
+            # ``ts, cs`` come from the end of the previous iteration: as loop-carried values
+            # they are computed once, where XLA would otherwise fuse the clearance into each
+            # of its consumers below and compute it several times
+            head, pos, lo, clo, g, steps, ts, cs, free, left, out_lo, out_clo, out_g = carry
+            live = pos < work
+            i = motion(pos)
+            di = dist[i]
+            steps = steps + 1
+            hit = jnp.any(~(cs > 0), axis=0)
+            moving = jnp.ones_like(live)
+            moved = jnp.zeros_like(steps)
+            for k in range(points):  # move the front over the proven leading pieces
+                moving = moving & (clo + cs[k] > di * (ts[k] - lo) + margin)
+                lo, clo = jnp.where(moving, ts[k], lo), jnp.where(moving, cs[k], clo)
+                moved = moved + moving
+            g = jnp.where(moved == 0, 0.5 * g, jnp.where(moved == points, 2.0 * g, g))
+            ok = live & ~hit & (clo + cb[i] > di * (1.0 - lo) + margin)
+            out_of_steps = live & ~ok & ~hit & (steps >= max_steps)
+            done = live & (ok | hit | out_of_steps)
+            at = jnp.where(done, i, num)
+            free = free.at[at].set(ok, mode="drop")
+            left = left.at[at].set(out_of_steps, mode="drop")
+            out_lo = out_lo.at[at].set(lo, mode="drop")
+            out_clo = out_clo.at[at].set(clo, mode="drop")
+            out_g = out_g.at[at].set(g, mode="drop")
+            # decided lanes take the next motions of the queue
+            pos = jnp.where(done, head + jnp.cumsum(done, dtype=jnp.int32) - 1, pos)
+            head = head + jnp.sum(done, dtype=jnp.int32)
+            j = motion(pos)
+            lo, clo, g = (jnp.where(done, lo0[j], lo), jnp.where(done, clo0[j], clo),
+                          jnp.where(done, g0[j], g))
+            steps = jnp.where(done, 0, steps)
+            ts, cs = self.ahead(j, lo, clo, g, done & first)
+            return head, pos, lo, clo, g, steps, ts, cs, free, left, out_lo, out_clo, out_g
+
+        pos = jnp.arange(lanes, dtype=jnp.int32)
+        i = motion(pos)
+        lo, clo, g = lo0[i], clo0[i], g0[i]
+        no = jnp.zeros((num,), bool)
+        init = ((jnp.int32(lanes), pos, lo, clo, g, jnp.zeros((lanes,), jnp.int32))
+                + self.ahead(i, lo, clo, g, jnp.full((lanes,), first))
+                + (no, no, lo0, clo0, g0))
+        out = jax.lax.while_loop(cond, body, init)
+        return out[8:]

@@ -57,7 +57,8 @@ MAP = {"name": "bench7", "robot": {"kind": "point"}, "bounds": [[0, 20], [0, 20]
        "discs": [], "padding": 0.8}
 
 GOALS = {"steer_qps": 3e8, "steer_vs_loop": 1e5, "steer_vs_numpy": 100.0, "gamma_cps": 1.5e8,
-         "gamma_1e9_seconds": 10.0, "rigid_cps": 1e5, "arm_cps": 2.5e5, "rss_ratio": 1.10,
+         "gamma_1e9_seconds": 10.0, "rigid_cps": 1e5, "arm_cps": 2.5e5,
+         "rigid_cert_cps": 7e5, "arm_cert_cps": 2.5e5, "rss_ratio": 1.10,
          "steer_numpy_qps": 5e8}
 
 
@@ -349,6 +350,78 @@ def bench_motions(name: str, n: int, reps: int, goal: float) -> list[dict]:
     ]
 
 
+def _short_motions(env, key, n: int, pad: float, length: float) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` valid pairs whose second state is the first plus a random step of metric length
+    up to about ``length`` (steps of the size a PNet predicts), kept where both are valid."""
+    robot = env.robot
+    out_a, out_b = [], []
+    rng = np.random.default_rng(int(jax.random.randint(key, (), 0, 2**31 - 1)))
+    while sum(len(x) for x in out_a) < n:
+        a = np.asarray(env.sample_states(jax.random.fold_in(key, len(out_a)), n, padding=pad))
+        step = rng.normal(size=a.shape) / np.asarray(robot.metric_weights)
+        step *= (length * rng.uniform(size=(n, 1))) / np.linalg.norm(step * np.asarray(robot.metric_weights),
+                                                                      axis=1, keepdims=True)
+        b = (a + step).astype(np.float32)
+        if robot.kind == "rigid_body":
+            b[:, 2] = (b[:, 2] + np.pi) % (2 * np.pi) - np.pi
+        ok = np.asarray(env.is_valid(b, padding=pad))
+        out_a.append(a[ok])
+        out_b.append(b[ok])
+    return np.concatenate(out_a)[:n], np.concatenate(out_b)[:n]
+
+
+def bench_certified(name: str, n: int, reps: int, goal: float | None, pad: float | None = None,
+                    short: float | None = None) -> list[dict]:
+    """The certified motion check against the discretised one, side by side, same motions.
+
+    Motions: uniform random valid pairs (``short`` None), or PNet-step-like pairs
+    (a valid state and a random step of metric length up to ``short``).
+    """
+    env = nj.make_env(name)
+    pad = env.padding if pad is None else pad
+    key = jax.random.key(1)
+    if short is None:
+        s = np.asarray(env.sample_states(key, 2 * n, padding=pad))
+        a, b = jnp.asarray(s[:n]), jnp.asarray(s[n:])
+        what = "uniform valid pairs"
+    else:
+        a, b = (jnp.asarray(x) for x in _short_motions(env, key, n, pad, short))
+        what = f"steps <= {short:g}"
+    t = interleaved({"certified": lambda: env.steer_to(a, b, padding=pad, check="certified"),
+                     "discretized": lambda: env.steer_to(a, b, padding=pad)}, reps)
+    cores = interleaved.cores
+    cert = np.asarray(env.steer_to(a, b, padding=pad, check="certified"))
+    disc = np.asarray(env.steer_to(a, b, padding=pad))
+    kind = "rigid body" if env.robot.kind == "rigid_body" else f"{env.robot.dim}-link arm"
+    row = {"name": f"{kind} certified motion checks ({name}, pad {pad:g}, {what})", "n": n,
+           "per_second": n / t["certified"], "free_fraction": float(cert.mean()),
+           "cores": cores["certified"],
+           "certified_free_discretized_blocked": int(np.sum(cert & ~disc)),
+           "discretized_free_certified_blocked": int(np.sum(disc & ~cert))}
+    if goal is not None:
+        row["goal"] = goal
+    return [row,
+            {"name": f"{kind} discretised motion checks, same motions", "n": n,
+             "per_second": n / t["discretized"], "free_fraction": float(disc.mean()),
+             "cores": cores["discretized"]},
+            {"name": f"ratio {kind} certified / discretised throughput",
+             "ratio": t["discretized"] / t["certified"]},
+            {"name": f"{kind}: free by discretised, blocked by certified", "n": n,
+             "value": float(np.sum(disc & ~cert))}]
+
+
+def bench_all_certified(quick: bool, reps: int) -> list[dict]:
+    n_r, n_a = (2 * 10**4, 10**4) if quick else (10**5, 10**5)
+    rows = []
+    rows += bench_certified("rigid/3", n_r, reps, GOALS["rigid_cert_cps"])
+    rows += bench_certified("nlink/6", n_a, reps, GOALS["arm_cert_cps"])
+    rows += bench_certified("rigid/3", n_r, reps, None, pad=0.0)
+    rows += bench_certified("nlink/6", n_a, reps, None, pad=0.0)
+    rows += bench_certified("rigid/3", n_r, reps, None, pad=0.0, short=2.0)
+    rows += bench_certified("nlink/6", n_a, reps, None, pad=0.0, short=1.0)
+    return rows
+
+
 # ---------------------------------------------------------------------------
 
 def _fmt(v: float) -> str:
@@ -386,8 +459,9 @@ def main(argv=None) -> int:
                     help="skip the 1e9-query gamma_nt runs (memory check uses 1e7 vs 1e8)")
     ap.add_argument("--reps", type=int, default=None, help="interleaved repeats (default 7, quick 3)")
     ap.add_argument("--json", type=Path, default=None, help="also write all rows as JSON")
-    ap.add_argument("--only", choices=("numpy",), default=None,
-                    help="run only one part: numpy = the NumPy-input steer_to comparison")
+    ap.add_argument("--only", choices=("numpy", "certified"), default=None,
+                    help="run only one part: numpy = the NumPy-input steer_to comparison, "
+                         "certified = certified vs discretised motion checks")
     args = ap.parse_args(argv)
     quick = args.quick
     skip_1e9 = args.skip_1e9 or quick
@@ -400,6 +474,8 @@ def main(argv=None) -> int:
           f"load average {load0[0]:.2f} at start; map {env.name}: {env.world.num_boxes} boxes, "
           f"padding {env.padding}")
     rows = []
+    if args.only == "certified":
+        return _report(args, argv, bench_all_certified(quick, reps), t_start, load0)
     rows += bench_numpy_steer("point/3", n=10**7, reps=reps if not quick else 5)
     if args.only == "numpy":
         return _report(args, argv, rows, t_start, load0)
@@ -412,6 +488,7 @@ def main(argv=None) -> int:
                           goal=GOALS["rigid_cps"])
     rows += bench_motions("nlink/6", n=10**5 if not quick else 10**4, reps=reps if not quick else 2,
                           goal=GOALS["arm_cps"])
+    rows += bench_all_certified(quick, reps)
     rows += bench_memory((10**7, 10**9) if not skip_1e9 else (10**7, 10**8))
     return _report(args, argv, rows, t_start, load0)
 

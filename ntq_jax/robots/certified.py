@@ -2,37 +2,38 @@
 
 The discretised check (:mod:`ntq_jax.robots.base`) tests states ``resolution``
 apart and can miss a shallow clip of an obstacle between two of them. This
-check cannot: it uses clearance-based bisection (Schwarzer, Saha and Latombe,
-"Exact collision checking of robot paths", 2002).
+check cannot. It uses the free-piece condition of clearance-based exact
+collision checking (Schwarzer, Saha and Latombe, "Exact collision checking of
+robot paths", 2002):
 
-* ``c(q)``, the robot's *clearance* (``robot.clearance``): the distance from
-  its geometry at ``q`` to the nearest obstacle minus the padding, or to the
-  workspace boundary if that is nearer; ``c(q) > 0`` exactly when ``q`` is
-  valid.
-* ``D(qa, qb)``, the *sweep bound* (``robot.sweep_bound``): an upper bound on
-  how far any point of the robot moves along the motion from ``qa`` to
-  ``qb``. The rigid body: ``|dp| + r_max |dtheta|`` (``r_max`` the rectangle's
-  half diagonal); the arm: ``sum_j R_j |dq_j|`` (``R_j`` the reach beyond
-  joint ``j``). Both are linear in the motion's parameter, so a piece
-  ``[t0, t1]`` of it moves at most ``(t1 - t0) D``.
-* A piece is free when ``c(q(t0)) + c(q(t1)) > (t1 - t0) D + margin``: every
-  configuration in between is within ``t D`` of one end's geometry and within
-  ``(1 - t) D`` of the other's, and one of the two is less than that end's
-  clearance. Otherwise the piece is split at ``split`` evenly spaced interior
-  points; a point with ``c <= 0`` (an invalid state) makes the motion blocked.
+* ``c(q)``, the *clearance* of a part of the robot (``robot.part_clearances``;
+  the rigid body is one part, the arm one part per link): its distance to the
+  nearest obstacle minus the padding, or to the workspace boundary if that is
+  nearer. All parts have ``c > 0`` exactly when ``q`` is valid.
+* ``D(qa, qb)``, the part's *sweep bound* (``robot.part_sweep_bounds``): an
+  upper bound on how far any of its points moves along the motion from ``qa``
+  to ``qb``. The rigid body: ``|dp| + r_max |dtheta|`` (``r_max`` the
+  rectangle's half diagonal); link ``k`` of the arm: ``sum_{j <= k} R_jk |dq_j|``
+  (``R_jk`` the length of links ``j..k``). Both are linear in the motion's
+  parameter, so a piece ``[t0, t1]`` of it moves at most ``(t1 - t0) D``.
+* A piece is free when, for every part, ``c(q(t0)) + c(q(t1)) > (t1 - t0) D +
+  margin``: a configuration in between is within ``(t - t0) D`` of the part's
+  geometry at ``t0`` and within ``(t1 - t) D`` of it at ``t1``, and one of the
+  two is less than that end's clearance. A configuration with ``c <= 0`` (an
+  invalid state) makes the motion blocked.
 
-``margin`` (workspace units) absorbs float32 rounding in the clearances, the
-interpolated states and the bound, so a motion that passes closer than about
-``margin / 2`` to an obstacle is reported blocked: the check errs only on the
-blocked side. Refinement is bounded: when the pieces still to prove would
-exceed ``stack`` pending ends, or a motion needs more than ``max_steps``
-refinements (a motion grazing an obstacle for a long stretch), the motion is
-reported **blocked**, never free.
+:func:`certified_steer_to_batch` covers each motion with such pieces, sweeping
+from the start (see there). ``margin`` (workspace units) absorbs float32
+rounding in the clearances, the interpolated states and the bound, so a motion
+that passes closer than about ``margin / 2`` to an obstacle is reported
+blocked: the check errs only on the blocked side. The work per motion is
+bounded: a motion still undecided after ``max_evals`` clearance evaluations (a
+long pass within a hair of an obstacle) is reported **blocked**, never free.
 
-Batches run as a work queue, like the discretised kernel: ``lanes`` lanes each
-refine one motion, proving pieces depth first from the start, and a lane whose
-motion is decided takes the next one. Motions that the endpoints' clearances
-alone prove free (short motions far from obstacles) never enter the queue.
+Batches run as a work queue, like the discretised kernel: lanes each sweep one
+motion, and a lane whose motion is decided takes the next one. Motions that the
+endpoints' clearances alone prove free (short motions far from obstacles) never
+enter the queue.
 """
 
 from __future__ import annotations
@@ -50,7 +51,8 @@ CERT_POINTS = 8  # configurations each lane evaluates per iteration
 CERT_GROWTH = 1.5  # initial step of the sweep: CERT_GROWTH * c(front) / D (see certified_steer_to_batch)
 CERT_PHASE_STEPS = 48  # iterations per motion in the wide first phase
 CERT_TAIL_LANES = 32  # lanes of the second phase (the few motions the first left undecided)
-CERT_MAX_STEPS = 1024  # iterations per motion in all before it is reported blocked
+CERT_TAIL_POINTS = 32  # configurations per lane and iteration in the second phase
+CERT_MAX_EVALS = 8192  # clearance evaluations per motion before it is reported blocked
 CERT_MARGIN = 1e-3  # workspace units: float32 safety margin of the free test
 
 MOTION_CHECKS = ("discretized", "certified")  # the values of every ``check=`` argument
@@ -58,7 +60,7 @@ MOTION_CHECKS = ("discretized", "certified")  # the values of every ``check=`` a
 
 class CertifiedSteering:
     """Mixin: :func:`certified_steer_to_batch` as a method, for robots with
-    ``clearance`` and ``sweep_bound``."""
+    ``part_clearances`` and ``part_sweep_bounds``."""
 
     def certified_steer_to_batch(self, a: Array, b: Array, world: World, padding: float,
                                  mask: Array | None = None) -> Array:
@@ -71,15 +73,21 @@ def certified_steer_to_batch(robot, a: Array, b: Array, world: World, padding: f
                              points: int = CERT_POINTS, growth: float = CERT_GROWTH,
                              phase_steps: int = CERT_PHASE_STEPS,
                              tail_lanes: int = CERT_TAIL_LANES,
-                             max_steps: int = CERT_MAX_STEPS,
+                             tail_points: int = CERT_TAIL_POINTS,
+                             max_evals: int = CERT_MAX_EVALS,
                              margin: float = CERT_MARGIN) -> Array:
     """Certified ``steer_to`` over a coordinate-major batch ``(d, N), (d, N) -> (N,)`` bool.
 
     True only for motions proven collision-free at ``padding`` (see the module
     docstring). ``mask`` (optional, ``(N,)`` bool): the motions to check; the
-    others, like non-finite ones, are reported blocked. The robot must provide
-    ``clearance(q, world, padding)`` and ``sweep_bound(a, b)``; the compiled
-    shape depends only on ``N`` and the static arguments.
+    others, like non-finite ones, are reported blocked. The robot provides
+    ``part_clearances(q, world, padding)`` and ``part_sweep_bounds(a, b)``, both
+    ``(m,)``: the robot's geometry in ``m`` parts (the arm: one per link), each
+    with its own clearance and its own bound on how far it moves; a piece of
+    motion is free when the free test holds for every part. A part near the base
+    moves little, so per-part bounds prove motions in fewer, longer pieces than
+    the whole robot's single bound. The compiled shape depends only on ``N`` and
+    the static arguments.
 
     Each lane sweeps its motion from the start: the *front* ``t0`` is the end of
     the proven part ``[0, t0]``. An iteration evaluates ``points`` configurations
@@ -88,54 +96,62 @@ def certified_steer_to_batch(robot, a: Array, b: Array, world: World, padding: f
     to the goal is proven, blocked as soon as an evaluated configuration is
     invalid. The first iteration of a motion spreads its points evenly over
     ``[0, 1]`` (most blocked motions are found there); later ones step
-    ``h = g c(front) / D`` with ``g`` starting at ``growth``, halved after an
-    iteration that proves nothing (``g <= 1`` always proves the first piece, so
-    the sweep cannot stall) and doubled after one that proves every piece. Free
-    space is crossed in a few large steps; the steps shrink only where the robot
-    passes close to an obstacle.
+    ``h = g min_parts(c(front) / D)`` with ``g`` starting at ``growth``, halved
+    after an iteration that proves nothing (``g <= 1`` always proves the first
+    piece, so the sweep cannot stall) and doubled after one that proves every
+    piece. Free space is crossed in a few large steps; the steps shrink only
+    where the robot passes close to an obstacle.
 
     Two phases keep the tail short: ``lanes`` lanes give each motion up to
     ``phase_steps`` iterations; the few left undecided (long passes close to
-    obstacles) continue where they stopped on ``tail_lanes`` lanes, up to
-    ``max_steps`` iterations in all, and are reported blocked if still
-    undecided.
+    obstacles) continue where they stopped on ``tail_lanes`` lanes evaluating
+    ``tail_points`` configurations per iteration, until ``max_evals``
+    configurations of the motion were evaluated in all, and are reported blocked
+    if still undecided.
     """
     d, num = a.shape
     if num == 0:
         return jnp.zeros((0,), bool)
-    clear = jax.vmap(robot.clearance, in_axes=(1, None, None))
-    ca, cb = clear(a, world, padding), clear(b, world, padding)
-    dist = jax.vmap(robot.sweep_bound, in_axes=(1, 1))(a, b)
-    ok = (ca > 0) & (cb > 0) & jnp.isfinite(dist)
+    clear = jax.vmap(robot.part_clearances, in_axes=(1, None, None), out_axes=1)
+    ca, cb = clear(a, world, padding), clear(b, world, padding)  # (m, N)
+    dist = jax.vmap(robot.part_sweep_bounds, in_axes=(1, 1), out_axes=1)(a, b)  # (m, N)
+    ok = jnp.all(ca > 0, axis=0) & jnp.all(cb > 0, axis=0) & jnp.all(jnp.isfinite(dist), axis=0)
     if mask is not None:
         ok = ok & mask
-    easy = ok & (ca + cb > dist + margin)
+    easy = ok & jnp.all(ca + cb > dist + margin, axis=0)
     hard = ok & ~easy
     sweep = _Sweep(robot, a, b, world, padding, cb, dist, points, margin)
     g0 = jnp.full((num,), growth, a.dtype)
     free, left, lo, clo, g = sweep.run(hard, jnp.zeros((num,), a.dtype), ca, g0, True,
                                        min(lanes, num), phase_steps)
-    if max_steps > phase_steps:
-        free2, left, _, _, _ = sweep.run(left, lo, clo, g, False, min(tail_lanes, num),
-                                         max_steps - phase_steps)
+    tail_steps = (max_evals - phase_steps * points) // tail_points
+    if tail_steps > 0:
+        tail = _Sweep(robot, a, b, world, padding, cb, dist, tail_points, margin)
+        free2, left, _, _, _ = tail.run(left, lo, clo, g, False, min(tail_lanes, num), tail_steps)
         free = free | free2
     return easy | free
 
 
 class _Sweep:
-    """The sweep's work queue over one batch of motions (see :func:`certified_steer_to_batch`)."""
+    """The sweep's work queue over one batch of motions (see :func:`certified_steer_to_batch`).
+
+    Per-part arrays are ``(m, ...)``: clearances ``cb`` and bounds ``dist`` ``(m, N)``.
+    """
 
     def __init__(self, robot, a, b, world, padding, cb, dist, points, margin):
         self.a, self.b, self.world, self.padding = a, b, world, padding
         self.cb, self.dist, self.points, self.margin = cb, dist, points, margin
         self.interpolate = jax.vmap(jax.vmap(robot.interpolate, in_axes=(None, None, 0), out_axes=1),
                                     in_axes=(1, 1, 1), out_axes=2)
-        self.clear = jax.vmap(jax.vmap(robot.clearance, in_axes=(1, None, None)), in_axes=(1, None, None))
+        # (d, points, lanes) -> (points, m, lanes)
+        self.clear = jax.vmap(jax.vmap(robot.part_clearances, in_axes=(1, None, None), out_axes=1),
+                              in_axes=(1, None, None), out_axes=0)
         self.ks = jnp.arange(1, points + 1, dtype=a.dtype)[:, None]  # (points, 1)
 
     def ahead(self, i, lo, clo, g, first):
         """The next ``points`` configurations of the sweeps of motions ``i`` and their clearances."""
-        step = jnp.minimum(g * clo / jnp.maximum(self.dist[i], 1e-30), (1.0 - lo) / self.points)
+        room = jnp.min(clo / jnp.maximum(self.dist[:, i], 1e-30), axis=0)
+        step = jnp.minimum(g * room, (1.0 - lo) / self.points)
         step = jnp.where(first, 1.0 / (self.points + 1), step)
         ts = jnp.minimum(lo + step * self.ks, 1.0)  # (points, lanes)
         d = self.a.shape[0]
@@ -144,15 +160,15 @@ class _Sweep:
         return ts, self.clear(self.interpolate(ap, bp, ts), self.world, self.padding)
 
     def run(self, todo, lo0, clo0, g0, first: bool, lanes: int, max_steps: int):
-        """Sweeps the motions ``todo`` from their fronts ``lo0`` (clearance ``clo0``, step
-        factor ``g0``) for up to ``max_steps`` iterations each.
+        """Sweeps the motions ``todo`` from their fronts ``lo0`` (clearances ``clo0`` ``(m, N)``,
+        step factor ``g0``) for up to ``max_steps`` iterations each.
 
-        Returns ``(free, undecided, lo, clo, g)``, each ``(N,)``: the motions proven
-        free, those still undecided, and where their sweeps stopped.
+        Returns ``(free, undecided, lo, clo, g)``: the motions proven free, those still
+        undecided, and where their sweeps stopped.
         """
         num = todo.shape[0]
-        order = _longest_first(
-            jnp.where(todo, 1 + jnp.minimum(self.dist * 64.0, 2.0 ** 30).astype(jnp.int32), 0))
+        order = _longest_first(jnp.where(
+            todo, 1 + jnp.minimum(jnp.max(self.dist, axis=0) * 64.0, 2.0 ** 30).astype(jnp.int32), 0))
         work = jnp.sum(todo, dtype=jnp.int32)
         points, margin, dist, cb = self.points, self.margin, self.dist, self.cb
 
@@ -169,30 +185,30 @@ class _Sweep:
             head, pos, lo, clo, g, steps, ts, cs, free, left, out_lo, out_clo, out_g = carry
             live = pos < work
             i = motion(pos)
-            di = dist[i]
+            di = dist[:, i]  # (m, lanes)
             steps = steps + 1
-            hit = jnp.any(~(cs > 0), axis=0)
+            hit = jnp.any(~(cs > 0), axis=(0, 1))
             moving = jnp.ones_like(live)
             moved = jnp.zeros_like(steps)
             for k in range(points):  # move the front over the proven leading pieces
-                moving = moving & (clo + cs[k] > di * (ts[k] - lo) + margin)
+                moving = moving & jnp.all(clo + cs[k] > di * (ts[k] - lo) + margin, axis=0)
                 lo, clo = jnp.where(moving, ts[k], lo), jnp.where(moving, cs[k], clo)
                 moved = moved + moving
             g = jnp.where(moved == 0, 0.5 * g, jnp.where(moved == points, 2.0 * g, g))
-            ok = live & ~hit & (clo + cb[i] > di * (1.0 - lo) + margin)
+            ok = live & ~hit & jnp.all(clo + cb[:, i] > di * (1.0 - lo) + margin, axis=0)
             out_of_steps = live & ~ok & ~hit & (steps >= max_steps)
             done = live & (ok | hit | out_of_steps)
             at = jnp.where(done, i, num)
             free = free.at[at].set(ok, mode="drop")
             left = left.at[at].set(out_of_steps, mode="drop")
             out_lo = out_lo.at[at].set(lo, mode="drop")
-            out_clo = out_clo.at[at].set(clo, mode="drop")
+            out_clo = out_clo.at[:, at].set(clo, mode="drop")
             out_g = out_g.at[at].set(g, mode="drop")
             # decided lanes take the next motions of the queue
             pos = jnp.where(done, head + jnp.cumsum(done, dtype=jnp.int32) - 1, pos)
             head = head + jnp.sum(done, dtype=jnp.int32)
             j = motion(pos)
-            lo, clo, g = (jnp.where(done, lo0[j], lo), jnp.where(done, clo0[j], clo),
+            lo, clo, g = (jnp.where(done, lo0[j], lo), jnp.where(done, clo0[:, j], clo),
                           jnp.where(done, g0[j], g))
             steps = jnp.where(done, 0, steps)
             ts, cs = self.ahead(j, lo, clo, g, done & first)
@@ -200,7 +216,7 @@ class _Sweep:
 
         pos = jnp.arange(lanes, dtype=jnp.int32)
         i = motion(pos)
-        lo, clo, g = lo0[i], clo0[i], g0[i]
+        lo, clo, g = lo0[i], clo0[:, i], g0[i]
         no = jnp.zeros((num,), bool)
         init = ((jnp.int32(lanes), pos, lo, clo, g, jnp.zeros((lanes,), jnp.int32))
                 + self.ahead(i, lo, clo, g, jnp.full((lanes,), first))

@@ -110,18 +110,39 @@ class NLinkArm(DiscretizedSteering, CertifiedSteering):
             ok = ok & geometry.in_bounds(xs[k + 1], ys[k + 1], world.bounds)
         return ok
 
+    def part_clearances(self, q: Array, world: World, padding: float) -> Array:
+        """``(n,)``, per link: its distance to the nearest obstacle minus ``padding``, or of
+        its end joint (link 1: also the base) to the workspace boundary if smaller (negative
+        outside); all ``> 0`` iff ``q`` is valid, all -1 for non-finite ``q`` or a joint
+        outside ``[-pi, pi]``."""
+        xs, ys = self.joint_xy(q)
+        base = geometry.wall_clearance(xs[0], ys[0], world.bounds)
+        parts = []
+        for k in range(self.dim):
+            c = jnp.minimum(geometry.segment_clearance(xs[k], ys[k], xs[k + 1], ys[k + 1], world)
+                            - padding, geometry.wall_clearance(xs[k + 1], ys[k + 1], world.bounds))
+            parts.append(jnp.minimum(c, base) if k == 0 else c)
+        c = jnp.stack(parts)
+        ok = jnp.all(jnp.isfinite(q)) & jnp.all(jnp.abs(q) <= jnp.pi) & jnp.all(jnp.isfinite(c))
+        return jnp.where(ok, c, -1.0)
+
+    def part_sweep_bounds(self, a: Array, b: Array) -> Array:
+        """``(n,)``, per link k: ``sum_{j <= k} R_jk |dq_j|`` with ``R_jk`` the length of links
+        ``j..k``, an upper bound on how far any point of link k moves from ``a`` to ``b``."""
+        dq = [jnp.abs(b[j] - a[j]) for j in range(self.dim)]
+        out = []
+        for k in range(self.dim):
+            total = jnp.float32(0.0)
+            for j in range(k + 1):
+                total = total + float(sum(self.link_lengths[j:k + 1])) * dq[j]
+            out.append(total)
+        return jnp.stack(out)
+
     def clearance(self, q: Array, world: World, padding: float) -> Array:
         """Distance of the links to the nearest obstacle minus ``padding``, or of a joint to
         the workspace boundary if smaller (negative outside); ``> 0`` iff ``q`` is valid,
         -1 for non-finite ``q`` or a joint outside ``[-pi, pi]``."""
-        xs, ys = self.joint_xy(q)
-        c = geometry.wall_clearance(xs[0], ys[0], world.bounds)
-        for k in range(self.dim):
-            c = jnp.minimum(c, geometry.segment_clearance(xs[k], ys[k], xs[k + 1], ys[k + 1], world)
-                            - padding)
-            c = jnp.minimum(c, geometry.wall_clearance(xs[k + 1], ys[k + 1], world.bounds))
-        ok = jnp.all(jnp.isfinite(q)) & jnp.all(jnp.abs(q) <= jnp.pi) & jnp.isfinite(c)
-        return jnp.where(ok, c, -1.0)
+        return jnp.min(self.part_clearances(q, world, padding))
 
     def sweep_bound(self, a: Array, b: Array) -> Array:
         """Upper bound on how far any point of the arm moves from ``a`` to ``b``:

@@ -94,6 +94,14 @@ class RigidBody(DiscretizedSteering, CertifiedSteering):
             c = jnp.minimum(c, geometry.wall_clearance(px, py, world.bounds))
         return jnp.where(jnp.isfinite(q[0] + q[1] + q[2]) & jnp.isfinite(c), c, -1.0)
 
+    def part_clearances(self, q: Array, world: World, padding: float) -> Array:
+        """``(1,)``: the body is one part (see :mod:`ntq_jax.robots.certified`)."""
+        return self.clearance(q, world, padding)[None]
+
+    def part_sweep_bounds(self, a: Array, b: Array) -> Array:
+        """``(1,)``: :meth:`sweep_bound`."""
+        return self.sweep_bound(a, b)[None]
+
     def sweep_bound(self, a: Array, b: Array) -> Array:
         """Upper bound on how far any point of the body moves from ``a`` to ``b``:
         ``|dp| + r_max |dtheta|`` (shortest arc)."""

@@ -52,7 +52,7 @@ CERT_GROWTH = 1.5  # initial step of the sweep: CERT_GROWTH * c(front) / D (see 
 CERT_PHASE_STEPS = 48  # iterations per motion in the wide first phase
 CERT_TAIL_LANES = 32  # lanes of the second phase (the few motions the first left undecided)
 CERT_TAIL_POINTS = 32  # configurations per lane and iteration in the second phase
-CERT_MAX_EVALS = 8192  # clearance evaluations per motion before it is reported blocked
+CERT_MAX_EVALS = 2048  # clearance evaluations per motion before it is reported blocked
 CERT_MARGIN = 1e-3  # workspace units: float32 safety margin of the free test
 
 MOTION_CHECKS = ("discretized", "certified")  # the values of every ``check=`` argument

@@ -177,10 +177,10 @@ def test_register_custom_planner(point3):
 
 def test_no_recompilation_across_batch_sizes(point3, queries):
     from ntq_jax.planners.smoothing import shortcut
-    from ntq_jax.robots.batch import is_valid_batch, steer_to_batch
+    from ntq_jax.robots.batch import _steer_to_batch, is_valid_batch
 
     plan(point3, queries, "astar")
-    fns = (astar, steer_to_batch, is_valid_batch)
+    fns = (astar, _steer_to_batch, is_valid_batch)
     before = [f._cache_size() for f in fns]
     sc = shortcut._cache_size()
     longest = int(np.argmax(plan(point3, queries, "astar", smooth=False).lengths))

@@ -53,10 +53,18 @@ def motion_check(robot, check: str):
 
 
 @functools.partial(_kernel_jit, static_argnames=("robot", "padding", "check"))
+def _steer_to_batch(robot, world: World, a: Array, b: Array, padding: float, check: str) -> Array:
+    return motion_check(robot, check)(a.T, b.T, world, padding)
+
+
 def steer_to_batch(robot, world: World, a: Array, b: Array, padding: float,
                    check: str = "discretized") -> Array:
-    """``(N, d), (N, d) -> (N,)`` bool, True where the connection is collision-free."""
-    return motion_check(robot, check)(a.T, b.T, world, padding)
+    """``(N, d), (N, d) -> (N,)`` bool, True where the connection is collision-free.
+
+    ``check``: see :func:`motion_check`. One compiled program per robot, padding,
+    check and shape, however the arguments are passed.
+    """
+    return _steer_to_batch(robot, world, a, b, padding, check)
 
 
 @functools.partial(_kernel_jit, static_argnames=("robot",))

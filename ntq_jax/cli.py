@@ -5,9 +5,9 @@ Every script's entry point goes through :func:`run_cli`::
     def main(argv=None) -> int:
         return run_cli(lambda: _main(argv))
 
-The package's expected exceptions (:data:`EXPECTED_ERRORS`: a bad environment,
-config, dataset, checkpoint or run folder, a path that is missing, not writable
-or of the wrong kind) are printed as one ``error: <message>`` line on stderr
+The package's expected exceptions (:class:`UsageError` for a bad argument,
+:data:`EXPECTED_ERRORS`: a bad environment, config, dataset, checkpoint or run
+folder, a path that is missing, not writable or of the wrong kind) are printed as one ``error: <message>`` line on stderr
 (their messages name the problem and the fix) and give exit code 2; Ctrl-C
 gives one ``interrupted`` line and exit code 130. Anything else is a bug and
 keeps its traceback.
@@ -19,7 +19,12 @@ import logging
 import sys
 from typing import Callable, Iterable
 
-__all__ = ["EXPECTED_ERRORS", "PATH_ERRORS", "expected_error_types", "error_line", "run_cli"]
+__all__ = ["UsageError", "EXPECTED_ERRORS", "PATH_ERRORS", "expected_error_types", "error_line",
+           "positive_int", "run_cli"]
+
+
+class UsageError(ValueError):
+    """A command-line argument that cannot be used (the message names the option and the fix)."""
 
 #: ``(module, class name)`` of the package's expected exceptions. They are looked
 #: up in :data:`sys.modules` only: an exception can only be raised by a module
@@ -50,7 +55,14 @@ def expected_error_types(extra: Iterable[type[BaseException]] = ()
         cls = getattr(sys.modules.get(module), name, None)
         if isinstance(cls, type) and issubclass(cls, BaseException):
             found.append(cls)
-    return tuple(found) + tuple(PATH_ERRORS) + tuple(extra)
+    return (UsageError, *found, *PATH_ERRORS, *extra)
+
+
+def positive_int(option: str, value: int) -> int:
+    """``value`` if it is >= 1, else a :class:`UsageError` naming ``option``."""
+    if value < 1:
+        raise UsageError(f"{option} {value}: expected a positive integer (1 or more)")
+    return value
 
 
 def error_line(err: BaseException) -> str:

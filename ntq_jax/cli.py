@@ -44,6 +44,8 @@ PATH_ERRORS: dict[type[OSError], str] = {
     IsADirectoryError: "a file was expected there, not a folder",
     NotADirectoryError: "a folder was expected there, but the path (or one of its parents) "
                         "is a file",
+    FileExistsError: "a folder is needed there but a file of that name exists; choose another "
+                     "path or remove the file",
 }
 
 

@@ -235,7 +235,7 @@ def test_data_complete_means_verified(run_copy):
     assert dataset_problem(env_dir / "D1", checksum=False) is None
     assert "sha256" in dataset_problem(env_dir / "D1")
     f.write_bytes(blob + b"\0")
-    assert "expected" in dataset_problem(env_dir / "D1", checksum=False)
+    assert "truncated or corrupt" in dataset_problem(env_dir / "D1", checksum=False)
     assert set(damaged_datasets(env_dir, names)) == {"D1"}
 
 

@@ -184,11 +184,11 @@ def _array_problem(f: Path, want, checksum: bool) -> str | None:
     except (OSError, ValueError, EOFError) as e:
         return f"{f}: unreadable .npy header ({e})"
     if dtype.str != want.get("dtype") or list(shape) != list(want.get("shape", [])):
-        return (f"{f}: dtype {dtype.str} shape {list(shape)} differ from meta.json "
-                f"({want.get('dtype')} {want.get('shape')})")
+        return (f"{f}: dtype {dtype} shape {tuple(shape)} differs from meta.json (dtype "
+                f"{want.get('dtype')}, shape {want.get('shape')})")
     actual = f.stat().st_size
     if actual != size:
-        return f"{f}: {actual} bytes, expected {size} (truncated or extended)"
+        return f"{f}: truncated or corrupt ({actual} bytes, its header needs {size})"
     if checksum and artifacts.sha256(f) != want.get("sha256"):
         return f"{f}: corrupt (sha256 differs from meta.json)"
     return None

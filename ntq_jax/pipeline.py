@@ -15,14 +15,21 @@ A run folder holds::
     paths/<env>/<model>_<kind>[_nosteer].npz   every planned path
     results.json, results.csv, tables.md, tables.tex, figures/*.png
 
-Every stage resumes: a rerun skips complete datasets, resumes training from its
-last checkpoint, reuses every saved evaluation file and rewrites the report. A
-run folder made with a different config is refused.
+Every stage resumes: a rerun verifies the datasets against their checksums
+(rewriting only a damaged one), resumes training from its last checkpoint,
+reuses every saved evaluation file and rewrites the report. A folder is adopted
+as a run only when its ``run.json`` is present, valid and made with the same
+config; any other non-empty folder is refused (:class:`PipelineError`) unless
+``overwrite=True`` (``train_all.py --overwrite``) deletes it first, which is
+done only for a folder holding nothing but a run's files. Nothing is written
+before the config and every environment are validated.
 """
 
 from __future__ import annotations
 
 import json
+import os
+import shutil
 import time
 from pathlib import Path
 from typing import Callable
@@ -53,6 +60,12 @@ DEFAULT = {
 }
 
 
+#: What a run folder may hold (``--overwrite`` deletes only folders made of these).
+RUN_ENTRIES = frozenset({"config.yaml", "run.json", "data", "models", "eval", "paths",
+                         "results.json", "results.csv", "tables.md", "tables.tex", "figures"})
+_NEW_OUT = "pass a new --out"
+
+
 class PipelineError(RuntimeError):
     """A run cannot proceed (e.g. a run folder made with another config)."""
 
@@ -66,28 +79,103 @@ def load_config(path: str | Path | None, overrides: list[str]) -> C.Config:
     return C.load(path, overrides)
 
 
-def prepare_run(cfg: C.Config, out: str | Path | None) -> Path:
-    """Creates (or reopens) the run folder; refuses a folder made with another config.
+def run_folder(cfg: C.Config, out: str | Path | None) -> Path:
+    """The run folder: ``out``, or ``<cfg.out_dir>/<task>-<config hash>``."""
+    return Path(out) if out else Path(cfg.out_dir) / f"{cfg.task}-{cfg.hash()[:8]}"
 
-    ``out`` defaults to ``<cfg.out_dir>/<task>-<config hash>``.
+
+def read_run_info(run: Path) -> tuple[dict | None, str]:
+    """``(run.json's content, "")`` when valid, else ``(None, why it is not)``."""
+    f = run / "run.json"
+    if not f.is_file():
+        return None, f"no run.json ({f} missing)"
+    try:
+        info = json.loads(f.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+        return None, f"{f} is unreadable ({type(e).__name__}: {e})"
+    if (not isinstance(info, dict) or not isinstance(info.get("config_hash"), str)
+            or not isinstance(info.get("stages"), dict)):
+        return None, f"{f} is not a run record (config_hash and stages expected)"
+    return info, ""
+
+
+def _refuse_or_clear(run: Path, why: str, overwrite: bool) -> None:
+    """Deletes ``run`` for ``overwrite`` (a run's files only), else raises the error ``why``."""
+    if not overwrite:
+        raise PipelineError(f"{run}: {why}; {_NEW_OUT}, or add --overwrite to delete this "
+                            "folder and start over")
+    foreign = sorted(p.name for p in run.iterdir()
+                     if p.name not in RUN_ENTRIES and not p.name.startswith("."))
+    if foreign:
+        raise PipelineError(f"{run}: {why}, and it holds {', '.join(foreign[:5])} which are not "
+                            f"a run's files; --overwrite refuses to delete it: {_NEW_OUT}")
+    shutil.rmtree(run)
+
+
+def _check_writable(run: Path) -> None:
+    """Raises a :class:`PipelineError` when ``run`` cannot be created or written."""
+    probe = run
+    while not probe.exists():
+        if probe.parent == probe:
+            break
+        probe = probe.parent
+    if not probe.is_dir():
+        raise PipelineError(f"{run}: {probe} is a file, not a folder; {_NEW_OUT}")
+    if not os.access(probe, os.W_OK | os.X_OK):
+        raise PipelineError(f"{run}: {probe} is not writable; {_NEW_OUT} in a writable place")
+
+
+def prepare_run(cfg: C.Config, out: str | Path | None, *, overwrite: bool = False) -> Path:
+    """Creates (or reopens) the run folder after validating every environment of ``cfg``.
+
+    ``out`` defaults to ``<cfg.out_dir>/<task>-<config hash>``. An existing
+    folder is adopted only when its ``run.json`` is valid and records this
+    config's hash; an empty folder is used as it is. Nothing is written when
+    an error is raised.
+
+    Args:
+        cfg: the resolved config.
+        out: the run folder (``--out``), or None for the default.
+        overwrite: delete a non-empty folder that is not this config's run
+            (only when it holds nothing but a run's files) and start over.
+
+    Raises:
+        EnvError: an environment of ``cfg.envs`` cannot be made.
+        PipelineError: ``out`` is a file or not writable, or a non-empty folder
+            that is not a run of this config (the message says how to proceed).
     """
-    run = Path(out) if out else Path(cfg.out_dir) / f"{cfg.task}-{cfg.hash()[:8]}"
+    for name in cfg.envs:
+        make_env(name)  # raises EnvError before anything is written
+    run = run_folder(cfg, out)
+    _check_writable(run)
+    if run.is_dir() and any(run.iterdir()):
+        info, why = read_run_info(run)
+        if info is None:
+            _refuse_or_clear(run, f"not empty and not a run folder: {why}", overwrite)
+        elif info["config_hash"] != cfg.hash():
+            _refuse_or_clear(run, f"holds a run with another config (hash {info['config_hash']}, "
+                                  f"this one {cfg.hash()})", overwrite)
     run.mkdir(parents=True, exist_ok=True)
-    info_f = run / "run.json"
-    info = {}
-    if info_f.is_file():
-        try:
-            info = json.loads(info_f.read_text())
-        except json.JSONDecodeError:
-            info = {}
-        if info.get("config_hash") not in (None, cfg.hash()):
-            raise PipelineError(
-                f"{run} holds a run with another config (hash {info.get('config_hash')}, this one "
-                f"{cfg.hash()}); pass a new --out, or delete the folder to start over")
-    info.update({"config_hash": cfg.hash(), "stages": info.get("stages", {})})
-    artifacts.write_json(info_f, info)
-    artifacts.write_text(run / "config.yaml", yaml.safe_dump(cfg.to_dict(), sort_keys=False))
+    info, _ = read_run_info(run)
+    if info is None:
+        artifacts.write_json(run / "run.json", {"config_hash": cfg.hash(), "stages": {}})
+    text = yaml.safe_dump(cfg.to_dict(), sort_keys=False)
+    cfg_file = run / "config.yaml"
+    if not cfg_file.is_file() or cfg_file.read_text() != text:
+        artifacts.write_text(cfg_file, text)
     return run
+
+
+def data_digest(data_dir: Path, names: list[str]) -> str:
+    """A digest of the datasets' recorded checksums (what a trained ensemble was trained on)."""
+    sums = {}
+    for nm in names:
+        try:
+            sums[nm] = {a: v.get("sha256") for a, v in
+                        json.loads((data_dir / nm / "meta.json").read_text())["arrays"].items()}
+        except (OSError, ValueError, KeyError, AttributeError):
+            sums[nm] = None
+    return artifacts.fingerprint(sums)
 
 
 def _mark(run: Path, stage: str, **fields) -> None:
@@ -109,18 +197,28 @@ def _run_env(cfg: C.Config, run: Path, name: str, env, *, progress, figures: boo
     summary = data_mod.generate_datasets(env, cfg, run / "data", env_name=name,
                                          progress=progress, figure=figures)
     data_dir = Path(summary["env_dir"])
+    for ds, why in summary.get("damaged", {}).items():
+        log(f"[{name}] data: {ds} failed verification ({why}); "
+            + ("rewritten" if ds in summary.get("rewritten", []) else "regenerated"))
     t1 = time.perf_counter()
     _mark(run, f"data/{slug}", seconds=round(t1 - t0, 1), skipped=bool(summary.get("skipped")))
     # -- training --------------------------------------------------------------
     model_dir = run / "models" / slug
+    digest = data_digest(data_dir, data_mod.dataset_names(len(cfg.data.datasets)))
     if (model_dir / "ensemble" / "ensemble.json").is_file():
+        trained_on = (read_run_info(run)[0] or {}).get("stages", {}).get(f"train/{slug}", {})
+        if trained_on.get("data") not in (None, digest):
+            raise PipelineError(
+                f"{model_dir} was trained on other data than {data_dir} now holds (a dataset "
+                f"was regenerated and differs); delete {model_dir} and {run / 'paths' / slug} "
+                "and rerun the same command to retrain and re-evaluate")
         log(f"[{name}] train: complete, loading {model_dir / 'ensemble'}")
     else:
         log(f"[{name}] train: {len(cfg.data.datasets)} PNets, {cfg.train.epochs} epochs")
         training.train_from_folder(data_dir, cfg, model_dir, progress=progress)
     ens = training.load_ensemble(model_dir)
     t2 = time.perf_counter()
-    _mark(run, f"train/{slug}", seconds=round(t2 - t1, 1))
+    _mark(run, f"train/{slug}", seconds=round(t2 - t1, 1), data=digest)
     # -- evaluation ------------------------------------------------------------
     log(f"[{name}] evaluate: K_test = {cfg.eval.k_test} uniform + {cfg.eval.k_test} "
         f"non-trivial queries, {ens.num_members} models, steerTo {list(cfg.eval.steer)}")

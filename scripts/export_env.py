@@ -3,6 +3,9 @@
 
     python scripts/export_env.py point/3 --out point_3.json
     python scripts/export_env.py --list
+
+Expected errors (an unknown preset, a bad map file, an unwritable --out) are one
+``error:`` line with the fix, exit code 2.
 """
 
 from __future__ import annotations
@@ -12,9 +15,15 @@ import json
 import sys
 from pathlib import Path
 
+from ntq_jax.cli import UsageError, run_cli
 
 
 def main(argv=None) -> int:
+    """The command line; expected errors are one ``error:`` line and exit code 2."""
+    return run_cli(lambda: _main(argv))
+
+
+def _main(argv) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("name", nargs="?", help="preset name (e.g. point/0) or JSON map file")
     ap.add_argument("--out", type=Path, help="output file (default: print to stdout)")
@@ -28,11 +37,8 @@ def main(argv=None) -> int:
             print(f"{name:10s} paper gamma_nt {g:.3f}")
         return 0
     if not args.name:
-        ap.error("give a preset name or a JSON file (or --list)")
-    try:
-        env = nj.make_env(args.name)
-    except nj.EnvError as e:
-        ap.error(str(e))
+        raise UsageError("give a preset name or a JSON file (or --list)")
+    env = nj.make_env(args.name)
     if args.out:
         env.save_json(args.out)
         print(f"wrote {args.out}")

@@ -7,10 +7,13 @@ Examples::
     python scripts/generate_data.py --config configs/point.yaml --env point/2 --out runs/data
     python scripts/generate_data.py --config configs/nlink.yaml --set data.chunk=100
 
-Writes ``<out>/<env_slug>/env.json``, ``<out>/<env_slug>/D0..D3/`` (see
-:mod:`ntq_jax.data`) and ``<out>/<env_slug>/figure.png``. Rerunning the same
+Writes ``<out>/<env_slug>/env.json``, ``config.yaml`` (the resolved config),
+``D0..D3/`` (see :mod:`ntq_jax.data`) and ``figure.png``. Rerunning the same
 command after an interruption (Ctrl-C, kill -9) resumes from the completed
-chunks; a complete output is left as it is.
+chunks. A complete output is verified against the checksums in its meta.json
+files and left as it is; a damaged dataset (truncated or corrupt array) is
+regenerated, and only the damaged ones are rewritten. Expected errors are one
+``error:`` line with the fix, exit code 2.
 """
 
 from __future__ import annotations
@@ -19,9 +22,15 @@ import argparse
 import sys
 from pathlib import Path
 
+from ntq_jax.cli import run_cli
 
 
 def main(argv=None) -> int:
+    """The command line; expected errors are one ``error:`` line and exit code 2."""
+    return run_cli(lambda: _main(argv))
+
+
+def _main(argv) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--config", default=None, help="YAML config (default: built-in defaults)")
@@ -38,32 +47,28 @@ def main(argv=None) -> int:
 
     from ntq_jax import config as C
     from ntq_jax import artifacts, data, make_env
-    from ntq_jax.envs import EnvError
 
     overrides = list(args.set)
     if args.planner:
         overrides.append(f"planner.name={args.planner}")
-    try:
-        cfg = C.load(args.config, overrides)
-    except C.ConfigError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
+    cfg = C.load(args.config, overrides)
     envs = args.env or list(cfg.envs)
     out = Path(args.out) if args.out else Path(cfg.out_dir) / "data"
+    if out.exists() and not out.is_dir():
+        raise NotADirectoryError(20, "Not a directory (--out must be a folder)", str(out))
+    made = {name: make_env(name) for name in envs}  # every env valid before any work
     results = {}
-    for name in envs:
-        try:
-            env = make_env(name)
-        except EnvError as e:
-            print(f"error: {e}", file=sys.stderr)
-            return 2
+    for name, env in made.items():
         s = data.generate_datasets(env, cfg, out, env_name=name, progress=not args.no_progress,
                                    figure=not args.no_figure)
         results[name] = s
-        state = "already complete" if s["skipped"] else (
+        state = "already complete (verified)" if s["skipped"] else (
             f"done in {s['timings']['total']:.1f} s"
             + (f" (reused {s['reused_queries']} planned queries)" if s["reused_queries"] else ""))
         print(f"{name}: {s['env_dir']} {state}")
+        for ds, why in s.get("damaged", {}).items():
+            print(f"  {ds}: damaged ({why}); "
+                  + ("rewritten" if ds in s.get("rewritten", []) else "left as it is"))
         for ds, st in s["datasets"].items():
             print(f"  {ds}: {st['queries']} queries, {st['solved']} solved, {st['samples']} "
                   f"samples, pruned {st['fraction_pruned']:.1%}, mean waypoints "

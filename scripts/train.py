@@ -11,7 +11,9 @@
 (load it with ``ntq_jax.training.load_ensemble(OUT)``). Interrupted (Ctrl-C,
 ``kill -9``)? Re-run the same command: it resumes from the latest checkpoint.
 A checkpoint written with another config, seed or data is refused with a clear
-message. The progress bar shows each member's latest minibatch loss.
+message. The progress bar shows each member's latest minibatch loss. Expected
+errors (a bad config, dataset or checkpoint) are one ``error:`` line with the
+fix, exit code 2.
 """
 
 from __future__ import annotations
@@ -21,9 +23,15 @@ import sys
 import time
 from pathlib import Path
 
+from ntq_jax.cli import UsageError, positive_int, run_cli
 
 
 def main(argv=None) -> int:
+    """The command line; expected errors are one ``error:`` line and exit code 2."""
+    return run_cli(lambda: _main(argv))
+
+
+def _main(argv) -> int:
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--data", type=Path, required=True,
@@ -42,15 +50,13 @@ def main(argv=None) -> int:
     ap.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     args = ap.parse_args(argv)
 
-    from ntq_jax.config import ConfigError, load
+    from ntq_jax.config import load
 
-    try:
-        cfg = load(args.config, args.set)
-    except ConfigError as e:
-        ap.error(str(e))
+    positive_int("--cpu-devices", args.cpu_devices)
+    cfg = load(args.config, args.set)
     if not (args.data / "env.json").is_file():
-        ap.error(f"--data {args.data}: no env.json there; pass an environment folder written by "
-                 "scripts/generate_data.py (env.json beside D0..D3)")
+        raise UsageError(f"--data {args.data}: no env.json there; pass an environment folder "
+                         "written by scripts/generate_data.py (env.json beside D0..D3)")
     out = args.out or args.data / "pnets"
 
     import jax
@@ -61,15 +67,8 @@ def main(argv=None) -> int:
     print(f"training {cfg.model.hidden} PNets on {args.data} -> {out} "
           f"({len(jax.devices())} {jax.default_backend()} device(s))", file=sys.stderr)
     t0 = time.perf_counter()
-    try:
-        ens, hist = T.train_from_folder(args.data, cfg, out, progress=not args.no_progress,
-                                        shard=False if args.no_shard else None)
-    except T.CheckpointError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
-    except (FileNotFoundError, ValueError) as e:
-        print(f"error: {type(e).__name__}: {e}", file=sys.stderr)
-        return 2
+    ens, hist = T.train_from_folder(args.data, cfg, out, progress=not args.no_progress,
+                                    shard=False if args.no_shard else None)
     dt = time.perf_counter() - t0
     last = {}
     for m in range(hist.train_loss.shape[1]):

@@ -15,8 +15,12 @@ key (YAML values).
 
 The run folder (``--out``, default ``<out_dir>/<task>-<config hash>``) is
 described in :mod:`ntq_jax.pipeline`. Rerunning the same command after an
-interruption resumes it; a run folder made with a different config is refused
-(use another ``--out``).
+interruption resumes it (datasets are verified against their checksums first;
+a damaged one is regenerated). A non-empty folder that is not a run of this
+config (another config, or no valid run.json) is refused: pass another
+``--out``, or ``--overwrite`` to delete it and start over. Expected errors
+(a bad config, environment, run folder, dataset or checkpoint) are one
+``error:`` line with the fix, exit code 2.
 """
 
 from __future__ import annotations
@@ -26,17 +30,26 @@ import sys
 import time
 
 from ntq_jax import artifacts
-from ntq_jax.config import ConfigError
-from ntq_jax.pipeline import PipelineError, load_config, prepare_run, run_pipeline
+from ntq_jax.cli import positive_int, run_cli
+from ntq_jax.pipeline import load_config, prepare_run, run_pipeline
 from ntq_jax.training import use_cpu_devices
 
 
 def main(argv=None) -> int:
+    """The command line; expected errors are one ``error:`` line and exit code 2."""
+    return run_cli(lambda: _main(argv))
+
+
+def _main(argv) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--config", default=None, help="YAML config (default: the embedded default)")
     ap.add_argument("--out", default=None,
                     help="run folder (default: <out_dir>/<task>-<config hash>; rerun to resume)")
+    ap.add_argument("--overwrite", action="store_true",
+                    help="delete --out first when it is not a run of this config (another "
+                         "config, or run.json missing or corrupt) and start over; only a folder "
+                         "holding nothing but a run's files is deleted")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help="config override, e.g. --set eval.k_test=100 (repeatable)")
     ap.add_argument("--no-progress", action="store_true", help="no progress bars")
@@ -48,23 +61,14 @@ def main(argv=None) -> int:
                          "separate cores (speed: BENCHMARKS.md); results then differ from a "
                          "one-device run at float level. Default 1")
     args = ap.parse_args(argv)
-    use_cpu_devices(args.cpu_devices)  # before any JAX operation
+    use_cpu_devices(positive_int("--cpu-devices", args.cpu_devices))  # before any JAX operation
     if not args.no_compile_cache:
         artifacts.enable_compile_cache()
-
-    try:
-        cfg = load_config(args.config, args.set)
-        run = prepare_run(cfg, args.out)
-    except (ConfigError, PipelineError) as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
+    cfg = load_config(args.config, args.set)
+    run = prepare_run(cfg, args.out, overwrite=args.overwrite)  # validates before writing
     print(f"run folder: {run}", flush=True)
     t0 = time.perf_counter()
-    try:
-        out = run_pipeline(cfg, run, progress=not args.no_progress, figures=not args.no_figures)
-    except PipelineError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
+    out = run_pipeline(cfg, run, progress=not args.no_progress, figures=not args.no_figures)
     print()
     print((run / "tables.md").read_text())
     print(f"done in {time.perf_counter() - t0:.0f} s; run folder: {run}")

@@ -19,9 +19,14 @@ D1 about half of each, so ``2K`` queries are planned instead of ``4K``.
 
 Resumable: the planning chunks stay in ``<env_dir>/.work/<fingerprint>/``
 (:mod:`ntq_jax.data.planning`) until the datasets are written (``meta.json``
-last, :mod:`ntq_jax.data.format`); a rerun reuses them, and a complete output
-of the same settings is left untouched. Stage timings: BENCHMARKS.md
-(``benchmarks/bench_data.py``).
+last, :mod:`ntq_jax.data.format`); a rerun reuses them. Complete means verified:
+a rerun checks every array against the checksums in its ``meta.json``
+(:func:`ntq_jax.data.format.damaged_datasets`); when all match the output is
+left untouched, otherwise the pools are planned again and only the damaged
+datasets are rewritten (an intact dataset is rewritten too if the planner does
+not reproduce it bit for bit, so the set stays consistent). ``<env_dir>/config.yaml``
+records the resolved config, so the advice of every dataset error is an exact
+command. Stage timings: BENCHMARKS.md (``benchmarks/bench_data.py``).
 """
 
 from __future__ import annotations
@@ -37,11 +42,13 @@ from typing import Callable, NamedTuple
 
 import jax
 import numpy as np
+import yaml
 
 from ntq_jax import artifacts
 from ntq_jax import queries as Q
-from ntq_jax.data.format import (FORMAT, FORMAT_VERSION, dataset_names, env_slug, is_complete,
-                                 plot_environment, write_dataset)
+from ntq_jax.data.format import (CONFIG_FILE, FORMAT, FORMAT_VERSION, damaged_datasets,
+                                 dataset_names, env_slug, npy_sha256, plot_environment,
+                                 write_dataset)
 from ntq_jax.data.include import include_data
 from ntq_jax.data.planning import PoolPlan, plan_pool, planner_options, resolve_planner
 from ntq_jax.data.pools import (Keys, Pools, mixing_bits, pool_index, pool_sizes, run_keys,
@@ -243,13 +250,26 @@ def _warn_rejected(run: RunSpec, planned: PoolPlan) -> None:
                       "recorded as unsolved", RuntimeWarning, stacklevel=3)
 
 
-def _open_work(env, run: RunSpec) -> Path:
-    """Creates ``<env_dir>/.work/<fingerprint>/`` and writes ``env.json``."""
+def _open_work(env, config, run: RunSpec) -> Path:
+    """Creates ``<env_dir>/.work/<fingerprint>/``; writes ``env.json`` and ``config.yaml``."""
     work = run.env_dir / ".work" / run.fingerprint
     work.mkdir(parents=True, exist_ok=True)
     artifacts.clean_tmp(work)
     env.save_json(run.env_dir / "env.json")
+    text = yaml.safe_dump(config.to_dict(), sort_keys=False)
+    cfg_file = run.env_dir / CONFIG_FILE
+    if not cfg_file.is_file() or cfg_file.read_text() != text:
+        artifacts.write_text(cfg_file, text)
     return work
+
+
+def _unchanged(folder: Path, arrays: dict[str, np.ndarray]) -> bool:
+    """``folder``'s ``meta.json`` records exactly these arrays (sha256 of their ``.npy`` bytes)."""
+    try:
+        recorded = json.loads((folder / "meta.json").read_text())["arrays"]
+        return all(recorded[name]["sha256"] == npy_sha256(a) for name, a in arrays.items())
+    except (OSError, ValueError, KeyError, TypeError):
+        return False
 
 
 def _already_complete(run: RunSpec, figure: bool) -> dict:
@@ -259,7 +279,7 @@ def _already_complete(run: RunSpec, figure: bool) -> dict:
         write_figure(run)
     shutil.rmtree(run.env_dir / ".work", ignore_errors=True)
     return {"env_dir": str(run.env_dir), "skipped": True, "fingerprint": run.fingerprint,
-            "timings": {}, "reused_queries": 0,
+            "timings": {}, "reused_queries": 0, "damaged": {}, "rewritten": [],
             "datasets": {nm: m["stats"] for nm, m in metas.items()}}
 
 
@@ -296,14 +316,18 @@ def generate_datasets(env, config, out_dir, *, env_name: str | None = None, plan
 
     Returns:
         A summary dict: ``env_dir``, ``datasets`` (name -> statistics), ``timings``
-        (seconds per stage), ``reused_queries``, ``skipped`` (already complete),
-        ``fingerprint`` and (unless skipped) ``planned_queries``.
+        (seconds per stage), ``reused_queries``, ``skipped`` (already complete and
+        verified), ``damaged`` (name -> problem, for datasets that had been
+        written before but failed verification), ``rewritten`` (the datasets
+        written now), ``fingerprint`` and (unless skipped) ``planned_queries``.
     """
     t_all = time.perf_counter()
     run = resolve_run(env, config, out_dir, env_name, planner)
-    if is_complete(run.env_dir, run.names, run.fingerprint):
+    bad = damaged_datasets(run.env_dir, run.names, run.fingerprint)
+    if not bad:
         return _already_complete(run, figure)
-    work = _open_work(env, run)
+    damaged = {nm: why for nm, why in bad.items() if (run.env_dir / nm / "meta.json").exists()}
+    work = _open_work(env, config, run)
     timings: dict[str, float] = {}
 
     # 1. the query pools U and N
@@ -333,6 +357,7 @@ def generate_datasets(env, config, out_dir, *, env_name: str | None = None, plan
     # 4. includeData per dataset, written with its metadata (meta.json last)
     common = common_meta(env, config, run, g_data, g_eval)
     summary: dict[str, dict] = {}
+    rewritten: list[str] = []
     with open_bar(progress, desc=f"{run.slug}: includeData + write", total=len(run.specs),
                   unit="dataset") as bar:
         for j, (name, spec) in enumerate(zip(run.names, run.specs)):
@@ -344,9 +369,11 @@ def generate_datasets(env, config, out_dir, *, env_name: str | None = None, plan
                 stats = dataset_stats(arrays, idx, planned, blocked, spec.prune, g_data, g_eval)
                 warns = dataset_warnings(run.env_name, name, stats, spec.prune,
                                          config.sampling.n_max)
-                write_dataset(run.env_dir / name, arrays, dict(
-                    common, name=name, p_nt=spec.p_nt, prune=spec.prune, stats=stats,
-                    sharing=sharing(run, j), warnings=warns))
+                if name in bad or not _unchanged(run.env_dir / name, arrays):
+                    write_dataset(run.env_dir / name, arrays, dict(
+                        common, name=name, p_nt=spec.p_nt, prune=spec.prune, stats=stats,
+                        sharing=sharing(run, j), warnings=warns))
+                    rewritten.append(name)
             summary[name] = stats
             bar.update(1)
 
@@ -358,4 +385,4 @@ def generate_datasets(env, config, out_dir, *, env_name: str | None = None, plan
     timings["total"] = time.perf_counter() - t_all
     return {"env_dir": str(run.env_dir), "skipped": False, "fingerprint": run.fingerprint,
             "timings": timings, "reused_queries": planned.reused, "datasets": summary,
-            "planned_queries": len(pools.queries)}
+            "damaged": damaged, "rewritten": rewritten, "planned_queries": len(pools.queries)}

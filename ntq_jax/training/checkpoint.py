@@ -237,12 +237,15 @@ def load_ensemble(path: str | os.PathLike) -> models.Ensemble:
                                   "re-run the same training command to resume and finish it")
         raise CheckpointError(f"{path}: no trained ensemble here (expected ensemble.json); pass "
                               "the output folder of scripts/train.py")
+    fix = (f"delete {path} and rerun the training command (scripts/train.py or "
+           "scripts/train_all.py) to write it again from the last checkpoint")
     try:
         info = json.loads(info_file.read_text())
         spec = models.ModelSpec.from_json(info["spec"])
         num = int(info["num_members"])
     except Exception as e:  # noqa: BLE001
-        raise CheckpointError(f"{info_file} is corrupt ({type(e).__name__}: {e})") from None
+        raise CheckpointError(f"{info_file} is corrupt ({type(e).__name__}: {e}); {fix}"
+                              ) from None
     template = models.init_ensemble(spec, 0, num_members=num)
     try:
         with ocp.StandardCheckpointer() as ckpt:
@@ -250,5 +253,5 @@ def load_ensemble(path: str | os.PathLike) -> models.Ensemble:
         params = _unflat(template.params, flat)
     except Exception as e:  # noqa: BLE001
         raise CheckpointError(f"{path / 'params'} is corrupt or does not match ensemble.json "
-                              f"({type(e).__name__}: {str(e)[:300]})") from None
+                              f"({type(e).__name__}: {str(e)[:300]}); {fix}") from None
     return models.Ensemble(graphdef=template.graphdef, params=params, spec=spec)

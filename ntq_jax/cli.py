@@ -1,0 +1,122 @@
+"""Command-line error handling shared by the scripts: expected errors become one line.
+
+Every script's entry point goes through :func:`run_cli`::
+
+    def main(argv=None) -> int:
+        return run_cli(lambda: _main(argv))
+
+The package's expected exceptions (:class:`UsageError` for a bad argument,
+:data:`EXPECTED_ERRORS`: a bad environment, config, dataset, checkpoint or run
+folder, a path that is missing, not writable or of the wrong kind) are printed as one ``error: <message>`` line on stderr
+(their messages name the problem and the fix) and give exit code 2; Ctrl-C
+gives one ``interrupted`` line and exit code 130. Anything else is a bug and
+keeps its traceback.
+"""
+
+from __future__ import annotations
+
+import logging
+import sys
+from typing import Callable, Iterable
+
+__all__ = ["UsageError", "EXPECTED_ERRORS", "PATH_ERRORS", "expected_error_types", "error_line",
+           "positive_int", "run_cli"]
+
+
+class UsageError(ValueError):
+    """A command-line argument that cannot be used (the message names the option and the fix)."""
+
+#: ``(module, class name)`` of the package's expected exceptions. They are looked
+#: up in :data:`sys.modules` only: an exception can only be raised by a module
+#: that was imported, so the lookup never imports anything (``--help`` stays fast).
+EXPECTED_ERRORS: tuple[tuple[str, str], ...] = (
+    ("ntq_jax.envs", "EnvError"),
+    ("ntq_jax.config", "ConfigError"),
+    ("ntq_jax.data.format", "DatasetError"),
+    ("ntq_jax.training.checkpoint", "CheckpointError"),
+    ("ntq_jax.pipeline", "PipelineError"),
+)
+
+#: Path errors and the fix each one calls for.
+PATH_ERRORS: dict[type[OSError], str] = {
+    PermissionError: "choose a writable location or change its permissions",
+    FileNotFoundError: "check the path",
+    IsADirectoryError: "a file was expected there, not a folder",
+    NotADirectoryError: "a folder was expected there, but the path (or one of its parents) "
+                        "is a file",
+    FileExistsError: "a folder is needed there but a file of that name exists; choose another "
+                     "path or remove the file",
+}
+
+
+def expected_error_types(extra: Iterable[type[BaseException]] = ()
+                         ) -> tuple[type[BaseException], ...]:
+    """The expected exception classes of the modules imported so far, path errors and ``extra``."""
+    found = []
+    for module, name in EXPECTED_ERRORS:
+        cls = getattr(sys.modules.get(module), name, None)
+        if isinstance(cls, type) and issubclass(cls, BaseException):
+            found.append(cls)
+    return (UsageError, *found, *PATH_ERRORS, *extra)
+
+
+def positive_int(option: str, value: int) -> int:
+    """``value`` if it is >= 1, else a :class:`UsageError` naming ``option``."""
+    if value < 1:
+        raise UsageError(f"{option} {value}: expected a positive integer (1 or more)")
+    return value
+
+
+def error_line(err: BaseException) -> str:
+    """``error: <message>`` on one line (a multi-line message is joined with ``; ``).
+
+    A path error without a message of ours (``[Errno 13] Permission denied:
+    'x'``) becomes ``<path>: <reason>; <fix>``.
+    """
+    fix = next((f for cls, f in PATH_ERRORS.items() if type(err) is cls), None)
+    if fix is not None and isinstance(err, OSError) and err.strerror:
+        where = f"{err.filename}: " if err.filename is not None else ""
+        msg = f"{where}{err.strerror.lower()}; {fix}"
+    else:
+        msg = str(err) or type(err).__name__
+    parts = [p.strip() for p in msg.splitlines() if p.strip()]
+    return "error: " + "; ".join(parts)
+
+
+def _quiet_asyncio_after_error() -> None:
+    """Silences asyncio's "Event loop is closed" noise printed at exit after a failed orbax read."""
+    logging.getLogger("asyncio").setLevel(logging.CRITICAL)
+    logging.getLogger("absl").setLevel(logging.CRITICAL)
+
+    def hook(unraisable, _default=sys.unraisablehook):
+        exc = unraisable.exc_value
+        if isinstance(exc, RuntimeError) and "Event loop is closed" in str(exc):
+            return
+        _default(unraisable)
+
+    sys.unraisablehook = hook
+
+
+def run_cli(main: Callable[[], int], extra: Iterable[type[BaseException]] = ()) -> int:
+    """Runs a script's ``main()`` and returns its exit code; expected errors become one line.
+
+    Args:
+        main: the script's body, returning its exit code.
+        extra: more exception classes the script expects (printed the same way).
+
+    Returns:
+        ``main()``'s exit code; 2 after an expected error (one ``error: ...``
+        line on stderr), 130 after Ctrl-C. Other exceptions propagate with
+        their traceback.
+    """
+    try:
+        return main()
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+    except Exception as e:  # noqa: BLE001 (re-raised unless expected)
+        if not isinstance(e, expected_error_types(extra)):
+            raise
+        _quiet_asyncio_after_error()
+        print(error_line(e), file=sys.stderr, flush=True)
+        return 2

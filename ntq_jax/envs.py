@@ -10,6 +10,11 @@
      "discs": [[cx, cy, r], ...],
      "padding": 0.8}
 
+Parsing is strict (:mod:`ntq_jax.validation`): every row has exactly its
+width, every entry is a finite number (``true`` and ``"22"`` are not), and
+every problem is one :class:`EnvError` line naming the key, the row and the
+expected form.
+
 Every method that touches geometry takes ``padding=``: ``None`` (default) is
 the environment's own padding, the data-generation geometry of the paper;
 ``padding=0`` is the evaluation geometry.
@@ -28,7 +33,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ntq_jax import artifacts, geometry, queries as Q
+from ntq_jax import artifacts, geometry, queries as Q, validation
 from ntq_jax.geometry import World
 from ntq_jax.presets import PRESETS
 from ntq_jax.robots import Robot, robot_from_json
@@ -180,7 +185,11 @@ class Env:
 
     @staticmethod
     def from_json(spec: dict[str, Any], where: str = "environment") -> "Env":
-        """Builds an Env from a JSON dict; every problem is one :class:`EnvError` naming the key."""
+        """Builds an Env from a JSON dict; every problem is one :class:`EnvError` naming the key.
+
+        Strict (see the module docstring): exact row widths, finite numbers only
+        (no bools, no strings, nothing reshaped), ``null`` refused.
+        """
         if not isinstance(spec, dict):
             raise EnvError(f"{where}: expected a JSON object, got {type(spec).__name__}")
         unknown = sorted(set(spec) - _JSON_KEYS)
@@ -189,18 +198,19 @@ class Env:
         for key in ("robot", "bounds"):
             if key not in spec:
                 raise EnvError(f"{where}: missing required key {key!r}")
+        name = spec.get("name", "custom")
+        if not isinstance(name, str) or not name:
+            raise EnvError(f"{where}: name must be a non-empty string, got {validation.short_repr(name)}")
         try:
             robot = robot_from_json(spec["robot"], where=f"{where}: robot")
         except (TypeError, ValueError) as e:
             raise EnvError(str(e)) from None
         try:
             world = World.create(spec["bounds"], spec.get("boxes", []), spec.get("discs", []))
+            padding = validation.number(spec.get("padding", 0.0), "padding", minimum=0)
         except (TypeError, ValueError) as e:
             raise EnvError(f"{where}: {e}") from None
-        padding = spec.get("padding", 0.0)
-        if not isinstance(padding, (int, float)) or not math.isfinite(padding) or padding < 0:
-            raise EnvError(f"{where}: padding must be a number >= 0, got {padding!r}")
-        return Env(str(spec.get("name", "custom")), robot, world, float(padding))
+        return Env(name, robot, world, padding)
 
 
 def make_env(name_or_path: str | os.PathLike) -> Env:
@@ -214,6 +224,8 @@ def make_env(name_or_path: str | os.PathLike) -> Env:
         return Env.from_json(PRESETS[name], where=f"preset {name}")
     path = Path(name)
     if path.suffix.lower() == ".json" or path.exists():
+        if path.is_dir():
+            raise EnvError(f"environment file {name!r} is a directory, not a JSON map file")
         if not path.is_file():
             raise EnvError(f"environment file {name!r} does not exist")
         try:

@@ -27,7 +27,7 @@ import math
 import jax
 import jax.numpy as jnp
 
-from ntq_jax import geometry
+from ntq_jax import geometry, validation
 from ntq_jax.geometry import World
 from ntq_jax.robots.base import DiscretizedSteering, wrap_angle
 from ntq_jax.robots.certified import CertifiedSteering
@@ -48,9 +48,8 @@ class RigidBody(DiscretizedSteering, CertifiedSteering):
 
     def __post_init__(self):
         for name in ("length", "width", "angle_weight", "resolution"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                raise ValueError(f"rigid_body.{name} must be a number > 0, got {v!r}")
+            v = validation.number(getattr(self, name), f"rigid_body.{name}", minimum=0, strict=True)
+            object.__setattr__(self, name, v)
 
     @property
     def half_diagonal(self) -> float:

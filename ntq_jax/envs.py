@@ -13,7 +13,8 @@
 Parsing is strict (:mod:`ntq_jax.validation`): every row has exactly its
 width, every entry is a finite number (``true`` and ``"22"`` are not), and
 every problem is one :class:`EnvError` line naming the key, the row and the
-expected form.
+expected form. A discretised robot's ``resolution`` is bounded below by
+:func:`check_resolution` (at most :data:`MAX_STATES_PER_MOTION` states per motion).
 
 Every method that touches geometry takes ``padding=``: ``None`` (default) is
 the environment's own padding, the data-generation geometry of the paper;
@@ -45,8 +46,41 @@ Array = jax.Array
 _JSON_KEYS = {"name", "robot", "bounds", "boxes", "discs", "padding"}
 
 
+#: The most states a discretised ``steer_to`` may check on one motion between two valid
+#: states: ``resolution`` must be at least the robot's longest motion divided by this
+#: (:func:`check_resolution`). With 10^5, one motion takes milliseconds; the presets
+#: check at most a few hundred states per motion.
+MAX_STATES_PER_MOTION = 100_000
+
+
 class EnvError(ValueError):
     """A bad environment name or file."""
+
+
+def check_resolution(robot: Robot, world: World) -> None:
+    """Refuses a ``resolution`` so fine that one motion would check too many states.
+
+    For the robots with a discretised ``steer_to`` (they have ``resolution`` and
+    ``longest_motion``): ``resolution >= longest_motion(world) / MAX_STATES_PER_MOTION``,
+    with the longest motion between two valid states in the robot's cost metric
+    (rigid body: the workspace diagonal plus ``angle_weight * pi``; arm: the joint
+    box diagonal ``2 pi sqrt(n)`` radians). The point robot's check is exact and
+    has no resolution.
+
+    Raises:
+        ValueError: naming the resolution, the bound and how it was derived.
+    """
+    longest = getattr(robot, "longest_motion", None)
+    if longest is None:
+        return
+    length = float(longest(world))
+    floor = length / MAX_STATES_PER_MOTION
+    if not robot.resolution >= floor:
+        unit = " rad" if robot.kind == "nlink" else ""
+        raise ValueError(
+            f"{robot.kind}.resolution {robot.resolution:g}{unit} is too fine: the longest motion "
+            f"({length:.4g}{unit}) would be checked at {length / robot.resolution:.3g} states; "
+            f"use resolution >= {floor:.3g}{unit} (at most {MAX_STATES_PER_MOTION} states per motion)")
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -64,6 +98,12 @@ class Env:
     robot: Robot
     world: World
     padding: float
+
+    def __post_init__(self):
+        try:
+            check_resolution(self.robot, self.world)
+        except ValueError as e:
+            raise EnvError(f"{self.name}: {e}") from None
 
     # -- geometry -----------------------------------------------------------
     @property
@@ -188,7 +228,8 @@ class Env:
         """Builds an Env from a JSON dict; every problem is one :class:`EnvError` naming the key.
 
         Strict (see the module docstring): exact row widths, finite numbers only
-        (no bools, no strings, nothing reshaped), ``null`` refused.
+        (no bools, no strings, nothing reshaped), ``null`` refused, and a bounded
+        ``resolution`` (:func:`check_resolution`).
         """
         if not isinstance(spec, dict):
             raise EnvError(f"{where}: expected a JSON object, got {type(spec).__name__}")
@@ -208,6 +249,7 @@ class Env:
         try:
             world = World.create(spec["bounds"], spec.get("boxes", []), spec.get("discs", []))
             padding = validation.number(spec.get("padding", 0.0), "padding", minimum=0)
+            check_resolution(robot, world)
         except (TypeError, ValueError) as e:
             raise EnvError(f"{where}: {e}") from None
         return Env(name, robot, world, padding)

@@ -54,6 +54,12 @@ class NLinkArm(DiscretizedSteering, CertifiedSteering):
         object.__setattr__(self, "resolution", validation.number(
             self.resolution, "nlink.resolution", minimum=0, strict=True))
 
+    def longest_motion(self, world: World) -> float:
+        """The longest motion between two valid states in the cost metric (radians): the
+        diagonal ``2 pi sqrt(n)`` of the joint box ``[-pi, pi]^n`` (the bound of
+        ``resolution``, see :func:`ntq_jax.envs.check_resolution`)."""
+        return 2.0 * math.pi * math.sqrt(len(self.link_lengths))
+
     @property
     def dim(self) -> int:
         return len(self.link_lengths)

@@ -51,6 +51,13 @@ class RigidBody(DiscretizedSteering, CertifiedSteering):
             v = validation.number(getattr(self, name), f"rigid_body.{name}", minimum=0, strict=True)
             object.__setattr__(self, name, v)
 
+    def longest_motion(self, world: World) -> float:
+        """The longest motion between two valid states in the cost metric: the workspace
+        diagonal plus ``angle_weight * pi`` (the bound of ``resolution``, see
+        :func:`ntq_jax.envs.check_resolution`)."""
+        b = world.bounds.tolist() if hasattr(world.bounds, "tolist") else world.bounds
+        return math.hypot(b[0][1] - b[0][0], b[1][1] - b[1][0]) + self.angle_weight * math.pi
+
     @property
     def half_diagonal(self) -> float:
         return 0.5 * math.hypot(self.length, self.width)

@@ -24,6 +24,7 @@ the environment's own padding, the data-generation geometry of the paper;
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import json
 import math
 import os
@@ -104,6 +105,15 @@ class Env:
             check_resolution(self.robot, self.world)
         except ValueError as e:
             raise EnvError(f"{self.name}: {e}") from None
+
+    def content_hash(self) -> str:
+        """sha256 (hex) of what the environment is, not what it is called: the robot's
+        parameters, the padding and the exact float32 bounds, boxes and discs. Two maps
+        with the same content have the same hash whatever their names or file paths."""
+        content = {"robot": self.robot.to_json(), "padding": float(self.padding),
+                   **{k: np.asarray(getattr(self.world, k), np.float64).tolist()
+                      for k in ("bounds", "boxes", "discs")}}
+        return hashlib.sha256(json.dumps(content, sort_keys=True).encode()).hexdigest()
 
     # -- geometry -----------------------------------------------------------
     @property

@@ -32,7 +32,6 @@ import yaml
 from ntq_jax import artifacts, config as C
 from ntq_jax import data as data_mod
 from ntq_jax import training
-from ntq_jax.envs import make_env
 from ntq_jax.data import env_slug
 from ntq_jax.evaluate import evaluate_env
 from ntq_jax.report import write_report
@@ -101,7 +100,7 @@ def _mark(run: Path, stage: str, **fields) -> None:
 def _run_env(cfg: C.Config, run: Path, name: str, env, *, progress, figures: bool,
              log: Callable[[str], None]) -> tuple[list[dict], dict]:
     """Data -> training -> evaluation for one environment; returns its rows and timings."""
-    slug = env_slug(name)
+    slug = env_slug(name, env)
     # -- data ----------------------------------------------------------------
     t0 = time.perf_counter()
     log(f"[{name}] data: {cfg.data.k_train_for(name)} queries x {len(cfg.data.datasets)} "
@@ -141,9 +140,9 @@ def run_pipeline(cfg: C.Config, run: Path, *, progress=True, figures: bool = Tru
         figures: write the PNG figures.
         log: one-line progress messages.
     """
-    rows, envs, timings = [], {}, {}
+    rows, timings = [], {}
+    envs = data_mod.resolve_envs(cfg.envs)  # every env built, no two sharing a folder
     for name in cfg.envs:
-        envs[name] = make_env(name)
         env_rows, timings[name] = _run_env(cfg, run, name, envs[name], progress=progress,
                                            figures=figures, log=log)
         rows += env_rows

@@ -35,7 +35,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ntq_jax import artifacts, geometry, queries as Q, validation
+from ntq_jax import artifacts, geometry, validation
+from ntq_jax import queries as Q
 from ntq_jax.geometry import World
 from ntq_jax.presets import PRESETS
 from ntq_jax.robots import Robot, robot_from_json

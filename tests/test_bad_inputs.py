@@ -58,8 +58,8 @@ _RIGID = {"kind": "rigid_body", "length": 1.2, "width": 0.4, "angle_weight": 0.5
     ({"name": None}, r"name must be a non-empty string, got None"),
     ({"robot": {**_ARM, "link_lengths": "22"}},
      r"robot: nlink.link_lengths must be a list \[l1, l2, \.\.\.\].*got '22' \(str\)"),
-    ({"robot": {**_ARM, "base": "55"}}, r"robot: nlink.base must be a list \[x, y\] \(2 numbers\), "
-                                       r"got '55' \(str\)"),
+    ({"robot": {**_ARM, "base": "55"}},
+     r"robot: nlink.base must be a list \[x, y\] \(2 numbers\), got '55' \(str\)"),
     ({"robot": {**_ARM, "base": [1, 2, 3]}}, r"nlink.base is \[1, 2, 3\]: expected \[x, y\]"),
     ({"robot": {**_ARM, "link_lengths": [2, False]}}, r"nlink.link_lengths\[1\] is False"),
     ({"robot": {**_RIGID, "length": True}}, r"rigid_body.length must be a number > 0, got True"),
@@ -67,8 +67,8 @@ _RIGID = {"kind": "rigid_body", "length": 1.2, "width": 0.4, "angle_weight": 0.5
     ({"robot": {"kind": ["point"]}}, r"robot.kind \['point'\] is unknown"),
     # bounded discretisation: no resolution that makes one motion check millions of states
     ({"robot": {**_RIGID, "resolution": 1e-9}},
-     r"rigid_body.resolution 1e-09 is too fine: the longest motion \(15.71\).*1.57e\+10 states; "
-     r"use resolution >= 0.000157 \(at most 100000 states per motion\)"),
+     (r"rigid_body.resolution 1e-09 is too fine: the longest motion \(15.71\).*1.57e\+10 states; "
+      r"use resolution >= 0.000157 \(at most 100000 states per motion\)")),
     ({"robot": {**_ARM, "resolution": 1e-7}},
      r"nlink.resolution 1e-07 rad is too fine.*use resolution >= 8.89e-05 rad"),
 ])

@@ -83,7 +83,7 @@ class Dataset(NamedTuple):
     meta: dict
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _preset_hash(name: str) -> str:
     """:meth:`Env.content_hash` of the preset ``name``."""
     return make_env(name).content_hash()

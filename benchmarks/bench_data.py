@@ -56,8 +56,8 @@ def main(argv=None) -> int:
         sets.append(f"data.gamma_queries={args.gamma_queries}")
     cfg = C.load(args.config, sets)
     out = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="bench_data_"))
-    shutil.rmtree(out / data.env_slug(args.env), ignore_errors=True)
     env = make_env(args.env)
+    shutil.rmtree(out / data.env_slug(args.env, env), ignore_errors=True)
     t0 = time.perf_counter()
     s = data.generate_datasets(env, cfg, out, env_name=args.env, progress=args.progress)
     wall = time.perf_counter() - t0

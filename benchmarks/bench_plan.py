@@ -106,7 +106,7 @@ def bench(env_name: str, *, queries: int, loop_queries: int, run=None, model: in
     if run is not None:
         from ntq_jax.training import load_ensemble
         cfg = C.load(Path(run) / "config.yaml", list(eval_overrides))
-        ens = load_ensemble(Path(run) / "models" / env_slug(env_name))
+        ens = load_ensemble(Path(run) / "models" / env_slug(env_name, env))
         source = f"trained PNet_{model} of {run}"
     else:
         cfg = C.load(None, [f"model.hidden={list(hidden)}", *eval_overrides])

@@ -67,7 +67,7 @@ def recheck_run(run: Path) -> list[dict]:
     rows = []
     for name in cfg["envs"]:
         env = nj.make_env(name)
-        slug = env_slug(name)
+        slug = env_slug(name, env)
         ref = artifacts.load_npz(run / "eval" / slug / "reference.npz")
         for kind in ("uniform", "nontrivial"):
             if ref is None:

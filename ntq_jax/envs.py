@@ -10,6 +10,12 @@
      "discs": [[cx, cy, r], ...],
      "padding": 0.8}
 
+Parsing is strict (:mod:`ntq_jax.validation`): every row has exactly its
+width, every entry is a finite number (``true`` and ``"22"`` are not), and
+every problem is one :class:`EnvError` line naming the key, the row and the
+expected form. A discretised robot's ``resolution`` is bounded below by
+:func:`check_resolution` (at most :data:`MAX_STATES_PER_MOTION` states per motion).
+
 Every method that touches geometry takes ``padding=``: ``None`` (default) is
 the environment's own padding, the data-generation geometry of the paper;
 ``padding=0`` is the evaluation geometry.
@@ -18,6 +24,7 @@ the environment's own padding, the data-generation geometry of the paper;
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import json
 import math
 import os
@@ -28,7 +35,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ntq_jax import artifacts, geometry, queries as Q
+from ntq_jax import artifacts, geometry, validation
+from ntq_jax import queries as Q
 from ntq_jax.geometry import World
 from ntq_jax.presets import PRESETS
 from ntq_jax.robots import Robot, robot_from_json
@@ -40,8 +48,41 @@ Array = jax.Array
 _JSON_KEYS = {"name", "robot", "bounds", "boxes", "discs", "padding"}
 
 
+#: The most states a discretised ``steer_to`` may check on one motion between two valid
+#: states: ``resolution`` must be at least the robot's longest motion divided by this
+#: (:func:`check_resolution`). With 10^5, one motion takes milliseconds; the presets
+#: check at most a few hundred states per motion.
+MAX_STATES_PER_MOTION = 100_000
+
+
 class EnvError(ValueError):
     """A bad environment name or file."""
+
+
+def check_resolution(robot: Robot, world: World) -> None:
+    """Refuses a ``resolution`` so fine that one motion would check too many states.
+
+    For the robots with a discretised ``steer_to`` (they have ``resolution`` and
+    ``longest_motion``): ``resolution >= longest_motion(world) / MAX_STATES_PER_MOTION``,
+    with the longest motion between two valid states in the robot's cost metric
+    (rigid body: the workspace diagonal plus ``angle_weight * pi``; arm: the joint
+    box diagonal ``2 pi sqrt(n)`` radians). The point robot's check is exact and
+    has no resolution.
+
+    Raises:
+        ValueError: naming the resolution, the bound and how it was derived.
+    """
+    longest = getattr(robot, "longest_motion", None)
+    if longest is None:
+        return
+    length = float(longest(world))
+    floor = length / MAX_STATES_PER_MOTION
+    if not robot.resolution >= floor:
+        unit = " rad" if robot.kind == "nlink" else ""
+        raise ValueError(
+            f"{robot.kind}.resolution {robot.resolution:g}{unit} is too fine: the longest motion "
+            f"({length:.4g}{unit}) would be checked at {length / robot.resolution:.3g} states; "
+            f"use resolution >= {floor:.3g}{unit} (at most {MAX_STATES_PER_MOTION} states per motion)")
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -59,6 +100,21 @@ class Env:
     robot: Robot
     world: World
     padding: float
+
+    def __post_init__(self):
+        try:
+            check_resolution(self.robot, self.world)
+        except ValueError as e:
+            raise EnvError(f"{self.name}: {e}") from None
+
+    def content_hash(self) -> str:
+        """sha256 (hex) of what the environment is, not what it is called: the robot's
+        parameters, the padding and the exact float32 bounds, boxes and discs. Two maps
+        with the same content have the same hash whatever their names or file paths."""
+        content = {"robot": self.robot.to_json(), "padding": float(self.padding),
+                   **{k: np.asarray(getattr(self.world, k), np.float64).tolist()
+                      for k in ("bounds", "boxes", "discs")}}
+        return hashlib.sha256(json.dumps(content, sort_keys=True).encode()).hexdigest()
 
     # -- geometry -----------------------------------------------------------
     @property
@@ -180,7 +236,12 @@ class Env:
 
     @staticmethod
     def from_json(spec: dict[str, Any], where: str = "environment") -> "Env":
-        """Builds an Env from a JSON dict; every problem is one :class:`EnvError` naming the key."""
+        """Builds an Env from a JSON dict; every problem is one :class:`EnvError` naming the key.
+
+        Strict (see the module docstring): exact row widths, finite numbers only
+        (no bools, no strings, nothing reshaped), ``null`` refused, and a bounded
+        ``resolution`` (:func:`check_resolution`).
+        """
         if not isinstance(spec, dict):
             raise EnvError(f"{where}: expected a JSON object, got {type(spec).__name__}")
         unknown = sorted(set(spec) - _JSON_KEYS)
@@ -189,18 +250,20 @@ class Env:
         for key in ("robot", "bounds"):
             if key not in spec:
                 raise EnvError(f"{where}: missing required key {key!r}")
+        name = spec.get("name", "custom")
+        if not isinstance(name, str) or not name:
+            raise EnvError(f"{where}: name must be a non-empty string, got {validation.short_repr(name)}")
         try:
             robot = robot_from_json(spec["robot"], where=f"{where}: robot")
         except (TypeError, ValueError) as e:
             raise EnvError(str(e)) from None
         try:
             world = World.create(spec["bounds"], spec.get("boxes", []), spec.get("discs", []))
+            padding = validation.number(spec.get("padding", 0.0), "padding", minimum=0)
+            check_resolution(robot, world)
         except (TypeError, ValueError) as e:
             raise EnvError(f"{where}: {e}") from None
-        padding = spec.get("padding", 0.0)
-        if not isinstance(padding, (int, float)) or not math.isfinite(padding) or padding < 0:
-            raise EnvError(f"{where}: padding must be a number >= 0, got {padding!r}")
-        return Env(str(spec.get("name", "custom")), robot, world, float(padding))
+        return Env(name, robot, world, padding)
 
 
 def make_env(name_or_path: str | os.PathLike) -> Env:
@@ -214,6 +277,8 @@ def make_env(name_or_path: str | os.PathLike) -> Env:
         return Env.from_json(PRESETS[name], where=f"preset {name}")
     path = Path(name)
     if path.suffix.lower() == ".json" or path.exists():
+        if path.is_dir():
+            raise EnvError(f"environment file {name!r} is a directory, not a JSON map file")
         if not path.is_file():
             raise EnvError(f"environment file {name!r} does not exist")
         try:

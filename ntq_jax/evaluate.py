@@ -361,7 +361,7 @@ def evaluate_env(env, ensemble, cfg, run_dir, *, env_name: str, data_env_dir=Non
     Returns:
         One result row (dict) per (model, query kind, steerTo).
     """
-    slug = env_slug(env_name)
+    slug = env_slug(env_name, env)
     run_dir = Path(run_dir)
     out_dir = run_dir / "eval" / slug
     pnets = list(ensemble) if isinstance(ensemble, (list, tuple)) else member_pnets(ensemble)

@@ -42,6 +42,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ntq_jax import validation
+
 Array = jax.Array
 
 #: XLA options for the jitted kernels (``jax.jit(..., compiler_options=...)``): on CPU,
@@ -68,19 +70,32 @@ class World:
 
     @staticmethod
     def create(bounds, boxes=(), discs=()) -> "World":
-        """Builds a World from nested sequences, validating shapes and values."""
-        b = np.asarray(bounds, dtype=np.float64)
-        if b.shape != (2, 2) or not np.all(np.isfinite(b)) or np.any(b[:, 1] <= b[:, 0]):
-            raise ValueError(
-                f"bounds must be [[xmin, xmax], [ymin, ymax]] with min < max, got {bounds!r}")
-        bx = np.asarray(boxes, dtype=np.float64).reshape(-1, 4) if len(boxes) else np.zeros((0, 4))
-        dc = np.asarray(discs, dtype=np.float64).reshape(-1, 3) if len(discs) else np.zeros((0, 3))
-        if not (np.all(np.isfinite(bx)) and np.all(np.isfinite(dc))):
-            raise ValueError("obstacle coordinates must be finite numbers")
-        if np.any(bx[:, 2:] <= 0):
-            raise ValueError("box half sizes must be > 0 (rows are [cx, cy, half_w, half_h])")
-        if np.any(dc[:, 2] <= 0):
-            raise ValueError("disc radii must be > 0 (rows are [cx, cy, r])")
+        """Builds a World from nested sequences (or 2-D arrays), validating shapes and values.
+
+        Strict: ``bounds`` is exactly two rows ``[min, max]``, every box row is
+        exactly ``[cx, cy, half_w, half_h]`` and every disc row exactly
+        ``[cx, cy, r]``, all finite numbers (bools and strings are refused);
+        nothing is reshaped. ``[]`` (or an empty array) means no obstacles.
+
+        Raises:
+            ValueError: one line naming the key, the row and the expected form.
+        """
+        b = validation.number_rows(bounds, "bounds", 2, "[min, max]")
+        if b.shape != (2, 2):
+            raise ValueError(f"bounds must be [[xmin, xmax], [ymin, ymax]] (two rows), got "
+                             f"{validation.short_repr(bounds)}")
+        for i, axis in enumerate("xy"):
+            if not b[i, 1] > b[i, 0]:
+                raise ValueError(f"bounds[{i}] is {b[i].tolist()}: expected [{axis}min, {axis}max] "
+                                 f"with {axis}min < {axis}max")
+        bx = validation.number_rows(boxes, "boxes", 4, "[cx, cy, half_w, half_h]")
+        dc = validation.number_rows(discs, "discs", 3, "[cx, cy, r]")
+        for i in np.flatnonzero(np.any(bx[:, 2:] <= 0, axis=1))[:1]:
+            raise ValueError(f"boxes[{i}] is {bx[i].tolist()}: half sizes must be > 0 "
+                             "(rows are [cx, cy, half_w, half_h])")
+        for i in np.flatnonzero(dc[:, 2] <= 0)[:1]:
+            raise ValueError(f"discs[{i}] is {dc[i].tolist()}: radius must be > 0 "
+                             "(rows are [cx, cy, r])")
         return World(jnp.asarray(b, jnp.float32), jnp.asarray(bx, jnp.float32),
                      jnp.asarray(dc, jnp.float32))
 

@@ -39,7 +39,6 @@ import yaml
 from ntq_jax import artifacts, config as C
 from ntq_jax import data as data_mod
 from ntq_jax import training
-from ntq_jax.envs import make_env
 from ntq_jax.data import env_slug
 from ntq_jax.evaluate import evaluate_env
 from ntq_jax.report import write_report
@@ -140,12 +139,12 @@ def prepare_run(cfg: C.Config, out: str | Path | None, *, overwrite: bool = Fals
             (only when it holds nothing but a run's files) and start over.
 
     Raises:
-        EnvError: an environment of ``cfg.envs`` cannot be made.
+        EnvError: an environment of ``cfg.envs`` cannot be made, or two of them
+            would share a folder.
         PipelineError: ``out`` is a file or not writable, or a non-empty folder
             that is not a run of this config (the message says how to proceed).
     """
-    for name in cfg.envs:
-        make_env(name)  # raises EnvError before anything is written
+    data_mod.resolve_envs(cfg.envs)  # raises EnvError before anything is written
     run = run_folder(cfg, out)
     _check_writable(run)
     if run.is_dir() and any(run.iterdir()):
@@ -189,7 +188,7 @@ def _mark(run: Path, stage: str, **fields) -> None:
 def _run_env(cfg: C.Config, run: Path, name: str, env, *, progress, figures: bool,
              log: Callable[[str], None]) -> tuple[list[dict], dict]:
     """Data -> training -> evaluation for one environment; returns its rows and timings."""
-    slug = env_slug(name)
+    slug = env_slug(name, env)
     # -- data ----------------------------------------------------------------
     t0 = time.perf_counter()
     log(f"[{name}] data: {cfg.data.k_train_for(name)} queries x {len(cfg.data.datasets)} "
@@ -239,9 +238,9 @@ def run_pipeline(cfg: C.Config, run: Path, *, progress=True, figures: bool = Tru
         figures: write the PNG figures.
         log: one-line progress messages.
     """
-    rows, envs, timings = [], {}, {}
+    rows, timings = [], {}
+    envs = data_mod.resolve_envs(cfg.envs)  # every env built, no two sharing a folder
     for name in cfg.envs:
-        envs[name] = make_env(name)
         env_rows, timings[name] = _run_env(cfg, run, name, envs[name], progress=progress,
                                            figures=figures, log=log)
         rows += env_rows

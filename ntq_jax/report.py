@@ -219,7 +219,7 @@ def _figures(run_dir: Path, rows: list[dict], envs: dict) -> dict:
         written.append(plotting.success_figure(
             rows, figs / f"success_ratio{'' if steer else '_nosteer'}.png", steer))
     for name, env in envs.items():
-        slug = env_slug(name)
+        slug = env_slug(name, env)
         steer = any(r["steer"] for r in rows if r["env"] == name)
         mine = [r for r in rows if r["env"] == name and r["steer"] == steer
                 and r["query_kind"] == "nontrivial"]

@@ -263,7 +263,7 @@ def test_obstacle_free_map_gives_an_empty_valid_d3(tmp_path):
         s = data.generate_datasets(env, cfg, tmp_path, planner=straight_line, progress=False,
                                    figure=False)
     assert s["datasets"]["D3"]["samples"] == 0
-    d0, d1, d2, d3 = data.load_datasets(tmp_path / "empty")
+    d0, d1, d2, d3 = data.load_datasets(s["env_dir"])  # <out>/empty-<content hash>
     assert d3.inputs.shape == (0, 4) and d3.targets.shape == (0, 2) and d3.path_index.shape == (0,)
     assert len(d3.paths) == 12 and any("pruning removed every" in w for w in d3.meta["warnings"])
     assert np.all(np.asarray(d2.query_kind) == 2)  # the non-trivial sampler was exhausted
@@ -287,7 +287,7 @@ def test_a_custom_planners_paths_are_verified_and_bad_ones_recorded_unsolved(tmp
         s = data.generate_datasets(env, cfg, tmp_path, planner=keep, progress=False, figure=False)
     for res, paths, status in returned:  # the planner's arrays are not modified
         assert np.array_equal(res.paths, paths) and np.array_equal(res.status, status)
-    for d in data.load_datasets(tmp_path / "wall"):
+    for d in data.load_datasets(s["env_dir"]):  # <out>/wall-<content hash>
         q = np.asarray(d.queries)
         free = np.asarray(env.steer_to(q[:, 0], q[:, 1]))
         assert np.array_equal(np.asarray(d.solved), free)

@@ -10,7 +10,7 @@
 
 from ntq_jax.data.format import (ARRAY_SPECS, FORMAT, FORMAT_VERSION, Dataset, DatasetError,
                                  dataset_names, env_slug, load_dataset, load_datasets,
-                                 plot_environment)
+                                 plot_environment, resolve_envs)
 from ntq_jax.data.generate import generate_datasets
 from ntq_jax.data.include import include_data
 from ntq_jax.data.planning import planner_options, resolve_planner
@@ -18,6 +18,6 @@ from ntq_jax.data.pools import mixing_bits, run_keys
 from ntq_jax.data.synthetic import straight_line_rows
 
 __all__ = ["Dataset", "DatasetError", "ARRAY_SPECS", "FORMAT", "FORMAT_VERSION", "env_slug",
-           "dataset_names", "load_dataset", "load_datasets", "plot_environment",
+           "resolve_envs", "dataset_names", "load_dataset", "load_datasets", "plot_environment",
            "generate_datasets", "include_data", "planner_options", "resolve_planner",
            "mixing_bits", "run_keys", "straight_line_rows"]

@@ -100,7 +100,7 @@ class RunSpec(NamedTuple):
 def resolve_run(env, config, out_dir, env_name: str | None, planner) -> RunSpec:
     """The :class:`RunSpec` of ``generate_datasets``' arguments (paddings resolved here)."""
     env_name = env_name or env.name
-    slug = env_slug(env_name)
+    slug = env_slug(env_name, env)
     dc = config.data
     specs = list(dc.datasets)
     k = dc.k_train_for(env_name)

@@ -25,7 +25,7 @@ import math
 import jax
 import jax.numpy as jnp
 
-from ntq_jax import geometry
+from ntq_jax import geometry, validation
 from ntq_jax.geometry import World
 from ntq_jax.robots.base import DiscretizedSteering
 from ntq_jax.robots.certified import CertifiedSteering
@@ -43,14 +43,22 @@ class NLinkArm(DiscretizedSteering, CertifiedSteering):
     kind: str = dataclasses.field(default="nlink", init=False)
 
     def __post_init__(self):
-        object.__setattr__(self, "link_lengths", tuple(float(v) for v in self.link_lengths))
-        object.__setattr__(self, "base", tuple(float(v) for v in self.base))
-        if len(self.link_lengths) < 1 or any(not (math.isfinite(v) and v > 0) for v in self.link_lengths):
-            raise ValueError(f"nlink.link_lengths must be numbers > 0, got {self.link_lengths!r}")
-        if len(self.base) != 2 or not all(math.isfinite(v) for v in self.base):
-            raise ValueError(f"nlink.base must be [x, y], got {self.base!r}")
-        if not (math.isfinite(self.resolution) and self.resolution > 0):
-            raise ValueError(f"nlink.resolution must be > 0, got {self.resolution!r}")
+        lengths = validation.number_list(self.link_lengths, "nlink.link_lengths",
+                                         "[l1, l2, ...] of link lengths > 0", min_length=1)
+        for i, v in enumerate(lengths):
+            if not v > 0:
+                raise ValueError(f"nlink.link_lengths[{i}] is {v:g}: link lengths must be > 0")
+        base = validation.number_list(self.base, "nlink.base", "[x, y]", length=2)
+        object.__setattr__(self, "link_lengths", lengths)
+        object.__setattr__(self, "base", base)
+        object.__setattr__(self, "resolution", validation.number(
+            self.resolution, "nlink.resolution", minimum=0, strict=True))
+
+    def longest_motion(self, world: World) -> float:
+        """The longest motion between two valid states in the cost metric (radians): the
+        diagonal ``2 pi sqrt(n)`` of the joint box ``[-pi, pi]^n`` (the bound of
+        ``resolution``, see :func:`ntq_jax.envs.check_resolution`)."""
+        return 2.0 * math.pi * math.sqrt(len(self.link_lengths))
 
     @property
     def dim(self) -> int:

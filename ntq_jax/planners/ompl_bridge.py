@@ -11,10 +11,14 @@ per-query :class:`BridgeOutcome` (kept in ``info["bitstar_status"]``) maps to
 invalid or crashing query is a status, never an exception.
 
 Workers are started with ``spawn`` (never fork: the parent has JAX and its
-threads loaded), so a script calling :func:`plan_bitstar` at import time needs
-the ``if __name__ == "__main__":`` guard. A worker that dies (killed, segfault in
-native code) has the query it was solving retried once in a fresh worker
-(CRASHED if it kills that one too) and its other queries re-queued.
+threads loaded) WITHOUT importing the caller's ``__main__`` module (see
+:func:`_main_hidden`): everything a worker needs lives in ``ntq_jax``, so a
+user's script calling :func:`plan_bitstar` at top level, without an
+``if __name__ == "__main__":`` guard, is not re-run by each worker (with
+multiprocessing's default it would be, and every worker would die starting).
+A worker that dies (killed, segfault in native code) has the query it was
+solving retried once in a fresh worker (CRASHED if it kills that one too) and
+its other queries re-queued.
 
 Determinism: before each query the worker re-seeds OMPL with
 ``query_seeds(seed, N)[i]`` and builds a fresh planner, so the samples do not
@@ -27,12 +31,16 @@ far BIT* gets before the wall-clock deadline. Throughput and callback costs:
 from __future__ import annotations
 
 import collections
+import contextlib
 import dataclasses
 import importlib.util
 import math
 import multiprocessing as mp
 import os
+import sys
+import threading
 import time
+import types
 import warnings
 from multiprocessing.connection import wait as _mp_wait
 from typing import Mapping
@@ -192,6 +200,36 @@ def _verified_result(env, q: np.ndarray, pad: float, r: _Results, seeds: np.ndar
     return res
 
 
+_MAIN_LOCK = threading.Lock()
+
+
+@contextlib.contextmanager
+def _main_hidden():
+    """Starts worker processes without the caller's ``__main__`` module.
+
+    ``spawn`` normally re-imports the parent's main script in every child (as
+    ``__mp_main__``) before running the target: a script calling ``plan`` at
+    top level without the ``if __name__ == "__main__":`` guard would then run
+    again in each worker and die trying to start workers of its own. The
+    preparation data multiprocessing sends the child names the main module
+    found in ``sys.modules["__main__"]``; while a worker starts, that entry is a
+    bare module with neither ``__file__`` nor ``__spec__`` (what an interactive
+    session has), so the child imports nothing of the caller. The worker's
+    target and arguments are all ``ntq_jax`` objects (the entry is restored at
+    once, under a lock, and only :meth:`_Worker.__init__` holds it).
+    """
+    with _MAIN_LOCK:
+        main = sys.modules.get("__main__")
+        sys.modules["__main__"] = types.ModuleType("__main__")
+        try:
+            yield
+        finally:
+            if main is None:
+                sys.modules.pop("__main__", None)
+            else:
+                sys.modules["__main__"] = main
+
+
 class _Worker:
     """One worker process, its pipe and the queries it holds."""
 
@@ -200,7 +238,8 @@ class _Worker:
         self.conn = parent
         self.proc = ctx.Process(target=worker_main, args=(child,) + args, daemon=True,
                                 name="ntq_jax-bitstar")
-        self.proc.start()
+        with _main_hidden():
+            self.proc.start()
         child.close()
         self.assigned: list[int] = []  # indices sent and not finished
         self.current: int | None = None  # started, not finished

@@ -48,6 +48,7 @@ from typing import Mapping
 import numpy as np
 
 from ntq_jax.planners.ompl_checker import NumpyChecker
+from ntq_jax.planners.options import bool_option, float_option, int_option, motion_check_option
 from ntq_jax.planners.ompl_worker import LOG_LEVELS, BridgeOutcome, worker_main
 from ntq_jax.planners.verify import finalize, valid_queries
 from ntq_jax.types import PlanResult, PlanStatus
@@ -116,14 +117,18 @@ def plan_bitstar(env, queries, *, padding: float | None = None, seed: int = 0,
         and ``n_motion_calls`` (Python callbacks, summed) and ``wall_time``.
 
     Raises:
-        ValueError: malformed arguments; ImportError: ``ompl`` is not installed.
+        TypeError, ValueError: malformed arguments (the message names the option);
+            ImportError: ``ompl`` is not installed.
     """
     t_wall = time.perf_counter()
     q = _check_arguments(env, queries, time_budget, ompl_log_level)
+    workers = int_option("bitstar", "workers", workers, 0) or (os.cpu_count() or 1)
+    stop_on_first = bool_option("bitstar", "stop_on_first", stop_on_first)
+    chunk_size = int_option("bitstar", "chunk_size", chunk_size, 1, none_ok=True)
+    hang_timeout = float_option("bitstar", "hang_timeout", hang_timeout, none_ok=True)
+    startup_timeout = float_option("bitstar", "startup_timeout", startup_timeout)
+    check = motion_check_option("bitstar", check)
     pad = env.resolve_padding(padding)
-    workers = int(workers) if workers else (os.cpu_count() or 1)
-    if workers < 1:
-        raise ValueError(f"workers must be >= 0 (0 = os.cpu_count()), got {workers}")
     n = q.shape[0]
     seeds = query_seeds(seed, n)
     results = _Results.empty(n)
@@ -136,7 +141,7 @@ def plan_bitstar(env, queries, *, padding: float | None = None, seed: int = 0,
                                np.asarray(env.world.boxes), np.asarray(env.world.discs), pad)
         worker_args = (checker, float(time_budget), bool(stop_on_first), ompl_log_level,
                        dict(_crash_on or {}))
-        hang = 3.0 * time_budget + 30.0 if hang_timeout is None else float(hang_timeout)
+        hang = 3.0 * time_budget + 30.0 if hang_timeout is None else hang_timeout
         pool = _WorkerPool(worker_args, q, seeds, todo, min(workers, len(todo)), chunk_size,
                            hang, startup_timeout, results)
         pool.run()
@@ -153,9 +158,7 @@ def _check_arguments(env, queries, time_budget, ompl_log_level) -> np.ndarray:
     q = np.asarray(queries, np.float32)
     if q.ndim != 3 or q.shape[1:] != (2, d):
         raise ValueError(f"queries must have shape (N, 2, {d}) for {env.name}, got {q.shape}")
-    if not (isinstance(time_budget, (int, float)) and math.isfinite(time_budget)
-            and time_budget > 0):
-        raise ValueError(f"time_budget must be a number of seconds > 0, got {time_budget!r}")
+    float_option("bitstar", "time_budget", time_budget)  # seconds
     if ompl_log_level not in LOG_LEVELS:
         raise ValueError(f"ompl_log_level must be one of {LOG_LEVELS}, got {ompl_log_level!r}")
     if importlib.util.find_spec("ompl") is None:

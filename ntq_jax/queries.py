@@ -307,6 +307,20 @@ class GammaEstimate(NamedTuple):
         return self.candidates / self.seconds if self.seconds > 0 else float("inf")
 
 
+class GammaInterrupted(KeyboardInterrupt):
+    """Ctrl-C during :func:`gamma_nt`; ``estimate`` is the streaming estimate so far.
+
+    A ``KeyboardInterrupt`` (so code that does not know it still stops), whose
+    ``estimate`` is a :class:`GammaEstimate` over the whole chunks counted before
+    the interrupt (an unbiased estimate over fewer queries, with its wider
+    interval), or None when none was.
+    """
+
+    def __init__(self, estimate: GammaEstimate | None):
+        super().__init__("gamma_nt interrupted")
+        self.estimate = estimate
+
+
 def wilson_interval(k: int, n: int, z: float = 1.959963984540054) -> tuple[float, float]:
     """Wilson score interval for a binomial proportion ``k / n``."""
     if n <= 0:
@@ -405,6 +419,8 @@ def gamma_nt(robot, world: World, key: Array, n: int, padding: float, chunk: int
         TypeError, ValueError: an argument of the wrong type or out of range
             (the message names it).
         FreeSpaceTooSmall: no valid query among the first 65 chunks.
+        GammaInterrupted: on Ctrl-C (a ``KeyboardInterrupt``), with the estimate
+            over the chunks counted so far.
     """
     n = check_count("n", n, 1)
     padding = check_padding(padding)
@@ -416,33 +432,38 @@ def gamma_nt(robot, world: World, key: Array, n: int, padding: float, chunk: int
     def seeds(i):
         return prng.stream_seeds(key, i)
 
-    queries = blocked = cands = 0
+    counts = (0, 0, 0)  # valid queries, blocked, raw candidates: one tuple, updated at once
     i = 0
-    pending = _gamma_chunk_counts(robot, world, seeds(0), padding, chunk)
-    while True:
-        nxt = _gamma_chunk_counts(robot, world, seeds(i + 1), padding, chunk)
-        v, b = (int(x) for x in pending)
-        if queries + v >= n:
-            both, blk = _gamma_chunk_lanes(robot, world, seeds(i), padding, chunk)
-            both, blk = np.asarray(both), np.asarray(blk)
-            need = n - queries
-            last = int(np.flatnonzero(both)[need - 1])
-            blocked += int(blk[: last + 1].sum())
-            queries += need
-            cands += last + 1
-            break
-        queries += v
-        blocked += b
-        cands += chunk
+    try:
+        pending = _gamma_chunk_counts(robot, world, seeds(0), padding, chunk)
+        while True:
+            nxt = _gamma_chunk_counts(robot, world, seeds(i + 1), padding, chunk)
+            v, b = (int(x) for x in pending)
+            queries, blocked, cands = counts
+            if queries + v >= n:
+                both, blk = _gamma_chunk_lanes(robot, world, seeds(i), padding, chunk)
+                both, blk = np.asarray(both), np.asarray(blk)
+                need = n - queries
+                last = int(np.flatnonzero(both)[need - 1])
+                counts = (n, blocked + int(blk[: last + 1].sum()), cands + last + 1)
+                break
+            counts = (queries + v, blocked + b, cands + chunk)
+            if progress is not None:
+                progress(counts[0])
+            pending = nxt
+            i += 1
+            if i > 64 and counts[0] == 0:
+                raise FreeSpaceTooSmall(f"no valid query among {counts[2]} candidates "
+                                        f"(padding={padding})")
+        jax.block_until_ready(nxt)
         if progress is not None:
-            progress(queries)
-        pending = nxt
-        i += 1
-        if i > 64 and queries == 0:
-            raise FreeSpaceTooSmall(f"no valid query among {cands} candidates (padding={padding})")
-    jax.block_until_ready(nxt)
-    if progress is not None:
-        progress(queries)
+            progress(counts[0])
+    except KeyboardInterrupt:
+        queries, blocked, cands = counts
+        partial = (GammaEstimate(blocked / queries, wilson_interval(blocked, queries), queries,
+                                 blocked, cands, time.perf_counter() - t0) if queries else None)
+        raise GammaInterrupted(partial) from None
+    queries, blocked, cands = counts
     secs = time.perf_counter() - t0
     return GammaEstimate(blocked / queries, wilson_interval(blocked, queries), queries, blocked,
                          cands, secs)

@@ -24,6 +24,8 @@ from __future__ import annotations
 
 import functools
 import math
+import numbers
+import operator
 import time
 from typing import Callable, NamedTuple
 
@@ -43,10 +45,56 @@ STATE_BLOCK = 8192  # candidate states drawn per block (fixed: results do not de
 QUERY_BLOCK = 4096  # candidate queries checked per block by the non-trivial sampler
 DEFAULT_N_MAX = 10_000
 MAX_STATE_BLOCKS = 100_000  # ~8e8 candidates before giving up on a nearly-full map
+MAX_CHUNK = 1 << 26  # gamma_nt: candidate pairs per compiled chunk (~8 bytes each for the point robot)
 
 
 class FreeSpaceTooSmall(ValueError):
     """Raised when rejection sampling finds (almost) no valid state."""
+
+
+# ---------------------------------------------------------------------------
+# Argument checks (shared by every public function of this module)
+# ---------------------------------------------------------------------------
+
+def check_count(name: str, value, minimum: int = 0, maximum: int | None = None) -> int:
+    """``value`` as a Python int in ``[minimum, maximum]``; TypeError / ValueError naming ``name``.
+
+    Accepts Python and NumPy integers (and integer scalar arrays); refuses
+    bools, floats (even whole ones: ``2.0`` is most likely a computed value
+    that should have been rounded deliberately) and everything else.
+    """
+    if isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name} must be an int >= {minimum}, got the bool {value!r}")
+    try:
+        v = operator.index(value)
+    except TypeError:
+        raise TypeError(f"{name} must be an int >= {minimum}, got {value!r} "
+                        f"({type(value).__name__})") from None
+    if v < minimum:
+        raise ValueError(f"{name} must be an int >= {minimum}, got {v}")
+    if maximum is not None and v > maximum:
+        raise ValueError(f"{name} must be an int in [{minimum}, {maximum:,}], got {v:,}")
+    return int(v)
+
+
+def check_probability(name: str, value) -> float:
+    """``value`` as a float in ``[0, 1]``; TypeError / ValueError naming ``name``."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+        raise TypeError(f"{name} must be a number in [0, 1], got {value!r} "
+                        f"({type(value).__name__})")
+    if not 0.0 <= value <= 1.0:  # also refuses NaN
+        raise ValueError(f"{name} must be a number in [0, 1], got {value!r}")
+    return float(value)
+
+
+def check_padding(padding) -> float:
+    """``padding`` as a finite float >= 0 (already resolved: never None here)."""
+    if isinstance(padding, (bool, np.bool_)) or not isinstance(padding, numbers.Real):
+        raise TypeError(f"padding must be a finite number >= 0, got {padding!r} "
+                        f"({type(padding).__name__})")
+    if not (math.isfinite(padding) and padding >= 0):
+        raise ValueError(f"padding must be a finite number >= 0, got {padding!r}")
+    return float(padding)
 
 
 # ---------------------------------------------------------------------------
@@ -94,12 +142,15 @@ def _take(stream, n: int, d: int) -> np.ndarray:
 
 
 def sample_states(robot, world: World, key: Array, n: int, padding: float) -> np.ndarray:
-    """``n`` uniform valid states, ``(n, d)`` float32."""
+    """``n`` uniform valid states, ``(n, d)`` float32 (``n`` an int >= 0)."""
+    n = check_count("n", n)
+    padding = check_padding(padding)
     return _take(valid_state_stream(robot, world, key, padding), n, robot.dim)
 
 
 def sample_uniform_queries(robot, world: World, key: Array, n: int, padding: float) -> np.ndarray:
-    """``n`` uniform queries ``(n, 2, d)``: independent uniform valid start and goal."""
+    """``n`` uniform queries ``(n, 2, d)``: independent uniform valid start and goal (``n`` >= 0)."""
+    n = check_count("n", n)
     s = sample_states(robot, world, key, 2 * n, padding)
     return s.reshape(n, 2, robot.dim)
 
@@ -126,6 +177,7 @@ def replay_nontrivial(blocked: np.ndarray, n_max: int, attempts0: int = 0):
         returned candidates in order, whether each was returned after ``n_max``
         trivial attempts, and the attempt count carried into the next block.
     """
+    n_max = check_count("n_max", n_max, 1)
     blocked = np.asarray(blocked, bool)
     m = blocked.size
     if m == 0:
@@ -160,10 +212,11 @@ def sample_nontrivial_queries(robot, world: World, key: Array, n: int, padding: 
 
     Exactly the sequential rejection sampler applied to the stream of uniform
     candidate queries; ``exhausted[i]`` marks a trivial query returned after
-    ``n_max`` failed attempts.
+    ``n_max`` failed attempts. ``n`` is an int >= 0, ``n_max`` an int >= 1.
     """
-    if n_max < 1:
-        raise ValueError(f"n_max must be >= 1, got {n_max}")
+    n = check_count("n", n)
+    n_max = check_count("n_max", n_max, 1)
+    padding = check_padding(padding)
     stream = valid_state_stream(robot, world, key, padding)
     buf = np.zeros((0, robot.dim), np.float32)
     out_q, out_x, have, attempts = [], [], 0, 0
@@ -190,12 +243,24 @@ def sample_queries(robot, world: World, key: Array, n: int, p_nt: float, padding
                    n_max: int = DEFAULT_N_MAX):
     """``n`` queries of Alg. 2: each non-trivial with probability ``p_nt``, else uniform.
 
+    Args:
+        n: number of queries, an int >= 0.
+        p_nt: probability of a non-trivial query, in ``[0, 1]``.
+        padding: clearance (a finite number >= 0).
+        n_max: attempts of the non-trivial sampler, an int >= 1.
+
     Returns:
         ``(queries (n, 2, d) float32, kind (n,) int8)`` with kind ``UNIFORM``,
         ``NON_TRIVIAL`` or ``NT_EXHAUSTED``.
+
+    Raises:
+        TypeError, ValueError: an argument of the wrong type or out of range
+            (the message names it).
     """
-    if not (0.0 <= p_nt <= 1.0):
-        raise ValueError(f"p_nt must be in [0, 1], got {p_nt}")
+    n = check_count("n", n)
+    p_nt = check_probability("p_nt", p_nt)
+    n_max = check_count("n_max", n_max, 1)
+    padding = check_padding(padding)
     k_mix, k_uni, k_nt = jax.random.split(key, 3)
     use_nt = np.asarray(jax.random.uniform(k_mix, (n,))) < p_nt
     n_nt = int(use_nt.sum())
@@ -240,6 +305,20 @@ class GammaEstimate(NamedTuple):
     @property
     def candidates_per_second(self) -> float:
         return self.candidates / self.seconds if self.seconds > 0 else float("inf")
+
+
+class GammaInterrupted(KeyboardInterrupt):
+    """Ctrl-C during :func:`gamma_nt`; ``estimate`` is the streaming estimate so far.
+
+    A ``KeyboardInterrupt`` (so code that does not know it still stops), whose
+    ``estimate`` is a :class:`GammaEstimate` over the whole chunks counted before
+    the interrupt (an unbiased estimate over fewer queries, with its wider
+    interval), or None when none was.
+    """
+
+    def __init__(self, estimate: GammaEstimate | None):
+        super().__init__("gamma_nt interrupted")
+        self.estimate = estimate
 
 
 def wilson_interval(k: int, n: int, z: float = 1.959963984540054) -> tuple[float, float]:
@@ -330,43 +409,61 @@ def gamma_nt(robot, world: World, key: Array, n: int, padding: float, chunk: int
     kept in flight so dispatch overlaps compute.
 
     Args:
+        n: uniform valid queries to examine, an int >= 1.
+        padding: clearance (a finite number >= 0).
+        chunk: candidate pairs per compiled chunk, an int in ``[1, MAX_CHUNK]``;
+            None = :func:`default_chunk`.
         progress: called with the number of valid queries counted so far.
+
+    Raises:
+        TypeError, ValueError: an argument of the wrong type or out of range
+            (the message names it).
+        FreeSpaceTooSmall: no valid query among the first 65 chunks.
+        GammaInterrupted: on Ctrl-C (a ``KeyboardInterrupt``), with the estimate
+            over the chunks counted so far.
     """
-    if n < 1:
-        raise ValueError(f"the number of queries must be >= 1, got {n}")
-    chunk = int(chunk or default_chunk(robot))
+    n = check_count("n", n, 1)
+    padding = check_padding(padding)
+    chunk = default_chunk(robot) if chunk is None else check_count("chunk", chunk, 1, MAX_CHUNK)
+    if progress is not None and not callable(progress):
+        raise TypeError(f"progress must be callable or None, got {type(progress).__name__}")
     t0 = time.perf_counter()
 
     def seeds(i):
         return prng.stream_seeds(key, i)
 
-    queries = blocked = cands = 0
+    counts = (0, 0, 0)  # valid queries, blocked, raw candidates: one tuple, updated at once
     i = 0
-    pending = _gamma_chunk_counts(robot, world, seeds(0), padding, chunk)
-    while True:
-        nxt = _gamma_chunk_counts(robot, world, seeds(i + 1), padding, chunk)
-        v, b = (int(x) for x in pending)
-        if queries + v >= n:
-            both, blk = _gamma_chunk_lanes(robot, world, seeds(i), padding, chunk)
-            both, blk = np.asarray(both), np.asarray(blk)
-            need = n - queries
-            last = int(np.flatnonzero(both)[need - 1])
-            blocked += int(blk[: last + 1].sum())
-            queries += need
-            cands += last + 1
-            break
-        queries += v
-        blocked += b
-        cands += chunk
+    try:
+        pending = _gamma_chunk_counts(robot, world, seeds(0), padding, chunk)
+        while True:
+            nxt = _gamma_chunk_counts(robot, world, seeds(i + 1), padding, chunk)
+            v, b = (int(x) for x in pending)
+            queries, blocked, cands = counts
+            if queries + v >= n:
+                both, blk = _gamma_chunk_lanes(robot, world, seeds(i), padding, chunk)
+                both, blk = np.asarray(both), np.asarray(blk)
+                need = n - queries
+                last = int(np.flatnonzero(both)[need - 1])
+                counts = (n, blocked + int(blk[: last + 1].sum()), cands + last + 1)
+                break
+            counts = (queries + v, blocked + b, cands + chunk)
+            if progress is not None:
+                progress(counts[0])
+            pending = nxt
+            i += 1
+            if i > 64 and counts[0] == 0:
+                raise FreeSpaceTooSmall(f"no valid query among {counts[2]} candidates "
+                                        f"(padding={padding})")
+        jax.block_until_ready(nxt)
         if progress is not None:
-            progress(queries)
-        pending = nxt
-        i += 1
-        if i > 64 and queries == 0:
-            raise FreeSpaceTooSmall(f"no valid query among {cands} candidates (padding={padding})")
-    jax.block_until_ready(nxt)
-    if progress is not None:
-        progress(queries)
+            progress(counts[0])
+    except KeyboardInterrupt:
+        queries, blocked, cands = counts
+        partial = (GammaEstimate(blocked / queries, wilson_interval(blocked, queries), queries,
+                                 blocked, cands, time.perf_counter() - t0) if queries else None)
+        raise GammaInterrupted(partial) from None
+    queries, blocked, cands = counts
     secs = time.perf_counter() - t0
     return GammaEstimate(blocked / queries, wilson_interval(blocked, queries), queries, blocked,
                          cands, secs)

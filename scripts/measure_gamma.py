@@ -10,76 +10,197 @@ elapsed seconds and throughput.
 
 The default padding is 0, the evaluation geometry on which the paper reports
 gamma_nt; ``--padding`` measures another geometry (e.g. the data-generation one).
+
+After the first chunks the estimated time is printed; a run that would take
+longer than ``--max-hours`` (default 24) stops there with an error. Ctrl-C
+prints the estimate over the queries counted so far (with its interval) and
+exits with code 130; ``--json`` is then not written. Bad arguments, an unknown
+environment, an unwritable ``--json`` path (checked before any work) and a map
+without free space end in one ``error:`` line and exit code 2.
 """
 
 from __future__ import annotations
 
 import argparse
+import math
+import os
 import sys
+import tempfile
+import time
 from pathlib import Path
 
+MAX_QUERIES = 10**15  # ~80 days at the fastest measured rate (1.5e8 queries/s, point robot)
+INTERRUPTED = 130     # the shell's exit code for a process ended by SIGINT
 
-from ntq_jax import artifacts
+
+class ScriptError(Exception):
+    """An expected failure of this script: reported as one ``error:`` line, exit code 2."""
 
 
-def _count(text: str) -> int:
+def _count(text: str, maximum: int | None = None) -> int:
+    """A whole number >= 1 (``1e9`` accepted), at most ``maximum``."""
     try:
         v = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not (v >= 1 and v == int(v)):
+    if not (math.isfinite(v) and v >= 1 and v == int(v)):
         raise argparse.ArgumentTypeError(f"must be a whole number >= 1, got {text!r}")
+    if maximum is not None and v > maximum:
+        raise argparse.ArgumentTypeError(f"must be at most {maximum:.0e}, got {text!r}")
     return int(v)
 
 
-def main(argv=None) -> int:
+def _queries(text: str) -> int:
+    return _count(text, MAX_QUERIES)
+
+
+def _chunk(text: str) -> int:
+    from ntq_jax.queries import MAX_CHUNK
+    return _count(text, MAX_CHUNK)
+
+
+def _padding(text: str) -> float:
+    """A finite number >= 0."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not (math.isfinite(v) and v >= 0):
+        raise argparse.ArgumentTypeError(f"must be a finite number >= 0, got {text!r}")
+    return v
+
+
+def _hours(text: str) -> float:
+    """A number of hours > 0 (``inf`` allowed: no limit)."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not v > 0:  # also refuses NaN
+        raise argparse.ArgumentTypeError(f"must be a number of hours > 0 (or inf), got {text!r}")
+    return v
+
+
+def check_writable(path: Path, flag: str) -> None:
+    """Raises ScriptError unless a file can be written at ``path`` (its folder is created on write).
+
+    Creates and removes a probe file in the nearest existing folder, so a
+    read-only file system or folder is found even when running as root.
+    """
+    if path.is_dir():
+        raise ScriptError(f"{flag} {path} is a folder; give a file name")
+    folder = path.parent
+    while not folder.exists():
+        folder = folder.parent
+    if not folder.is_dir():
+        raise ScriptError(f"{flag} {path} cannot be written: {folder} is a file, not a folder")
+    try:
+        fd, probe = tempfile.mkstemp(dir=folder, prefix=".write-test-")
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as e:
+        raise ScriptError(f"{flag} {path} cannot be written: creating a file in {folder} failed "
+                          f"({e.strerror})") from None
+
+
+def _duration(seconds: float) -> str:
+    if seconds < 120:
+        return f"{seconds:.0f} s"
+    if seconds < 2 * 3600:
+        return f"{seconds / 60:.0f} min"
+    return f"{seconds / 3600:,.1f} h"
+
+
+class _Eta:
+    """Progress callback: the tqdm bar, plus one time estimate printed after ~0.25 s of streaming.
+
+    The rate is measured from the end of the first chunk (which includes the
+    compilation) on; if the estimate exceeds ``max_hours`` it raises ScriptError,
+    which stops :func:`ntq_jax.queries.gamma_nt` before any more work.
+    """
+
+    def __init__(self, bar, total: int, max_hours: float):
+        self.bar, self.total, self.max_hours = bar, total, max_hours
+        self.first: tuple[float, int] | None = None
+        self.reported = False
+
+    def __call__(self, done: int) -> None:
+        self.bar.update(done - self.bar.n)
+        now = time.monotonic()
+        if self.first is None:
+            self.first = (now, done)
+            return
+        t0, d0 = self.first
+        if self.reported or done >= self.total or now - t0 < 0.25 or done <= d0:
+            return
+        self.reported = True
+        rate = (done - d0) / (now - t0)
+        eta = (self.total - done) / rate
+        msg = f"{self.total:,} queries at {rate:,.0f} queries/s: about {_duration(eta)} left"
+        if eta > self.max_hours * 3600:
+            raise ScriptError(f"{msg}, more than --max-hours {self.max_hours:g}: ask for fewer "
+                              "--queries, or raise --max-hours")
+        self.bar.write(msg, file=sys.stderr)
+
+
+def _report(env, padding: float, est, file=None) -> None:
+    lo, hi = est.ci95
+    print(f"env {env.name}  padding {padding:g}  queries {est.queries:,}  "
+          f"non-trivial {est.non_trivial:,}", file=file)
+    print(f"gamma_nt = {est.gamma:.6f}  95% CI [{lo:.6f}, {hi:.6f}]", file=file)
+    print(f"{est.seconds:.2f} s  {est.queries_per_second:,.0f} queries/s  "
+          f"({est.candidates_per_second:,.0f} raw candidates/s)", file=file)
+
+
+def _run(argv) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--env", default="point/0", help="preset name (point/0..3, rigid/0..3, "
                     "nlink/2|4|6) or a JSON map file (default: point/0)")
-    ap.add_argument("--queries", type=_count, default=10**7,
-                    help="uniform valid queries to examine; accepts 1e9 (default: 1e7)")
-    ap.add_argument("--padding", type=float, default=0.0,
+    ap.add_argument("--queries", type=_queries, default=10**7,
+                    help=f"uniform valid queries to examine; accepts 1e9 (default: 1e7, at most "
+                    f"{MAX_QUERIES:.0e})")
+    ap.add_argument("--padding", type=_padding, default=0.0,
                     help="clearance of the geometry (default 0: the evaluation geometry)")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--chunk", type=_count, default=None,
+    ap.add_argument("--chunk", type=_chunk, default=None,
                     help="candidate queries per compiled chunk (default: 4M point, 32k others)")
+    ap.add_argument("--max-hours", type=_hours, default=24.0,
+                    help="stop at once if the time estimate exceeds this (default 24; inf: no limit)")
     ap.add_argument("--json", type=Path, default=None, help="also write the result as JSON")
     ap.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     args = ap.parse_args(argv)
+    if args.json is not None:
+        check_writable(args.json, "--json")
 
     import jax
     from tqdm import tqdm
 
     import ntq_jax as nj
+    from ntq_jax import artifacts
 
-    try:
-        env = nj.make_env(args.env)
-    except nj.EnvError as e:
-        ap.error(str(e))
-    if args.padding < 0:
-        ap.error(f"--padding must be >= 0, got {args.padding}")
-
+    env = nj.make_env(args.env)
     bar = tqdm(total=args.queries, unit="q", unit_scale=True, disable=args.no_progress,
                desc=f"gamma_nt {env.name}", file=sys.stderr)
-
-    def progress(done):
-        bar.update(done - bar.n)
-
     try:
         est = env.gamma_nt(jax.random.key(args.seed), args.queries, padding=args.padding,
-                           chunk=args.chunk, progress=progress)
-    except nj.FreeSpaceTooSmall as e:
+                           chunk=args.chunk, progress=_Eta(bar, args.queries, args.max_hours))
+    except KeyboardInterrupt as e:
         bar.close()
-        print(f"error: {e}", file=sys.stderr)
-        return 2
-    bar.close()
-    lo, hi = est.ci95
-    print(f"env {env.name}  padding {args.padding:g}  queries {est.queries:,}  "
-          f"non-trivial {est.non_trivial:,}")
-    print(f"gamma_nt = {est.gamma:.6f}  95% CI [{lo:.6f}, {hi:.6f}]")
-    print(f"{est.seconds:.2f} s  {est.queries_per_second:,.0f} queries/s  "
-          f"({est.candidates_per_second:,.0f} raw candidates/s)")
+        partial = getattr(e, "estimate", None)
+        if partial is None:
+            print("interrupted before the first chunk was counted: no estimate", file=sys.stderr)
+        else:
+            print(f"interrupted after {partial.queries:,} of {args.queries:,} queries; the "
+                  "estimate so far:")
+            _report(env, args.padding, partial)
+        if args.json is not None:
+            print(f"{args.json} not written (interrupted)", file=sys.stderr)
+        return INTERRUPTED
+    finally:
+        bar.close()
+    _report(env, args.padding, est)
     if args.json:
+        lo, hi = est.ci95
         out = {"env": env.name, "padding": args.padding, "seed": args.seed,
                "queries": est.queries, "non_trivial": est.non_trivial, "gamma": est.gamma,
                "ci95": [lo, hi], "seconds": est.seconds,
@@ -88,6 +209,29 @@ def main(argv=None) -> int:
                "candidates_per_second": est.candidates_per_second}
         artifacts.write_json(args.json, out)
     return 0
+
+
+def main(argv=None) -> int:
+    """Runs the script; an expected error is one ``error:`` line on stderr and exit code 2.
+
+    Expected: :class:`ScriptError`, ``EnvError`` (unknown environment, bad map),
+    ``FreeSpaceTooSmall`` and the file-system errors of writing ``--json``.
+    (The same mapping as ``ntq_jax.cli.run_cli`` once that exists.) Ctrl-C
+    anywhere exits with code 130 without a traceback.
+    """
+    try:
+        from ntq_jax.envs import EnvError
+        from ntq_jax.queries import FreeSpaceTooSmall
+        expected = (ScriptError, EnvError, FreeSpaceTooSmall, PermissionError,
+                    FileNotFoundError, NotADirectoryError, IsADirectoryError)
+        try:
+            return _run(argv)
+        except expected as e:
+            print(f"error: {e}", file=sys.stderr)
+            return 2
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return INTERRUPTED
 
 
 if __name__ == "__main__":

@@ -17,7 +17,9 @@ shows the map, the neural path and, for point robots, the exact optimum.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
+import tempfile
 from pathlib import Path
 
 
@@ -26,7 +28,29 @@ from ntq_jax import artifacts
 
 
 class PlanError(ValueError):
-    pass
+    """An expected failure of this script: reported as one ``error:`` line, exit code 2."""
+
+
+def check_writable(path: Path, flag: str) -> None:
+    """Raises PlanError unless a file can be written at ``path`` (its folder is created on write).
+
+    Creates and removes a probe file in the nearest existing folder, so a
+    read-only file system or folder is found even when running as root.
+    """
+    if path.is_dir():
+        raise PlanError(f"{flag} {path} is a folder; give a file name")
+    folder = path.parent
+    while not folder.exists():
+        folder = folder.parent
+    if not folder.is_dir():
+        raise PlanError(f"{flag} {path} cannot be written: {folder} is a file, not a folder")
+    try:
+        fd, probe = tempfile.mkstemp(dir=folder, prefix=".write-test-")
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as e:
+        raise PlanError(f"{flag} {path} cannot be written: creating a file in {folder} failed "
+                        f"({e.strerror})") from None
 
 
 def _load(run: Path, env_name: str | None):
@@ -70,7 +94,13 @@ def _check_state(env, x, what: str):
 
 def plan_one(run, model: int, start, goal, *, env_name=None, steer: bool = True, seed: int = 0,
              png=None):
-    """Plans one query; returns ``(result, env, png_path)`` (see the module docstring)."""
+    """Plans one query; returns ``(result, env, png_path)`` (see the module docstring).
+
+    Raises:
+        PlanError: not a run folder, an environment not in the run, a bad state,
+            a model index out of range, a corrupt ensemble, or a ``png`` path
+            that cannot be written (checked before the models are loaded).
+    """
     import jax
     import numpy as np
 
@@ -82,6 +112,8 @@ def plan_one(run, model: int, start, goal, *, env_name=None, steer: bool = True,
     cfg, env, env_name, slug = _load(run, env_name)
     s = _check_state(env, start, "start")
     g = _check_state(env, goal, "goal")
+    png = Path(png) if png else run / "figures" / f"plan_{slug}_PNet_{model}.png"
+    check_writable(png, "--png")  # before loading the models and planning
     try:
         ens = load_ensemble(run / "models" / slug)
     except CheckpointError as e:
@@ -91,7 +123,6 @@ def plan_one(run, model: int, start, goal, *, env_name=None, steer: bool = True,
     opts = PlannerOptions.from_config(cfg.eval, steer=steer)
     res = plan_batch(env, member_pnets(ens)[model], np.stack([s, g])[None],
                      jax.random.key(seed), opts)
-    png = Path(png) if png else run / "figures" / f"plan_{slug}_PNet_{model}.png"
     _draw(env, res, s, g, model, png)
     return res, env, png
 
@@ -133,7 +164,8 @@ def main(argv=None) -> int:
     try:
         res, env, png = plan_one(args.run, args.model, args.start, args.goal, env_name=args.env,
                                  steer=not args.no_steer, seed=args.seed, png=args.png)
-    except (PlanError, ConfigError, EnvError) as e:
+    except (PlanError, ConfigError, EnvError, PermissionError, FileNotFoundError,
+            NotADirectoryError, IsADirectoryError) as e:  # the mapping of ntq_jax.cli.run_cli
         print(f"error: {e}", file=sys.stderr)
         return 2
     path = res.path(0)

@@ -132,7 +132,7 @@ def test_metric_index_matches_brute_force_under_the_rigid_metric():
 
 def test_bad_options_are_one_clear_error():
     env = nj.make_env("point/0")
-    with pytest.raises(ValueError, match="milestones must be >= 2"):
+    with pytest.raises(ValueError, match="roadmap: milestones must be an int >= 2"):
         nj.plan(env, _queries(env, 2), "roadmap", milestones=1)
 
 

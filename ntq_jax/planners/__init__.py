@@ -61,7 +61,9 @@ import numpy as np
 
 from ntq_jax.planners import astar, ompl_bridge, roadmap, visgraph
 from ntq_jax.planners.astar import config_grid
+from ntq_jax.planners.options import check_option_names
 from ntq_jax.planners.verify import check_paths, finalize, valid_queries
+from ntq_jax.queries import check_count
 from ntq_jax.types import STATUS_NAMES, PlannerFn, PlanResult, PlanStatus
 
 _REGISTRY: dict[str, PlannerFn] = {}
@@ -106,14 +108,24 @@ def plan(env, queries, planner: str = "astar", *, padding: float | None = None, 
     Raises:
         ValueError: unknown planner (the message lists the available ones), bad
             query shape, or a planner that does not support the robot.
+        TypeError, ValueError: an option the planner does not take (the message
+            lists those it does), or one of the wrong type or out of range (the
+            message names it); a non-integer or negative ``seed``.
     """
-    if planner not in _REGISTRY:
+    if not isinstance(planner, str) or planner not in _REGISTRY:
         raise ValueError(f"unknown planner {planner!r}; available: {', '.join(available_planners())}")
+    seed = check_count("seed", seed)
     pad = env.resolve_padding(padding)
-    q = np.asarray(queries, np.float32)
+    try:
+        q = np.asarray(queries, np.float32)
+    except (TypeError, ValueError):
+        raise TypeError(f"queries must be a numeric (K, 2, {env.dim}) array of (start, goal) "
+                        f"states for {env.name}, got {type(queries).__name__}") from None
     if q.ndim != 3 or q.shape[1:] != (2, env.dim):
         raise ValueError(f"queries must have shape (K, 2, {env.dim}) for {env.name}, got {q.shape}")
-    return _REGISTRY[planner](env, q, padding=pad, seed=int(seed), **options)
+    fn = _REGISTRY[planner]
+    check_option_names(planner, fn, options)
+    return fn(env, q, padding=pad, seed=seed, **options)
 
 
 register_planner("astar", astar.plan_astar)

@@ -19,7 +19,6 @@ segment (:mod:`ntq_jax.planners.verify`). Measurements: BENCHMARKS.md
 
 from __future__ import annotations
 
-import math
 import time
 from typing import NamedTuple
 
@@ -33,6 +32,8 @@ from ntq_jax.planners.env_cache import EnvCache
 from ntq_jax.planners.grid_graph import MAX_GRID_SIDE, GridGraph, prepare_grid
 from ntq_jax.planners.jps import (MAX_OPEN_CAPACITY, MAX_QUERIES_PER_CALL, cells_from_jump_points,
                                   search)
+from ntq_jax.planners.options import (bool_option, check_option_names, float_option, int_option,
+                                      motion_check_option)
 from ntq_jax.planners.smoothing import shortcut_paths
 from ntq_jax.planners.verify import finalize, valid_queries
 from ntq_jax.robots.batch import steer_to_pairs, valid_states
@@ -41,7 +42,7 @@ from ntq_jax.types import PlanResult, PlanStatus
 Array = jax.Array
 
 __all__ = ["AStarResult", "astar", "astar_chunked", "default_lanes", "default_max_path_len",
-           "ConfigGrid", "config_grid", "plan_astar"]
+           "ConfigGrid", "config_grid", "grid_shape", "plan_astar"]
 
 
 # ---------------------------------------------------------------------------
@@ -254,11 +255,34 @@ def config_grid(env, resolution: float, padding: float) -> ConfigGrid:
     if env.dim != 2:
         raise ValueError(f"the grid A* planner needs a 2-D configuration space (point robot or "
                          f"2-link arm); {env.name} has dimension {env.dim}: use 'bitstar'")
-    if not (resolution > 0 and math.isfinite(resolution)):
-        raise ValueError(f"resolution must be > 0, got {resolution!r}")
+    resolution = float_option("astar", "resolution", resolution)
+    grid_shape(env, resolution)  # 2 x 2 to MAX_GRID_SIDE cells a side, before building anything
     robot, world = env.robot, env.world
     return _GRIDS.get(env, (float(resolution), float(padding)),
                       lambda: _build_config_grid(robot, world, float(resolution), float(padding)))
+
+
+def grid_shape(env, resolution: float) -> tuple[int, int]:
+    """``(H, W)`` of the grid :func:`config_grid` builds at ``resolution``; ValueError if it has
+    fewer than 2 cells or more than ``MAX_GRID_SIDE`` cells along a side.
+
+    ``W = round((hi_0 - lo_0) / resolution)`` and ``H`` likewise over the
+    configuration box ``[lo, hi]`` (for the point robot, the workspace bounds:
+    the same sizes as :func:`ntq_jax.geometry.rasterize`).
+    """
+    lo, hi = (np.asarray(v, np.float64) for v in env.robot.config_bounds(env.world))
+    ext = hi[:2] - lo[:2]
+    w, h = (int(round(e / resolution)) for e in ext)
+    box = f"the {ext[0]:g} x {ext[1]:g} configuration box of {env.name}"
+    if min(h, w) < 2:
+        raise ValueError(f"astar: resolution {resolution:g} is too coarse: it grids {box} into "
+                         f"{w} x {h} cells and the grid needs at least 2 x 2; use a resolution "
+                         f"<= {float(ext.min()) / 2:g}")
+    if max(h, w) > MAX_GRID_SIDE:
+        raise ValueError(f"astar: resolution {resolution:g} is too fine: it grids {box} into "
+                         f"{w} x {h} cells and a side may have at most {MAX_GRID_SIDE}; use a "
+                         f"resolution >= {float(ext.max()) / MAX_GRID_SIDE:.3g}")
+    return h, w
 
 
 def _build_config_grid(robot, world, resolution: float, padding: float) -> ConfigGrid:
@@ -337,6 +361,16 @@ def _cell_paths(grid: ConfigGrid, q: np.ndarray, cells: np.ndarray, plen: np.nda
     return paths, plen + 2
 
 
+def _check_astar_options(options: dict) -> None:
+    """Types and ranges of the :func:`astar` options ``plan_astar`` forwards."""
+    for name, lo, hi, none_ok in (("max_path_len", 1, None, True), ("max_waypoints", 2, None, False),
+                                  ("lanes", 1, None, True),
+                                  ("open_capacity", 1, MAX_OPEN_CAPACITY, False),
+                                  ("trace_steps", 1, None, False)):
+        if name in options:
+            int_option("astar", name, options[name], lo, hi, none_ok=none_ok)
+
+
 def plan_astar(env, queries, *, padding: float, seed: int = 0, resolution: float = 0.1,
                smooth: bool = True, chunk_size: int = 1024, smooth_chunk: int = 128,
                check: str = "discretized", **astar_options) -> PlanResult:
@@ -347,7 +381,9 @@ def plan_astar(env, queries, *, padding: float, seed: int = 0, resolution: float
         queries: ``(K, 2, 2)`` (start, goal) states.
         padding: planning clearance (a number).
         seed: unused (deterministic).
-        resolution: grid cell side (workspace units or radians).
+        resolution: grid cell side (workspace units or radians): a finite number
+            > 0 giving 2 to ``MAX_GRID_SIDE`` cells along each side of the
+            configuration box (see :func:`grid_shape`).
         smooth: shortcut the grid paths (greedy farthest-visible rule).
         chunk_size: queries per :func:`astar` call; ``smooth_chunk``: paths per
             shortcutting call.
@@ -358,11 +394,22 @@ def plan_astar(env, queries, *, padding: float, seed: int = 0, resolution: float
     Returns:
         A verified :class:`PlanResult`; an endpoint that reaches no free cell
         centre is NO_PATH (counted in ``info["unsnapped"]``), a full A* buffer TIMEOUT.
+
+    Raises:
+        TypeError, ValueError: an unknown option, or an option of the wrong type
+            or out of range (the message names it); a robot that is not 2-D.
     """
     del seed  # deterministic
+    check_option_names("astar", plan_astar, astar_options, extra=_STATIC_ARGS)
+    resolution = float_option("astar", "resolution", resolution)
+    smooth = bool_option("astar", "smooth", smooth)
+    chunk_size = int_option("astar", "chunk_size", chunk_size, 1, MAX_QUERIES_PER_CALL)
+    smooth_chunk = int_option("astar", "smooth_chunk", smooth_chunk, 1)
+    check = motion_check_option("astar", check)
+    _check_astar_options(astar_options)
     q = np.asarray(queries, np.float32)
     t0 = time.perf_counter()
-    grid = config_grid(env, float(resolution), float(padding))
+    grid = config_grid(env, resolution, float(padding))
     k, d = q.shape[0], q.shape[2]
     info: dict = {"planner": "astar", "resolution": float(resolution), "grid_shape": grid.occ.shape}
     status = np.full(k, PlanStatus.NO_PATH, np.int8)

@@ -11,10 +11,14 @@ per-query :class:`BridgeOutcome` (kept in ``info["bitstar_status"]``) maps to
 invalid or crashing query is a status, never an exception.
 
 Workers are started with ``spawn`` (never fork: the parent has JAX and its
-threads loaded), so a script calling :func:`plan_bitstar` at import time needs
-the ``if __name__ == "__main__":`` guard. A worker that dies (killed, segfault in
-native code) has the query it was solving retried once in a fresh worker
-(CRASHED if it kills that one too) and its other queries re-queued.
+threads loaded) WITHOUT importing the caller's ``__main__`` module (see
+:func:`_main_hidden`): everything a worker needs lives in ``ntq_jax``, so a
+user's script calling :func:`plan_bitstar` at top level, without an
+``if __name__ == "__main__":`` guard, is not re-run by each worker (with
+multiprocessing's default it would be, and every worker would die starting).
+A worker that dies (killed, segfault in native code) has the query it was
+solving retried once in a fresh worker (CRASHED if it kills that one too) and
+its other queries re-queued.
 
 Determinism: before each query the worker re-seeds OMPL with
 ``query_seeds(seed, N)[i]`` and builds a fresh planner, so the samples do not
@@ -27,12 +31,16 @@ far BIT* gets before the wall-clock deadline. Throughput and callback costs:
 from __future__ import annotations
 
 import collections
+import contextlib
 import dataclasses
 import importlib.util
 import math
 import multiprocessing as mp
 import os
+import sys
+import threading
 import time
+import types
 import warnings
 from multiprocessing.connection import wait as _mp_wait
 from typing import Mapping
@@ -40,6 +48,7 @@ from typing import Mapping
 import numpy as np
 
 from ntq_jax.planners.ompl_checker import NumpyChecker
+from ntq_jax.planners.options import bool_option, float_option, int_option, motion_check_option
 from ntq_jax.planners.ompl_worker import LOG_LEVELS, BridgeOutcome, worker_main
 from ntq_jax.planners.verify import finalize, valid_queries
 from ntq_jax.types import PlanResult, PlanStatus
@@ -108,14 +117,18 @@ def plan_bitstar(env, queries, *, padding: float | None = None, seed: int = 0,
         and ``n_motion_calls`` (Python callbacks, summed) and ``wall_time``.
 
     Raises:
-        ValueError: malformed arguments; ImportError: ``ompl`` is not installed.
+        TypeError, ValueError: malformed arguments (the message names the option);
+            ImportError: ``ompl`` is not installed.
     """
     t_wall = time.perf_counter()
     q = _check_arguments(env, queries, time_budget, ompl_log_level)
+    workers = int_option("bitstar", "workers", workers, 0) or (os.cpu_count() or 1)
+    stop_on_first = bool_option("bitstar", "stop_on_first", stop_on_first)
+    chunk_size = int_option("bitstar", "chunk_size", chunk_size, 1, none_ok=True)
+    hang_timeout = float_option("bitstar", "hang_timeout", hang_timeout, none_ok=True)
+    startup_timeout = float_option("bitstar", "startup_timeout", startup_timeout)
+    check = motion_check_option("bitstar", check)
     pad = env.resolve_padding(padding)
-    workers = int(workers) if workers else (os.cpu_count() or 1)
-    if workers < 1:
-        raise ValueError(f"workers must be >= 0 (0 = os.cpu_count()), got {workers}")
     n = q.shape[0]
     seeds = query_seeds(seed, n)
     results = _Results.empty(n)
@@ -128,7 +141,7 @@ def plan_bitstar(env, queries, *, padding: float | None = None, seed: int = 0,
                                np.asarray(env.world.boxes), np.asarray(env.world.discs), pad)
         worker_args = (checker, float(time_budget), bool(stop_on_first), ompl_log_level,
                        dict(_crash_on or {}))
-        hang = 3.0 * time_budget + 30.0 if hang_timeout is None else float(hang_timeout)
+        hang = 3.0 * time_budget + 30.0 if hang_timeout is None else hang_timeout
         pool = _WorkerPool(worker_args, q, seeds, todo, min(workers, len(todo)), chunk_size,
                            hang, startup_timeout, results)
         pool.run()
@@ -145,9 +158,7 @@ def _check_arguments(env, queries, time_budget, ompl_log_level) -> np.ndarray:
     q = np.asarray(queries, np.float32)
     if q.ndim != 3 or q.shape[1:] != (2, d):
         raise ValueError(f"queries must have shape (N, 2, {d}) for {env.name}, got {q.shape}")
-    if not (isinstance(time_budget, (int, float)) and math.isfinite(time_budget)
-            and time_budget > 0):
-        raise ValueError(f"time_budget must be a number of seconds > 0, got {time_budget!r}")
+    float_option("bitstar", "time_budget", time_budget)  # seconds
     if ompl_log_level not in LOG_LEVELS:
         raise ValueError(f"ompl_log_level must be one of {LOG_LEVELS}, got {ompl_log_level!r}")
     if importlib.util.find_spec("ompl") is None:
@@ -192,6 +203,36 @@ def _verified_result(env, q: np.ndarray, pad: float, r: _Results, seeds: np.ndar
     return res
 
 
+_MAIN_LOCK = threading.Lock()
+
+
+@contextlib.contextmanager
+def _main_hidden():
+    """Starts worker processes without the caller's ``__main__`` module.
+
+    ``spawn`` normally re-imports the parent's main script in every child (as
+    ``__mp_main__``) before running the target: a script calling ``plan`` at
+    top level without the ``if __name__ == "__main__":`` guard would then run
+    again in each worker and die trying to start workers of its own. The
+    preparation data multiprocessing sends the child names the main module
+    found in ``sys.modules["__main__"]``; while a worker starts, that entry is a
+    bare module with neither ``__file__`` nor ``__spec__`` (what an interactive
+    session has), so the child imports nothing of the caller. The worker's
+    target and arguments are all ``ntq_jax`` objects (the entry is restored at
+    once, under a lock, and only :meth:`_Worker.__init__` holds it).
+    """
+    with _MAIN_LOCK:
+        main = sys.modules.get("__main__")
+        sys.modules["__main__"] = types.ModuleType("__main__")
+        try:
+            yield
+        finally:
+            if main is None:
+                sys.modules.pop("__main__", None)
+            else:
+                sys.modules["__main__"] = main
+
+
 class _Worker:
     """One worker process, its pipe and the queries it holds."""
 
@@ -200,7 +241,8 @@ class _Worker:
         self.conn = parent
         self.proc = ctx.Process(target=worker_main, args=(child,) + args, daemon=True,
                                 name="ntq_jax-bitstar")
-        self.proc.start()
+        with _main_hidden():
+            self.proc.start()
         child.close()
         self.assigned: list[int] = []  # indices sent and not finished
         self.current: int | None = None  # started, not finished

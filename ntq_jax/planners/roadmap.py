@@ -47,6 +47,7 @@ from scipy.spatial import cKDTree
 from ntq_jax import artifacts
 from ntq_jax.geometry import World
 from ntq_jax.planners.env_cache import EnvCache
+from ntq_jax.planners.options import bool_option, int_option, motion_check_option
 from ntq_jax.planners.smoothing import shortcut_paths
 from ntq_jax.planners.verify import finalize, valid_queries
 from ntq_jax.queries import sample_states
@@ -271,11 +272,23 @@ def plan_roadmap(env, queries, *, padding: float | None = None, seed: int = 0,
 
     Returns:
         A verified :class:`PlanResult`; unconnected after the last round: NO_PATH.
+
+    Raises:
+        TypeError, ValueError: an option of the wrong type or out of range (the
+            message names it).
     """
     del seed
-    if int(milestones) < 2 or (k is not None and int(k) < 1) or not 0 <= int(grow_rounds) <= 8:
-        raise ValueError(f"roadmap: milestones must be >= 2, k >= 1 or None and grow_rounds in "
-                         f"[0, 8]; got milestones={milestones}, k={k}, grow_rounds={grow_rounds}")
+    milestones = int_option("roadmap", "milestones", milestones, 2)
+    k = int_option("roadmap", "k", k, 1, none_ok=True)
+    grow_rounds = int_option("roadmap", "grow_rounds", grow_rounds, 0, 8)
+    roadmap_seed = int_option("roadmap", "roadmap_seed", roadmap_seed, 0)
+    smooth = bool_option("roadmap", "smooth", smooth)
+    smooth_chunk = int_option("roadmap", "smooth_chunk", smooth_chunk, 1)
+    threads = int_option("roadmap", "threads", threads, 1, none_ok=True)
+    check = motion_check_option("roadmap", check)
+    if cache_dir is not None and not isinstance(cache_dir, (str, os.PathLike)):
+        raise TypeError(f"roadmap: cache_dir must be a folder path or None, got {cache_dir!r} "
+                        f"({type(cache_dir).__name__})")
     padding = env.resolve_padding(padding)
     q = np.asarray(queries, np.float32)
     t0 = time.perf_counter()

@@ -55,6 +55,7 @@ from scipy.sparse.csgraph import shortest_path
 from ntq_jax.batching import bucket_size, map_chunks
 from ntq_jax.geometry import KERNEL_COMPILER_OPTIONS, World
 from ntq_jax.planners.env_cache import EnvCache
+from ntq_jax.planners.options import float_option, int_option, motion_check_option
 from ntq_jax.planners.verify import finalize
 from ntq_jax.robots.batch import is_valid_cm, steer_to_cm, steer_to_pairs, valid_states
 from ntq_jax.types import PlanResult, PlanStatus
@@ -395,9 +396,14 @@ def plan_visgraph(env, queries, *, padding: float | None = None, seed: int = 0,
         A :class:`PlanResult` checked by :func:`ntq_jax.planners.verify.finalize`.
 
     Raises:
-        ValueError: not a point robot.
+        ValueError: not a point robot; TypeError, ValueError: an option of the
+            wrong type or out of range (the message names it).
     """
     del seed  # deterministic
+    eps = float_option("visgraph", "eps", eps, none_ok=True)
+    arc_step = float_option("visgraph", "arc_step", arc_step, maximum=math.pi / 2, none_ok=True)
+    chunk_size = int_option("visgraph", "chunk_size", chunk_size, 1)
+    check = motion_check_option("visgraph", check)
     if env.robot.kind != "point":
         raise ValueError(f"the 'visgraph' planner is for the point robot only; {env.name} has a "
                          f"{env.robot.kind!r} robot: use 'bitstar' (or 'astar' for the 2-link arm)")
@@ -408,7 +414,7 @@ def plan_visgraph(env, queries, *, padding: float | None = None, seed: int = 0,
     graph = _GRAPHS.get(env, (pad, eps, step),
                         lambda: VisGraph.build(env, pad, eps=eps, arc_step=step))
     t1 = time.perf_counter()
-    res = graph.plan(q, chunk_size=int(chunk_size))
+    res = graph.plan(q, chunk_size=chunk_size)
     info = dict(res.info, build_time=t1 - t0, plan_time=time.perf_counter() - t1)
     out = finalize(q, res.paths, res.lengths, res.status, info, env, pad, check)
     info["time"] = time.perf_counter() - t0

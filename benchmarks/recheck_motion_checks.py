@@ -19,7 +19,6 @@ JSON with ``--json``::
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path

@@ -16,11 +16,14 @@ keeps its traceback.
 from __future__ import annotations
 
 import logging
+import os
 import sys
+import tempfile
+from pathlib import Path
 from typing import Callable, Iterable
 
 __all__ = ["UsageError", "EXPECTED_ERRORS", "PATH_ERRORS", "expected_error_types", "error_line",
-           "positive_int", "run_cli"]
+           "positive_int", "check_writable", "run_cli"]
 
 
 class UsageError(ValueError):
@@ -65,6 +68,30 @@ def positive_int(option: str, value: int) -> int:
     if value < 1:
         raise UsageError(f"{option} {value}: expected a positive integer (1 or more)")
     return value
+
+
+def check_writable(path: str | os.PathLike, flag: str) -> None:
+    """A :class:`UsageError` unless a file can be written at ``path`` (its folder is created on
+    write), so a script can refuse an output path before doing its work.
+
+    Creates and removes a probe file in the nearest existing folder, so a
+    read-only file system or folder is found even when running as root.
+    """
+    path = Path(path)
+    if path.is_dir():
+        raise UsageError(f"{flag} {path} is a folder; give a file name")
+    folder = path.parent
+    while not folder.exists():
+        folder = folder.parent
+    if not folder.is_dir():
+        raise UsageError(f"{flag} {path} cannot be written: {folder} is a file, not a folder")
+    try:
+        fd, probe = tempfile.mkstemp(dir=folder, prefix=".write-test-")
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as e:
+        raise UsageError(f"{flag} {path} cannot be written: creating a file in {folder} failed "
+                         f"({e.strerror})") from None
 
 
 def error_line(err: BaseException) -> str:

@@ -23,17 +23,17 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
 import sys
-import tempfile
 import time
 from pathlib import Path
+
+from ntq_jax.cli import UsageError, check_writable, run_cli
 
 MAX_QUERIES = 10**15  # ~80 days at the fastest measured rate (1.5e8 queries/s, point robot)
 INTERRUPTED = 130     # the shell's exit code for a process ended by SIGINT
 
 
-class ScriptError(Exception):
+class ScriptError(UsageError):
     """An expected failure of this script: reported as one ``error:`` line, exit code 2."""
 
 
@@ -79,28 +79,6 @@ def _hours(text: str) -> float:
     if not v > 0:  # also refuses NaN
         raise argparse.ArgumentTypeError(f"must be a number of hours > 0 (or inf), got {text!r}")
     return v
-
-
-def check_writable(path: Path, flag: str) -> None:
-    """Raises ScriptError unless a file can be written at ``path`` (its folder is created on write).
-
-    Creates and removes a probe file in the nearest existing folder, so a
-    read-only file system or folder is found even when running as root.
-    """
-    if path.is_dir():
-        raise ScriptError(f"{flag} {path} is a folder; give a file name")
-    folder = path.parent
-    while not folder.exists():
-        folder = folder.parent
-    if not folder.is_dir():
-        raise ScriptError(f"{flag} {path} cannot be written: {folder} is a file, not a folder")
-    try:
-        fd, probe = tempfile.mkstemp(dir=folder, prefix=".write-test-")
-        os.close(fd)
-        os.unlink(probe)
-    except OSError as e:
-        raise ScriptError(f"{flag} {path} cannot be written: creating a file in {folder} failed "
-                          f"({e.strerror})") from None
 
 
 def _duration(seconds: float) -> str:
@@ -212,26 +190,12 @@ def _run(argv) -> int:
 
 
 def main(argv=None) -> int:
-    """Runs the script; an expected error is one ``error:`` line on stderr and exit code 2.
-
-    Expected: :class:`ScriptError`, ``EnvError`` (unknown environment, bad map),
-    ``FreeSpaceTooSmall`` and the file-system errors of writing ``--json``.
-    (The same mapping as ``ntq_jax.cli.run_cli`` once that exists.) Ctrl-C
-    anywhere exits with code 130 without a traceback.
-    """
-    try:
-        from ntq_jax.envs import EnvError
-        from ntq_jax.queries import FreeSpaceTooSmall
-        expected = (ScriptError, EnvError, FreeSpaceTooSmall, PermissionError,
-                    FileNotFoundError, NotADirectoryError, IsADirectoryError)
-        try:
-            return _run(argv)
-        except expected as e:
-            print(f"error: {e}", file=sys.stderr)
-            return 2
-    except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
-        return INTERRUPTED
+    """Runs the script through :func:`ntq_jax.cli.run_cli`: an expected error (a bad option, an
+    unknown environment or bad map, too little free space, a path that cannot be written) is
+    one ``error:`` line on stderr and exit code 2; Ctrl-C exits with code 130 without a
+    traceback (during the estimate, after printing the estimate so far)."""
+    from ntq_jax.queries import FreeSpaceTooSmall
+    return run_cli(lambda: _run(argv), extra=(FreeSpaceTooSmall,))
 
 
 if __name__ == "__main__":

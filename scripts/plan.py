@@ -17,40 +17,17 @@ shows the map, the neural path and, for point robots, the exact optimum.
 from __future__ import annotations
 
 import argparse
-import os
 import sys
-import tempfile
 from pathlib import Path
 
 
 import ntq_jax as nj
 from ntq_jax import artifacts
+from ntq_jax.cli import UsageError, check_writable, run_cli
 
 
-class PlanError(ValueError):
+class PlanError(UsageError):
     """An expected failure of this script: reported as one ``error:`` line, exit code 2."""
-
-
-def check_writable(path: Path, flag: str) -> None:
-    """Raises PlanError unless a file can be written at ``path`` (its folder is created on write).
-
-    Creates and removes a probe file in the nearest existing folder, so a
-    read-only file system or folder is found even when running as root.
-    """
-    if path.is_dir():
-        raise PlanError(f"{flag} {path} is a folder; give a file name")
-    folder = path.parent
-    while not folder.exists():
-        folder = folder.parent
-    if not folder.is_dir():
-        raise PlanError(f"{flag} {path} cannot be written: {folder} is a file, not a folder")
-    try:
-        fd, probe = tempfile.mkstemp(dir=folder, prefix=".write-test-")
-        os.close(fd)
-        os.unlink(probe)
-    except OSError as e:
-        raise PlanError(f"{flag} {path} cannot be written: creating a file in {folder} failed "
-                        f"({e.strerror})") from None
 
 
 def _load(run: Path, env_name: str | None):
@@ -143,6 +120,12 @@ def _draw(env, res, s, g, model, png: Path):
 
 
 def main(argv=None) -> int:
+    """Runs the script; an expected error is one ``error:`` line and exit code 2
+    (:func:`ntq_jax.cli.run_cli`)."""
+    return run_cli(lambda: _main(argv))
+
+
+def _main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--run", required=True, help="run folder of scripts/train_all.py")
@@ -158,16 +141,9 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if not args.no_compile_cache:
         artifacts.enable_compile_cache()
-    from ntq_jax.config import ConfigError
-    from ntq_jax.envs import EnvError
     from ntq_jax.types import CAUSE_NAMES
-    try:
-        res, env, png = plan_one(args.run, args.model, args.start, args.goal, env_name=args.env,
-                                 steer=not args.no_steer, seed=args.seed, png=args.png)
-    except (PlanError, ConfigError, EnvError, PermissionError, FileNotFoundError,
-            NotADirectoryError, IsADirectoryError) as e:  # the mapping of ntq_jax.cli.run_cli
-        print(f"error: {e}", file=sys.stderr)
-        return 2
+    res, env, png = plan_one(args.run, args.model, args.start, args.goal, env_name=args.env,
+                             steer=not args.no_steer, seed=args.seed, png=args.png)
     path = res.path(0)
     print(f"{env.name}, PNet_{args.model}: {CAUSE_NAMES[int(res.cause[0])]}")
     for row in path:

@@ -148,7 +148,7 @@ def paired_cost_difference(x, y, *, n_boot: int = N_BOOT, seed: int = SEED,
     means = np.empty(n_boot)
     for s in range(0, n_boot, per):
         k = min(per, n_boot - s)
-        means[s:s + k] = d[rng.integers(0, n, size=(k, n))].mean(axis=1)
+        means[s:s + k] = d[rng.integers(0, n, size=(k, n), dtype=np.int32)].mean(axis=1)
     alpha = (1 - confidence) / 2
     lo, hi = np.quantile(means, [alpha, 1 - alpha])
     return {"n": n, "diff": diff, "ci": [float(lo), float(hi)]}

@@ -9,7 +9,8 @@ query kind and steerTo variant), so two models are compared query by query:
   the difference of success ratios ``(b - c) / n`` with Newcombe's hybrid score
   interval for paired proportions (Newcombe 1998, method 10: the Wilson
   intervals of the two success ratios combined with the correlation of the
-  pairs; the form of Altman et al., *Statistics with Confidence*, 2000);
+  pairs; the form of Altman et al., *Statistics with Confidence*, 2000, and of
+  Fagerland, Lydersen & Laake, *Statistical Analysis of Contingency Tables*, 2017);
 * cost, over the queries both solve: :func:`paired_cost_difference`, the mean
   paired difference (A - B) of the per-query cost ratios with a percentile
   paired bootstrap interval over queries (fixed seed, vectorised resampling)

@@ -10,6 +10,18 @@ timings, failures, and the success of the in-band and out-of-band test queries
 apart (both endpoints valid at the environment's data padding, or not; see
 :func:`ntq_jax.evaluate.band_metrics`); the CSV has one line per row.
 
+Paired comparisons (:func:`comparisons`, statistics in :mod:`ntq_jax.stats`):
+every model is tested on the same queries, so models are compared query by
+query, per (environment, query kind, steerTo), from the per-query arrays of the
+saved paths files: McNemar's exact test and the success-ratio difference with
+Newcombe's paired interval; over the queries both solve, the mean difference of
+cost ratio with a paired bootstrap interval and the Wilcoxon signed-rank
+p-value. Which models are compared is data (:data:`DEFAULT_PAIRS`: PNet_1..3 vs
+PNet_0; a baseline :data:`BEST_MEMBER` is the single member with the highest
+success in that cell). They are a table after each detail table of
+``tables.md``, the ``comparisons`` list of ``results.json``, and the ``vs_*``
+columns of ``results.csv`` (a row's first comparison as the model).
+
 :func:`write_report` writes, into the run folder (atomically), ``results.json``
 (rows plus run metadata), ``results.csv``, ``tables.md``, ``tables.tex`` and the
 figures of :mod:`ntq_jax.plotting`: ``figures/success_ratio[_nosteer].png``,
@@ -21,9 +33,11 @@ from __future__ import annotations
 import csv
 import io
 import math
+import re
+import warnings
 from pathlib import Path
 
-from ntq_jax import artifacts, plotting
+from ntq_jax import artifacts, plotting, stats
 from ntq_jax.data import env_slug
 from ntq_jax.presets import PAPER_GAMMA
 from ntq_jax.types import QUERY_KINDS
@@ -38,6 +52,20 @@ CSV_FIELDS = ["task", "env", "model", "query_kind", "steer", "k_test", "successe
               "gamma_nt", "band_padding", "n_in_band", "n_out_band", "success_in_band",
               "success_in_band_ci95_lo", "success_in_band_ci95_hi", "success_out_band",
               "success_out_band_ci95_lo", "success_out_band_ci95_hi", "paths_file"]
+# a row's first paired comparison (as the model; see comparisons()), after CSV_FIELDS
+COMPARISON_CSV_FIELDS = ["vs_model", "vs_only_model", "vs_only_baseline", "vs_success_diff",
+                         "vs_success_diff_ci95_lo", "vs_success_diff_ci95_hi", "vs_mcnemar_p",
+                         "vs_cost_n", "vs_cost_ratio_diff", "vs_cost_ratio_diff_ci95_lo",
+                         "vs_cost_ratio_diff_ci95_hi", "vs_wilcoxon_p"]
+
+#: Baseline placeholder of a pair: the single member (``PNet_<m>``) with the most
+#: successes in the (environment, query kind, steerTo) cell (ties: the lower index).
+BEST_MEMBER = "best member"
+#: The paired comparisons of the report, ``(model, baseline)``. An ensemble row is
+#: compared with its best member by adding e.g. ``("PNet_ens", BEST_MEMBER)``.
+DEFAULT_PAIRS: tuple[tuple[str, str], ...] = (("PNet_1", "PNet_0"), ("PNet_2", "PNet_0"),
+                                              ("PNet_3", "PNet_0"))
+_MEMBER = re.compile(r"PNet_(\d+)")
 
 
 def _f(x, nd=3) -> str:
@@ -58,8 +86,14 @@ def _title(task, steer):
     return t if steer else f"{t} without steerTo"
 
 
+def _model_key(name: str):
+    """Members ``PNet_<m>`` first, by index; other rows (e.g. an ensemble) after, by name."""
+    mt = _MEMBER.fullmatch(name)
+    return (0, int(mt.group(1)), "") if mt else (1, 0, name)
+
+
 def _models(block):
-    return sorted({m for m, _ in block}, key=lambda s: int(s.split("_")[-1]))
+    return sorted({m for m, _ in block}, key=_model_key)
 
 
 def _gamma_heading(env, block) -> tuple[str, str]:
@@ -102,7 +136,135 @@ def _band_cells(r) -> list[str]:
     return out
 
 
-def tables_md(rows) -> str:
+# ---------------------------------------------------------------------------
+# Paired comparisons
+# ---------------------------------------------------------------------------
+
+def best_member(cell: dict) -> str | None:
+    """The single member (``PNet_<m>``) of ``cell`` (``{model: row}``) with the most successes.
+
+    Ties go to the lower member index; None if the cell has no single member.
+    """
+    members = [(-r["successes"], int(mt.group(1)), m) for m, r in cell.items()
+               if (mt := _MEMBER.fullmatch(m))]
+    return min(members)[2] if members else None
+
+
+def _nan_to_none(v):
+    if isinstance(v, float) and math.isnan(v):
+        return None
+    if isinstance(v, list):
+        return [_nan_to_none(x) for x in v]
+    return v
+
+
+def comparisons(run_dir, rows, pairs=DEFAULT_PAIRS, *, n_boot: int = stats.N_BOOT,
+                seed: int = stats.SEED, load=artifacts.load_npz) -> list[dict]:
+    """Paired comparisons of models tested on the same queries (:func:`ntq_jax.stats.paired_comparison`).
+
+    For every (task, environment, steerTo, query kind) cell of ``rows`` and every
+    ``(model, baseline)`` of ``pairs`` whose models both have a row there, the
+    per-query arrays of their paths files (``row["paths_file"]`` under
+    ``run_dir``: ``success``, ``costs``, ``ref_costs``, ``ref_status``,
+    ``queries``) are compared, model minus baseline. A baseline
+    :data:`BEST_MEMBER` is resolved per cell by :func:`best_member`. Pairs with
+    a missing model or an unreadable paths file are left out (one warning per
+    call for the files), as are pairs whose files hold different queries
+    (a warning each).
+
+    Args:
+        run_dir: the run folder.
+        rows: the result rows.
+        pairs: ``[(model, baseline), ...]``.
+        n_boot, seed: the cost bootstrap (:func:`ntq_jax.stats.paired_cost_difference`).
+        load: ``path -> dict of arrays | None`` (default :func:`ntq_jax.artifacts.load_npz`).
+
+    Returns:
+        One dict per comparison, in the order (task, steerTo, environment) as
+        first seen in ``rows``, then ``pairs``, then query kind: ``task``,
+        ``env``, ``steer``, ``query_kind``, ``model``, ``baseline``,
+        ``baseline_rule`` (``BEST_MEMBER`` or None), ``n_boot``, ``seed`` and
+        the fields of :func:`ntq_jax.stats.paired_comparison` (NaN as None).
+    """
+    run_dir = Path(run_dir)
+    cells: dict = {}
+    for r in rows:
+        cells.setdefault((r["task"], r["steer"], r["env"]), {}).setdefault(
+            r["query_kind"], {})[r["model"]] = r
+    cache: dict = {}
+    missing: list[str] = []
+
+    def arrays(row):
+        f = row.get("paths_file")
+        if f not in cache:
+            cache[f] = load(run_dir / f) if f else None
+            if cache[f] is None:
+                missing.append(str(f))
+        return cache[f]
+
+    out = []
+    for (task, steer, env), kinds in cells.items():
+        for model, base in pairs:
+            for kind in [k for k in QUERY_KINDS if k in kinds] + sorted(set(kinds) - set(QUERY_KINDS)):
+                cell = kinds[kind]
+                base_name = best_member(cell) if base == BEST_MEMBER else base
+                if model not in cell or base_name not in cell or base_name == model:
+                    continue
+                a, b = arrays(cell[model]), arrays(cell[base_name])
+                if a is None or b is None:
+                    continue
+                try:
+                    cmp = stats.paired_comparison(a, b, n_boot=n_boot, seed=seed)
+                except ValueError as e:
+                    warnings.warn(f"paired comparison {model} vs {base_name} ({env}, {kind}, "
+                                  f"steer={steer}) left out: {e}", stacklevel=2)
+                    continue
+                out.append({"task": task, "env": env, "steer": bool(steer), "query_kind": kind,
+                            "model": model, "baseline": base_name,
+                            "baseline_rule": base if base == BEST_MEMBER else None,
+                            "n_boot": n_boot, "seed": seed,
+                            **{k: _nan_to_none(v) for k, v in cmp.items()}})
+    if missing:
+        warnings.warn(f"paired comparisons: {len(missing)} paths file(s) missing or unreadable "
+                      f"under {run_dir} (e.g. {missing[0]}); their pairs are left out",
+                      stacklevel=2)
+    return out
+
+
+def _p(p) -> str:
+    return "-" if p is None or (isinstance(p, float) and math.isnan(p)) else (
+        "<0.001" if p < 1e-3 else f"{p:.3f}")
+
+
+def _ci(x, lo_hi, nd=3) -> str:
+    lo, hi = lo_hi
+    return _f(x, nd) + ("" if lo is None or hi is None else f" [{lo:.{nd}f}, {hi:.{nd}f}]")
+
+
+def _comparison_md(comps) -> list[str]:
+    """The paired-comparison table of one environment block (empty if no comparison)."""
+    if not comps:
+        return []
+    out = ["Detail, paired comparisons on the same test queries (model minus baseline): "
+           "queries solved by both / only the model / only the baseline / neither; success "
+           "ratio difference with Newcombe's paired 95% interval and McNemar's exact p; over "
+           "the queries both solve, the mean difference of cost ratio with a paired bootstrap "
+           "95% interval and the Wilcoxon signed-rank p.", "",
+           "| Model | vs | kind | both / only model / only vs / neither | success diff [95%] | "
+           "McNemar p | both solved | cost ratio diff [95%] | Wilcoxon p |",
+           "|---|---|---|---|---|---|---|---|---|"]
+    for c in comps:
+        vs = c["baseline"] + (f" ({c['baseline_rule']})" if c.get("baseline_rule") else "")
+        out.append(f"| {c['model']} | {vs} | {c['query_kind']} | "
+                   f"{c['both']} / {c['only_a']} / {c['only_b']} / {c['neither']} | "
+                   f"{_ci(c['success_diff'], c['success_diff_ci95'])} | {_p(c['mcnemar_p'])} | "
+                   f"{c['cost_n']} | {_ci(c['cost_ratio_diff'], c['cost_ratio_diff_ci95'])} | "
+                   f"{_p(c['wilcoxon_p'])} |")
+    return out + [""]
+
+
+def tables_md(rows, comparisons: list[dict] | None = None) -> str:
+    """The Markdown tables; ``comparisons`` (from :func:`comparisons`) adds their tables."""
     out = ["# Results", ""]
     for (task, steer), envs in _groups(rows).items():
         out += [f"## {_title(task, steer)}", ""]
@@ -138,6 +300,8 @@ def tables_md(rows) -> str:
                                f"{fl.get('invalid_query', 0)} | {r['reference_failed']} | "
                                + " | ".join(_band_cells(r)) + " |")
             out.append("")
+            out += _comparison_md([c for c in comparisons or ()
+                                   if (c["task"], c["steer"], c["env"]) == (task, steer, env)])
     return "\n".join(out)
 
 
@@ -166,12 +330,29 @@ def tables_tex(rows) -> str:
     return "\n".join(out)
 
 
-def results_csv(rows) -> str:
+def _comparison_csv(c: dict) -> dict:
+    out = {"vs_model": c["baseline"], "vs_only_model": c["only_a"],
+           "vs_only_baseline": c["only_b"], "vs_success_diff": c["success_diff"],
+           "vs_mcnemar_p": c["mcnemar_p"], "vs_cost_n": c["cost_n"],
+           "vs_cost_ratio_diff": c["cost_ratio_diff"], "vs_wilcoxon_p": c["wilcoxon_p"]}
+    out["vs_success_diff_ci95_lo"], out["vs_success_diff_ci95_hi"] = c["success_diff_ci95"]
+    out["vs_cost_ratio_diff_ci95_lo"], out["vs_cost_ratio_diff_ci95_hi"] = c["cost_ratio_diff_ci95"]
+    return out
+
+
+def results_csv(rows, comparisons: list[dict] | None = None) -> str:
+    """One CSV line per row; the ``vs_*`` columns hold the row's first comparison as the model."""
+    first: dict = {}
+    for c in comparisons or ():
+        first.setdefault((c["task"], c["env"], c["steer"], c["query_kind"], c["model"]), c)
     buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=CSV_FIELDS, extrasaction="ignore")
+    w = csv.DictWriter(buf, fieldnames=CSV_FIELDS + COMPARISON_CSV_FIELDS, extrasaction="ignore")
     w.writeheader()
     for r in rows:
         flat = dict(r)
+        c = first.get((r["task"], r["env"], r["steer"], r["query_kind"], r["model"]))
+        if c is not None:
+            flat.update(_comparison_csv(c))
         flat["success_ci95_lo"], flat["success_ci95_hi"] = r["success_ci95"]
         for part in ("in_band", "out_band"):
             if f"success_{part}_ci95" in r:
@@ -188,7 +369,7 @@ def results_csv(rows) -> str:
 # ---------------------------------------------------------------------------
 
 def write_report(run_dir, rows: list[dict], envs: dict | None = None, meta: dict | None = None,
-                 figures: bool = True) -> dict:
+                 figures: bool = True, pairs=DEFAULT_PAIRS) -> dict:
     """Writes results.json/csv, tables.md/tex and the figures; returns their paths.
 
     Args:
@@ -197,14 +378,17 @@ def write_report(run_dir, rows: list[dict], envs: dict | None = None, meta: dict
         envs: ``{env_name: Env}`` for the map figures (optional).
         meta: run metadata stored in ``results.json``.
         figures: write the PNG figures.
+        pairs: the paired comparisons, ``[(model, baseline), ...]`` (see :func:`comparisons`).
     """
     run_dir = Path(run_dir)
     out = {name: run_dir / name
            for name in ("results.json", "results.csv", "tables.md", "tables.tex")}
-    artifacts.write_json(out["results.json"], {"meta": meta or {}, "rows": rows}, indent=1,
+    comps = comparisons(run_dir, rows, pairs)
+    artifacts.write_json(out["results.json"],
+                         {"meta": meta or {}, "rows": rows, "comparisons": comps}, indent=1,
                          default=str)
-    artifacts.write_text(out["results.csv"], results_csv(rows))
-    artifacts.write_text(out["tables.md"], tables_md(rows))
+    artifacts.write_text(out["results.csv"], results_csv(rows, comps))
+    artifacts.write_text(out["tables.md"], tables_md(rows, comps))
     artifacts.write_text(out["tables.tex"], tables_tex(rows))
     if figures:
         out.update(_figures(run_dir, rows, envs or {}))
@@ -224,7 +408,7 @@ def _figures(run_dir: Path, rows: list[dict], envs: dict) -> dict:
         mine = [r for r in rows if r["env"] == name and r["steer"] == steer
                 and r["query_kind"] == "nontrivial"]
         saved = {r["model"]: artifacts.load_npz(run_dir / r["paths_file"])
-                 for r in sorted(mine, key=lambda r: int(r["model"].split("_")[-1]))}
+                 for r in sorted(mine, key=lambda r: _model_key(r["model"]))}
         eval_dir = run_dir / "eval" / slug
         written.append(plotting.examples_figure(env, artifacts.load_npz(eval_dir / "reference.npz"),
                                                 saved, figs / f"examples_{slug}.png"))

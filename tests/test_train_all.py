@@ -145,3 +145,21 @@ def test_plan_script_rejects_bad_states(run, capsys):
     assert plan.main(["--run", str(run), "--model", "9", "--start", "1", "1",
                       "--goal", "2", "2"]) == 2
     assert "--model" in capsys.readouterr().err
+
+
+def test_report_has_paired_comparisons(run):
+    """PNet_1..3 vs PNet_0 per query kind, recomputed here from the saved paths files."""
+    from ntq_jax.stats import paired_comparison
+
+    md = (run / "tables.md").read_text()
+    comps = json.loads((run / "results.json").read_text())["comparisons"]
+    assert {(c["model"], c["baseline"], c["query_kind"]) for c in comps} == {
+        (f"PNet_{m}", "PNet_0", k) for m in (1, 2, 3) for k in ("uniform", "nontrivial")}
+    for c in comps:
+        assert f"| {c['model']} | PNet_0 | {c['query_kind']} | {c['both']} / {c['only_a']} / " in md
+        files = [run / "paths" / "point_2" / f"{m}_{c['query_kind']}.npz"
+                 for m in (c["model"], "PNet_0")]
+        want = paired_comparison(*(dict(np.load(f)) for f in files))
+        assert c["n"] == 16 and c["mcnemar_p"] == pytest.approx(want["mcnemar_p"])
+        assert c["success_diff"] == pytest.approx(want["success_diff"])
+        assert c["cost_n"] == want["cost_n"]

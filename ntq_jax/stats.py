@@ -1,0 +1,219 @@
+"""Paired comparisons of two planners tested on the same queries.
+
+Every model of a run is evaluated on the same test queries (per environment,
+query kind and steerTo variant), so two models are compared query by query:
+
+* success: :func:`mcnemar_exact`, McNemar's exact test (two-sided), the exact
+  binomial test of the discordant pairs (``b`` queries only model A solves,
+  ``c`` only model B solves) against 1/2; and :func:`paired_success_difference`,
+  the difference of success ratios ``(b - c) / n`` with Newcombe's hybrid score
+  interval for paired proportions (Newcombe 1998, method 10: the Wilson
+  intervals of the two success ratios combined with the correlation of the
+  pairs; the form of Altman et al., *Statistics with Confidence*, 2000, and of
+  Fagerland, Lydersen & Laake, *Statistical Analysis of Contingency Tables*, 2017);
+* cost, over the queries both solve: :func:`paired_cost_difference`, the mean
+  paired difference (A - B) of the per-query cost ratios with a percentile
+  paired bootstrap interval over queries (fixed seed, vectorised resampling)
+  and :func:`wilcoxon_p`, the two-sided Wilcoxon signed-rank p-value.
+
+:func:`paired_comparison` does all of it from the per-query arrays of two
+models (as saved in the run's paths files, :mod:`ntq_jax.evaluate`).
+
+Only NumPy and SciPy (``scipy.stats``); no JAX.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+from scipy import stats as _st
+
+__all__ = ["mcnemar_exact", "paired_success_difference", "paired_cost_difference",
+           "wilcoxon_p", "paired_comparison", "N_BOOT", "SEED"]
+
+N_BOOT = 10_000  #: bootstrap resamples of the cost difference
+SEED = 0  #: bootstrap seed (results are deterministic per seed)
+_MAX_DRAWS = 1 << 22  # resample indices drawn per chunk (memory bound of the bootstrap)
+
+
+def _z(confidence: float) -> float:
+    return float(_st.norm.ppf(0.5 + confidence / 2))
+
+
+def mcnemar_exact(b: int, c: int) -> float:
+    """Two-sided p-value of McNemar's exact test for ``b`` and ``c`` discordant pairs.
+
+    The exact binomial test of ``b`` successes in ``b + c`` trials at 1/2
+    (``scipy.stats.binomtest``). No discordant pair (``b = c = 0``): no evidence
+    of a difference, p = 1.
+    """
+    b, c = int(b), int(c)
+    if b < 0 or c < 0:
+        raise ValueError(f"discordant counts must be >= 0, got b={b}, c={c}")
+    if b + c == 0:
+        return 1.0
+    return float(_st.binomtest(b, b + c, 0.5).pvalue)
+
+
+def _wilson(k: int, n: int, z: float) -> tuple[float, float]:
+    p = k / n
+    denom = 1.0 + z * z / n
+    centre = (p + z * z / (2 * n)) / denom
+    half = z / denom * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n))
+    return max(0.0, centre - half), min(1.0, centre + half)
+
+
+def paired_success_difference(success_a, success_b, confidence: float = 0.95) -> dict:
+    """Difference of the success ratios of two models on the same queries, with its interval.
+
+    Newcombe's hybrid score interval for the difference of paired proportions
+    (Newcombe 1998, method 10): with ``a`` queries both solve, ``b`` only A,
+    ``c`` only B, ``d`` neither (``n`` in all), ``p1 = (a + b) / n``,
+    ``p2 = (a + c) / n`` and their Wilson intervals ``[l1, u1]``, ``[l2, u2]``,
+    the interval of ``D = p1 - p2`` is::
+
+        [D - sqrt((p1 - l1)^2 - 2 phi (p1 - l1)(u2 - p2) + (u2 - p2)^2),
+         D + sqrt((p2 - l2)^2 - 2 phi (p2 - l2)(u1 - p1) + (u1 - p1)^2)]
+
+    where ``phi`` is the correlation of the pairs, ``(a d - b c) / sqrt((a+b)(c+d)(a+c)(b+d))``
+    with ``a d - b c`` replaced by ``max(a d - b c - n / 2, 0)`` when positive
+    (0 when a margin is empty).
+
+    Args:
+        success_a, success_b: ``(n,)`` bool, per query, in the same query order.
+        confidence: the interval's level.
+
+    Returns:
+        ``n``, ``both`` (a), ``only_a`` (b), ``only_b`` (c), ``neither`` (d),
+        ``diff`` (``p1 - p2``, NaN for ``n = 0``) and ``ci`` ``[lo, hi]``
+        (NaN for ``n = 0``).
+    """
+    sa, sb = np.asarray(success_a, bool), np.asarray(success_b, bool)
+    if sa.shape != sb.shape or sa.ndim != 1:
+        raise ValueError(f"success arrays must be paired 1-D arrays, got {sa.shape} and {sb.shape}")
+    a, b = int(np.sum(sa & sb)), int(np.sum(sa & ~sb))
+    c, d = int(np.sum(~sa & sb)), int(np.sum(~sa & ~sb))
+    n = a + b + c + d
+    out = {"n": n, "both": a, "only_a": b, "only_b": c, "neither": d}
+    if n == 0:
+        return {**out, "diff": float("nan"), "ci": [float("nan"), float("nan")]}
+    z = _z(confidence)
+    p1, p2 = (a + b) / n, (a + c) / n
+    l1, u1 = _wilson(a + b, n, z)
+    l2, u2 = _wilson(a + c, n, z)
+    margins = float(a + b) * (c + d) * (a + c) * (b + d)
+    num = float(a * d - b * c)
+    num = max(num - n / 2, 0.0) if num > 0 else num
+    phi = num / math.sqrt(margins) if margins > 0 else 0.0
+    diff = p1 - p2
+    lo = diff - math.sqrt(max((p1 - l1) ** 2 - 2 * phi * (p1 - l1) * (u2 - p2) + (u2 - p2) ** 2, 0))
+    hi = diff + math.sqrt(max((p2 - l2) ** 2 - 2 * phi * (p2 - l2) * (u1 - p1) + (u1 - p1) ** 2, 0))
+    return {**out, "diff": diff, "ci": [max(-1.0, lo), min(1.0, hi)]}
+
+
+def paired_cost_difference(x, y, *, n_boot: int = N_BOOT, seed: int = SEED,
+                           confidence: float = 0.95) -> dict:
+    """Mean paired difference ``mean(x - y)`` with a percentile paired bootstrap interval.
+
+    The ``n`` query pairs are resampled with replacement ``n_boot`` times
+    (``numpy.random.default_rng(seed)``, vectorised, in chunks of at most a few
+    million indices; the chunking depends only on ``n`` and ``n_boot``, so the
+    result is deterministic per seed); the interval is the ``(1 - confidence) / 2``
+    and ``(1 + confidence) / 2`` quantiles of the resampled means.
+
+    Args:
+        x, y: ``(n,)`` finite floats, paired (e.g. the cost ratios of two models
+            on the queries both solve).
+        n_boot: bootstrap resamples.
+        seed: the generator's seed.
+        confidence: the interval's level.
+
+    Returns:
+        ``n``, ``diff`` (NaN for ``n = 0``) and ``ci`` ``[lo, hi]`` (NaN for
+        ``n < 2``: one pair has no spread to resample).
+    """
+    d = np.asarray(x, np.float64) - np.asarray(y, np.float64)
+    if d.ndim != 1:
+        raise ValueError(f"paired arrays must be 1-D, got shape {d.shape}")
+    n = int(d.size)
+    nan = float("nan")
+    if n == 0:
+        return {"n": 0, "diff": nan, "ci": [nan, nan]}
+    diff = float(d.mean())
+    if n < 2:
+        return {"n": n, "diff": diff, "ci": [nan, nan]}
+    rng = np.random.default_rng(seed)
+    per = max(1, _MAX_DRAWS // n)
+    means = np.empty(n_boot)
+    for s in range(0, n_boot, per):
+        k = min(per, n_boot - s)
+        means[s:s + k] = d[rng.integers(0, n, size=(k, n), dtype=np.int32)].mean(axis=1)
+    alpha = (1 - confidence) / 2
+    lo, hi = np.quantile(means, [alpha, 1 - alpha])
+    return {"n": n, "diff": diff, "ci": [float(lo), float(hi)]}
+
+
+def wilcoxon_p(x, y) -> float:
+    """Two-sided Wilcoxon signed-rank p-value of the pairs ``x - y`` (``scipy.stats.wilcoxon``).
+
+    Zero differences are dropped (scipy's default ``zero_method="wilcox"``).
+    NaN when fewer than 2 pairs or no non-zero difference (no test possible).
+    """
+    d = np.asarray(x, np.float64) - np.asarray(y, np.float64)
+    if d.size < 2 or not np.any(d != 0):
+        return float("nan")
+    try:
+        with warnings.catch_warnings():  # scipy's small-sample / ties notes
+            warnings.simplefilter("ignore")
+            p = _st.wilcoxon(d).pvalue
+    except ValueError:
+        return float("nan")
+    return float(p)
+
+
+def paired_comparison(a: dict, b: dict, *, n_boot: int = N_BOOT, seed: int = SEED,
+                      confidence: float = 0.95) -> dict:
+    """Model A against model B on the same queries, from their per-query arrays.
+
+    Args:
+        a, b: per-query arrays of each model (a paths file of
+            :mod:`ntq_jax.evaluate`): ``success`` (bool), ``costs`` and
+            ``ref_costs`` (the reference planner's cost, NaN/inf/<= 0 when it
+            failed); optionally ``ref_status`` (0 = solved) and ``queries``,
+            which must then be equal in both.
+        n_boot, seed, confidence: see :func:`paired_cost_difference`.
+
+    Returns:
+        A flat dict: ``n``, ``both``, ``only_a`` (McNemar's b), ``only_b`` (c),
+        ``neither``, ``success_diff`` (A - B) and ``success_diff_ci95``
+        (:func:`paired_success_difference`), ``mcnemar_p``
+        (:func:`mcnemar_exact`); ``cost_n`` (queries both solve with a
+        reference cost), ``cost_ratio_diff`` (mean of A's minus B's cost /
+        reference cost; negative: A's paths are cheaper),
+        ``cost_ratio_diff_ci95`` (paired bootstrap) and ``wilcoxon_p``.
+
+    Raises:
+        ValueError: the arrays are not paired (different lengths or queries).
+    """
+    sa, sb = np.asarray(a["success"], bool), np.asarray(b["success"], bool)
+    if sa.shape != sb.shape:
+        raise ValueError(f"not paired: {sa.shape[0] if sa.ndim else 0} and "
+                         f"{sb.shape[0] if sb.ndim else 0} queries")
+    if "queries" in a and "queries" in b and not np.array_equal(a["queries"], b["queries"]):
+        raise ValueError("not paired: the two models were tested on different queries")
+    s = paired_success_difference(sa, sb, confidence)
+    ref = np.asarray(a["ref_costs"], np.float64)
+    ok = np.isfinite(ref) & (ref > 0)
+    if "ref_status" in a:
+        ok &= np.asarray(a["ref_status"]) == 0
+    both = sa & sb & ok
+    ra = np.asarray(a["costs"], np.float64)[both] / ref[both]
+    rb = np.asarray(b["costs"], np.float64)[both] / ref[both]
+    cd = paired_cost_difference(ra, rb, n_boot=n_boot, seed=seed, confidence=confidence)
+    return {"n": s["n"], "both": s["both"], "only_a": s["only_a"], "only_b": s["only_b"],
+            "neither": s["neither"], "success_diff": s["diff"], "success_diff_ci95": s["ci"],
+            "mcnemar_p": mcnemar_exact(s["only_a"], s["only_b"]),
+            "cost_n": cd["n"], "cost_ratio_diff": cd["diff"], "cost_ratio_diff_ci95": cd["ci"],
+            "wilcoxon_p": wilcoxon_p(ra, rb)}

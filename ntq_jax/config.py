@@ -49,15 +49,53 @@ class SamplingConfig:
         _check(self.n_max >= 1, f"{p}.n_max", f"must be >= 1, got {self.n_max}")
 
 
+PRUNE_GAMMA = "gamma"
+
+
 @dataclasses.dataclass(frozen=True)
 class DatasetSpec:
-    """One dataset of Alg. 2: the non-trivial probability and the pruning flag."""
+    """One dataset of Alg. 2: the non-trivial probability and the pruning setting.
+
+    Datasets are named by their position in ``data.datasets``: ``D0``, ``D1``, ...
+
+    Attributes:
+        p_nt: probability that a query is non-trivial (Alg. 2).
+        prune: Alg. 4's pruning. ``false``: keep every sample; ``true``: drop
+            every sample whose ``steer_to(pi_i, pi_end)`` is free (the
+            "trivial remainder"; the paper's D3). A number ``p`` in [0, 1]:
+            drop each trivial-remainder sample with probability ``p``
+            (probabilistic pruning, the paper's Sec. VI; ``0`` gives the same
+            arrays as ``false``, ``1`` the same as ``true``). ``gamma``: ``p`` =
+            the map's gamma_nt estimated at the data-generation padding (the
+            ``gamma_nt`` of the dataset metadata). Non-trivial samples are never
+            dropped. Which samples are dropped follows from the run's seed, the
+            environment and the dataset's name only (:func:`ntq_jax.data.include.prune_rng`).
+        name: optional; when given it must be the dataset's positional name
+            (e.g. ``D4`` for the fifth entry), a check against a misordered list.
+    """
 
     p_nt: float
-    prune: bool = False
+    prune: typing.Union[bool, float, str] = False
+    name: Optional[str] = None
+
+    # left out of to_dict (and so of the config hash) when None: unnamed specs hash as before
+    _OMIT_NONE = ("name",)
 
     def validate(self, p: str):
         _check(0.0 <= self.p_nt <= 1.0, f"{p}.p_nt", f"must be in [0, 1], got {self.p_nt}")
+        pr = self.prune
+        if isinstance(pr, str):
+            _check(pr == PRUNE_GAMMA, f"{p}.prune",
+                   f"must be true, false, a probability in [0, 1] or {PRUNE_GAMMA!r}; got {pr!r}")
+        elif not isinstance(pr, bool):
+            _check(0.0 <= pr <= 1.0, f"{p}.prune",
+                   f"a pruning probability must be in [0, 1], got {pr}")
+
+    @property
+    def prunes(self) -> bool:
+        """Whether any sample may be pruned (``false`` and ``0`` never prune)."""
+        return self.prune is True or isinstance(self.prune, str) or (
+            not isinstance(self.prune, bool) and self.prune > 0.0)
 
 
 def _paper_datasets() -> tuple[DatasetSpec, ...]:
@@ -89,7 +127,12 @@ class DataConfig:
 
     Attributes:
         k_train: queries per dataset.
-        datasets: D0..D3 (the paper's four by default).
+        datasets: D0..D3 (the paper's four by default): :class:`DatasetSpec` s,
+            named ``D0``, ``D1``, ... by position; list more to train more
+            ensemble members, e.g. the probabilistic-pruning ``D4``::
+
+                datasets: [{p_nt: 0.0}, {p_nt: 0.5}, {p_nt: 1.0}, {p_nt: 1.0, prune: true},
+                           {name: D4, p_nt: 1.0, prune: gamma}]   # or prune: 0.3
         prune_padding: padding of the pruning steer_to; ``None`` = the environment's
             (the paper prunes on the data-generation geometry).
         chunk: queries per chunk written to disk (resumable unit).
@@ -112,6 +155,8 @@ class DataConfig:
         _check(len(self.datasets) >= 1, f"{p}.datasets", "must list at least one dataset")
         for i, d in enumerate(self.datasets):
             d.validate(f"{p}.datasets[{i}]")
+            _check(d.name is None or d.name == f"D{i}", f"{p}.datasets[{i}].name",
+                   f"datasets are named by position: entry {i} is D{i}, got {d.name!r}")
         _check(self.prune_padding is None or self.prune_padding >= 0, f"{p}.prune_padding",
                f"must be >= 0 or null, got {self.prune_padding}")
         _check(self.chunk >= 1, f"{p}.chunk", f"must be >= 1, got {self.chunk}")
@@ -405,7 +450,9 @@ class Config:
 
 def _to_plain(obj):
     if dataclasses.is_dataclass(obj):
-        return {f.name: _to_plain(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
+        omit = getattr(obj, "_OMIT_NONE", ())
+        return {f.name: _to_plain(getattr(obj, f.name)) for f in dataclasses.fields(obj)
+                if not (f.name in omit and getattr(obj, f.name) is None)}
     if isinstance(obj, tuple):
         return [_to_plain(v) for v in obj]
     return obj
@@ -415,6 +462,8 @@ def _type_name(tp) -> str:
     origin = typing.get_origin(tp)
     if origin in (typing.Union, types.UnionType):
         args = [a for a in typing.get_args(tp) if a is not type(None)]
+        if len(args) > 1:
+            return " or ".join(_type_name(a) for a in args)
         return f"{_type_name(args[0])} or null"
     if origin is tuple:
         return f"list of {_type_name(typing.get_args(tp)[0])}"
@@ -426,7 +475,17 @@ def _coerce(value, tp, key: str):
     if origin in (typing.Union, types.UnionType):
         args = [a for a in typing.get_args(tp) if a is not type(None)]
         if value is None:
-            return None
+            if type(None) in typing.get_args(tp):
+                return None
+            raise ConfigError(f"{key}: expected {_type_name(tp)}, got null")
+        if len(args) > 1:  # e.g. prune: bool, a number or a string, chosen by the value's type
+            for a in args:
+                if ((a is bool and isinstance(value, bool))
+                        or (a is float and isinstance(value, (int, float))
+                            and not isinstance(value, bool))
+                        or (a is str and isinstance(value, str))):
+                    return _coerce(value, a, key)
+            raise ConfigError(f"{key}: expected {_type_name(tp)}, got {value!r}")
         return _coerce(value, args[0], key)
     if origin is tuple:
         (item,) = [a for a in typing.get_args(tp) if a is not Ellipsis]

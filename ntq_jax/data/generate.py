@@ -15,6 +15,12 @@ independent of the pools, so every dataset's queries have exactly Alg. 2's
 distribution; only the datasets' joint distribution changes (they share
 queries). For the paper's D0..D3: D0 = ``U[:K]``, D2 = ``N[:K]``, D3 = D2 pruned,
 D1 about half of each, so ``2K`` queries are planned instead of ``4K``.
+A dataset with probabilistic pruning (``prune`` a probability or ``gamma``, e.g.
+a ``D4`` with ``p_nt = 1``) shares D2's queries and keeps each of D2's free
+("trivial-remainder") samples with probability ``1 - p_prune``
+(:mod:`ntq_jax.data.include`); ``gamma`` is this run's gamma_nt estimate at the
+data-generation padding (``meta.json``'s ``gamma_nt``), and ``p_prune`` is
+recorded in ``meta.json``.
 ``meta.json`` records each dataset's pool ranges (``sharing``).
 
 Resumable: the planning chunks stay in ``<env_dir>/.work/<fingerprint>/``
@@ -49,7 +55,7 @@ from ntq_jax import queries as Q
 from ntq_jax.data.format import (CONFIG_FILE, FORMAT, FORMAT_VERSION, damaged_datasets,
                                  dataset_names, env_slug, npy_sha256, plot_environment,
                                  write_dataset)
-from ntq_jax.data.include import include_data
+from ntq_jax.data.include import include_data, prune_probability, prune_rng
 from ntq_jax.data.planning import PoolPlan, plan_pool, planner_options, resolve_planner
 from ntq_jax.data.pools import (Keys, Pools, mixing_bits, pool_index, pool_sizes, run_keys,
                                 sample_pools)
@@ -156,16 +162,34 @@ def estimate_gammas(env, key: jax.Array, data_config, padding: float, work: Path
     return g_data, g_eval, time.perf_counter() - t0
 
 
-def dataset_arrays(env, pools: Pools, planned: PlanResult, idx: np.ndarray, prune: bool,
-                   prune_padding: float) -> dict[str, np.ndarray]:
-    """The arrays of the dataset made of pool rows ``idx`` (:data:`ARRAY_SPECS`)."""
+def resolve_prune(spec, g_data: dict, env_name: str, name: str) -> float:
+    """The drop probability of a free sample for ``spec.prune`` (``gamma``: ``g_data``'s estimate)."""
+    if isinstance(spec.prune, str):  # "gamma" (validated by the config)
+        g = g_data.get("gamma")
+        if g is None:
+            raise ValueError(
+                f"{env_name} {name}: prune: gamma needs the map's gamma_nt at the data padding, "
+                f"but it could not be estimated ({g_data.get('error', 'no estimate')}); give "
+                "the dataset a pruning probability instead")
+        return prune_probability(min(max(float(g), 0.0), 1.0))
+    return prune_probability(spec.prune)
+
+
+def dataset_arrays(env, pools: Pools, planned: PlanResult, idx: np.ndarray, prune: bool | float,
+                   prune_padding: float, rng: np.random.Generator | None = None
+                   ) -> dict[str, np.ndarray]:
+    """The arrays of the dataset made of pool rows ``idx`` (:data:`ARRAY_SPECS`).
+
+    ``prune``: ``include_data``'s flag or drop probability (``rng`` its draws).
+    """
     solved = planned.solved[idx]
     sel = idx[solved]
     lens = planned.lengths[sel].astype(np.int32)
     lmax = int(lens.max()) if len(lens) else 0
     paths = (np.ascontiguousarray(planned.paths[sel, :lmax]) if len(sel)
              else np.zeros((0, 0, env.dim), np.float32))
-    inputs, targets, pidx = include_data(env, paths, lens, prune=prune, padding=prune_padding)
+    inputs, targets, pidx = include_data(env, paths, lens, prune=prune, padding=prune_padding,
+                                         rng=rng)
     return {"inputs": inputs, "targets": targets, "path_index": pidx,
             "paths": paths.astype(np.float32), "path_lengths": lens,
             "queries": pools.queries[idx].astype(np.float32),
@@ -363,15 +387,20 @@ def generate_datasets(env, config, out_dir, *, env_name: str | None = None, plan
         for j, (name, spec) in enumerate(zip(run.names, run.specs)):
             with _timed(timings, "include"):
                 idx = pool_index(run.bits[j], pools.n_u)
-                arrays = dataset_arrays(env, pools, planned.result, idx, spec.prune,
-                                        run.prune_padding)
+                p_prune = resolve_prune(spec, g_data, run.env_name, name)
+                # bool prune: exactly Alg. 4's flag (the paper's datasets, as before)
+                prune = spec.prune if isinstance(spec.prune, bool) else p_prune
+                arrays = dataset_arrays(env, pools, planned.result, idx, prune,
+                                        run.prune_padding,
+                                        rng=prune_rng(config.seed, run.slug, name))
             with _timed(timings, "write"):
-                stats = dataset_stats(arrays, idx, planned, blocked, spec.prune, g_data, g_eval)
-                warns = dataset_warnings(run.env_name, name, stats, spec.prune,
+                stats = dataset_stats(arrays, idx, planned, blocked, p_prune > 0, g_data, g_eval)
+                warns = dataset_warnings(run.env_name, name, stats, p_prune > 0,
                                          config.sampling.n_max)
                 if name in bad or not _unchanged(run.env_dir / name, arrays):
                     write_dataset(run.env_dir / name, arrays, dict(
-                        common, name=name, p_nt=spec.p_nt, prune=spec.prune, stats=stats,
+                        common, name=name, p_nt=spec.p_nt, prune=spec.prune,
+                        p_prune=p_prune, stats=stats,
                         sharing=sharing(run, j), warnings=warns))
                     rewritten.append(name)
             summary[name] = stats

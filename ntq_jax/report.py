@@ -2,7 +2,8 @@
 
 :func:`tables_md`, :func:`tables_tex` and :func:`results_csv` turn the result
 rows of :func:`ntq_jax.evaluate.evaluate_env` into text: one table per task and
-steerTo variant laid out as the paper's Tables I-IV (model rows PNet_0..PNet_3;
+steerTo variant laid out as the paper's Tables I-IV (model rows PNet_0..PNet_3,
+then the ensemble rows PNet_ens and PNet_best-of-4 when evaluated;
 uniform and non-trivial columns; success ratio and cost ratio), one block per
 environment with gamma_nt in its heading; the Markdown adds the 95% intervals,
 and a detail table with the cost ratio to the exact optimum (point robots),
@@ -87,9 +88,9 @@ def _title(task, steer):
 
 
 def _model_key(name: str):
-    """Members ``PNet_<m>`` first, by index; other rows (e.g. an ensemble) after, by name."""
-    mt = _MEMBER.fullmatch(name)
-    return (0, int(mt.group(1)), "") if mt else (1, 0, name)
+    """Members ``PNet_<m>`` first, by index; then ``PNet_ens``, ``PNet_best-of-<N>``, and
+    other rows by name (:func:`ntq_jax.plotting.model_order`, the success figure's order)."""
+    return plotting.model_order(name)
 
 
 def _models(block):
@@ -323,7 +324,8 @@ def tables_tex(rows) -> str:
                     "\t\t\\midrule"]
             for m in _models(block):
                 cells = _cells(block, m, lambda r: [_f(r["success_ratio"]), _f(r["cost_ratio"])])
-                idx = m.split("_")[-1]
+                idx = m.split("_", 1)[-1]  # PNet_0 .. PNet_3, PNet_ens, PNet_best-of-4
+                idx = idx if idx.isdigit() else "\\mathsf{" + idx.replace("-", "\\mbox{-}") + "}"
                 out.append(f"\t\t$\\mathsf{{PNet}}_{idx}$ & " + " & ".join(cells) + " \\\\")
             out += ["\t\t\\bottomrule", "\t\\end{tabular}"]
         out += ["\\end{table}", ""]

@@ -18,8 +18,8 @@ saved paths files: McNemar's exact test and the success-ratio difference with
 Newcombe's paired interval; over the queries both solve, the mean difference of
 cost ratio with a paired bootstrap interval and the Wilcoxon signed-rank
 p-value. Which models are compared is data (:data:`DEFAULT_PAIRS`: PNet_1..3 vs
-PNet_0; a baseline :data:`BEST_MEMBER` is the single member with the highest
-success in that cell). They are a table after each detail table of
+PNet_0, the ensemble rows vs the best member; a baseline :data:`BEST_MEMBER` is
+the single member with the highest success in that cell). They are a table after each detail table of
 ``tables.md``, the ``comparisons`` list of ``results.json``, and the ``vs_*``
 columns of ``results.csv`` (a row's first comparison as the model).
 
@@ -62,10 +62,13 @@ COMPARISON_CSV_FIELDS = ["vs_model", "vs_only_model", "vs_only_baseline", "vs_su
 #: Baseline placeholder of a pair: the single member (``PNet_<m>``) with the most
 #: successes in the (environment, query kind, steerTo) cell (ties: the lower index).
 BEST_MEMBER = "best member"
-#: The paired comparisons of the report, ``(model, baseline)``. An ensemble row is
-#: compared with its best member by adding e.g. ``("PNet_ens", BEST_MEMBER)``.
+#: The paired comparisons of the report, ``(model, baseline)``: PNet_1..3 vs PNet_0, and
+#: the ensemble rows (``eval.ensemble``; best-of-4, or of 5 with a D4 member) vs their best
+#: member. Pairs whose model has no row are left out.
 DEFAULT_PAIRS: tuple[tuple[str, str], ...] = (("PNet_1", "PNet_0"), ("PNet_2", "PNet_0"),
-                                              ("PNet_3", "PNet_0"))
+                                              ("PNet_3", "PNet_0"), ("PNet_ens", BEST_MEMBER),
+                                              ("PNet_best-of-4", BEST_MEMBER),
+                                              ("PNet_best-of-5", BEST_MEMBER))
 _MEMBER = re.compile(r"PNet_(\d+)")
 
 

@@ -181,17 +181,25 @@ def test_plan_script_rejects_bad_states(run, capsys):
 
 
 def test_report_has_paired_comparisons(run):
-    """PNet_1..3 vs PNet_0 per query kind, recomputed here from the saved paths files."""
+    """PNet_1..3 vs PNet_0 and the ensemble rows vs the best member, per query kind,
+    recomputed here from the saved paths files."""
     from ntq_jax.stats import paired_comparison
 
     md = (run / "tables.md").read_text()
+    rows = json.loads((run / "results.json").read_text())["rows"]
     comps = json.loads((run / "results.json").read_text())["comparisons"]
+    best = {k: max(range(4), key=lambda m: (next(r["successes"] for r in rows if r["model"]
+                                                 == f"PNet_{m}" and r["query_kind"] == k), -m))
+            for k in ("uniform", "nontrivial")}
     assert {(c["model"], c["baseline"], c["query_kind"]) for c in comps} == {
-        (f"PNet_{m}", "PNet_0", k) for m in (1, 2, 3) for k in ("uniform", "nontrivial")}
+        (f"PNet_{m}", "PNet_0", k) for m in (1, 2, 3) for k in ("uniform", "nontrivial")} | {
+        (m, f"PNet_{best[k]}", k) for m in ("PNet_ens", "PNet_best-of-4")
+        for k in ("uniform", "nontrivial")}
     for c in comps:
-        assert f"| {c['model']} | PNet_0 | {c['query_kind']} | {c['both']} / {c['only_a']} / " in md
+        base = c["baseline"] + (" (best member)" if c["baseline_rule"] else "")
+        assert f"| {c['model']} | {base} | {c['query_kind']} | {c['both']} / {c['only_a']} / " in md
         files = [run / "paths" / "point_2" / f"{m}_{c['query_kind']}.npz"
-                 for m in (c["model"], "PNet_0")]
+                 for m in (c["model"], c["baseline"])]
         want = paired_comparison(*(dict(np.load(f)) for f in files))
         assert c["n"] == 16 and c["mcnemar_p"] == pytest.approx(want["mcnemar_p"])
         assert c["success_diff"] == pytest.approx(want["success_diff"])

@@ -373,8 +373,10 @@ class EvalConfig:
             :mod:`ntq_jax.neural_planner`), ``best`` the best-of-N baseline
             (``PNet_best-of-<N>``: per query the cheapest successful path of the N
             members' own plans, computed from their saved results without
-            replanning, timed as the sum of their planning times). Default both;
-            ``[]`` evaluates the members only.
+            replanning, timed as the sum of their planning times). ``null``
+            (default) is both, ``[ens, best]``; ``[]`` evaluates the members only.
+            Left out of the config hash when null, so run folders made before the
+            option existed are reopened (and get the two rows) on a rerun.
     """
 
     k_test: int = 500
@@ -388,13 +390,21 @@ class EvalConfig:
     gamma_queries: int = 200_000
     chunk: int = 1024
     motion_check: str = "certified"
-    ensemble: tuple[str, ...] = ("ens", "best")
+    ensemble: Optional[tuple[str, ...]] = None
+
+    # left out of to_dict (and so of the config hash) when None: configs hash as before
+    _OMIT_NONE = ("ensemble",)
+
+    @property
+    def ensemble_rows(self) -> tuple[str, ...]:
+        """The ensemble rows to evaluate: ``ensemble``, or ``("ens", "best")`` when null."""
+        return ("ens", "best") if self.ensemble is None else self.ensemble
 
     def validate(self, p: str):
-        for i, e in enumerate(self.ensemble):
+        for i, e in enumerate(self.ensemble_rows):
             _check(e in ("ens", "best"), f"{p}.ensemble[{i}]", f"must be ens or best, got {e!r}")
-        _check(len(set(self.ensemble)) == len(self.ensemble), f"{p}.ensemble",
-               f"lists a row twice: {list(self.ensemble)}")
+        _check(len(set(self.ensemble_rows)) == len(self.ensemble_rows), f"{p}.ensemble",
+               f"lists a row twice: {list(self.ensemble_rows)}")
         _check(self.motion_check in ("discretized", "certified"), f"{p}.motion_check",
                f"must be certified or discretized, got {self.motion_check!r}")
         _check(self.k_test >= 1, f"{p}.k_test", f"must be >= 1, got {self.k_test}")

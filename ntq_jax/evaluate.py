@@ -474,7 +474,7 @@ def evaluate_env(env, ensemble, cfg, run_dir, *, env_name: str, data_env_dir=Non
     Returns:
         One result row (dict) per (model, query kind, steerTo): per steerTo variant
         the members', then ``PNet_ens`` and ``PNet_best-of-<N>`` (as
-        ``cfg.eval.ensemble`` asks; only with at least two models and when every
+        ``cfg.eval.ensemble_rows`` asks; only with at least two models and when every
         one of them is evaluated).
     """
     slug = env_slug(env_name, env)
@@ -489,7 +489,7 @@ def evaluate_env(env, ensemble, cfg, run_dir, *, env_name: str, data_env_dir=Non
                    _data_planner(cfg, data_env_dir),
                    {kind: in_band(env, q) for kind, q in queries.items()}, log)
     together = (len(pnets) >= 2 and sorted(members) == list(range(len(pnets)))
-                and cfg.eval.ensemble)
+                and cfg.eval.ensemble_rows)
     rows = []
     for steer in cfg.eval.steer:
         saved = {}
@@ -497,10 +497,10 @@ def evaluate_env(env, ensemble, cfg, run_dir, *, env_name: str, data_env_dir=Non
             for kind in QUERY_KINDS:
                 row, saved[m, kind] = _cell(ctx, pnets[m], m, kind, steer)
                 rows.append(row)
-        if together and "ens" in cfg.eval.ensemble:
+        if together and "ens" in cfg.eval.ensemble_rows:
             rows += [_cell(ctx, pnets, ENSEMBLE, kind, steer, len(pnets))[0]
                      for kind in QUERY_KINDS]
-        if together and "best" in cfg.eval.ensemble:
+        if together and "best" in cfg.eval.ensemble_rows:
             rows += [_best_cell(ctx, [saved[m, kind] for m in members], kind, steer)
                      for kind in QUERY_KINDS]
     return rows

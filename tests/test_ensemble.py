@@ -164,3 +164,18 @@ def test_best_of_never_costlier_than_a_member_and_succeeds_iff_one_does():
     assert best["seconds"] == pytest.approx(6.0) and best["compile_seconds"] == pytest.approx(2.0)
     with pytest.raises(ValueError):
         E.best_of([])
+
+
+def test_eval_ensemble_option():
+    from ntq_jax.pipeline import load_config
+    from ntq_jax.config import ConfigError
+
+    default = load_config(None, [])
+    assert default.eval.ensemble is None and default.eval.ensemble_rows == ("ens", "best")
+    assert "ensemble" not in default.to_dict()["eval"]  # the default config hashes as before
+    assert load_config(None, ["eval.ensemble=[best]"]).eval.ensemble_rows == ("best",)
+    off = load_config(None, ["eval.ensemble=[]"])
+    assert off.eval.ensemble_rows == () and off.hash() != default.hash()
+    for bad in ("[foo]", "[ens,ens]", "ens"):
+        with pytest.raises(ConfigError, match="eval.ensemble"):
+            load_config(None, [f"eval.ensemble={bad}"])

@@ -367,6 +367,16 @@ class EvalConfig:
             planner's feasibility check (success) and to verify the reference
             planner's paths; the planner's own steerTo keeps the discretised check.
             The point robot's check is exact either way.
+        ensemble: the ensemble rows evaluated beside the members' (needs at least two
+            members): ``ens`` is the ensemble neural planner (``PNet_ens``: every
+            member proposes each next state and a fixed rule picks one; see
+            :mod:`ntq_jax.neural_planner`), ``best`` the best-of-N baseline
+            (``PNet_best-of-<N>``: per query the cheapest successful path of the N
+            members' own plans, computed from their saved results without
+            replanning, timed as the sum of their planning times). ``null``
+            (default) is both, ``[ens, best]``; ``[]`` evaluates the members only.
+            Left out of the config hash when null, so run folders made before the
+            option existed are reopened (and get the two rows) on a rerun.
     """
 
     k_test: int = 500
@@ -380,8 +390,21 @@ class EvalConfig:
     gamma_queries: int = 200_000
     chunk: int = 1024
     motion_check: str = "certified"
+    ensemble: Optional[tuple[str, ...]] = None
+
+    # left out of to_dict (and so of the config hash) when None: configs hash as before
+    _OMIT_NONE = ("ensemble",)
+
+    @property
+    def ensemble_rows(self) -> tuple[str, ...]:
+        """The ensemble rows to evaluate: ``ensemble``, or ``("ens", "best")`` when null."""
+        return ("ens", "best") if self.ensemble is None else self.ensemble
 
     def validate(self, p: str):
+        for i, e in enumerate(self.ensemble_rows):
+            _check(e in ("ens", "best"), f"{p}.ensemble[{i}]", f"must be ens or best, got {e!r}")
+        _check(len(set(self.ensemble_rows)) == len(self.ensemble_rows), f"{p}.ensemble",
+               f"lists a row twice: {list(self.ensemble_rows)}")
         _check(self.motion_check in ("discretized", "certified"), f"{p}.motion_check",
                f"must be certified or discretized, got {self.motion_check!r}")
         _check(self.k_test >= 1, f"{p}.k_test", f"must be >= 1, got {self.k_test}")

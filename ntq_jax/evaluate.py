@@ -6,7 +6,15 @@ they are disjoint from the training queries), solved by the classical reference
 planner (the task's planner on the evaluation geometry, padding 0, at the
 evaluation budget) and, for point robots, by the exact visibility graph; then by
 the neural planner (:mod:`ntq_jax.neural_planner`) with every ensemble member,
-with and/or without steerTo (``config.eval.steer``).
+with and/or without steerTo (``config.eval.steer``), and (``config.eval.ensemble``,
+with at least two members, when every member is evaluated) two rows of the
+members together, measured the same way on the same queries:
+
+* ``PNet_ens``: the ensemble neural planner (every member proposes each next
+  state, a fixed rule picks one: :func:`ntq_jax.neural_steps.choose`), planned
+  with its own key;
+* ``PNet_best-of-<N>``: per query the cheapest successful path of the N members'
+  own plans (:func:`best_of`), from their saved paths files without replanning.
 
 Metrics per (environment, model, test query kind, steerTo):
 
@@ -34,6 +42,9 @@ fingerprint says, is reused on a rerun)::
     <run>/paths/<env_slug>/<model>_<uniform|nontrivial>[_nosteer].npz
         queries, paths (NaN padded), lengths, success, costs, cause, ref_costs,
         opt_costs, pnet_calls, replans, seconds, compile_seconds, fingerprint
+        (best-of-N also: member, the index of the member whose path is kept)
+
+``<model>`` is ``PNet_0`` .. ``PNet_<M-1>``, ``PNet_ens`` and ``PNet_best-of-<M>``.
 
 Measured evaluation times: BENCHMARKS.md, "Neural planner evaluation".
 """
@@ -65,12 +76,22 @@ from ntq_jax.types import CAUSE_NAMES, QUERY_KINDS, PlanCause, PlanStatus
 EVAL_TAG = 0x7E57  # key tag of the test queries (training uses other streams)
 
 
-def model_name(member: int) -> str:
+ENSEMBLE = "ens"  # model id of the ensemble neural planner (row PNet_ens)
+
+
+def best_id(num_members: int) -> str:
+    """Model id of the best-of-N row (``best-of-4`` for four members)."""
+    return f"best-of-{num_members}"
+
+
+def model_name(member: int | str) -> str:
+    """``PNet_<m>`` for member ``m``; ``PNet_ens`` and ``PNet_best-of-<N>`` for the ensemble rows."""
     return f"PNet_{member}"
 
 
-def paths_file(run_dir, slug: str, member: int, kind: str, steer: bool) -> Path:
-    """``<run>/paths/<slug>/PNet_<m>_<kind>[_nosteer].npz``."""
+def paths_file(run_dir, slug: str, member: int | str, kind: str, steer: bool) -> Path:
+    """``<run>/paths/<slug>/PNet_<m>_<kind>[_nosteer].npz`` (``m``: a member index,
+    :data:`ENSEMBLE` or :func:`best_id`)."""
     return Path(run_dir) / "paths" / slug / f"{model_name(member)}_{kind}{'' if steer else '_nosteer'}.npz"
 
 
@@ -202,6 +223,68 @@ def metrics(success: np.ndarray, costs: np.ndarray, cause: np.ndarray, ref_costs
     return out
 
 
+# failures from closest to a success to farthest (best-of-N keeps the closest)
+_CAUSE_RANK = {PlanCause.SUCCESS: 0, PlanCause.INFEASIBLE: 1, PlanCause.NO_PATH: 2,
+               PlanCause.INVALID_QUERY: 3}
+
+
+def best_of(results: Sequence[dict]) -> dict:
+    """Best-of-N: per query, the cheapest successful path among N planners' results.
+
+    Args:
+        results: N saved paths files' arrays (:func:`_plan_cell`'s dicts) of the
+            same queries (e.g. the members' ``PNet_<m>`` files).
+
+    Returns:
+        The same arrays for the best-of-N planner: a query succeeds iff some
+        member succeeds, with the lowest cost among the successes (ties: the
+        first member); a failed query keeps the failure closest to a success
+        (infeasible, then no path, then invalid query; ties: the first member).
+        ``member`` is the index of the member whose path, length, cost and cause
+        are kept; ``paths`` are NaN padded to the longest member buffer.
+        ``pnet_calls`` and ``replans`` are summed over the members (the work
+        spent on the query), and so are ``seconds`` and ``compile_seconds``: the
+        members are planned one after the other, so the best-of-N planner's time
+        is the sum of their planning times (run in parallel it would be their
+        maximum). ``queries``, ``ref_costs``, ``ref_status`` and ``opt_costs``
+        are the first member's.
+
+    Raises:
+        ValueError: no results.
+    """
+    if not results:
+        raise ValueError("best_of needs at least one result")
+    success = np.stack([np.asarray(r["success"], bool) for r in results])       # (N, K)
+    costs = np.where(success, np.stack([np.asarray(r["costs"], np.float64) for r in results]),
+                     np.inf)
+    cause = np.stack([np.asarray(r["cause"]) for r in results])
+    rank = np.vectorize(lambda c: _CAUSE_RANK[PlanCause(int(c))], otypes=[np.int64])(cause)
+    any_ok = success.any(axis=0)
+    pick = np.where(any_ok, np.argmin(costs, axis=0), np.argmin(rank, axis=0))
+    k = success.shape[1]
+    rows = np.arange(k)
+    length = max(r["paths"].shape[1] for r in results)
+    d = results[0]["paths"].shape[2]
+    paths = np.full((k, length, d), np.nan, np.float32)
+    for j, r in enumerate(results):
+        sel = pick == j
+        paths[sel, : r["paths"].shape[1]] = r["paths"][sel]
+    lengths = np.stack([np.asarray(r["lengths"]) for r in results])[pick, rows]
+    out = dict(queries=results[0]["queries"], paths=paths, lengths=lengths.astype(np.int32),
+               success=any_ok, costs=costs[pick, rows], cause=cause[pick, rows].astype(np.int8),
+               pnet_calls=np.sum([np.asarray(r["pnet_calls"], np.int64) for r in results],
+                                 axis=0).astype(np.int32),
+               replans=np.sum([np.asarray(r["replans"], np.int64) for r in results],
+                              axis=0).astype(np.int32),
+               member=pick.astype(np.int8),
+               ref_costs=results[0]["ref_costs"], ref_status=results[0]["ref_status"],
+               seconds=float(sum(float(r["seconds"]) for r in results)),
+               compile_seconds=float(sum(float(r["compile_seconds"]) for r in results)))
+    if "opt_costs" in results[0]:
+        out["opt_costs"] = results[0]["opt_costs"]
+    return out
+
+
 def in_band(env, queries: np.ndarray) -> np.ndarray:
     """``(K,)`` bool: both endpoints of ``queries (K, 2, d)`` valid at the environment's padding.
 
@@ -313,17 +396,47 @@ def _plan_cell(ctx: _EnvEval, pnet, m: int, kind: str, steer) -> dict:
     return out
 
 
-def _cell(ctx: _EnvEval, pnet, m: int, kind: str, steer) -> dict:
-    """The result row of one (model, query kind, steerTo) cell, planned or loaded."""
-    cfg, k = ctx.cfg, max(len(ctx.queries[kind]), 1)
+def _cell(ctx: _EnvEval, pnet, m: int | str, kind: str, steer, *extra) -> tuple[dict, dict]:
+    """The result row of one (model, query kind, steerTo) cell, planned or loaded, and
+    its paths file's arrays.
+
+    ``m`` is a member index (``pnet`` its PNet) or :data:`ENSEMBLE` (``pnet`` the
+    members' list); ``extra`` is added to the fingerprint.
+    """
+    cfg = ctx.cfg
     f = paths_file(ctx.run_dir, ctx.slug, m, kind, steer)
     fp = artifacts.fingerprint(cfg.hash(), ctx.slug, m, kind, steer, str(ctx.ref["fingerprint"]),
-                               NP.ALGORITHM_VERSION)
+                               NP.ALGORITHM_VERSION, *extra)
     got = artifacts.compute_or_load(f, fp, lambda: _plan_cell(ctx, pnet, m, kind, steer))
+    return _row(ctx, m, kind, steer, f, got), got
+
+
+def _best_cell(ctx: _EnvEval, members: list[dict], kind: str, steer) -> dict:
+    """The best-of-N row from the members' paths files' arrays (saved like a planned cell)."""
+    m = best_id(len(members))
+    f = paths_file(ctx.run_dir, ctx.slug, m, kind, steer)
+    fp = artifacts.fingerprint(ctx.cfg.hash(), ctx.slug, m, kind, steer,
+                               str(ctx.ref["fingerprint"]), NP.ALGORITHM_VERSION,
+                               [str(z["fingerprint"]) for z in members])
+
+    def compute():
+        out = best_of(members)
+        ctx.log(f"  {ctx.slug} {model_name(m)} {kind:10s} steer={steer!s:5s}: success "
+                f"{out['success'].mean():.3f} (from the members' saved plans)")
+        return out
+
+    return _row(ctx, m, kind, steer, f, artifacts.compute_or_load(f, fp, compute))
+
+
+def _row(ctx: _EnvEval, m: int | str, kind: str, steer, f: Path, got: dict) -> dict:
+    """The result row of a cell from its paths file's arrays."""
+    cfg, k = ctx.cfg, max(len(ctx.queries[kind]), 1)
     specs = [dict(p_nt=d.p_nt, prune=d.prune) for d in cfg.data.datasets]
+    member = m if isinstance(m, int) else None
     row = {
         "task": cfg.task, "env": ctx.env_name, "env_slug": ctx.slug, "model": model_name(m),
-        "member": m, "dataset": specs[m] if m < len(specs) else None,
+        "member": member, "dataset": specs[member] if member is not None and member < len(specs)
+        else None,
         "query_kind": kind, "steer": bool(steer),
         "gamma_nt": ctx.gamma.get("gamma"), "gamma_nt_ci95": ctx.gamma.get("ci95"),
         "reference_planner": str(ctx.ref["planner"]), "data_planner": ctx.data_planner,
@@ -359,7 +472,10 @@ def evaluate_env(env, ensemble, cfg, run_dir, *, env_name: str, data_env_dir=Non
         log: progress messages.
 
     Returns:
-        One result row (dict) per (model, query kind, steerTo).
+        One result row (dict) per (model, query kind, steerTo): per steerTo variant
+        the members', then ``PNet_ens`` and ``PNet_best-of-<N>`` (as
+        ``cfg.eval.ensemble_rows`` asks; only with at least two models and when every
+        one of them is evaluated).
     """
     slug = env_slug(env_name, env)
     run_dir = Path(run_dir)
@@ -372,10 +488,22 @@ def evaluate_env(env, ensemble, cfg, run_dir, *, env_name: str, data_env_dir=Non
                    _gamma(env, cfg, data_env_dir, slug, out_dir),
                    _data_planner(cfg, data_env_dir),
                    {kind: in_band(env, q) for kind, q in queries.items()}, log)
-    return [_cell(ctx, pnets[m], m, kind, steer)
-            for steer in cfg.eval.steer
-            for m in members
-            for kind in QUERY_KINDS]
+    together = (len(pnets) >= 2 and sorted(members) == list(range(len(pnets)))
+                and cfg.eval.ensemble_rows)
+    rows = []
+    for steer in cfg.eval.steer:
+        saved = {}
+        for m in members:
+            for kind in QUERY_KINDS:
+                row, saved[m, kind] = _cell(ctx, pnets[m], m, kind, steer)
+                rows.append(row)
+        if together and "ens" in cfg.eval.ensemble_rows:
+            rows += [_cell(ctx, pnets, ENSEMBLE, kind, steer, len(pnets))[0]
+                     for kind in QUERY_KINDS]
+        if together and "best" in cfg.eval.ensemble_rows:
+            rows += [_best_cell(ctx, [saved[m, kind] for m in members], kind, steer)
+                     for kind in QUERY_KINDS]
+    return rows
 
 
 def recheck_paths(env, npz_path, *, delta: float | None = None, atol: float = 1e-5,

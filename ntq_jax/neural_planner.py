@@ -17,6 +17,22 @@ metric and a :class:`ntq_jax.types.PlanCause` (names in
 * ``INVALID_QUERY``: start or goal is not a valid state on the evaluation
   geometry, or not finite.
 
+**The ensemble planner.** ``pnet`` may also be a sequence of PNets (e.g.
+:func:`ntq_jax.evaluate.member_pnets` of a trained ensemble): wherever the
+planner asks for a next state (every coarse-plan step, every step of a
+bidirectional connection, so also neural replanning) every member predicts
+from the same key, current state and target, in one jitted call, and
+:func:`ntq_jax.neural_steps.choose` picks one by a fixed rule: a candidate
+whose steerTo to the target is free first (the cheapest path ``current ->
+candidate -> target`` among them, those also reachable from the current state
+first), else the one that most reduces the remaining cost-to-go in the
+robot's metric among those reachable from the current state by a free
+steerTo, else the lowest cost-to-go; ties go to the first member. Everything
+else (contraction, feasibility check, replanning rounds, costs) is the single
+planner's. With identical members (same function and parameters) every
+candidate is the same and the ensemble planner returns exactly the single
+member's result, except that ``pnet_calls`` counts every member's prediction.
+
 The result is deterministic given the key. One implementation serves every
 robot: it only uses the robot's kernels (:mod:`ntq_jax.robots.batch`) and the
 package's path shortcutting (:mod:`ntq_jax.planners.smoothing`). The
@@ -40,7 +56,7 @@ from jax.tree_util import Partial
 
 from ntq_jax.batching import bucket_size, pad_rows, padded_chunks
 from ntq_jax.geometry import World
-from ntq_jax.neural_steps import Stages, cost_jit
+from ntq_jax.neural_steps import EnsemblePNet, Stages, cost_jit
 from ntq_jax.robots.certified import MOTION_CHECKS
 from ntq_jax.types import PlanCause
 
@@ -124,7 +140,8 @@ class NeuralPlanResult:
         success: ``(N,)`` bool: reached the goal and collision-free on the evaluation geometry.
         costs: ``(N,)`` float64 path cost (the robot's metric); ``inf`` unless success.
         cause: ``(N,)`` int8 :class:`ntq_jax.types.PlanCause` values.
-        pnet_calls: ``(N,)`` int32 PNet predictions spent on the query.
+        pnet_calls: ``(N,)`` int32 PNet predictions spent on the query (the ensemble
+            planner counts every member's).
         replans: ``(N,)`` int32 replanning rounds the query went through.
         seconds: wall time of the batch (compiled calls only); ``compile_seconds``:
             time spent compiling for this call (0 when the compiled code was reused).
@@ -314,14 +331,26 @@ def _costs(robot, b: _Batch, success: np.ndarray) -> np.ndarray:
 # Public entry points
 # ---------------------------------------------------------------------------
 
-def as_pnet(pnet: Callable) -> Partial:
+def as_pnet(pnet) -> Partial | EnsemblePNet:
     """Wraps a ``pnet(key, current, goal)`` callable as a pytree for the jitted planner.
 
     A :class:`jax.tree_util.Partial` is passed through unchanged (its bound
     arguments, e.g. the parameters, are traced; only the function is part of the
     compile key), so build PNets as ``Partial(apply_fn, params)`` to share one
-    compilation across ensemble members.
+    compilation across ensemble members. A list or tuple of PNets becomes an
+    :class:`ntq_jax.neural_steps.EnsemblePNet` (the ensemble planner; one PNet
+    alone is that PNet).
+
+    Raises:
+        ValueError: an empty sequence.
     """
+    if isinstance(pnet, EnsemblePNet):
+        return pnet
+    if isinstance(pnet, (list, tuple)):
+        if not pnet:
+            raise ValueError("the ensemble planner needs at least one PNet")
+        members = tuple(as_pnet(p) for p in pnet)
+        return members[0] if len(members) == 1 else EnsemblePNet(members)
     return pnet if isinstance(pnet, Partial) else Partial(pnet)
 
 
@@ -371,11 +400,14 @@ def plan_batch(env, pnet: Callable, queries, key: Array,
        the path contracted and re-checked. Unlike MPNet, a failed connection
        leaves its segment as it was; the next round retries with new dropout masks.
 
-    The planner's own ``steerTo`` calls use ``plan_padding``.
+    The planner's own ``steerTo`` calls use ``plan_padding``. With a sequence of
+    PNets (the ensemble planner, see the module docstring) every prediction
+    above is every member's, chosen by :func:`ntq_jax.neural_steps.choose`.
 
     Args:
         env: a :class:`ntq_jax.Env` (any robot).
-        pnet: ``pnet(key, current (N, d), goal (N, d)) -> next (N, d)`` (see :func:`as_pnet`).
+        pnet: ``pnet(key, current (N, d), goal (N, d)) -> next (N, d)`` (see :func:`as_pnet`),
+            or a list/tuple of them for the ensemble planner.
         queries: ``(K, 2, d)`` start and goal states.
         key: PRNG key (dropout); the result is deterministic given the key.
         opts: :class:`PlannerOptions`.

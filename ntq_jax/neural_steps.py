@@ -6,7 +6,9 @@ contraction and feasibility check (:func:`coarse_core`), the validity of path
 states (:func:`valid_core`), the bidirectional neural connection of a batch of
 windows (:func:`connect_core`), the contraction and re-check of repaired paths
 (:func:`check_core`) and the costs of the successful paths (:data:`cost_jit`,
-float32 in the robot's metric). The stages take ``(robot, opts, world, ...)``:
+float32 in the robot's metric). Wherever a step asks the PNet for a next state
+it goes through :func:`propose`: one PNet's prediction, or, for an
+:class:`EnsemblePNet`, every member's prediction and the :func:`choose` rule. The stages take ``(robot, opts, world, ...)``:
 the robot and ``opts`` (a :class:`ntq_jax.neural_planner.PlannerOptions`, whose
 paddings are numbers) are static, the world is traced. :class:`Stages` runs
 them through a bounded cache of compiled programs keyed by the static settings
@@ -28,6 +30,105 @@ from ntq_jax.robots.batch import is_valid_cm, steer_to_cm
 Array = jax.Array
 
 COMPILED_CACHE_SIZE = 64  # compiled stages kept (the least recently used is dropped first)
+
+
+# ---------------------------------------------------------------------------
+# The ensemble planner's proposals
+# ---------------------------------------------------------------------------
+
+@jax.tree_util.register_pytree_node_class
+class EnsemblePNet:
+    """Several PNets planning together (the ensemble planner; a pytree of its members).
+
+    Each member is a ``pnet(key, current, goal)`` (e.g. a
+    :class:`jax.tree_util.Partial`); at every step where the planner asks for a
+    next state, every member predicts from the same ``(key, current, goal)``
+    (each member's own dropout stream comes from its function, e.g.
+    :func:`ntq_jax.evaluate.member_pnets` folds in the member index, as in the
+    members' own evaluation) and :func:`choose` picks one of the predictions.
+    The members are called in a Python loop inside the jitted step: one
+    compiled call predicts for every member and every query of a batch.
+    """
+
+    def __init__(self, members):
+        self.members = tuple(members)
+
+    def __len__(self) -> int:
+        return len(self.members)
+
+    def tree_flatten(self):
+        return self.members, None
+
+    @classmethod
+    def tree_unflatten(cls, aux, children):
+        return cls(children)
+
+
+def proposals_per_call(pnet) -> int:
+    """PNet predictions per :func:`propose` call (the member count of an ensemble, else 1)."""
+    return len(pnet) if isinstance(pnet, EnsemblePNet) else 1
+
+
+def _count(mask: Array, k: int) -> Array:
+    """``mask`` counted ``k`` times (the mask itself for ``k = 1``)."""
+    return mask if k == 1 else mask.astype(jnp.int32) * k
+
+
+def choose(robot, world, cands: Array, cur: Array, tgt: Array, live: Array, padding: float,
+           steer: bool = True) -> Array:
+    """The ensemble's rule: the index ``(N,)`` of the candidate to append, per row.
+
+    ``cands (M, N, d)`` are the members' proposals from ``cur (N, d)`` towards
+    ``tgt (N, d)`` (the goal of the coarse plan, or the other tree's end in a
+    bidirectional connection and in neural replanning). With ``c`` a candidate,
+    ``dist`` the robot's metric (``robot.distance``) and steerTo the planner's
+    own (discretised) check at ``padding``, candidates are ranked by tier, then
+    by a score, then by member index (the first member wins a tie):
+
+    0. ``steerTo(c, tgt)`` and ``steerTo(cur, c)`` free (``cur -> c -> tgt`` is a
+       free path): score ``dist(cur, c) + dist(c, tgt)``, the cheapest such path;
+    1. ``steerTo(c, tgt)`` free only: same score;
+    2. ``steerTo(cur, c)`` free only: score ``dist(c, tgt)``, the remaining
+       cost-to-go (the candidate that reduces it most);
+    3. the others: score ``dist(c, tgt)`` (the lowest cost-to-go).
+
+    Without steerTo (``steer=False``, the paper's variant without the steering
+    function) only the cost-to-go is used (every candidate in tier 3). A
+    non-finite score counts as infinite. Rows not ``live`` are not checked
+    (their choice is irrelevant). The rule is deterministic, so the ensemble
+    planner stays deterministic given its key, and ``M`` identical candidates
+    give candidate 0, the single member's prediction.
+    """
+    m, n, d = cands.shape
+    flat = cands.reshape(m * n, d)
+    tgt_m, cur_m = jnp.tile(tgt, (m, 1)), jnp.tile(cur, (m, 1))
+    dist = jax.vmap(robot.distance)
+    ctg = dist(flat, tgt_m).reshape(m, n)
+    if steer:
+        live_m = jnp.tile(live, m)
+        to_tgt = _steer(robot, world, flat, tgt_m, padding, live_m).reshape(m, n)
+        from_cur = _steer(robot, world, cur_m, flat, padding, live_m).reshape(m, n)
+        tier = jnp.where(to_tgt, jnp.where(from_cur, 0, 1), jnp.where(from_cur, 2, 3))
+        score = jnp.where(to_tgt, dist(cur_m, flat).reshape(m, n) + ctg, ctg)
+    else:
+        tier = jnp.zeros((m, n), jnp.int32)
+        score = ctg
+    score = jnp.where(jnp.isnan(score), jnp.inf, score)
+    best = jnp.min(tier, axis=0)
+    return jnp.argmin(jnp.where(tier == best[None], score, jnp.inf), axis=0)
+
+
+def propose(robot, world, pnet, key, cur: Array, tgt: Array, live: Array, padding: float,
+            steer: bool = True) -> Array:
+    """The next state ``(N, d)`` from ``cur`` towards ``tgt``: the PNet's prediction, or
+    for an :class:`EnsemblePNet` every member's and the one :func:`choose` picks."""
+    if not isinstance(pnet, EnsemblePNet):
+        return pnet(key, cur, tgt)
+    if len(pnet) == 1:
+        return pnet.members[0](key, cur, tgt)
+    cands = jnp.stack([p(key, cur, tgt) for p in pnet.members])
+    idx = choose(robot, world, cands, cur, tgt, live, padding, steer)
+    return jnp.take_along_axis(cands, idx[None, :, None], axis=0)[0]
 
 
 # ---------------------------------------------------------------------------
@@ -87,6 +188,7 @@ def _connect(robot, world, pnet, key, a: Array, b: Array, active: Array, steps: 
     ``B[0] = b``) with their lengths; ``A[:nA] + reversed(B[:nB])`` joins them.
     """
     num, d = a.shape
+    k = proposals_per_call(pnet)
     buf = jnp.full((num, steps + 1, d), jnp.nan, a.dtype)
     rows = jnp.arange(num)
 
@@ -102,12 +204,12 @@ def _connect(robot, world, pnet, key, a: Array, b: Array, active: Array, steps: 
         grow = live & ~joined & (s < steps)
         from_a = (s % 2) == 0
         cur, tgt = jnp.where(from_a, ea, eb), jnp.where(from_a, eb, ea)
-        new = pnet(jax.random.fold_in(key, s), cur, tgt)
+        new = propose(robot, world, pnet, jax.random.fold_in(key, s), cur, tgt, grow, padding)
         pa = pa.at[rows, jnp.where(grow & from_a, na, steps + 1)].set(new, mode="drop")
         pb = pb.at[rows, jnp.where(grow & ~from_a, nb, steps + 1)].set(new, mode="drop")
         na = na + (grow & from_a)
         nb = nb + (grow & ~from_a)
-        return s + 1, act, conn, pa, na, pb, nb, calls + grow
+        return s + 1, act, conn, pa, na, pb, nb, calls + _count(grow, k)
 
     one = jnp.ones(num, jnp.int32)
     init = (jnp.int32(0), active, jnp.zeros(num, bool), buf.at[:, 0].set(a), one,
@@ -125,6 +227,7 @@ def _forward(robot, world, pnet, key, starts, goals, active, opts, length):
     """
     num, d = starts.shape
     rows = jnp.arange(num)
+    k = proposals_per_call(pnet)
     p = jnp.full((num, length, d), jnp.nan, starts.dtype).at[:, 0].set(starts)
 
     def near(x):  # within delta of the goal in the robot's metric (angles wrap)
@@ -140,7 +243,8 @@ def _forward(robot, world, pnet, key, starts, goals, active, opts, length):
             hit = _steer(robot, world, end, goals, opts.plan_padding, live)
         else:
             hit = live & near(end)
-        nxt = pnet(jax.random.fold_in(key, i), end, goals)
+        nxt = propose(robot, world, pnet, jax.random.fold_in(key, i), end, goals, live & ~hit,
+                      opts.plan_padding, opts.steer)
         new = jnp.where(hit[:, None], goals, nxt) if opts.steer else nxt
         append = live & (~hit | opts.steer)
         p = p.at[rows, jnp.where(append, n, length)].set(new, mode="drop")
@@ -148,7 +252,7 @@ def _forward(robot, world, pnet, key, starts, goals, active, opts, length):
         end = jnp.where(append[:, None], new, end)
         reached = reached | hit
         done = done | hit
-        calls = calls + (live & ~hit)
+        calls = calls + _count(live & ~hit, k)
         return i + 1, p, n, end, done, reached, calls
 
     init = (jnp.int32(0), p, jnp.ones(num, jnp.int32), starts, ~active, jnp.zeros(num, bool),

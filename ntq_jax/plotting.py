@@ -183,6 +183,15 @@ def curves_figure(history, labels: Sequence[str], out: Path) -> Path | None:
     return Path(out)
 
 
+def model_order(name: str) -> tuple:
+    """Sort key of a result row's model: ``PNet_0..PNet_<M-1>`` by index, then the
+    ensemble rows (``PNet_ens``, then ``PNet_best-of-<N>``), then anything else by name."""
+    tail = name.split("_", 1)[-1]
+    if tail.isdigit():
+        return (0, int(tail), name)
+    return (1 if tail == "ens" else 2 if tail.startswith("best-of-") else 3, 0, name)
+
+
 def _fmt(x, nd=2) -> str:
     return "-" if x is None or (isinstance(x, float) and not math.isfinite(x)) else f"{x:.{nd}f}"
 
@@ -194,7 +203,7 @@ def success_figure(rows, path: Path, steer: bool = True) -> Path | None:
     if not rows:
         return None
     envs = list(dict.fromkeys(r["env"] for r in rows))
-    models = sorted({r["model"] for r in rows}, key=lambda s: int(s.split("_")[-1]))
+    models = sorted({r["model"] for r in rows}, key=model_order)
     fig, axes = plt.subplots(1, 2, figsize=(11, 3.8), sharey=True)
     width = 0.8 / max(len(models), 1)
     for ax, kind in zip(axes, QUERY_KINDS):

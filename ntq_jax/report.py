@@ -2,7 +2,8 @@
 
 :func:`tables_md`, :func:`tables_tex` and :func:`results_csv` turn the result
 rows of :func:`ntq_jax.evaluate.evaluate_env` into text: one table per task and
-steerTo variant laid out as the paper's Tables I-IV (model rows PNet_0..PNet_3;
+steerTo variant laid out as the paper's Tables I-IV (model rows PNet_0..PNet_3,
+then the ensemble rows PNet_ens and PNet_best-of-4 when evaluated;
 uniform and non-trivial columns; success ratio and cost ratio), one block per
 environment with gamma_nt in its heading; the Markdown adds the 95% intervals,
 and a detail table with the cost ratio to the exact optimum (point robots),
@@ -17,8 +18,8 @@ saved paths files: McNemar's exact test and the success-ratio difference with
 Newcombe's paired interval; over the queries both solve, the mean difference of
 cost ratio with a paired bootstrap interval and the Wilcoxon signed-rank
 p-value. Which models are compared is data (:data:`DEFAULT_PAIRS`: PNet_1..3 vs
-PNet_0; a baseline :data:`BEST_MEMBER` is the single member with the highest
-success in that cell). They are a table after each detail table of
+PNet_0, the ensemble rows vs the best member; a baseline :data:`BEST_MEMBER` is
+the single member with the highest success in that cell). They are a table after each detail table of
 ``tables.md``, the ``comparisons`` list of ``results.json``, and the ``vs_*``
 columns of ``results.csv`` (a row's first comparison as the model).
 
@@ -61,10 +62,13 @@ COMPARISON_CSV_FIELDS = ["vs_model", "vs_only_model", "vs_only_baseline", "vs_su
 #: Baseline placeholder of a pair: the single member (``PNet_<m>``) with the most
 #: successes in the (environment, query kind, steerTo) cell (ties: the lower index).
 BEST_MEMBER = "best member"
-#: The paired comparisons of the report, ``(model, baseline)``. An ensemble row is
-#: compared with its best member by adding e.g. ``("PNet_ens", BEST_MEMBER)``.
+#: The paired comparisons of the report, ``(model, baseline)``: PNet_1..3 vs PNet_0, and
+#: the ensemble rows (``eval.ensemble``; best-of-4, or of 5 with a D4 member) vs their best
+#: member. Pairs whose model has no row are left out.
 DEFAULT_PAIRS: tuple[tuple[str, str], ...] = (("PNet_1", "PNet_0"), ("PNet_2", "PNet_0"),
-                                              ("PNet_3", "PNet_0"))
+                                              ("PNet_3", "PNet_0"), ("PNet_ens", BEST_MEMBER),
+                                              ("PNet_best-of-4", BEST_MEMBER),
+                                              ("PNet_best-of-5", BEST_MEMBER))
 _MEMBER = re.compile(r"PNet_(\d+)")
 
 
@@ -87,9 +91,9 @@ def _title(task, steer):
 
 
 def _model_key(name: str):
-    """Members ``PNet_<m>`` first, by index; other rows (e.g. an ensemble) after, by name."""
-    mt = _MEMBER.fullmatch(name)
-    return (0, int(mt.group(1)), "") if mt else (1, 0, name)
+    """Members ``PNet_<m>`` first, by index; then ``PNet_ens``, ``PNet_best-of-<N>``, and
+    other rows by name (:func:`ntq_jax.plotting.model_order`, the success figure's order)."""
+    return plotting.model_order(name)
 
 
 def _models(block):
@@ -323,7 +327,8 @@ def tables_tex(rows) -> str:
                     "\t\t\\midrule"]
             for m in _models(block):
                 cells = _cells(block, m, lambda r: [_f(r["success_ratio"]), _f(r["cost_ratio"])])
-                idx = m.split("_")[-1]
+                idx = m.split("_", 1)[-1]  # PNet_0 .. PNet_3, PNet_ens, PNet_best-of-4
+                idx = idx if idx.isdigit() else "\\mathsf{" + idx.replace("-", "\\mbox{-}") + "}"
                 out.append(f"\t\t$\\mathsf{{PNet}}_{idx}$ & " + " & ".join(cells) + " \\\\")
             out += ["\t\t\\bottomrule", "\t\\end{tabular}"]
         out += ["\\end{table}", ""]

@@ -36,6 +36,19 @@ NEW_KEYS = {"data_planner", "band_padding", "n_in_band", "n_out_band", "successe
             # results.json's top-level "comparisons" (paired tests, ntq_jax.report.comparisons):
             # only "rows" is fingerprinted, so this section is outside the record anyway
             "comparisons"}
+
+
+def _new_model(name: str) -> bool:
+    """Models added after the recording: the ensemble rows (``eval.ensemble``, on by default).
+
+    True for a result row's model ``PNet_ens`` / ``PNet_best-of-<N>`` and for their paths
+    files ``paths/<env>/PNet_ens_*.npz`` / ``PNet_best-of-<N>_*.npz``: these rows and files
+    are not part of the golden record and are skipped; every PNet_0..3 row and file is
+    still compared bit for bit.
+    """
+    return name == "PNet_ens" or name.startswith(("PNet_ens_", "PNet_best-of-"))
+
+
 TIME_KEYS = {"seconds", "compile_seconds", "seconds_per_query", "reference_seconds_per_query",
              "time", "timings"}
 
@@ -75,12 +88,14 @@ def fingerprint_pipeline(run: Path) -> dict:
     params = {jax.tree_util.keystr(p): _h(v) for p, v in leaves}
     paths = {}
     for f in sorted((run / "paths").rglob("*.npz")) + sorted((run / "eval").rglob("*.npz")):
+        if _new_model(f.name):
+            continue
         z = np.load(f)
         paths[str(f.relative_to(run))] = {k: _h(z[k]) for k in sorted(z.files)
                                           if k not in TIME_KEYS and k != "fingerprint"
                                           and not k.endswith("_seconds")}
     res = json.loads((run / "results.json").read_text())
-    rows = _numbers(res["rows"])
+    rows = _numbers([r for r in res["rows"] if not _new_model(r["model"])])
     return {"datasets": _datasets(run / "data"), "params": params, "paths": paths,
             "rows_sha": hashlib.sha256(json.dumps(rows, sort_keys=True).encode()).hexdigest()[:20]}
 

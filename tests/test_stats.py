@@ -187,8 +187,8 @@ def _synthetic_run(tmp_path):
 
 def test_report_shows_the_paired_comparisons(tmp_path):
     rows = _synthetic_run(tmp_path)
-    pairs = R.DEFAULT_PAIRS + (("PNet_ens", R.BEST_MEMBER),)
-    R.write_report(tmp_path, [r for r in rows], figures=False, pairs=pairs)
+    assert ("PNet_ens", R.BEST_MEMBER) in R.DEFAULT_PAIRS  # the ensemble vs its best member
+    R.write_report(tmp_path, [r for r in rows], figures=False)
     md = (tmp_path / "tables.md").read_text()
     assert "Detail, paired comparisons" in md
     for m in (1, 2, 3):
@@ -223,7 +223,8 @@ def test_comparisons_leave_out_what_they_cannot_pair(tmp_path):
     with pytest.warns(UserWarning, match="1 paths file"):
         comps = R.comparisons(tmp_path, rows, n_boot=100)
     assert {(c["model"], c["query_kind"]) for c in comps} == {
-        (f"PNet_{m}", "nontrivial") for m in (1, 2, 3)}
+        (f"PNet_{m}", "nontrivial") for m in (1, 2, 3)} | {  # the ensemble vs PNet_3: both kinds
+        ("PNet_ens", k) for k in ("uniform", "nontrivial")}
     # a baseline absent from the rows, and a model against itself: nothing
     assert R.comparisons(tmp_path, rows, [("PNet_1", "PNet_9"), ("PNet_1", "PNet_1")]) == []
     assert R.best_member({r["model"]: r for r in rows if r["query_kind"] == "uniform"}) == "PNet_3"

@@ -51,7 +51,8 @@ def test_run_folder_contents(run):
     res = json.loads((run / "results.json").read_text())
     rows = res["rows"]
     assert {(r["model"], r["query_kind"]) for r in rows} == {
-        (f"PNet_{m}", k) for m in range(4) for k in ("uniform", "nontrivial")}
+        (m, k) for m in [f"PNet_{m}" for m in range(4)] + ["PNet_ens", "PNet_best-of-4"]
+        for k in ("uniform", "nontrivial")}
     for r in rows:
         assert r["k_test"] == 16 and 0 <= r["success_ratio"] <= 1
         lo, hi = r["success_ci95"]
@@ -73,7 +74,7 @@ def test_run_folder_contents(run):
     for m in range(4):
         assert f"| PNet_{m} |" in md
     assert (run / "tables.tex").read_text().count("\\begin{tabular}") == 1
-    assert len((run / "results.csv").read_text().strip().splitlines()) == 9
+    assert len((run / "results.csv").read_text().strip().splitlines()) == 13
     for f in ("success_ratio.png", "examples_point_2.png", "queries_point_2.png"):
         assert (run / "figures" / f).stat().st_size > 1000
     assert (run / "data" / "point_2" / "env.json").is_file()
@@ -102,8 +103,40 @@ def test_every_success_is_collision_free(run):
             seg = np.linalg.norm(np.diff(p, axis=0), axis=1).sum()
             assert z["costs"][i] == pytest.approx(seg, rel=1e-4)
             checked += 1
-    assert len(list((run / "paths" / "point_2").glob("*.npz"))) == 8
+    assert len(list((run / "paths" / "point_2").glob("*.npz"))) == 12
     assert checked > 0
+
+
+def test_ensemble_rows(run):
+    """PNet_ens and PNet_best-of-4: rows in every output, measured like the members."""
+    rows = json.loads((run / "results.json").read_text())["rows"]
+    by = {(r["model"], r["query_kind"]): r for r in rows}
+    keys = set(by[("PNet_0", "uniform")])
+    md = (run / "tables.md").read_text()
+    tex = (run / "tables.tex").read_text()
+    csv_models = [ln.split(",")[2] for ln in (run / "results.csv").read_text().splitlines()[1:]]
+    for name in ("PNet_ens", "PNet_best-of-4"):
+        assert f"| {name} |" in md and csv_models.count(name) == 2
+        for kind in ("uniform", "nontrivial"):
+            r = by[(name, kind)]
+            assert set(r) == keys and r["member"] is None and r["dataset"] is None
+            assert r["k_test"] == 16 and r["seconds_per_query"] > 0
+            z = np.load(run / r["paths_file"])
+            assert r["paths_file"] == f"paths/point_2/{name}_{kind}.npz"
+            np.testing.assert_array_equal(
+                z["queries"], np.load(run / by[("PNet_0", kind)]["paths_file"])["queries"])
+            assert int(z["success"].sum()) == r["successes"]
+    assert "$\\mathsf{PNet}_\\mathsf{ens}$" in tex
+    assert "$\\mathsf{PNet}_\\mathsf{best\\mbox{-}of\\mbox{-}4}$" in tex
+    assert md.index("| PNet_3 |") < md.index("| PNet_ens |") < md.index("| PNet_best-of-4 |")
+    for kind in ("uniform", "nontrivial"):  # best-of-4 from the members' saved plans
+        best = np.load(run / by[("PNet_best-of-4", kind)]["paths_file"])
+        members = [np.load(run / by[(f"PNet_{m}", kind)]["paths_file"]) for m in range(4)]
+        ok = np.stack([z["success"] for z in members])
+        np.testing.assert_array_equal(best["success"], ok.any(axis=0))
+        costs = np.stack([np.where(z["success"], z["costs"], np.inf) for z in members])
+        np.testing.assert_array_equal(best["costs"], costs.min(axis=0))
+        assert float(best["seconds"]) == pytest.approx(sum(float(z["seconds"]) for z in members))
 
 
 def test_rerun_resumes_without_redoing_work(run):
@@ -148,17 +181,25 @@ def test_plan_script_rejects_bad_states(run, capsys):
 
 
 def test_report_has_paired_comparisons(run):
-    """PNet_1..3 vs PNet_0 per query kind, recomputed here from the saved paths files."""
+    """PNet_1..3 vs PNet_0 and the ensemble rows vs the best member, per query kind,
+    recomputed here from the saved paths files."""
     from ntq_jax.stats import paired_comparison
 
     md = (run / "tables.md").read_text()
+    rows = json.loads((run / "results.json").read_text())["rows"]
     comps = json.loads((run / "results.json").read_text())["comparisons"]
+    best = {k: max(range(4), key=lambda m: (next(r["successes"] for r in rows if r["model"]
+                                                 == f"PNet_{m}" and r["query_kind"] == k), -m))
+            for k in ("uniform", "nontrivial")}
     assert {(c["model"], c["baseline"], c["query_kind"]) for c in comps} == {
-        (f"PNet_{m}", "PNet_0", k) for m in (1, 2, 3) for k in ("uniform", "nontrivial")}
+        (f"PNet_{m}", "PNet_0", k) for m in (1, 2, 3) for k in ("uniform", "nontrivial")} | {
+        (m, f"PNet_{best[k]}", k) for m in ("PNet_ens", "PNet_best-of-4")
+        for k in ("uniform", "nontrivial")}
     for c in comps:
-        assert f"| {c['model']} | PNet_0 | {c['query_kind']} | {c['both']} / {c['only_a']} / " in md
+        base = c["baseline"] + (" (best member)" if c["baseline_rule"] else "")
+        assert f"| {c['model']} | {base} | {c['query_kind']} | {c['both']} / {c['only_a']} / " in md
         files = [run / "paths" / "point_2" / f"{m}_{c['query_kind']}.npz"
-                 for m in (c["model"], "PNet_0")]
+                 for m in (c["model"], c["baseline"])]
         want = paired_comparison(*(dict(np.load(f)) for f in files))
         assert c["n"] == 16 and c["mcnemar_p"] == pytest.approx(want["mcnemar_p"])
         assert c["success_diff"] == pytest.approx(want["success_diff"])

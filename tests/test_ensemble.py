@@ -1,0 +1,181 @@
+"""The ensemble rows: the ensemble neural planner (PNet_ens) and best-of-N (PNet_best-of-4).
+
+* Four identical members plan exactly like the single member on the same queries
+  and key (success, paths, lengths, costs, causes, replans bit for bit; only
+  ``pnet_calls`` counts the four members' predictions), with stochastic
+  (dropout-like) stand-ins and with real PNets, through replanning and the
+  bidirectional coarse plan.
+* The rule (:func:`ntq_jax.neural_steps.choose`) on hand-made candidates, and the
+  ensemble of a useless and a good member planning like the good one.
+* Best-of-N (:func:`ntq_jax.evaluate.best_of`): never costlier than any member's
+  successful path on a query, succeeds iff some member succeeds.
+* The rows and files in a tiny pipeline run (the fixture of tests/test_train_all.py).
+"""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from ntq_jax import evaluate as E
+from ntq_jax import make_env, models
+from ntq_jax.config import ModelConfig
+from ntq_jax.neural_planner import PlannerOptions, plan_batch
+from ntq_jax.neural_steps import choose
+from ntq_jax.types import PlanCause
+
+from test_neural_planner import (BATCH, OPTS, ORACLE, SEEKER, STAY, make, optimum, pnet,
+                                 shapely_free)
+
+FIELDS = ("paths", "lengths", "success", "costs", "cause", "replans")
+
+
+def _assert_same(a, b, calls_factor):
+    for f in FIELDS:
+        np.testing.assert_array_equal(getattr(a, f), getattr(b, f), err_msg=f)
+    np.testing.assert_array_equal(a.pnet_calls * calls_factor, b.pnet_calls)
+
+
+@pytest.mark.parametrize("opts", [OPTS, PlannerOptions(n_plan=12, replan_rounds=2,
+                                                       replan_steps=8, bidirectional=True)],
+                         ids=["forward", "bidirectional"])
+def test_identical_members_equal_the_single_member_stand_in(opts):
+    # a noisy seeker walks through the wall: coarse plans, infeasible paths, replanning
+    q = np.asarray([[[2, 5], [8, 5]], [[1, 1], [9, 6]], [[4, 9], [6, 1]], [[2, 2], [8, 8]]],
+                   np.float32)
+    env, net = make("wall"), pnet("wall", SEEKER, sigma=0.7)
+    one = plan_batch(env, net, q, jax.random.key(3), opts)
+    ens = plan_batch(env, [net] * 4, q, jax.random.key(3), opts)
+    assert one.replans.max() >= 1  # replanning ran
+    _assert_same(one, ens, 4)
+
+
+def test_identical_members_equal_the_single_member_pnet():
+    """Real PNets (random weights, dropout on) through evaluate.member_pnets.
+
+    A member's dropout key is ``fold_in(step key, m)`` (``member_pnets``, as in
+    its own evaluation), so "identical members" means the same parameters *and*
+    the same member index: four copies of member 1's PNet plan exactly like
+    member 1. An ensemble of four copies of one member's parameters under the
+    indices 0..3 draws four different dropout masks (four different candidates):
+    only without dropout is it again the single member.
+    """
+    env = make_env("point/2")
+    q = np.asarray(env.sample_queries(jax.random.key(5), 24, 1.0, padding=0.0)[0], np.float32)
+    opts = PlannerOptions(n_plan=15, replan_rounds=2, replan_steps=6)
+    for dropout in (0.5, 0.0):
+        spec = models.ModelSpec.from_env(env, ModelConfig(hidden=(32, 32), dropout=dropout))
+        ens = models.init_ensemble(spec, 0, 4)
+        p1 = E.member_pnets(ens)[1]
+        one = plan_batch(env, p1, q, jax.random.key(7), opts)
+        _assert_same(one, plan_batch(env, [p1] * 4, q, jax.random.key(7), opts), 4)
+        if dropout == 0.0:  # four members with one member's parameters
+            same = models.Ensemble(ens.graphdef, models.stack_states(
+                [models.unstack_state(ens.params, 1)] * 4), ens.spec)
+            _assert_same(one, plan_batch(env, E.member_pnets(same), q, jax.random.key(7), opts),
+                         4)
+
+
+def test_a_useless_member_does_not_hurt_the_ensemble():
+    q = np.asarray([[[2, 5], [8, 5]], [[1, 1], [9, 6]], [[4, 9], [6, 1]], [[2, 2], [8, 8]]],
+                   np.float32)
+    env = make("wall")
+    ens = plan_batch(env, [pnet("wall", STAY), pnet("wall", SEEKER), pnet("wall", ORACLE)], q,
+                     jax.random.key(0), OPTS)
+    assert np.all(ens.success)
+    np.testing.assert_allclose(ens.costs, optimum("wall", q), rtol=1e-4)
+    for i in range(len(q)):
+        assert shapely_free("wall", ens.path(i))
+    # alone, the stay-put member never leaves the start
+    alone = plan_batch(env, pnet("wall", STAY), q, jax.random.key(0), OPTS)
+    assert not alone.success[0] and alone.cause[0] == PlanCause.NO_PATH
+
+
+def test_choose_rule_by_hand():
+    env = make("wall")  # wall x 4.5..5.5, y 2..8
+    cur = jnp.asarray([[2.0, 5.0]])
+    tgt = jnp.asarray([[8.0, 5.0]])
+
+    def pick(cands, steer=True):
+        c = jnp.asarray(cands, jnp.float32)[:, None, :]
+        return int(choose(env.robot, env.world, c, cur, tgt, jnp.ones(1, bool), 0.0, steer)[0])
+
+    # tier 0 (cur -> c -> goal free) beats a closer cost-to-go; cheapest path among tier 0
+    assert pick([[4.0, 5.0], [5.0, 9.0], [5.0, 9.5]]) == 1
+    # tier 1 (c sees the goal, cur does not see c) beats tier 2
+    assert pick([[4.0, 5.0], [7.0, 5.0]]) == 1
+    # tier 2: the free candidate with the lowest cost-to-go, not a closer blocked one
+    assert pick([[3.0, 5.0], [4.0, 5.0]]) == 1  # both free from cur, 4 is closer to the goal
+    assert pick([[5.0, 5.0], [3.0, 5.0]]) == 1  # (5, 5) is inside the wall
+    # tier 3: nothing free, lowest cost-to-go; NaN never wins
+    assert pick([[5.0, 5.0], [5.0, 4.0], [np.nan, np.nan]]) == 0
+    # ties: the first member; without steerTo only the cost-to-go counts
+    assert pick([[3.0, 5.0], [3.0, 5.0]]) == 0
+    assert pick([[5.0, 9.5], [7.5, 5.0]], steer=False) == 1
+
+
+def _saved(success, costs, cause, paths, calls):
+    k = len(success)
+    return dict(queries=np.zeros((k, 2, 2), np.float32), paths=np.asarray(paths, np.float32),
+                lengths=np.full(k, paths.shape[1], np.int32), success=np.asarray(success),
+                costs=np.asarray(costs, np.float64), cause=np.asarray(cause, np.int8),
+                pnet_calls=np.asarray(calls, np.int32), replans=np.zeros(k, np.int32),
+                ref_costs=np.ones(k), ref_status=np.zeros(k, np.int8), seconds=1.5,
+                compile_seconds=0.5)
+
+
+def test_best_of_never_costlier_than_a_member_and_succeeds_iff_one_does():
+    rng = np.random.default_rng(0)
+    k, m = 200, 4
+    members = []
+    for j in range(m):
+        success = rng.random(k) < 0.5
+        costs = np.where(success, rng.uniform(1, 3, k), np.inf)
+        costs[:3] = [2.0, 2.0, np.inf]  # query 0/1: ties; query 2: every member fails
+        success[:3] = [True, True, False]
+        cause = np.where(success, 0, rng.choice([1, 2, 3], k))
+        length = 3 + j  # members' path buffers of different lengths
+        paths = np.full((k, length, 2), float(j), np.float32)
+        members.append(_saved(success, costs, cause, paths, np.full(k, j + 1)))
+        members[-1]["lengths"] = np.full(k, length, np.int32)
+    cause2 = np.array([members[j]["cause"][2] for j in range(m)])
+    best = E.best_of(members)
+    succ = np.stack([z["success"] for z in members])
+    cost = np.stack([np.where(z["success"], z["costs"], np.inf) for z in members])
+    np.testing.assert_array_equal(best["success"], succ.any(axis=0))
+    assert np.all(best["costs"][:, None] <= cost.T)  # never costlier than any member's success
+    np.testing.assert_array_equal(best["costs"], cost.min(axis=0))
+    assert np.all(np.isinf(best["costs"][~best["success"]]))
+    np.testing.assert_array_equal(best["cause"] == PlanCause.SUCCESS, best["success"])
+    # the kept path is the chosen member's; ties go to the first member
+    j = best["member"]
+    assert j[0] == 0 and j[1] == 0
+    for i in range(k):
+        n = best["lengths"][i]
+        assert n == members[j[i]]["lengths"][i]
+        assert np.all(best["paths"][i, :n] == j[i]) and np.all(np.isnan(best["paths"][i, n:]))
+        if best["success"][i]:
+            assert members[j[i]]["success"][i] and best["costs"][i] == members[j[i]]["costs"][i]
+    # every member fails on query 2: the failure closest to a success is kept
+    rank = {0: 0, 2: 1, 1: 2, 3: 3}
+    assert best["cause"][2] == min(cause2, key=lambda c: rank[int(c)])
+    # the work of every member: calls and seconds summed
+    np.testing.assert_array_equal(best["pnet_calls"], np.full(k, 1 + 2 + 3 + 4))
+    assert best["seconds"] == pytest.approx(6.0) and best["compile_seconds"] == pytest.approx(2.0)
+    with pytest.raises(ValueError):
+        E.best_of([])
+
+
+def test_eval_ensemble_option():
+    from ntq_jax.pipeline import load_config
+    from ntq_jax.config import ConfigError
+
+    default = load_config(None, [])
+    assert default.eval.ensemble is None and default.eval.ensemble_rows == ("ens", "best")
+    assert "ensemble" not in default.to_dict()["eval"]  # the default config hashes as before
+    assert load_config(None, ["eval.ensemble=[best]"]).eval.ensemble_rows == ("best",)
+    off = load_config(None, ["eval.ensemble=[]"])
+    assert off.eval.ensemble_rows == () and off.hash() != default.hash()
+    for bad in ("[foo]", "[ens,ens]", "ens"):
+        with pytest.raises(ConfigError, match="eval.ensemble"):
+            load_config(None, [f"eval.ensemble={bad}"])

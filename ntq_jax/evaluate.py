@@ -454,7 +454,7 @@ def _row(ctx: _EnvEval, m: int | str, kind: str, steer, f: Path, got: dict) -> d
 
 def evaluate_env(env, ensemble, cfg, run_dir, *, env_name: str, data_env_dir=None,
                  planner: Callable | None = None, members: Sequence[int] | None = None,
-                 log: Callable[[str], None] = print) -> list[dict]:
+                 eval_dir=None, log: Callable[[str], None] = print) -> list[dict]:
     """Evaluates every member of ``ensemble`` on one environment (see the module docstring).
 
     Args:
@@ -469,6 +469,10 @@ def evaluate_env(env, ensemble, cfg, run_dir, *, env_name: str, data_env_dir=Non
         planner: a reference planner callable ``(env, q, *, padding, seed)`` instead
             of ``cfg.planner.name``.
         members: which members to evaluate (default all).
+        eval_dir: the folder of ``queries.npz``, ``reference.npz`` and ``gamma.json``
+            (default ``<run_dir>/eval/<env_slug>``); several runs can share one, e.g.
+            the learning curve's sizes (``ntq_jax.curve``), which then plan on the
+            same test queries and compute the references once.
         log: progress messages.
 
     Returns:
@@ -479,7 +483,7 @@ def evaluate_env(env, ensemble, cfg, run_dir, *, env_name: str, data_env_dir=Non
     """
     slug = env_slug(env_name, env)
     run_dir = Path(run_dir)
-    out_dir = run_dir / "eval" / slug
+    out_dir = run_dir / "eval" / slug if eval_dir is None else Path(eval_dir)
     pnets = list(ensemble) if isinstance(ensemble, (list, tuple)) else member_pnets(ensemble)
     members = list(range(len(pnets)) if members is None else members)
     queries = test_queries(env, cfg, slug, out_dir)

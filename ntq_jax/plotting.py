@@ -6,6 +6,8 @@
 * :func:`success_figure`, :func:`examples_figure`, :func:`queries_figure`: the
   report's success bars, neural paths beside the reference, test queries.
 * :func:`query_figure`: one planned query (``scripts/plan.py``).
+* :func:`learning_curve_figure`: success vs training rows and vs K_train per
+  dataset (``scripts/learning_curve.py``).
 
 Maps are drawn by :func:`draw_map` from the environment JSON: obstacles dark,
 their padding light (optional); for the arm, the workspace with the arm along
@@ -25,7 +27,7 @@ from ntq_jax import artifacts
 from ntq_jax.types import QUERY_KINDS, PlanStatus
 
 __all__ = ["draw_map", "draw_arm", "dataset_figure", "curves_figure", "success_figure",
-           "examples_figure", "queries_figure", "query_figure"]
+           "examples_figure", "queries_figure", "query_figure", "learning_curve_figure"]
 
 KIND_TITLE = {"uniform": "Uniform Query", "nontrivial": "Non-trivial Query"}
 
@@ -303,3 +305,49 @@ def query_figure(env, path: np.ndarray, success: bool, cost: float, label: str,
     ax.plot(*goal[:2], "*", color="blue", ms=12)
     ax.legend(fontsize=8)
     return _save(fig, out, bbox_inches="tight")
+
+
+def learning_curve_figure(rows, path: Path, title: str = "") -> Path | None:
+    """Success ratio vs training rows (top) and vs K_train (bottom), per dataset, with 95%
+    intervals; non-trivial test queries left, uniform right.
+
+    ``rows``: :func:`ntq_jax.curve.curve_rows`' dicts (``size``, ``dataset``, ``rows``,
+    ``kind``, ``success``, ``ci95``). Returns None without rows.
+    """
+    if not rows:
+        return None
+    plt = _plt()
+    names = sorted({r["dataset"] for r in rows}, key=lambda n: (len(n), n))
+    kinds = [k for k in ("nontrivial", "uniform") if any(r["kind"] == k for r in rows)]
+    fig, axes = plt.subplots(2, len(kinds), figsize=(5.2 * len(kinds), 7.2), squeeze=False,
+                             sharey=True)
+    for col, kind in enumerate(kinds):
+        for row, (xkey, xlabel) in enumerate((("rows", "training rows (samples)"),
+                                              ("size", "K_train (queries per dataset)"))):
+            ax = axes[row, col]
+            for j, nm in enumerate(names):
+                rr = sorted((r for r in rows if r["dataset"] == nm and r["kind"] == kind),
+                            key=lambda r: r[xkey])
+                if not rr:
+                    continue
+                x = np.array([r[xkey] for r in rr], float)
+                y = np.array([r["success"] for r in rr], float)
+                lo = np.array([r["ci95"][0] for r in rr], float)
+                hi = np.array([r["ci95"][1] for r in rr], float)
+                c = f"C{j}"
+                ax.plot(x, y, "o-", color=c, label=nm, ms=4)
+                ax.fill_between(x, lo, hi, color=c, alpha=0.15, lw=0)
+            ax.set_xlabel(xlabel)
+            ax.set_ylim(0, 1.05)
+            ax.grid(alpha=0.3)
+            if row == 0:
+                ax.set_title(KIND_TITLE[kind])
+            if col == 0:
+                ax.set_ylabel("success ratio (95% interval)")
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="upper center", ncol=len(names), fontsize=9,
+               bbox_to_anchor=(0.5, 1.0))
+    if title:
+        fig.suptitle(title, y=1.04)
+    fig.tight_layout(rect=(0, 0, 1, 0.96))
+    return _save(fig, path, bbox_inches="tight")

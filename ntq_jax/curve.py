@@ -63,7 +63,6 @@ from ntq_jax.cli import UsageError
 from ntq_jax.data import env_slug
 from ntq_jax.evaluate import evaluate_env
 from ntq_jax.progress import open_bar
-from ntq_jax.types import QUERY_KINDS
 
 __all__ = ["parse_sizes", "size_config", "prefix_dataset", "curve_rows", "run_curve",
            "write_table"]

@@ -24,7 +24,7 @@ from ntq_jax.neural_planner import PlannerOptions, plan_batch
 from ntq_jax.neural_steps import choose
 from ntq_jax.types import PlanCause
 
-from test_neural_planner import (BATCH, OPTS, ORACLE, SEEKER, STAY, make, optimum, pnet,
+from test_neural_planner import (OPTS, ORACLE, SEEKER, STAY, make, optimum, pnet,
                                  shapely_free)
 
 FIELDS = ("paths", "lengths", "success", "costs", "cause", "replans")

@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Callable, Iterable
 
 __all__ = ["UsageError", "EXPECTED_ERRORS", "PATH_ERRORS", "expected_error_types", "error_line",
-           "positive_int", "check_writable", "run_cli"]
+           "positive_int", "check_writable", "add_run_options", "start_run", "run_cli"]
 
 
 class UsageError(ValueError):
@@ -92,6 +92,30 @@ def check_writable(path: str | os.PathLike, flag: str) -> None:
     except OSError as e:
         raise UsageError(f"{flag} {path} cannot be written: creating a file in {folder} failed "
                          f"({e.strerror})") from None
+
+
+def add_run_options(ap, *, set_example: str, figures_help: str, cpu_devices_help: str) -> None:
+    """The options of the scripts that run pipeline stages: ``--config``, ``--set``,
+    ``--no-progress``, ``--no-compile-cache``, ``--no-figures``, ``--cpu-devices``
+    (applied by :func:`start_run`)."""
+    ap.add_argument("--config", default=None, help="YAML config (default: the embedded default)")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help=f"config override, e.g. --set {set_example} (repeatable)")
+    ap.add_argument("--no-progress", action="store_true", help="no progress bars")
+    ap.add_argument("--no-compile-cache", action="store_true",
+                    help="do not use JAX's persistent compilation cache")
+    ap.add_argument("--no-figures", action="store_true", help=figures_help)
+    ap.add_argument("--cpu-devices", type=int, default=1, help=cpu_devices_help)
+
+
+def start_run(args) -> None:
+    """Applies :func:`add_run_options`' ``--cpu-devices`` (before any JAX operation) and
+    ``--no-compile-cache``."""
+    from ntq_jax import artifacts
+    from ntq_jax.training import use_cpu_devices
+    use_cpu_devices(positive_int("--cpu-devices", args.cpu_devices))
+    if not args.no_compile_cache:
+        artifacts.enable_compile_cache()
 
 
 def error_line(err: BaseException) -> str:

@@ -25,9 +25,7 @@ import sys
 import time
 from pathlib import Path
 
-from ntq_jax import artifacts
-from ntq_jax.cli import positive_int, run_cli
-from ntq_jax.training import use_cpu_devices
+from ntq_jax.cli import add_run_options, run_cli, start_run
 
 
 def main(argv=None) -> int:
@@ -38,26 +36,17 @@ def main(argv=None) -> int:
 def _main(argv) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--config", default=None, help="YAML config (default: the embedded default)")
     ap.add_argument("--env", default=None, help="the map (default: the config's first)")
     ap.add_argument("--sizes", default="250,500,1000,2000,3000",
                     help="comma-separated K_train values (default 250,500,1000,2000,3000)")
     ap.add_argument("--out", default=None,
                     help="curve folder (default: <out_dir>/curve-<map>-<config hash>; rerun "
                          "to resume)")
-    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                    help="config override, e.g. --set train.epochs=20 (repeatable)")
-    ap.add_argument("--no-progress", action="store_true", help="no progress bars")
-    ap.add_argument("--no-compile-cache", action="store_true",
-                    help="do not use JAX's persistent compilation cache")
-    ap.add_argument("--no-figures", action="store_true", help="skip curve.png")
-    ap.add_argument("--cpu-devices", type=int, default=1,
-                    help="JAX CPU devices to create (the PNets train on separate cores); "
-                         "default 1")
+    add_run_options(ap, set_example="train.epochs=20", figures_help="skip curve.png",
+                    cpu_devices_help="JAX CPU devices to create (the PNets train on separate "
+                    "cores); default 1")
     args = ap.parse_args(argv)
-    use_cpu_devices(positive_int("--cpu-devices", args.cpu_devices))
-    if not args.no_compile_cache:
-        artifacts.enable_compile_cache()
+    start_run(args)  # before any JAX operation
     from ntq_jax.curve import parse_sizes, run_curve
     from ntq_jax.data import env_slug, resolve_envs
     from ntq_jax.pipeline import load_config

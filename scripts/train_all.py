@@ -29,10 +29,8 @@ import argparse
 import sys
 import time
 
-from ntq_jax import artifacts
-from ntq_jax.cli import positive_int, run_cli
+from ntq_jax.cli import add_run_options, run_cli, start_run
 from ntq_jax.pipeline import load_config, prepare_run, run_pipeline
-from ntq_jax.training import use_cpu_devices
 
 
 def main(argv=None) -> int:
@@ -43,27 +41,18 @@ def main(argv=None) -> int:
 def _main(argv) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--config", default=None, help="YAML config (default: the embedded default)")
     ap.add_argument("--out", default=None,
                     help="run folder (default: <out_dir>/<task>-<config hash>; rerun to resume)")
     ap.add_argument("--overwrite", action="store_true",
                     help="delete --out first when it is not a run of this config (another "
                          "config, or run.json missing or corrupt) and start over; only a folder "
                          "holding nothing but a run's files is deleted")
-    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                    help="config override, e.g. --set eval.k_test=100 (repeatable)")
-    ap.add_argument("--no-progress", action="store_true", help="no progress bars")
-    ap.add_argument("--no-compile-cache", action="store_true",
-                    help="do not use JAX's persistent compilation cache")
-    ap.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
-    ap.add_argument("--cpu-devices", type=int, default=1,
-                    help="JAX CPU devices to create (one per core): the four PNets train on "
-                         "separate cores (speed: BENCHMARKS.md); results then differ from a "
-                         "one-device run at float level. Default 1")
+    add_run_options(ap, set_example="eval.k_test=100", figures_help="skip the PNG figures",
+                    cpu_devices_help="JAX CPU devices to create (one per core): the four PNets "
+                    "train on separate cores (speed: BENCHMARKS.md); results then differ from a "
+                    "one-device run at float level. Default 1")
     args = ap.parse_args(argv)
-    use_cpu_devices(positive_int("--cpu-devices", args.cpu_devices))  # before any JAX operation
-    if not args.no_compile_cache:
-        artifacts.enable_compile_cache()
+    start_run(args)  # before any JAX operation
     cfg = load_config(args.config, args.set)
     run = prepare_run(cfg, args.out, overwrite=args.overwrite)  # validates before writing
     print(f"run folder: {run}", flush=True)

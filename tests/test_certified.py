@@ -59,6 +59,7 @@ from ntq_jax.presets import PRESETS
 from ntq_jax.robots import NLinkArm, RigidBody
 from ntq_jax.robots.batch import is_valid_batch, steer_to_pairs
 from ntq_jax.robots.certified import CERT_MARGIN, certified_steer_to_batch
+from test_geometry_oracle import tangent_segments
 
 EPS32 = float(np.finfo(np.float32).eps)
 F64 = np.float64
@@ -222,14 +223,7 @@ def segment_cases(rng, obst, kind):
     the segment or at an end, slightly tilted), random near it, and zero-length."""
     n = len(obst)
     px, py, nx, ny = anchor(rng, obst, kind, signed_offsets(rng, n))
-    tilt = np.where(rng.random(n) < 0.3, 0.0, rng.choice([-1, 1], n) * 10 ** rng.uniform(-6, -0.5, n))
-    tx = -ny * np.cos(tilt) - nx * np.sin(tilt)
-    ty = nx * np.cos(tilt) - ny * np.sin(tilt)
-    length = 10 ** rng.uniform(-3, 1.2, n)
-    u = rng.choice([0.0, 1.0, 0.5], n, p=[0.2, 0.2, 0.6])
-    u = np.where(u == 0.5, rng.random(n), u)
-    tangent = np.stack([px - u * length * tx, py - u * length * ty,
-                        px + (1 - u) * length * tx, py + (1 - u) * length * ty], 1)
+    tangent = tangent_segments(rng, px, py, nx, ny)
     x0, y0 = region(rng, obst, kind)
     x1, y1 = region(rng, obst, kind)
     rand = np.stack([x0, y0, x1, y1], 1)

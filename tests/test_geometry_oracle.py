@@ -141,12 +141,10 @@ def point_cases(rng, obst, pad, kind):
     return f32(np.stack([np.where(near, px, rx), np.where(near, py, ry)], 1))
 
 
-def segment_cases(rng, obst, pad, kind):
-    """Segments ``(n, 4)``: tangent to the padded obstacle (+- a tiny tilt, closest point at an
-    endpoint or inside), random, axis-parallel, zero-length, and along the box edges."""
-    n = len(obst)
-    anchor, region = (box_anchor, box_region) if kind == "box" else (disc_anchor, disc_region)
-    px, py, nx, ny = anchor(rng, obst, tangency_offsets(rng, n, pad))
+def tangent_segments(rng, px, py, nx, ny):
+    """``(n, 4)`` segments through the points ``(px, py)`` along the tangent of the outward
+    normal ``(nx, ny)`` (slightly tilted in 70 % of cases), the point at an end or inside."""
+    n = len(px)
     tilt = np.where(rng.random(n) < 0.3, 0.0, rng.choice([-1, 1], n) * 10 ** rng.uniform(-6, -0.5, n))
     tx = -ny * np.cos(tilt) - nx * np.sin(tilt)
     ty = nx * np.cos(tilt) - ny * np.sin(tilt)
@@ -155,6 +153,16 @@ def segment_cases(rng, obst, pad, kind):
     u = np.where(u == 0.5, rng.random(n), u)
     tangent = np.stack([px - u * length * tx, py - u * length * ty,
                         px + (1 - u) * length * tx, py + (1 - u) * length * ty], 1)
+    return tangent
+
+
+def segment_cases(rng, obst, pad, kind):
+    """Segments ``(n, 4)``: tangent to the padded obstacle (+- a tiny tilt, closest point at an
+    endpoint or inside), random, axis-parallel, zero-length, and along the box edges."""
+    n = len(obst)
+    anchor, region = (box_anchor, box_region) if kind == "box" else (disc_anchor, disc_region)
+    px, py, nx, ny = anchor(rng, obst, tangency_offsets(rng, n, pad))
+    tangent = tangent_segments(rng, px, py, nx, ny)
     x0, y0 = region(rng, obst, pad)
     x1, y1 = region(rng, obst, pad)
     rand = np.stack([x0, y0, x1, y1], 1)

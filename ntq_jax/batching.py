@@ -12,7 +12,7 @@ from typing import Callable, Iterator, Sequence
 
 import numpy as np
 
-__all__ = ["bucket_size", "pad_rows", "padded_chunks", "map_chunks"]
+__all__ = ["bucket_size", "pad_rows", "padded_chunks", "group_chunks", "map_chunks"]
 
 
 def bucket_size(n: int, minimum: int = 1) -> int:
@@ -50,6 +50,26 @@ def padded_chunks(arrays: Sequence[np.ndarray], chunk: int, fill=0
         mask = np.zeros(chunk, bool)
         mask[:m] = True
         yield lo, m, padded, mask
+
+
+def group_chunks(groups: Sequence[np.ndarray], width: int
+                 ) -> Iterator[tuple[int, np.ndarray, np.ndarray]]:
+    """Yields ``(lo, idx, mask)``: chunks of several groups side by side, ``width`` rows each.
+
+    Chunk ``j`` holds the items ``lo:lo+width`` (``lo = j * width``) of every
+    group, each padded to ``width`` with 0: ``idx`` ``(G*width,)`` is their
+    concatenation (group-major) and ``mask`` is True on the real items. With one
+    group this is :func:`padded_chunks` of that group. The chunks run until the
+    longest group is exhausted (a shorter group's block is then all padding).
+    """
+    if width < 1:
+        raise ValueError(f"width must be >= 1, got {width}")
+    n = max((len(g) for g in groups), default=0)
+    for lo in range(0, n, width):
+        parts = [np.asarray(g)[lo:lo + width] for g in groups]
+        idx = np.concatenate([pad_rows(p, width) for p in parts])
+        mask = np.concatenate([np.arange(width) < len(p) for p in parts])
+        yield lo, idx, mask
 
 
 def map_chunks(fn: Callable, *arrays: np.ndarray, chunk: int, fill=0, with_mask: bool = False,

@@ -333,6 +333,10 @@ class TrainConfig:
                f"must be >= 1, got {self.keep_checkpoints}")
 
 
+#: The ensemble rows ``eval.ensemble`` can ask for (all of them by default).
+ENSEMBLE_ROWS = ("ens", "best", "cascade")
+
+
 @dataclasses.dataclass(frozen=True)
 class EvalConfig:
     """Neural planner evaluation.
@@ -373,10 +377,14 @@ class EvalConfig:
             :mod:`ntq_jax.neural_planner`), ``best`` the best-of-N baseline
             (``PNet_best-of-<N>``: per query the cheapest successful path of the N
             members' own plans, computed from their saved results without
-            replanning, timed as the sum of their planning times). ``null``
-            (default) is both, ``[ens, best]``; ``[]`` evaluates the members only.
-            Left out of the config hash when null, so run folders made before the
-            option existed are reopened (and get the two rows) on a rerun.
+            replanning, timed as the sum of their planning times), ``cascade`` the
+            members as fallbacks (``PNet_cascade``: the member with the best success
+            on validation queries plans every query, the next the ones still
+            unsolved, and so on; :func:`ntq_jax.neural_planner.plan_cascade`).
+            ``null`` (default) is all three, ``[ens, best, cascade]``; ``[]``
+            evaluates the members only. Left out of the config hash when null, so
+            run folders made before the option existed are reopened (and get the
+            rows) on a rerun.
     """
 
     k_test: int = 500
@@ -397,12 +405,13 @@ class EvalConfig:
 
     @property
     def ensemble_rows(self) -> tuple[str, ...]:
-        """The ensemble rows to evaluate: ``ensemble``, or ``("ens", "best")`` when null."""
-        return ("ens", "best") if self.ensemble is None else self.ensemble
+        """The ensemble rows to evaluate: ``ensemble``, or all of :data:`ENSEMBLE_ROWS` when null."""
+        return ENSEMBLE_ROWS if self.ensemble is None else self.ensemble
 
     def validate(self, p: str):
         for i, e in enumerate(self.ensemble_rows):
-            _check(e in ("ens", "best"), f"{p}.ensemble[{i}]", f"must be ens or best, got {e!r}")
+            _check(e in ENSEMBLE_ROWS, f"{p}.ensemble[{i}]",
+                   f"must be one of {', '.join(ENSEMBLE_ROWS)}, got {e!r}")
         _check(len(set(self.ensemble_rows)) == len(self.ensemble_rows), f"{p}.ensemble",
                f"lists a row twice: {list(self.ensemble_rows)}")
         _check(self.motion_check in ("discretized", "certified"), f"{p}.motion_check",

@@ -7,14 +7,18 @@ planner (the task's planner on the evaluation geometry, padding 0, at the
 evaluation budget) and, for point robots, by the exact visibility graph; then by
 the neural planner (:mod:`ntq_jax.neural_planner`) with every ensemble member,
 with and/or without steerTo (``config.eval.steer``), and (``config.eval.ensemble``,
-with at least two members, when every member is evaluated) two rows of the
+with at least two members, when every member is evaluated) rows of the
 members together, measured the same way on the same queries:
 
 * ``PNet_ens``: the ensemble neural planner (every member proposes each next
   state, a fixed rule picks one: :func:`ntq_jax.neural_steps.choose`), planned
   with its own key;
 * ``PNet_best-of-<N>``: per query the cheapest successful path of the N members'
-  own plans (:func:`best_of`), from their saved paths files without replanning.
+  own plans (:func:`best_of`), from their saved paths files without replanning;
+* ``PNet_cascade``: the members as fallbacks
+  (:func:`ntq_jax.neural_planner.plan_cascade`), in the order of their success
+  on validation queries (:func:`validation_order`): best-of-N's successes at
+  about one member's work plus the fallbacks' on the failures.
 
 Metrics per (environment, model, test query kind, steerTo):
 
@@ -42,9 +46,12 @@ fingerprint says, is reused on a rerun)::
     <run>/paths/<env_slug>/<model>_<uniform|nontrivial>[_nosteer].npz
         queries, paths (NaN padded), lengths, success, costs, cause, ref_costs,
         opt_costs, pnet_calls, replans, seconds, compile_seconds, fingerprint
-        (best-of-N also: member, the index of the member whose path is kept)
+        (best-of-N and the cascade also: member, the index of the member whose
+        path is kept; the cascade: order, its member order)
+    <run>/paths/<env_slug>/validation[_nosteer].npz   the cascade's member order
 
-``<model>`` is ``PNet_0`` .. ``PNet_<M-1>``, ``PNet_ens`` and ``PNet_best-of-<M>``.
+``<model>`` is ``PNet_0`` .. ``PNet_<M-1>``, ``PNet_ens``, ``PNet_best-of-<M>`` and
+``PNet_cascade``.
 
 Measured evaluation times: BENCHMARKS.md, "Neural planner evaluation".
 """
@@ -71,12 +78,14 @@ from ntq_jax.planners import plan
 from ntq_jax.planners.verify import check_paths
 from ntq_jax.queries import wilson_interval
 from ntq_jax.robots.batch import distances, valid_states
-from ntq_jax.types import CAUSE_NAMES, QUERY_KINDS, PlanCause, PlanStatus
+from ntq_jax.types import CAUSE_NAMES, CAUSE_RANK, QUERY_KINDS, PlanCause, PlanStatus
 
 EVAL_TAG = 0x7E57  # key tag of the test queries (training uses other streams)
 
 
 ENSEMBLE = "ens"  # model id of the ensemble neural planner (row PNet_ens)
+CASCADE = "cascade"  # model id of the members as fallbacks (row PNet_cascade)
+VALIDATION_TAG = EVAL_TAG + 5  # key tag of the cascade's validation queries
 
 
 def best_id(num_members: int) -> str:
@@ -85,7 +94,8 @@ def best_id(num_members: int) -> str:
 
 
 def model_name(member: int | str) -> str:
-    """``PNet_<m>`` for member ``m``; ``PNet_ens`` and ``PNet_best-of-<N>`` for the ensemble rows."""
+    """``PNet_<m>`` for member ``m``; ``PNet_ens``, ``PNet_best-of-<N>`` and ``PNet_cascade``
+    for the ensemble rows."""
     return f"PNet_{member}"
 
 
@@ -223,10 +233,6 @@ def metrics(success: np.ndarray, costs: np.ndarray, cause: np.ndarray, ref_costs
     return out
 
 
-# failures from closest to a success to farthest (best-of-N keeps the closest)
-_CAUSE_RANK = {PlanCause.SUCCESS: 0, PlanCause.INFEASIBLE: 1, PlanCause.NO_PATH: 2,
-               PlanCause.INVALID_QUERY: 3}
-
 
 def best_of(results: Sequence[dict]) -> dict:
     """Best-of-N: per query, the cheapest successful path among N planners' results.
@@ -258,7 +264,7 @@ def best_of(results: Sequence[dict]) -> dict:
     costs = np.where(success, np.stack([np.asarray(r["costs"], np.float64) for r in results]),
                      np.inf)
     cause = np.stack([np.asarray(r["cause"]) for r in results])
-    rank = np.vectorize(lambda c: _CAUSE_RANK[PlanCause(int(c))], otypes=[np.int64])(cause)
+    rank = np.vectorize(lambda c: CAUSE_RANK[PlanCause(int(c))], otypes=[np.int64])(cause)
     any_ok = success.any(axis=0)
     pick = np.where(any_ok, np.argmin(costs, axis=0), np.argmin(rank, axis=0))
     k = success.shape[1]
@@ -377,37 +383,45 @@ class _EnvEval:
     log: Callable[[str], None]
 
 
-def _plan_cell(ctx: _EnvEval, pnet, m: int, kind: str, steer) -> dict:
-    """Neural plans of one cell, as saved in its paths file."""
+def _plan_cell(ctx: _EnvEval, pnet, m: int | str, kind: str, steer, order=None) -> dict:
+    """Neural plans of one cell, as saved in its paths file (``order``: the cascade's)."""
     cfg, q = ctx.cfg, ctx.queries[kind]
     key = jax.random.fold_in(jax.random.fold_in(jax.random.key(cfg.seed), EVAL_TAG + 2),
                              _tag(f"{ctx.slug}/{m}/{kind}/{steer}"))
     opts = NP.PlannerOptions.from_config(cfg.eval, steer=steer)
-    res = NP.plan_batch(ctx.env, pnet, q, key, opts, chunk=cfg.eval.chunk)
+    if m == CASCADE:
+        res = NP.plan_cascade(ctx.env, pnet, q, key, opts, order=order, chunk=cfg.eval.chunk)
+    else:
+        res = NP.plan_batch(ctx.env, pnet, q, key, opts, chunk=cfg.eval.chunk)
     out = dict(queries=q, paths=res.paths, lengths=res.lengths, success=res.success,
                costs=res.costs, cause=res.cause, pnet_calls=res.pnet_calls, replans=res.replans,
                ref_costs=ctx.ref[f"{kind}_costs"], ref_status=ctx.ref[f"{kind}_status"],
                seconds=res.seconds, compile_seconds=res.compile_seconds)
     if f"{kind}_opt_costs" in ctx.ref:
         out["opt_costs"] = ctx.ref[f"{kind}_opt_costs"]
+    if res.member is not None:
+        out.update(member=res.member, order=np.asarray(order, np.int8))
     ctx.log(f"  {ctx.slug} {model_name(m)} {kind:10s} steer={steer!s:5s}: success "
             f"{res.success.mean():.3f}, {res.seconds / max(len(q), 1) * 1e3:.2f} "
             f"ms/query (+{res.compile_seconds:.1f} s compile)")
     return out
 
 
-def _cell(ctx: _EnvEval, pnet, m: int | str, kind: str, steer, *extra) -> tuple[dict, dict]:
+def _cell(ctx: _EnvEval, pnet, m: int | str, kind: str, steer, *extra,
+          order=None) -> tuple[dict, dict]:
     """The result row of one (model, query kind, steerTo) cell, planned or loaded, and
     its paths file's arrays.
 
-    ``m`` is a member index (``pnet`` its PNet) or :data:`ENSEMBLE` (``pnet`` the
-    members' list); ``extra`` is added to the fingerprint.
+    ``m`` is a member index (``pnet`` its PNet), :data:`ENSEMBLE` or
+    :data:`CASCADE` (``pnet`` the members' list; ``order`` the cascade's member
+    order); ``extra`` is added to the fingerprint.
     """
     cfg = ctx.cfg
     f = paths_file(ctx.run_dir, ctx.slug, m, kind, steer)
     fp = artifacts.fingerprint(cfg.hash(), ctx.slug, m, kind, steer, str(ctx.ref["fingerprint"]),
-                               NP.ALGORITHM_VERSION, *extra)
-    got = artifacts.compute_or_load(f, fp, lambda: _plan_cell(ctx, pnet, m, kind, steer))
+                               NP.ALGORITHM_VERSION, *extra,
+                               *([] if order is None else [list(map(int, order))]))
+    got = artifacts.compute_or_load(f, fp, lambda: _plan_cell(ctx, pnet, m, kind, steer, order))
     return _row(ctx, m, kind, steer, f, got), got
 
 
@@ -426,6 +440,39 @@ def _best_cell(ctx: _EnvEval, members: list[dict], kind: str, steer) -> dict:
         return out
 
     return _row(ctx, m, kind, steer, f, artifacts.compute_or_load(f, fp, compute))
+
+
+def validation_order(ctx: _EnvEval, pnets: list, steer) -> list[int]:
+    """The cascade's member order: by success on validation queries, best first.
+
+    ``K_test`` fresh non-trivial queries (sampled like the test queries, with a
+    key tag of their own, so disjoint from them and from the training queries)
+    are planned by every member; members are ordered by their success, ties by
+    index. Saved in ``<run>/paths/<env_slug>/validation[_nosteer].npz``
+    (``success`` per member, ``order``, ``seconds``), reused on a rerun.
+    """
+    cfg = ctx.cfg
+    f = Path(ctx.run_dir) / "paths" / ctx.slug / f"validation{'' if steer else '_nosteer'}.npz"
+    fp = artifacts.fingerprint(cfg.hash(), ctx.slug, "validation", steer, len(pnets),
+                               NP.ALGORITHM_VERSION)
+
+    def compute():
+        key = jax.random.fold_in(jax.random.fold_in(jax.random.key(cfg.seed), VALIDATION_TAG),
+                                 _tag(ctx.slug))
+        qpad = ctx.env.resolve_padding(cfg.eval.query_padding)
+        q, _ = ctx.env.sample_queries(jax.random.fold_in(key, 0), cfg.eval.k_test, 1.0,
+                                      padding=qpad, n_max=cfg.sampling.n_max)
+        opts = NP.PlannerOptions.from_config(cfg.eval, steer=steer)
+        res = [NP.plan_batch(ctx.env, p, np.asarray(q, np.float32),
+                             jax.random.fold_in(key, 1 + m), opts, chunk=cfg.eval.chunk)
+               for m, p in enumerate(pnets)]
+        success = np.array([r.success.mean() for r in res])
+        order = np.argsort(-success, kind="stable").astype(np.int8)
+        ctx.log(f"  {ctx.slug} cascade order {order.tolist()} (validation success "
+                f"{np.round(success, 3).tolist()})")
+        return dict(success=success, order=order, seconds=sum(r.seconds for r in res))
+
+    return [int(m) for m in artifacts.compute_or_load(f, fp, compute)["order"]]
 
 
 def _row(ctx: _EnvEval, m: int | str, kind: str, steer, f: Path, got: dict) -> dict:
@@ -477,7 +524,7 @@ def evaluate_env(env, ensemble, cfg, run_dir, *, env_name: str, data_env_dir=Non
 
     Returns:
         One result row (dict) per (model, query kind, steerTo): per steerTo variant
-        the members', then ``PNet_ens`` and ``PNet_best-of-<N>`` (as
+        the members', then ``PNet_ens``, ``PNet_best-of-<N>`` and ``PNet_cascade`` (as
         ``cfg.eval.ensemble_rows`` asks; only with at least two models and when every
         one of them is evaluated).
     """
@@ -506,6 +553,10 @@ def evaluate_env(env, ensemble, cfg, run_dir, *, env_name: str, data_env_dir=Non
                      for kind in QUERY_KINDS]
         if together and "best" in cfg.eval.ensemble_rows:
             rows += [_best_cell(ctx, [saved[m, kind] for m in members], kind, steer)
+                     for kind in QUERY_KINDS]
+        if together and CASCADE in cfg.eval.ensemble_rows:
+            order = validation_order(ctx, pnets, steer)
+            rows += [_cell(ctx, pnets, CASCADE, kind, steer, len(pnets), order=order)[0]
                      for kind in QUERY_KINDS]
     return rows
 

@@ -54,11 +54,12 @@ import jax.numpy as jnp
 import numpy as np
 from jax.tree_util import Partial
 
-from ntq_jax.batching import bucket_size, pad_rows, padded_chunks
+from ntq_jax.batching import bucket_size, group_chunks, pad_rows, padded_chunks
 from ntq_jax.geometry import World
-from ntq_jax.neural_steps import EnsemblePNet, Stages, cost_jit
+from ntq_jax.neural_steps import (EnsemblePNet, MemberBlocks, Stages, cost_jit, fold_in,
+                                  is_key_stack, split2)
 from ntq_jax.robots.certified import MOTION_CHECKS
-from ntq_jax.types import PlanCause
+from ntq_jax.types import CAUSE_RANK, PlanCause
 
 Array = jax.Array
 
@@ -145,6 +146,7 @@ class NeuralPlanResult:
         replans: ``(N,)`` int32 replanning rounds the query went through.
         seconds: wall time of the batch (compiled calls only); ``compile_seconds``:
             time spent compiling for this call (0 when the compiled code was reused).
+        member: ``(N,)`` int8, for :func:`plan_cascade` only: the PNet whose path is kept.
     """
 
     paths: np.ndarray
@@ -156,6 +158,7 @@ class NeuralPlanResult:
     replans: np.ndarray
     seconds: float = 0.0
     compile_seconds: float = 0.0
+    member: np.ndarray | None = None
 
     def path(self, i: int) -> np.ndarray:
         """Query ``i``'s path ``(lengths[i], d)``."""
@@ -215,7 +218,11 @@ def splice(path: np.ndarray, n: int, ia: int, ib: int, sub: np.ndarray):
 
 @dataclasses.dataclass
 class _Batch:
-    """The per-query state of a :func:`plan_batch` call (host arrays, updated stage by stage)."""
+    """The per-query state of a :func:`plan_batch` call (host arrays, updated stage by stage).
+
+    With several members (:func:`plan_members`) the rows are ``members`` blocks of
+    the same ``K`` queries, one block per member.
+    """
 
     paths: np.ndarray      # (K, L, d) float32, NaN padded
     lengths: np.ndarray    # (K,) int32
@@ -225,13 +232,14 @@ class _Batch:
     blocked: np.ndarray    # (K, L-1) bool: segments in collision
     calls: np.ndarray      # (K,) int32 PNet predictions
     replans: np.ndarray    # (K,) int32 replanning rounds
+    members: int = 1       # planners side by side: rows m*K/M.. (m+1)*K/M-1 are member m's
 
     @staticmethod
-    def empty(k: int, length: int, d: int) -> "_Batch":
+    def empty(k: int, length: int, d: int, members: int = 1) -> "_Batch":
         return _Batch(np.full((k, length, d), np.nan, np.float32), np.zeros(k, np.int32),
                       np.zeros(k, bool), np.zeros(k, bool), np.zeros(k, bool),
                       np.zeros((k, length - 1), bool), np.zeros(k, np.int32),
-                      np.zeros(k, np.int32))
+                      np.zeros(k, np.int32), members)
 
     def cause(self) -> np.ndarray:
         """``(K,)`` int8 :class:`PlanCause` of every query."""
@@ -246,14 +254,24 @@ class _Batch:
 # The stages of plan_batch
 # ---------------------------------------------------------------------------
 
+def _member_rows(b: _Batch, rows: np.ndarray) -> list[np.ndarray]:
+    """Positions in ``rows`` (batch rows) of each member's rows, in order (one group per member)."""
+    k = b.paths.shape[0] // b.members
+    who = np.asarray(rows) // k
+    return [np.flatnonzero(who == m) for m in range(b.members)]
+
+
 def _coarse(stages: Stages, b: _Batch, q: np.ndarray, key, size: int) -> None:
-    """Steps 1-3 (coarse plan, contraction, feasibility) of every query, chunks of ``size``."""
-    for lo, m, (part,), act in padded_chunks([q], size):
-        out = stages("coarse", stages.pnet, jax.random.fold_in(key, lo // size),
-                     jnp.asarray(part[:, 0]), jnp.asarray(part[:, 1]), jnp.asarray(act))
+    """Steps 1-3 (coarse plan, contraction, feasibility) of every query, chunks of ``size``
+    (per member: ``size`` rows of each member side by side)."""
+    k = len(q)
+    for lo, idx, act in group_chunks([np.arange(k)] * b.members, size):
+        rows = idx + np.repeat(np.arange(b.members) * k, size)
+        out = stages("coarse", stages.pnet, fold_in(key, lo // size),
+                     jnp.asarray(q[idx, 0]), jnp.asarray(q[idx, 1]), jnp.asarray(act))
         for dst, src in zip((b.paths, b.lengths, b.valid, b.reached, b.feasible, b.blocked,
                              b.calls), out):
-            dst[lo:lo + m] = src[:m]
+            dst[rows[act]] = src[act]
 
 
 def _window_validity(stages: Stages, b: _Batch, todo: np.ndarray, width: int) -> np.ndarray:
@@ -268,6 +286,7 @@ def _window_validity(stages: Stages, b: _Batch, todo: np.ndarray, width: int) ->
 def _reconnect(stages: Stages, b: _Batch, rows, wa, wb, key, width: int):
     """Neural connections of the windows ``paths[rows, wa] -> paths[rows, wb]``.
 
+    Each member's windows are connected by its own PNet, ``width`` of each per call.
     Returns ``(sub, ns, connected)``; the PNet calls are added to ``b.calls``.
     """
     d = b.paths.shape[2]
@@ -275,12 +294,12 @@ def _reconnect(stages: Stages, b: _Batch, rows, wa, wb, key, width: int):
     ns = np.zeros(len(rows), np.int64)
     conn = np.zeros(len(rows), bool)
     a, z = b.paths[rows, wa], b.paths[rows, wb]
-    for lo, m, (sel,), mask in padded_chunks([np.arange(len(rows))], width):
-        o = stages("connect", stages.pnet, jax.random.fold_in(key, lo // width),
+    for lo, sel, mask in group_chunks(_member_rows(b, rows), width):
+        o = stages("connect", stages.pnet, fold_in(key, lo // width),
                    jnp.asarray(a[sel]), jnp.asarray(z[sel]), jnp.asarray(mask))
-        part = slice(lo, lo + m)
-        sub[part], ns[part], conn[part] = o[0][:m], o[1][:m], o[2][:m]
-        np.add.at(b.calls, rows[part], o[3][:m])
+        part = sel[mask]
+        sub[part], ns[part], conn[part] = o[0][mask], o[1][mask], o[2][mask]
+        np.add.at(b.calls, rows[part], o[3][mask])
     return sub, ns, conn
 
 
@@ -423,6 +442,119 @@ def plan_batch(env, pnet: Callable, queries, key: Array,
         ValueError: ``queries`` has the wrong shape, ``chunk < 1``, or the
             bidirectional planner without steerTo.
     """
+    q = _check_inputs(env, queries, opts, chunk)
+    world = padded_world(env.world, pad_obstacles) if pad_obstacles > 0 else env.world
+    stages = Stages(env.robot, opts, world, as_pnet(pnet))
+    b = _plan(stages, q, key, chunk, repair_width, members=1)
+    return _result(env.robot, b, stages, slice(None))
+
+
+def plan_members(env, pnets, queries, key: Array, opts: PlannerOptions = PlannerOptions(), *,
+                 chunk: int = 1024, repair_width: int = 256) -> list[NeuralPlanResult]:
+    """Every PNet of ``pnets`` plans every query on its own, all members in one batch.
+
+    The result of member ``m`` is the one :func:`plan_batch` returns for
+    ``pnets[m]`` with key ``key[m]`` (or ``key``, when one key is given for all):
+    the members' rows are planned side by side (:class:`ntq_jax.neural_steps.
+    MemberBlocks`: each jitted call carries ``chunk`` rows of every member and
+    each member predicts for its own rows), which only changes how the work is
+    batched, not what is computed. This is what a best-of-N planner runs
+    (:func:`ntq_jax.evaluate.best_of` then keeps each query's cheapest success).
+
+    Args:
+        env, queries, opts, chunk, repair_width: as in :func:`plan_batch`
+            (``chunk`` and ``repair_width`` are rows per member).
+        pnets: a sequence of ``M >= 1`` PNets (see :func:`as_pnet`; not ensemble planners).
+        key: one PRNG key, or ``M`` keys stacked (one per member, e.g. the keys of
+            the members' own evaluations).
+
+    Returns:
+        ``M`` :class:`NeuralPlanResult`, one per member. Each carries the wall and
+        compile time of the whole batched call (all members together) in
+        ``seconds`` and ``compile_seconds``.
+
+    Raises:
+        ValueError: as :func:`plan_batch`; no PNet; ``key`` a stack of the wrong length.
+    """
+    q = _check_inputs(env, queries, opts, chunk)
+    members = tuple(as_pnet(p) for p in pnets)
+    if not members or any(isinstance(p, EnsemblePNet) for p in members):
+        raise ValueError("plan_members needs one or more PNets (not ensemble planners)")
+    if is_key_stack(key) and key.shape[0] != len(members):
+        raise ValueError(f"got {key.shape[0]} keys for {len(members)} PNets")
+    stages = Stages(env.robot, opts, env.world, MemberBlocks(members))
+    b = _plan(stages, q, key, chunk, repair_width, members=len(members))
+    k = len(q)
+    return [_result(env.robot, b, stages, slice(m * k, (m + 1) * k)) for m in range(len(members))]
+
+
+def plan_cascade(env, pnets, queries, key: Array, opts: PlannerOptions = PlannerOptions(), *,
+                 order=None, chunk: int = 1024, repair_width: int = 256) -> NeuralPlanResult:
+    """The PNets as fallbacks: the first plans every query, the next the queries still
+    unsolved, and so on; each query keeps its first success.
+
+    Attempt ``j`` is :func:`plan_batch` with ``pnets[order[j]]`` and key
+    ``fold_in(key, j)`` on the queries no earlier attempt solved. A query
+    succeeds iff one of its attempts succeeds; its path, cost and cause are that
+    attempt's. A query no attempt solves keeps the failure closest to a success
+    (:data:`ntq_jax.types.CAUSE_RANK`; ties: the earliest attempt). The work
+    falls with every solved query, so the cascade costs one member's planning
+    plus the fallbacks' on the failures, against ``M`` members' for best-of-M
+    (:func:`ntq_jax.evaluate.best_of`), and reaches the same successes (any
+    member's) at the cost of the first member that solves a query instead of
+    the cheapest. Order the members best first (e.g. by success on validation
+    queries, as :func:`ntq_jax.evaluate.evaluate_env` does).
+
+    Args:
+        env, queries, key, opts, chunk, repair_width: as in :func:`plan_batch`.
+        pnets: ``M >= 1`` PNets (see :func:`as_pnet`).
+        order: the member order (a permutation of ``range(M)``, or a prefix of
+            one); default ``0..M-1``.
+
+    Returns:
+        A :class:`NeuralPlanResult` with ``member`` set; ``pnet_calls``,
+        ``replans``, ``seconds`` and ``compile_seconds`` are summed over the attempts.
+
+    Raises:
+        ValueError: as :func:`plan_batch`; no PNet; ``order`` not distinct member indices.
+    """
+    q = _check_inputs(env, queries, opts, chunk)
+    order = list(range(len(pnets)) if order is None else order)
+    if not order or len(set(order)) != len(order) or not all(0 <= m < len(pnets) for m in order):
+        raise ValueError(f"order must list distinct member indices of 0..{len(pnets) - 1}, "
+                         f"got {order}")
+    k = len(q)
+    paths = np.full((k, opts.max_len, env.dim), np.nan, np.float32)
+    lengths = np.zeros(k, np.int32)
+    costs = np.full(k, np.inf)
+    cause = np.full(k, PlanCause.INVALID_QUERY, np.int8)
+    rank = np.full(k, len(CAUSE_RANK))
+    calls, replans, member = np.zeros(k, np.int32), np.zeros(k, np.int32), np.zeros(k, np.int8)
+    seconds = compile_seconds = 0.0
+    left = np.arange(k)
+    for j, m in enumerate(order):
+        if not len(left):
+            break
+        res = plan_batch(env, pnets[m], q[left], fold_in(key, j), opts, chunk=chunk,
+                         repair_width=repair_width)
+        seconds, compile_seconds = seconds + res.seconds, compile_seconds + res.compile_seconds
+        calls[left] += res.pnet_calls
+        replans[left] += res.replans
+        r = np.array([CAUSE_RANK[PlanCause(int(c))] for c in res.cause])
+        better = r < rank[left]
+        rows = left[better]
+        paths[rows] = np.nan
+        paths[rows, :res.paths.shape[1]] = res.paths[better]
+        lengths[rows], costs[rows] = res.lengths[better], res.costs[better]
+        cause[rows], rank[rows], member[rows] = res.cause[better], r[better], m
+        left = left[~res.success]
+    success = cause == PlanCause.SUCCESS
+    top = max(1, int(lengths.max(initial=0)))
+    return NeuralPlanResult(paths[:, :top], lengths, success, costs, cause, calls, replans,
+                            seconds, compile_seconds, member)
+
+
+def _check_inputs(env, queries, opts: PlannerOptions, chunk: int) -> np.ndarray:
     q = np.asarray(queries, np.float32)
     if q.ndim != 3 or q.shape[1:] != (2, env.dim):
         raise ValueError(f"queries must have shape (K, 2, {env.dim}), got {q.shape}")
@@ -430,19 +562,32 @@ def plan_batch(env, pnet: Callable, queries, key: Array,
         raise ValueError("the bidirectional planner needs steerTo (steer=True)")
     if chunk < 1:
         raise ValueError(f"chunk must be >= 1, got {chunk}")
-    world = padded_world(env.world, pad_obstacles) if pad_obstacles > 0 else env.world
-    stages = Stages(env.robot, opts, world, as_pnet(pnet))
+    return q
+
+
+def _plan(stages: Stages, q: np.ndarray, key, chunk: int, repair_width: int,
+          members: int) -> _Batch:
+    """Steps 1-4 of :func:`plan_batch` for ``members`` planners side by side."""
+    opts = stages.opts
     size = bucket_size(min(len(q), chunk))
     width = bucket_size(min(repair_width, size))
-    b = _Batch.empty(len(q), opts.max_len, env.dim)
-    k_coarse, k_rep = jax.random.split(key)
+    b = _Batch.empty(members * len(q), opts.max_len, q.shape[2], members)
+    k_coarse, k_rep = split2(key)
     _coarse(stages, b, q, k_coarse, size)
     for r in range(opts.replan_rounds if opts.steer else 0):
         todo = np.flatnonzero(b.reached & ~b.feasible)
         if not len(todo):
             break
-        _replan_round(stages, b, todo, jax.random.fold_in(k_rep, r), width)
-    success = b.reached & b.feasible
-    top = max(1, int(b.lengths.max(initial=0)))
-    return NeuralPlanResult(b.paths[:, :top], b.lengths, success, _costs(env.robot, b, success),
-                            b.cause(), b.calls, b.replans, stages.run, stages.compile)
+        _replan_round(stages, b, todo, fold_in(k_rep, r), width)
+    return b
+
+
+def _result(robot, b: _Batch, stages: Stages, rows: slice) -> NeuralPlanResult:
+    """The :class:`NeuralPlanResult` of the batch rows ``rows`` (trimmed to their longest path)."""
+    success = (b.reached & b.feasible)[rows]
+    lengths = b.lengths[rows]
+    top = max(1, int(lengths.max(initial=0)))
+    sub = _Batch(b.paths[rows], lengths, b.valid[rows], b.reached[rows], b.feasible[rows],
+                 b.blocked[rows], b.calls[rows], b.replans[rows])
+    return NeuralPlanResult(sub.paths[:, :top], lengths, success, _costs(robot, sub, success),
+                            sub.cause(), sub.calls, sub.replans, stages.run, stages.compile)

@@ -23,6 +23,7 @@ import time
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.tree_util import Partial
 
 from ntq_jax.planners.smoothing import shortcut_batch
 from ntq_jax.robots.batch import is_valid_cm, steer_to_cm
@@ -62,6 +63,88 @@ class EnsemblePNet:
     @classmethod
     def tree_unflatten(cls, aux, children):
         return cls(children)
+
+
+@jax.tree_util.register_pytree_node_class
+class MemberBlocks:
+    """Several PNets planning side by side in one batch, each on its own block of rows.
+
+    Called as ``pnet(key, current (M*W, d), goal (M*W, d))``: the rows are ``M``
+    blocks of ``W`` (member-major), member ``m`` predicts for block ``m`` only
+    (``M`` predictions of ``W`` rows: the members' work, not ``M`` times it), and
+    the blocks are concatenated back. ``key`` is one key (every member gets it)
+    or ``M`` keys, one per member (:func:`fold_in` folds a stack of keys row by
+    row). Each block sees exactly what the member sees when it plans alone on
+    the same rows with that key, so :func:`ntq_jax.neural_planner.plan_members`
+    reproduces the members' own plans (a pytree of its members, like
+    :class:`EnsemblePNet`).
+    """
+
+    def __init__(self, members):
+        self.members = tuple(members)
+
+    def __len__(self) -> int:
+        return len(self.members)
+
+    def __call__(self, key, current: Array, goal: Array) -> Array:
+        m = len(self.members)
+        w = current.shape[0] // m
+        batched = is_key_stack(key)
+        stacked = _stacked_partials(self.members)
+        if stacked is not None:  # one function: vmapped over the members' bound arguments
+            func, args = stacked
+            keys = key if batched else jnp.broadcast_to(key, (m,) + key.shape)
+            out = jax.vmap(lambda a, k, c, g: func(*a, k, c, g))(
+                args, keys, current.reshape(m, w, -1), goal.reshape(m, w, -1))
+            return out.reshape(m * w, -1)
+        return jnp.concatenate([
+            p(key[i] if batched else key, current[i * w:(i + 1) * w], goal[i * w:(i + 1) * w])
+            for i, p in enumerate(self.members)])
+
+    def tree_flatten(self):
+        return self.members, None
+
+    @classmethod
+    def tree_unflatten(cls, aux, children):
+        return cls(children)
+
+
+def _stacked_partials(members):
+    """``(func, stacked args)`` when every member is a ``Partial`` of one function with
+    arguments of one structure and shape (e.g. an ensemble's members), else None."""
+    first = members[0]
+    if not all(isinstance(p, Partial) and p.func is first.func and not p.keywords
+               for p in members):
+        return None
+    trees = [jax.tree_util.tree_structure(p.args) for p in members]
+    shapes = [[jnp.shape(x) for x in jax.tree_util.tree_leaves(p.args)] for p in members]
+    if any(t != trees[0] for t in trees) or any(s != shapes[0] for s in shapes):
+        return None
+    return first.func, jax.tree_util.tree_map(lambda *xs: jnp.stack(xs),
+                                              *[p.args for p in members])
+
+
+def is_key_stack(key) -> bool:
+    """True for a stack of PRNG keys (one per member), False for a single key (typed
+    keys of shape ``()`` or raw ``uint32`` keys of shape ``(2,)``)."""
+    typed = jax.dtypes.issubdtype(key.dtype, jax.dtypes.prng_key)
+    return key.ndim > (0 if typed else 1)
+
+
+def fold_in(key, data) -> Array:
+    """:func:`jax.random.fold_in` of one key, or of each key of a stack (:func:`is_key_stack`)."""
+    if is_key_stack(key):
+        return jax.vmap(jax.random.fold_in, in_axes=(0, None))(key, data)
+    return jax.random.fold_in(key, data)
+
+
+def split2(key) -> tuple[Array, Array]:
+    """:func:`jax.random.split` into two, of one key or of each key of a stack."""
+    if is_key_stack(key):
+        ks = jax.vmap(jax.random.split)(key)
+        return ks[:, 0], ks[:, 1]
+    k0, k1 = jax.random.split(key)
+    return k0, k1
 
 
 def proposals_per_call(pnet) -> int:
@@ -204,7 +287,7 @@ def _connect(robot, world, pnet, key, a: Array, b: Array, active: Array, steps: 
         grow = live & ~joined & (s < steps)
         from_a = (s % 2) == 0
         cur, tgt = jnp.where(from_a, ea, eb), jnp.where(from_a, eb, ea)
-        new = propose(robot, world, pnet, jax.random.fold_in(key, s), cur, tgt, grow, padding)
+        new = propose(robot, world, pnet, fold_in(key, s), cur, tgt, grow, padding)
         pa = pa.at[rows, jnp.where(grow & from_a, na, steps + 1)].set(new, mode="drop")
         pb = pb.at[rows, jnp.where(grow & ~from_a, nb, steps + 1)].set(new, mode="drop")
         na = na + (grow & from_a)
@@ -243,7 +326,7 @@ def _forward(robot, world, pnet, key, starts, goals, active, opts, length):
             hit = _steer(robot, world, end, goals, opts.plan_padding, live)
         else:
             hit = live & near(end)
-        nxt = propose(robot, world, pnet, jax.random.fold_in(key, i), end, goals, live & ~hit,
+        nxt = propose(robot, world, pnet, fold_in(key, i), end, goals, live & ~hit,
                       opts.plan_padding, opts.steer)
         new = jnp.where(hit[:, None], goals, nxt) if opts.steer else nxt
         append = live & (~hit | opts.steer)

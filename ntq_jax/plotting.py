@@ -187,11 +187,13 @@ def curves_figure(history, labels: Sequence[str], out: Path) -> Path | None:
 
 def model_order(name: str) -> tuple:
     """Sort key of a result row's model: ``PNet_0..PNet_<M-1>`` by index, then the
-    ensemble rows (``PNet_ens``, then ``PNet_best-of-<N>``), then anything else by name."""
+    ensemble rows (``PNet_ens``, ``PNet_best-of-<N>``, ``PNet_cascade``), then anything
+    else by name."""
     tail = name.split("_", 1)[-1]
     if tail.isdigit():
         return (0, int(tail), name)
-    return (1 if tail == "ens" else 2 if tail.startswith("best-of-") else 3, 0, name)
+    rank = {"ens": 1, "cascade": 3}.get(tail, 2 if tail.startswith("best-of-") else 4)
+    return (rank, 0, name)
 
 
 def _fmt(x, nd=2) -> str:

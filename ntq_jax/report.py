@@ -3,7 +3,7 @@
 :func:`tables_md`, :func:`tables_tex` and :func:`results_csv` turn the result
 rows of :func:`ntq_jax.evaluate.evaluate_env` into text: one table per task and
 steerTo variant laid out as the paper's Tables I-IV (model rows PNet_0..PNet_3,
-then the ensemble rows PNet_ens and PNet_best-of-4 when evaluated;
+then the ensemble rows PNet_ens, PNet_best-of-4 and PNet_cascade when evaluated;
 uniform and non-trivial columns; success ratio and cost ratio), one block per
 environment with gamma_nt in its heading; the Markdown adds the 95% intervals,
 and a detail table with the cost ratio to the exact optimum (point robots),
@@ -63,12 +63,13 @@ COMPARISON_CSV_FIELDS = ["vs_model", "vs_only_model", "vs_only_baseline", "vs_su
 #: successes in the (environment, query kind, steerTo) cell (ties: the lower index).
 BEST_MEMBER = "best member"
 #: The paired comparisons of the report, ``(model, baseline)``: PNet_1..3 vs PNet_0, and
-#: the ensemble rows (``eval.ensemble``; best-of-4, or of 5 with a D4 member) vs their best
-#: member. Pairs whose model has no row are left out.
+#: the ensemble rows (``eval.ensemble``; best-of-4, or of 5 with a D4 member; the cascade)
+#: vs their best member. Pairs whose model has no row are left out.
 DEFAULT_PAIRS: tuple[tuple[str, str], ...] = (("PNet_1", "PNet_0"), ("PNet_2", "PNet_0"),
                                               ("PNet_3", "PNet_0"), ("PNet_ens", BEST_MEMBER),
                                               ("PNet_best-of-4", BEST_MEMBER),
-                                              ("PNet_best-of-5", BEST_MEMBER))
+                                              ("PNet_best-of-5", BEST_MEMBER),
+                                              ("PNet_cascade", BEST_MEMBER))
 _MEMBER = re.compile(r"PNet_(\d+)")
 
 
@@ -91,7 +92,8 @@ def _title(task, steer):
 
 
 def _model_key(name: str):
-    """Members ``PNet_<m>`` first, by index; then ``PNet_ens``, ``PNet_best-of-<N>``, and
+    """Members ``PNet_<m>`` first, by index; then ``PNet_ens``, ``PNet_best-of-<N>``,
+    ``PNet_cascade``, and
     other rows by name (:func:`ntq_jax.plotting.model_order`, the success figure's order)."""
     return plotting.model_order(name)
 

@@ -37,6 +37,12 @@ class PlanCause(enum.IntEnum):
     INVALID_QUERY = 3  #: start or goal invalid on the evaluation geometry, or not finite
 
 
+#: Outcomes from a success to the farthest failure: a combination of several planners'
+#: attempts on a query keeps the attempt of lowest rank (an infeasible path is closer to a
+#: success than no path, which is closer than an invalid query).
+CAUSE_RANK = {PlanCause.SUCCESS: 0, PlanCause.INFEASIBLE: 1, PlanCause.NO_PATH: 2,
+              PlanCause.INVALID_QUERY: 3}
+
 STATUS_NAMES = {s: s.name.lower() for s in PlanStatus}
 CAUSE_NAMES = {c: c.name.lower() for c in PlanCause}
 

@@ -171,7 +171,7 @@ def test_eval_ensemble_option():
     from ntq_jax.config import ConfigError
 
     default = load_config(None, [])
-    assert default.eval.ensemble is None and default.eval.ensemble_rows == ("ens", "best")
+    assert default.eval.ensemble is None and default.eval.ensemble_rows == ("ens", "best", "cascade")
     assert "ensemble" not in default.to_dict()["eval"]  # the default config hashes as before
     assert load_config(None, ["eval.ensemble=[best]"]).eval.ensemble_rows == ("best",)
     off = load_config(None, ["eval.ensemble=[]"])
@@ -179,3 +179,94 @@ def test_eval_ensemble_option():
     for bad in ("[foo]", "[ens,ens]", "ens"):
         with pytest.raises(ConfigError, match="eval.ensemble"):
             load_config(None, [f"eval.ensemble={bad}"])
+
+
+# ---------------------------------------------------------------------------
+# Members side by side (plan_members) and as fallbacks (plan_cascade)
+# ---------------------------------------------------------------------------
+
+def _assert_equal_results(a, b):
+    for f in FIELDS + ("pnet_calls",):
+        np.testing.assert_array_equal(getattr(a, f), getattr(b, f), err_msg=f)
+
+
+def test_group_chunks_of_one_group_are_padded_chunks():
+    from ntq_jax.batching import group_chunks, padded_chunks
+    rows = np.arange(11) * 3
+    got = list(group_chunks([rows], 4))
+    want = list(padded_chunks([rows], 4))
+    assert len(got) == len(want) == 3
+    for (lo, idx, mask), (lo2, _, (pad,), mask2) in zip(got, want):
+        assert lo == lo2
+        np.testing.assert_array_equal(idx, pad)
+        np.testing.assert_array_equal(mask, mask2)
+    # several groups: the longest sets the number of chunks, shorter blocks are padding
+    (lo, idx, mask), = group_chunks([np.array([5, 6]), np.array([], int), np.array([9])], 2)
+    np.testing.assert_array_equal(idx, [5, 6, 0, 0, 9, 0])
+    np.testing.assert_array_equal(mask, [1, 1, 0, 0, 1, 0])
+
+
+@pytest.mark.parametrize("real", [False, True], ids=["stand-ins", "pnets"])
+def test_plan_members_equals_each_member_alone(real):
+    """Members side by side in one batch plan exactly like each member alone, with its key
+    (stand-ins: the per-member loop; real PNets of one ensemble: the vmapped members)."""
+    from ntq_jax.neural_planner import plan_members
+    if real:
+        env = make_env("point/2")
+        q = np.asarray(env.sample_queries(jax.random.key(5), 40, 1.0, padding=0.0)[0],
+                       np.float32)
+        spec = models.ModelSpec.from_env(env, ModelConfig(hidden=(32, 32), dropout=0.5))
+        nets = E.member_pnets(models.init_ensemble(spec, 0, 3))
+    else:
+        env = make("wall")
+        q = np.asarray([[[2, 5], [8, 5]], [[1, 1], [9, 6]], [[4, 9], [6, 1]],
+                        [[2, 2], [8, 8]], [[1, 5], [9, 5]]], np.float32)
+        nets = [pnet("wall", SEEKER, sigma=0.7), pnet("wall", STAY), pnet("wall", ORACLE)]
+    opts = PlannerOptions(n_plan=15, replan_rounds=3, replan_steps=6)
+    keys = jnp.stack([jax.random.key(m + 10) for m in range(3)])
+    together = plan_members(env, nets, q, keys, opts, chunk=16, repair_width=4)
+    alone = [plan_batch(env, n, q, keys[m], opts, chunk=16, repair_width=4)
+             for m, n in enumerate(nets)]
+    assert sum(int(r.replans.max()) for r in alone) >= 1  # replanning ran
+    for a, b in zip(alone, together):
+        _assert_equal_results(a, b)
+    # one key for all: each member with that key
+    one = plan_members(env, nets, q, jax.random.key(4), opts, chunk=16, repair_width=4)
+    _assert_equal_results(plan_batch(env, nets[1], q, jax.random.key(4), opts, chunk=16,
+                                     repair_width=4), one[1])
+    with pytest.raises(ValueError, match="keys"):
+        plan_members(env, nets, q, keys[:2], opts)
+
+
+def test_cascade_keeps_the_first_success_and_replans_only_the_failures():
+    from ntq_jax.neural_planner import plan_cascade
+    env = make("wall")
+    q = np.asarray([[[2, 5], [8, 5]], [[1, 1], [9, 6]], [[4, 9], [6, 1]], [[2, 2], [8, 8]],
+                    [[3, 3], [3.5, 3.5]]], np.float32)
+    nets = [pnet("wall", STAY), pnet("wall", SEEKER, sigma=0.7), pnet("wall", ORACLE)]
+    key = jax.random.key(2)
+    res = plan_cascade(env, nets, q, key, OPTS, order=[0, 1, 2])
+    # attempt by attempt, by hand
+    a0 = plan_batch(env, nets[0], q, jax.random.fold_in(key, 0), OPTS)
+    left = np.flatnonzero(~a0.success)
+    assert a0.success[4] and len(left) == 4  # the stay-put member solves only the free query
+    a1 = plan_batch(env, nets[1], q[left], jax.random.fold_in(key, 1), OPTS)
+    left2 = left[~a1.success]
+    assert res.success.all() and res.member[4] == 0
+    np.testing.assert_array_equal(res.member[left[a1.success]], 1)
+    np.testing.assert_array_equal(res.member[left2], 2)
+    np.testing.assert_allclose(res.costs[left2], optimum("wall", q[left2]), rtol=1e-4)
+    np.testing.assert_array_equal(res.costs[left[a1.success]], a1.costs[a1.success])
+    np.testing.assert_array_equal(res.costs[4], a0.costs[4])
+    # the work: attempt 0 on every query, attempt 1 on its 4 failures
+    assert res.pnet_calls[4] == a0.pnet_calls[4]
+    for i, j in enumerate(left):
+        assert res.pnet_calls[j] >= a0.pnet_calls[j] + a1.pnet_calls[i]
+    for i in range(len(q)):
+        assert shapely_free("wall", res.path(i))
+    # a useless member alone: failures keep the closest cause; the order is checked
+    alone = plan_cascade(env, nets[:1], q, key, OPTS)
+    np.testing.assert_array_equal(alone.cause, a0.cause)
+    for bad in ([], [0, 0], [3]):
+        with pytest.raises(ValueError, match="order"):
+            plan_cascade(env, nets, q, key, OPTS, order=bad)

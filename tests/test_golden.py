@@ -41,12 +41,14 @@ NEW_KEYS = {"data_planner", "band_padding", "n_in_band", "n_out_band", "successe
 def _new_model(name: str) -> bool:
     """Models added after the recording: the ensemble rows (``eval.ensemble``, on by default).
 
-    True for a result row's model ``PNet_ens`` / ``PNet_best-of-<N>`` and for their paths
-    files ``paths/<env>/PNet_ens_*.npz`` / ``PNet_best-of-<N>_*.npz``: these rows and files
-    are not part of the golden record and are skipped; every PNet_0..3 row and file is
-    still compared bit for bit.
+    True for a result row's model ``PNet_ens`` / ``PNet_best-of-<N>`` / ``PNet_cascade`` and
+    for their paths files ``paths/<env>/PNet_ens_*.npz`` / ``PNet_best-of-<N>_*.npz`` /
+    ``PNet_cascade_*.npz`` / ``validation*.npz`` (the cascade's member order): these rows
+    and files are not part of the golden record and are skipped; every PNet_0..3 row and
+    file is still compared bit for bit.
     """
-    return name == "PNet_ens" or name.startswith(("PNet_ens_", "PNet_best-of-"))
+    return name in ("PNet_ens", "PNet_cascade") or name.startswith(
+        ("PNet_ens_", "PNet_best-of-", "PNet_cascade_", "validation"))
 
 
 TIME_KEYS = {"seconds", "compile_seconds", "seconds_per_query", "reference_seconds_per_query",

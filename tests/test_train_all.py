@@ -51,7 +51,7 @@ def test_run_folder_contents(run):
     res = json.loads((run / "results.json").read_text())
     rows = res["rows"]
     assert {(r["model"], r["query_kind"]) for r in rows} == {
-        (m, k) for m in [f"PNet_{m}" for m in range(4)] + ["PNet_ens", "PNet_best-of-4"]
+        (m, k) for m in [f"PNet_{m}" for m in range(4)] + ["PNet_ens", "PNet_best-of-4", "PNet_cascade"]
         for k in ("uniform", "nontrivial")}
     for r in rows:
         assert r["k_test"] == 16 and 0 <= r["success_ratio"] <= 1
@@ -74,7 +74,7 @@ def test_run_folder_contents(run):
     for m in range(4):
         assert f"| PNet_{m} |" in md
     assert (run / "tables.tex").read_text().count("\\begin{tabular}") == 1
-    assert len((run / "results.csv").read_text().strip().splitlines()) == 13
+    assert len((run / "results.csv").read_text().strip().splitlines()) == 1 + 2 * 7  # header + (4 members + 3 ensemble rows) x 2 query kinds
     for f in ("success_ratio.png", "examples_point_2.png", "queries_point_2.png"):
         assert (run / "figures" / f).stat().st_size > 1000
     assert (run / "data" / "point_2" / "env.json").is_file()
@@ -103,19 +103,20 @@ def test_every_success_is_collision_free(run):
             seg = np.linalg.norm(np.diff(p, axis=0), axis=1).sum()
             assert z["costs"][i] == pytest.approx(seg, rel=1e-4)
             checked += 1
-    assert len(list((run / "paths" / "point_2").glob("*.npz"))) == 12
+    assert len(list((run / "paths" / "point_2").glob("*.npz"))) == 7 * 2 + 1  # (4 members + 3 ensemble rows) x 2 kinds + validation.npz
     assert checked > 0
 
 
 def test_ensemble_rows(run):
-    """PNet_ens and PNet_best-of-4: rows in every output, measured like the members."""
+    """PNet_ens, PNet_best-of-4 and PNet_cascade: rows in every output, measured like the
+    members."""
     rows = json.loads((run / "results.json").read_text())["rows"]
     by = {(r["model"], r["query_kind"]): r for r in rows}
     keys = set(by[("PNet_0", "uniform")])
     md = (run / "tables.md").read_text()
     tex = (run / "tables.tex").read_text()
     csv_models = [ln.split(",")[2] for ln in (run / "results.csv").read_text().splitlines()[1:]]
-    for name in ("PNet_ens", "PNet_best-of-4"):
+    for name in ("PNet_ens", "PNet_best-of-4", "PNet_cascade"):
         assert f"| {name} |" in md and csv_models.count(name) == 2
         for kind in ("uniform", "nontrivial"):
             r = by[(name, kind)]
@@ -128,7 +129,8 @@ def test_ensemble_rows(run):
             assert int(z["success"].sum()) == r["successes"]
     assert "$\\mathsf{PNet}_\\mathsf{ens}$" in tex
     assert "$\\mathsf{PNet}_\\mathsf{best\\mbox{-}of\\mbox{-}4}$" in tex
-    assert md.index("| PNet_3 |") < md.index("| PNet_ens |") < md.index("| PNet_best-of-4 |")
+    assert (md.index("| PNet_3 |") < md.index("| PNet_ens |") < md.index("| PNet_best-of-4 |")
+            < md.index("| PNet_cascade |"))
     for kind in ("uniform", "nontrivial"):  # best-of-4 from the members' saved plans
         best = np.load(run / by[("PNet_best-of-4", kind)]["paths_file"])
         members = [np.load(run / by[(f"PNet_{m}", kind)]["paths_file"]) for m in range(4)]
@@ -137,6 +139,17 @@ def test_ensemble_rows(run):
         costs = np.stack([np.where(z["success"], z["costs"], np.inf) for z in members])
         np.testing.assert_array_equal(best["costs"], costs.min(axis=0))
         assert float(best["seconds"]) == pytest.approx(sum(float(z["seconds"]) for z in members))
+        # the cascade: members in the order of their validation success, each query's
+        # first success; every member's failures are somebody's fallback
+        val = np.load(run / "paths" / "point_2" / "validation.npz")
+        order = [int(m) for m in val["order"]]
+        assert sorted(order) == [0, 1, 2, 3]
+        assert list(val["success"][order]) == sorted(val["success"], reverse=True)
+        cas = np.load(run / by[("PNet_cascade", kind)]["paths_file"])
+        np.testing.assert_array_equal(cas["order"], order)
+        first = cas["member"] == order[0]
+        assert first[cas["success"]].mean() >= 0.5  # the first member solves most of them
+        assert set(np.unique(cas["member"][cas["success"]])) <= set(order)
 
 
 def test_rerun_resumes_without_redoing_work(run):
@@ -193,7 +206,7 @@ def test_report_has_paired_comparisons(run):
             for k in ("uniform", "nontrivial")}
     assert {(c["model"], c["baseline"], c["query_kind"]) for c in comps} == {
         (f"PNet_{m}", "PNet_0", k) for m in (1, 2, 3) for k in ("uniform", "nontrivial")} | {
-        (m, f"PNet_{best[k]}", k) for m in ("PNet_ens", "PNet_best-of-4")
+        (m, f"PNet_{best[k]}", k) for m in ("PNet_ens", "PNet_best-of-4", "PNet_cascade")
         for k in ("uniform", "nontrivial")}
     for c in comps:
         base = c["baseline"] + (" (best member)" if c["baseline_rule"] else "")

@@ -73,7 +73,7 @@ def test_run_folder_contents(run):
     assert all(r["data_planner"] == "astar" for r in rows)
     for m in range(4):
         assert f"| PNet_{m} |" in md
-    assert (run / "tables.tex").read_text().count("\\begin{tabular}") == 1
+    assert (run / "tables.tex").read_text().count("\\begin{tabular}") == 2  # results, comparisons
     assert len((run / "results.csv").read_text().strip().splitlines()) == 1 + 2 * 7  # header + (4 members + 3 ensemble rows) x 2 query kinds
     for f in ("success_ratio.png", "examples_point_2.png", "queries_point_2.png"):
         assert (run / "figures" / f).stat().st_size > 1000
@@ -217,3 +217,13 @@ def test_report_has_paired_comparisons(run):
         assert c["n"] == 16 and c["mcnemar_p"] == pytest.approx(want["mcnemar_p"])
         assert c["success_diff"] == pytest.approx(want["success_diff"])
         assert c["cost_n"] == want["cost_n"]
+    # the LaTeX report has them too: one comparison table, a line per comparison
+    tex = (run / "tables.tex").read_text()
+    assert tex.count("paired comparisons on the same test queries") == 1
+    body = tex[tex.index("paired comparisons on the same test queries"):]
+    lines = [ln for ln in body.splitlines() if ln.strip().startswith("point/2 & ")]
+    assert len(lines) == len(comps)
+    c = next(c for c in comps if c["model"] == "PNet_3" and c["query_kind"] == "nontrivial")
+    diff = f"{c['success_diff']:.3f} [{c['success_diff_ci95'][0]:.3f}, "
+    assert any("$\\mathsf{PNet}_3$ & $\\mathsf{PNet}_0$ & non-trivial & " + diff in ln
+               for ln in lines)

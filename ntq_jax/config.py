@@ -300,6 +300,11 @@ class TrainConfig:
         steps_per_call: training steps fused into one compiled call (``lax.scan``);
             checkpoints and validation happen between calls.
         keep_checkpoints: how many recent checkpoints to keep.
+        seed: the seed of the members' initialisation, minibatch order and dropout
+            (``null``, the default: the run's ``seed``). Set it to train again on
+            the same data (data and test queries follow the run's ``seed``), e.g. to
+            measure the spread over training seeds. Left out of the config hash when
+            null.
     """
 
     epochs: int = 50
@@ -312,8 +317,17 @@ class TrainConfig:
     eval_every: int = 0
     steps_per_call: int = 20
     keep_checkpoints: int = 2
+    seed: Optional[int] = None
+
+    # left out of to_dict (and so of the config hash) when None: configs hash as before
+    _OMIT_NONE = ("seed",)
+
+    def seed_for(self, run_seed: int) -> int:
+        """The training seed: ``seed``, or the run's seed when null."""
+        return run_seed if self.seed is None else self.seed
 
     def validate(self, p: str):
+        _check(self.seed is None or self.seed >= 0, f"{p}.seed", f"must be >= 0, got {self.seed}")
         _check(self.epochs >= 1, f"{p}.epochs", f"must be >= 1, got {self.epochs}")
         _check(self.batch_size >= 1, f"{p}.batch_size", f"must be >= 1, got {self.batch_size}")
         _check(self.optimizer in ("adagrad", "adam", "sgd"), f"{p}.optimizer",

@@ -225,7 +225,7 @@ def _size_unit(cfg_k: C.Config, env, env_name: str, k: int, names: list[str],
             + ", ".join(f"{nm} {len(p['inputs'])} rows" for nm, p in zip(names, prefixes)))
         training.train_ensemble(
             [(p["inputs"], p["targets"], p["path_index"]) for p in prefixes], env, cfg_k.model,
-            cfg_k.train, seed=cfg_k.seed, ckpt_dir=model_dir, progress=progress, labels=names,
+            cfg_k.train, seed=cfg_k.train.seed_for(cfg_k.seed), ckpt_dir=model_dir, progress=progress, labels=names,
             resolved_config=cfg_k.to_dict())
     ens = training.load_ensemble(model_dir)
     t1 = time.perf_counter()

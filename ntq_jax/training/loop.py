@@ -316,7 +316,8 @@ def train_from_folder(env_dir: str | os.PathLike, cfg, out_dir: str | os.PathLik
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     artifacts.write_text(out / "config.json", json.dumps(cfg.to_dict(), indent=1))
-    return train_ensemble(datasets, env, cfg.model, cfg.train, seed=cfg.seed, ckpt_dir=out,
+    return train_ensemble(datasets, env, cfg.model, cfg.train, seed=cfg.train.seed_for(cfg.seed),
+                          ckpt_dir=out,
                           progress=progress, labels=[f"D{i}" for i in range(len(datasets))],
                           shard=shard, resolved_config=cfg.to_dict())
 

@@ -177,20 +177,29 @@ class DataConfig:
 
 @dataclasses.dataclass(frozen=True)
 class PlannerEnvOverride:
-    """Per-environment planner budgets (the paper: BIT* 2/4/6 s data, 1/2/4 s eval for 2/4/6 links).
+    """Per-environment planner settings (the paper: BIT* 2/4/6 s data, 1/2/4 s eval for
+    2/4/6 links; or another planner for one map, e.g. the roadmap for a rigid-body map
+    in a config of grid-A* point maps).
 
     Attributes:
         env: the environment name exactly as listed in ``envs``.
         time_budget: BIT* seconds per query for data (``None`` = ``planner.time_budget``).
         eval_time_budget: BIT* seconds at evaluation (``None`` = ``planner.eval_time_budget``).
+        name: the planner of this environment (``None`` = ``planner.name``).
     """
 
     env: str
     time_budget: Optional[float] = None
     eval_time_budget: Optional[float] = None
+    name: Optional[str] = None
+
+    # left out of to_dict (and so of the config hash) when None: configs hash as before
+    _OMIT_NONE = ("name",)
 
     def validate(self, p: str):
         _check(bool(self.env), f"{p}.env", "must name an environment")
+        _check(self.name is None or self.name in PLANNERS, f"{p}.name",
+               f"must be one of {', '.join(PLANNERS)} or null; got {self.name!r}")
         for k in ("time_budget", "eval_time_budget"):
             v = getattr(self, k)
             _check(v is None or v > 0, f"{p}.{k}", f"must be > 0 or null, got {v}")
@@ -212,8 +221,9 @@ class PlannerConfig:
         time_budget: BIT* seconds per query during data generation.
         eval_time_budget: BIT* seconds per query at evaluation.
         workers: BIT* worker processes (0 = number of cores).
-        per_env: per-environment budgets (:class:`PlannerEnvOverride`); read them
-            with :meth:`time_budget_for` / :meth:`eval_time_budget_for`.
+        per_env: per-environment planners and budgets (:class:`PlannerEnvOverride`);
+            read them with :meth:`name_for`, :meth:`time_budget_for` and
+            :meth:`eval_time_budget_for`.
     """
 
     name: str = "astar"
@@ -249,6 +259,10 @@ class PlannerConfig:
             if o.env == env and getattr(o, key) is not None:
                 return getattr(o, key)
         return getattr(self, key)
+
+    def name_for(self, env: str) -> str:
+        """The planner of ``env``: its ``per_env`` name, else ``name``."""
+        return self._for(env, "name")
 
     def time_budget_for(self, env: str) -> float:
         """BIT* data-generation seconds per query for ``env``."""
@@ -452,8 +466,9 @@ class Config:
     """A whole experiment: environments, then every stage of the pipeline.
 
     Attributes:
-        task: ``point``, ``rigid`` or ``nlink`` (informational; the robot comes
-            from each environment).
+        task: ``point``, ``rigid`` or ``nlink`` (names the run folder; the robot,
+            and so the table a map's rows go to, comes from each environment, so
+            one config may mix robots).
         envs: preset names or JSON map paths.
         seed: master seed; every stage derives its keys from it.
         out_dir: where run folders are written.

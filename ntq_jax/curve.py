@@ -271,7 +271,7 @@ def run_curve(cfg: C.Config, env_name: str, sizes: Sequence[int], out: str | Pat
     t0 = time.perf_counter()
     gen_cfg = size_config(cfg, env_name, sizes[-1])
     log(f"[{env_name}] data: {sizes[-1]} queries x {len(cfg.data.datasets)} datasets "
-        f"({cfg.planner.name}), generated once for sizes {sizes}")
+        f"({cfg.planner.name_for(env_name)}), generated once for sizes {sizes}")
     summary = data_mod.generate_datasets(env, gen_cfg, out / "data", env_name=env_name,
                                          progress=progress, figure=False)
     data_dir = Path(summary["env_dir"])
@@ -294,7 +294,7 @@ def run_curve(cfg: C.Config, env_name: str, sizes: Sequence[int], out: str | Pat
     files = {"json": artifacts.write_json(out / "curve.json", doc,
                                           default=artifacts.json_default),
              "md": write_table(rows, out / "curve.md",
-                               f"Learning curve: {env_name} ({cfg.planner.name} data, "
+                               f"Learning curve: {env_name} ({cfg.planner.name_for(env_name)} data, "
                                f"K_test {cfg.eval.k_test} per kind)"),
              "png": None}
     if figures:

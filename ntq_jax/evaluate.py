@@ -78,7 +78,8 @@ from ntq_jax.planners import plan
 from ntq_jax.planners.verify import check_paths
 from ntq_jax.queries import wilson_interval
 from ntq_jax.robots.batch import distances, valid_states
-from ntq_jax.types import CAUSE_NAMES, CAUSE_RANK, QUERY_KINDS, PlanCause, PlanStatus
+from ntq_jax.types import (CAUSE_NAMES, CAUSE_RANK, QUERY_KINDS, TASK_OF_ROBOT, PlanCause,
+                           PlanStatus)
 
 EVAL_TAG = 0x7E57  # key tag of the test queries (training uses other streams)
 
@@ -86,6 +87,12 @@ EVAL_TAG = 0x7E57  # key tag of the test queries (training uses other streams)
 ENSEMBLE = "ens"  # model id of the ensemble neural planner (row PNet_ens)
 CASCADE = "cascade"  # model id of the members as fallbacks (row PNet_cascade)
 VALIDATION_TAG = EVAL_TAG + 5  # key tag of the cascade's validation queries
+
+
+def task_of(env) -> str:
+    """The task of an environment's robot (``point``, ``rigid`` or ``nlink``): the paper
+    table its rows belong to, whatever ``config.task`` says (a config may mix robots)."""
+    return TASK_OF_ROBOT.get(env.robot.kind, env.robot.kind)
 
 
 def best_id(num_members: int) -> str:
@@ -168,7 +175,8 @@ def reference_plans(env, cfg, env_name: str, slug: str, queries: dict, out_dir: 
     padding, seed)`` returning a :class:`ntq_jax.types.PlanResult`. The optimum is
     the visibility graph's (``ntq_jax.plan(env, q, "visgraph", padding=0.0)``).
     """
-    name = cfg.planner.name if planner is None else getattr(planner, "__name__", "custom")
+    name = (cfg.planner.name_for(env_name) if planner is None
+            else getattr(planner, "__name__", "custom"))
     fp = artifacts.fingerprint(slug, name, cfg.planner, cfg.eval.motion_check,
                                {k: artifacts.array_digest(v) for k, v in queries.items()},
                                {k: len(v) for k, v in queries.items()})
@@ -195,7 +203,7 @@ def reference_plans(env, cfg, env_name: str, slug: str, queries: dict, out_dir: 
 def _run_reference(env, q, cfg, env_name, planner, out_dir: Path):
     if planner is not None:
         return planner(env, q, padding=0.0, seed=cfg.seed)
-    name = cfg.planner.name
+    name = cfg.planner.name_for(env_name)
     run, _ = resolve_planner(name, planner_options(cfg, env_name, name, evaluation=True),
                              cache_dir=Path(out_dir) / "roadmap")
     return run(env, q, padding=0.0, seed=cfg.seed)
@@ -327,14 +335,14 @@ def band_metrics(success: np.ndarray, band: np.ndarray) -> dict:
     return out
 
 
-def _data_planner(cfg, data_env_dir) -> str:
-    """The planner that made the datasets (their metadata), else the config's."""
+def _data_planner(cfg, env_name: str, data_env_dir) -> str:
+    """The planner that made the datasets (their metadata), else the config's for the map."""
     for meta in sorted(Path(data_env_dir).glob("D*/meta.json")) if data_env_dir else []:
         try:
             return str(json.loads(meta.read_text())["planner"]["name"])
         except (OSError, KeyError, TypeError, json.JSONDecodeError):
             continue
-    return cfg.planner.name
+    return cfg.planner.name_for(env_name)
 
 
 def _gamma(env, cfg, data_env_dir, slug: str, out_dir: Path) -> dict:
@@ -481,7 +489,7 @@ def _row(ctx: _EnvEval, m: int | str, kind: str, steer, f: Path, got: dict) -> d
     specs = [dict(p_nt=d.p_nt, prune=d.prune) for d in cfg.data.datasets]
     member = m if isinstance(m, int) else None
     row = {
-        "task": cfg.task, "env": ctx.env_name, "env_slug": ctx.slug, "model": model_name(m),
+        "task": task_of(ctx.env), "env": ctx.env_name, "env_slug": ctx.slug, "model": model_name(m),
         "member": member, "dataset": specs[member] if member is not None and member < len(specs)
         else None,
         "query_kind": kind, "steer": bool(steer),
@@ -514,7 +522,7 @@ def evaluate_env(env, ensemble, cfg, run_dir, *, env_name: str, data_env_dir=Non
         data_env_dir: the environment's dataset folder (for gamma_nt and the
             datasets' p_nt); optional.
         planner: a reference planner callable ``(env, q, *, padding, seed)`` instead
-            of ``cfg.planner.name``.
+            of the map's planner (``cfg.planner.name_for(env_name)``).
         members: which members to evaluate (default all).
         eval_dir: the folder of ``queries.npz``, ``reference.npz`` and ``gamma.json``
             (default ``<run_dir>/eval/<env_slug>``); several runs can share one, e.g.
@@ -537,7 +545,7 @@ def evaluate_env(env, ensemble, cfg, run_dir, *, env_name: str, data_env_dir=Non
     ctx = _EnvEval(env, cfg, run_dir, env_name, slug, queries,
                    reference_plans(env, cfg, env_name, slug, queries, out_dir, planner),
                    _gamma(env, cfg, data_env_dir, slug, out_dir),
-                   _data_planner(cfg, data_env_dir),
+                   _data_planner(cfg, env_name, data_env_dir),
                    {kind: in_band(env, q) for kind, q in queries.items()}, log)
     together = (len(pnets) >= 2 and sorted(members) == list(range(len(pnets)))
                 and cfg.eval.ensemble_rows)

@@ -192,7 +192,7 @@ def _run_env(cfg: C.Config, run: Path, name: str, env, *, progress, figures: boo
     # -- data ----------------------------------------------------------------
     t0 = time.perf_counter()
     log(f"[{name}] data: {cfg.data.k_train_for(name)} queries x {len(cfg.data.datasets)} "
-        f"datasets ({cfg.planner.name})")
+        f"datasets ({cfg.planner.name_for(name)})")
     summary = data_mod.generate_datasets(env, cfg, run / "data", env_name=name,
                                          progress=progress, figure=figures)
     data_dir = Path(summary["env_dir"])

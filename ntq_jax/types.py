@@ -46,6 +46,9 @@ CAUSE_RANK = {PlanCause.SUCCESS: 0, PlanCause.INFEASIBLE: 1, PlanCause.NO_PATH: 
 STATUS_NAMES = {s: s.name.lower() for s in PlanStatus}
 CAUSE_NAMES = {c: c.name.lower() for c in PlanCause}
 
+#: The task (the paper's table: point robot, rigid body, n-link arm) of each robot kind.
+TASK_OF_ROBOT = {"point": "point", "rigid_body": "rigid", "nlink": "nlink"}
+
 #: The two test-query sets of an evaluation, in table order (names in its saved files).
 QUERY_KINDS = ("uniform", "nontrivial")
 

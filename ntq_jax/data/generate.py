@@ -111,7 +111,7 @@ def resolve_run(env, config, out_dir, env_name: str | None, planner) -> RunSpec:
     specs = list(dc.datasets)
     k = dc.k_train_for(env_name)
     pad, prune_pad = env.resolve_padding(None), env.resolve_padding(dc.prune_padding)
-    planner = config.planner.name if planner is None else planner
+    planner = config.planner.name_for(env_name) if planner is None else planner
     custom = callable(planner)
     options = (dict(getattr(planner, "options", {}) or {}) if custom
                else planner_options(config, env_name, str(planner)))
@@ -332,7 +332,7 @@ def generate_datasets(env, config, out_dir, *, env_name: str | None = None, plan
         out_dir: the output root.
         env_name: the name listed in ``config.envs`` (for per-env overrides and
             the folder name); default ``env.name``.
-        planner: ``None`` (``config.planner.name``), a planner name, or a callable
+        planner: ``None`` (``config.planner.name_for(env_name)``), a planner name, or a callable
             ``(env, queries (K, 2, d), *, padding, seed) -> PlanResult`` (its
             results are verified with :func:`ntq_jax.planners.verify.finalize`).
         progress: progress bars per stage (:func:`ntq_jax.progress.open_bar`; True = tqdm).

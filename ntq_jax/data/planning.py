@@ -38,14 +38,15 @@ def planner_options(config, env_name: str, name: str | None = None, *,
                     evaluation: bool = False) -> dict:
     """The keyword options passed to ``ntq_jax.planners.plan`` for planner ``name``.
 
-    ``name`` defaults to ``config.planner.name``; ``evaluation`` picks BIT*'s
+    ``name`` defaults to the environment's planner (``config.planner.name_for(env_name)``);
+    ``evaluation`` picks BIT*'s
     evaluation budget instead of the data-generation one, and the evaluation's
     motion check (``config.eval.motion_check``) for the planner's checks and the
     verification of its paths. Data generation keeps the planners' default, the
     discretised check (the paper's), at the data padding.
     """
     pc = config.planner
-    name = name or pc.name
+    name = name or pc.name_for(env_name)
     extra = {"check": config.eval.motion_check} if evaluation else {}
     if name == "astar":
         return {"resolution": pc.resolution, **extra}

@@ -282,6 +282,33 @@ def test_point_over_90_percent(tmp_path):
     assert _find(cs, text, "point/2")["verdict"] == R.UNRESOLVED  # [0.88, 0.96]
 
 
+def test_nlink_gain_grows_with_links(tmp_path):
+    for env, (a, b) in zip(R.PAPER_TABLES["IV"]["envs"], [(12, 10), (60, 10), (80, 10)]):
+        write_summary(tmp_path, make_summary(env, comparisons=[
+            _comp(env, "PNet_3", "PNet_0", "nontrivial", True, a, b)]))
+    c = _find(R.claims(R.load_summaries(tmp_path)), "PNet_3's gain over PNet_0", "nlink")
+    assert c["verdict"] == R.HOLDS  # gains +0.004, +0.100, +0.140 with intervals +-0.04
+    assert "nlink/4 minus nlink/2 +0.096" in c["evidence"]
+    write_summary(tmp_path, make_summary("nlink/6", comparisons=[
+        _comp("nlink/6", "PNet_3", "PNet_0", "nontrivial", True, 15, 10)]))
+    c = _find(R.claims(R.load_summaries(tmp_path)), "PNet_3's gain over PNet_0", "nlink")
+    assert c["verdict"] == R.UNRESOLVED  # 4 links: larger; 6 links: not resolvable
+
+
+def test_cost_ratio_lower_for_rigid_and_six_links(tmp_path):
+    for env in R.MAPS:
+        s = make_summary(env)
+        low = env.startswith("rigid") or env == "nlink/6"
+        for r in s["rows"]:
+            r["cost_ratio"] = (0.95 if low else 1.03) + R.MAPS.index(env) * 1e-3
+        write_summary(tmp_path, s)
+    c = _find(R.claims(R.load_summaries(tmp_path)), "cost ratio lower", "rigid")
+    assert c["verdict"] == R.HOLDS and "Mann-Whitney one-sided p 0.002" in c["evidence"]
+    (tmp_path / "point" / "point_3" / "summary.json").unlink()
+    c = _find(R.claims(R.load_summaries(tmp_path)), "cost ratio lower", "rigid")
+    assert c["verdict"] == R.NOT_RUN and c["evidence"] == "10 of 11 maps run"
+
+
 # ---------------------------------------------------------------------------
 # Seed variance
 # ---------------------------------------------------------------------------
@@ -306,6 +333,23 @@ def test_seed_variance_mean_and_range(tmp_path):
     assert "nlink/4 3 of 3 (0, 1, 2)" in text and "rigid/0 0 of 3" in text
     # the main tables use the main run only
     assert "| PNet_3 | 0.800 [0.760, 0.840] |" in text
+
+
+def test_check_seed_runs(tmp_path):
+    write_summary(tmp_path, make_summary("rigid/0"))
+    write_summary(tmp_path, make_summary("rigid/0", train_seed=1), seed_dir=1)
+    assert R.check_seed_runs(R.load_summaries(tmp_path)) == []
+    other = make_summary("rigid/0", train_seed=3)
+    other["fingerprints"]["datasets"]["D1"] = "e" * 64
+    write_summary(tmp_path, other, seed_dir=2)
+    write_summary(tmp_path, make_summary("point/0", train_seed=1), seed_dir=1)
+    probs = R.check_seed_runs(R.load_summaries(tmp_path))
+    assert probs == [
+        "point/point_0/seeds/train_seed_1/summary.json: no main run of point/0",
+        "rigid/rigid_0/seeds/train_seed_2/summary.json: train_seed 3 but folder train_seed_2",
+        "rigid/rigid_0/seeds/train_seed_2/summary.json: dataset fingerprints differ from the "
+        "main run of rigid/0"]
+    assert "Seed-run problems: " in R.render(tmp_path)
 
 
 # ---------------------------------------------------------------------------
@@ -407,5 +451,7 @@ def test_committed_reproduction_md_is_current():
 
 
 def test_committed_summaries_are_paper_size():
-    bad = {s["_path"]: p for s in _committed() if (p := R.check_summary(s))}
+    summaries = _committed()
+    bad = {s["_path"]: p for s in summaries if (p := R.check_summary(s))}
     assert not bad, bad
+    assert R.check_seed_runs(summaries) == []

@@ -77,7 +77,7 @@ from ntq_jax.stats import mcnemar_exact
 __all__ = ["PAPER", "PAPER_TABLES", "PAPER_K_TRAIN", "PAPER_K_TEST", "PAPER_PADDING",
            "PAPER_DATASETS", "MAPS", "SEED_MAPS", "ALPHA", "HOLDS", "FAILS", "UNRESOLVED",
            "NOT_RUN", "load_summaries", "check_summary", "check_seed_runs", "verdict", "claims", "seed_variance",
-           "render", "write", "main"]
+           "seed_variance_diffs", "render", "write", "main"]
 
 DOC_NAME = "REPRODUCTION.md"
 TASKS = ("point", "rigid", "nlink")
@@ -827,15 +827,21 @@ def claims(summaries) -> list[dict]:
 # ---------------------------------------------------------------------------
 
 
-def seed_variance(summaries, env: str) -> list[dict]:
-    """Mean and range over the training seeds of ``env`` (main run and ``seeds/*``; one
-    summary per train seed, the main run first): one dict per (steerTo, model, kind) with
-    ``seeds``, ``success_mean``/``min``/``max`` and ``cost_mean``/``min``/``max``."""
+def _seed_runs(summaries, env: str) -> list[dict]:
+    """The runs of ``env``, one per train seed (the main run first, as loaded)."""
     runs, seen = [], set()
     for s in summaries:
         if s.get("env") == env and s.get("train_seed") not in seen:
             seen.add(s.get("train_seed"))
             runs.append(s)
+    return runs
+
+
+def seed_variance(summaries, env: str) -> list[dict]:
+    """Mean and range over the training seeds of ``env`` (main run and ``seeds/*``; one
+    summary per train seed, the main run first): one dict per (steerTo, model, kind) with
+    ``seeds``, ``success_mean``/``min``/``max`` and ``cost_mean``/``min``/``max``."""
+    runs = _seed_runs(summaries, env)
     cells: dict = {}
     for s in runs:
         for r in s.get("rows", []):
@@ -857,6 +863,30 @@ def seed_variance(summaries, env: str) -> list[dict]:
     return out
 
 
+def seed_variance_diffs(summaries, env: str) -> list[dict]:
+    """Mean and range over the training seeds of ``env`` of every paired success difference
+    (model - baseline): one dict per (steerTo, model, baseline, kind) with ``seeds``,
+    ``diff_mean``/``min``/``max`` and ``significant`` (seeds with McNemar p < ALPHA)."""
+    cells: dict = {}
+    for s in _seed_runs(summaries, env):
+        for c in s.get("comparisons", []):
+            kind = c["query_kind"]
+            key = (not bool(c.get("steer", True)), _model_key(c["model"]),
+                   KINDS.index(kind) if kind in KINDS else 9, c["model"], c["baseline"], kind,
+                   bool(c.get("steer", True)))
+            cells.setdefault(key, []).append((s.get("train_seed"), c))
+    out = []
+    for key in sorted(cells):
+        got = cells[key]
+        d = [c["success_diff"] for _, c in got]
+        out.append({"model": key[3], "baseline": key[4], "query_kind": key[5], "steer": key[6],
+                    "seeds": sorted((k for k, _ in got), key=str),
+                    "diff_mean": sum(d) / len(d), "diff_min": min(d), "diff_max": max(d),
+                    "significant": sum(_num(c.get("mcnemar_p")) and c["mcnemar_p"] < ALPHA
+                                       for _, c in got)})
+    return out
+
+
 # ---------------------------------------------------------------------------
 # The document
 # ---------------------------------------------------------------------------
@@ -872,7 +902,8 @@ def _header(summaries) -> list[str]:
            "Generated from the committed summaries (`<task>/<map>/summary.json`, seed runs in "
            "`<task>/<map>/seeds/train_seed_<k>/summary.json`) by "
            "`python -m ntq_jax.reproduction results/paper` (do not edit by hand; "
-           "`python -m ntq_jax.reproduction results/paper --check` tells whether it is current). "
+           "`python -m ntq_jax.reproduction results/paper --check` tells whether it is current; "
+           "`python scripts/reproduce.py --report-only` regenerates it too). "
            "The summaries were made with:", ""]
     out += [f"    {c}" for c in cmds] or ["    (no summary yet: `python scripts/reproduce.py ...`)"]
     out += ["", "Success ratio: successes / K_test, with its 95% Wilson interval. Cost ratio: "
@@ -1045,6 +1076,17 @@ def _seeds(summaries) -> list[str]:
                        f"{_f(st['success_mean'])} | [{_f(st['success_min'])}, "
                        f"{_f(st['success_max'])}] | {_f(st['cost_mean'])} | "
                        f"[{_f(st['cost_min'])}, {_f(st['cost_max'])}] |")
+        diffs = seed_variance_diffs(summaries, env)
+        if diffs:
+            out += ["", "Paired success differences over the seeds (an ensemble row's baseline is "
+                    "each seed's best member; another best member is another line):", "",
+                    "| Model | vs | steerTo | kind | seeds | diff mean | range | "
+                    "seeds with McNemar p < 0.05 |", "|---|---|---|---|---|---|---|---|"]
+            for d in diffs:
+                out.append(f"| {d['model']} | {d['baseline']} | {'yes' if d['steer'] else 'no'} | "
+                           f"{_kind_name(d['query_kind'])} | {len(d['seeds'])} | "
+                           f"{_signed(d['diff_mean'])} | [{_signed(d['diff_min'])}, "
+                           f"{_signed(d['diff_max'])}] | {d['significant']} |")
         out.append("")
     return out
 

@@ -335,6 +335,19 @@ def test_seed_variance_mean_and_range(tmp_path):
     assert "| PNet_3 | 0.800 [0.760, 0.840] |" in text
 
 
+def test_seed_variance_of_paired_differences(tmp_path):
+    for seed, (a, b) in ((0, (40, 10)), (1, (20, 10)), (2, (30, 10))):
+        s = make_summary("rigid/0", train_seed=seed, comparisons=[
+            _comp("rigid/0", "PNet_3", "PNet_0", "nontrivial", True, a, b)])
+        write_summary(tmp_path, s, seed_dir=None if seed == 0 else seed)
+    (d,) = R.seed_variance_diffs(R.load_summaries(tmp_path), "rigid/0")
+    assert d["seeds"] == [0, 1, 2] and d["diff_mean"] == pytest.approx(0.04)
+    assert (d["diff_min"], d["diff_max"]) == (0.02, 0.06)
+    assert d["significant"] == 2  # 40/10 and 30/10; 20/10 has p 0.099
+    assert "| PNet_3 | PNet_0 | yes | non-trivial | 3 | +0.040 | [+0.020, +0.060] | 2 |" in (
+        R.render(tmp_path))
+
+
 def test_check_seed_runs(tmp_path):
     write_summary(tmp_path, make_summary("rigid/0"))
     write_summary(tmp_path, make_summary("rigid/0", train_seed=1), seed_dir=1)

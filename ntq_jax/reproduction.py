@@ -22,15 +22,19 @@ training seed). A summary holds ``task``, ``env``, ``train_seed``, the resolved
 ``fingerprints`` of its datasets and models, per-stage ``timings`` and the
 ``command`` that made it.
 
-Functions (pure, data only; no JAX):
+Functions (pure, data only; this module computes nothing with JAX):
 
 * :func:`load_summaries` reads every summary under a root, sorted by task, map
   (the paper's order), main run before seed runs, train seed.
 * :func:`check_summary` lists what makes a summary not a paper-size run
   (K_train, K_test, padding, datasets D0..D3, fingerprints, timings, rows);
-  empty when fine.
+  empty when fine. :func:`check_seed_runs` checks that each seed run has its
+  folder's train seed and the main run's dataset fingerprints (same data).
 * :func:`claims` checks the trend claims of the paper's Results section, each
-  one line with a verdict and the numbers (see "Verdicts" below).
+  one line with a verdict and the numbers (see "Claims" and "Verdicts" below).
+* :func:`seed_variance` and :func:`seed_variance_diffs`: mean and range over a
+  map's training seeds of every row (success, cost ratio) and of every paired
+  success difference (with how many seeds reach p < 0.05).
 * :func:`render` turns a root into the whole Markdown document: how it was
   made, coverage (which of the 11 maps and of Table III are present, which are
   missing), Tables I-IV (ours with the 95% interval next to the paper's; the
@@ -44,6 +48,34 @@ Functions (pure, data only; no JAX):
 Command line: ``python -m ntq_jax.reproduction [root]`` (default ``results/paper``)
 writes the document and prints its path; ``--check`` writes nothing and exits 1
 with a one-line message if the file on disk differs from what :func:`render` gives.
+
+Claims (the paper's words in quotes; "with steerTo" = Tables I, II, IV):
+
+* "In most cases, PNet_2 and PNet_3 outperform PNet_0": PNet_3 >= PNet_0 on
+  non-trivial queries per map and pooled per task, PNet_2 and PNet_3 >= PNet_0
+  pooled per task over both kinds;
+* point: "all models perform well with a success rate of over 90%", per map
+  (holds if every 95% interval is above 0.9, does not hold if one is below);
+* rigid: "The PNet_3 model has the highest success ratio in all cases except
+  one (Environment 3, Non-trivial Query)", per map and kind;
+* n-link: "The success ratio over uniform queries is in the range of 0.9, 0.8
+  and 0.7 for the case of 2, 4 and 6-link" (tested as falling from 2 to 4 to 6
+  links), "about a 25% increase in the success ratio over PNet_0 for the 6-link
+  (non-trivial queries) case" (holds if the paired 95% interval of our
+  difference contains 0.25 x our PNet_0 success and the difference is
+  significant, does not hold if the interval excludes it), and the gain on
+  4 and 6 links larger than on 2 links ("much more evident");
+* "The cost ratio is relatively lower for the rigid body and 6-link case":
+  one-sided exact Mann-Whitney test of the maps' mean cost ratios;
+* "The success ratio for all PNet models is naturally higher over uniform test
+  queries", per task and model (Fisher, pooled over maps);
+* "The success ratio also generally has an inverse relation with gamma_nt",
+  per task, per query kind, and over all 11 maps;
+* without steerTo (Table III): "the performance of PNet_3 is the worst" and
+  "The PNet_0 model performs best on uniform queries in all environments" per
+  map; "PNet_1 or PNet_2 show better performance over non-trivial queries in
+  some cases" (holds if one does, significantly); "The success ratio of all
+  PNet models is adversely affected", per model.
 
 Verdicts (:func:`verdict`, level :data:`ALPHA` = 0.05): a claim that model A's
 success ratio is at least model B's *holds* if our difference A - B has the

@@ -751,10 +751,12 @@ def _claims_nlink(main) -> list[dict]:
              else UNRESOLVED)
     else:
         v = UNRESOLVED
+    side = ("" if v != FAILS else " (our gain is larger)" if t["diff"] > claimed
+            else " (our gain is smaller)")
     out.append(_claim("IV", text, "nlink/6 (claimed diff = 0.25 x our PNet_0)", v,
                       f"{_f(_row_s(s, 'PNet_3', 'nontrivial'))} vs {_f(s0)} "
                       f"({t['diff'] / s0:+.1%}); claimed diff {claimed:+.3f}, ours "
-                      f"{_test_text(t)}", paper))
+                      f"{_test_text(t)}{side}", paper))
     return out
 
 

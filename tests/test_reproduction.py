@@ -265,6 +265,7 @@ def test_six_link_25_percent(tmp_path):
     write_summary(tmp_path, small)
     c = _find(R.claims(R.load_summaries(tmp_path)), "PNet_3 about 25%", "nlink/6")
     assert c["verdict"] == R.FAILS  # the claimed +0.100 is outside [-0.02, 0.06]
+    assert c["evidence"].endswith("(our gain is smaller)")
 
 
 def test_point_over_90_percent(tmp_path):

@@ -469,3 +469,20 @@ def test_committed_summaries_are_paper_size():
     bad = {s["_path"]: p for s in summaries if (p := R.check_summary(s))}
     assert not bad, bad
     assert R.check_seed_runs(summaries) == []
+
+
+def test_render_tolerates_missing_values(tmp_path):
+    """summaries.py records None for a timing or fingerprint it could not read, and a
+    model that solved nothing has a NaN cost ratio: the document still renders."""
+    s = make_summary("point/3", {("PNet_1", "nontrivial", True): 0})
+    s["timings"] = {"data": None, "train": 12.0, "eval": None}
+    s["fingerprints"]["datasets"]["D3"] = None
+    s["rows"][3]["cost_ratio"] = float("nan")
+    write_summary(tmp_path, s)
+    text = R.render(tmp_path)
+    assert "| point/3 | - | 12.0 | - | 12.0 |" in text
+    assert ("| PNet_1 | 0.800 [0.760, 0.840] | 0.958 | 1.010 | 1.069 | 0.000 [0.000, 0.040] | "
+            "0.896 | - | 1.167 |") in text
+    probs = R.check_summary(R.load_summaries(tmp_path)[0])
+    assert "dataset fingerprints missing: D3" in probs
+    assert "timings of data/train/eval missing" in probs

@@ -87,6 +87,7 @@ EVAL_TAG = 0x7E57  # key tag of the test queries (training uses other streams)
 ENSEMBLE = "ens"  # model id of the ensemble neural planner (row PNet_ens)
 CASCADE = "cascade"  # model id of the members as fallbacks (row PNet_cascade)
 VALIDATION_TAG = EVAL_TAG + 5  # key tag of the cascade's validation queries
+CASCADE_VERSION = 2  # in the cascade cells' fingerprint: bump when plan_cascade's results change
 
 
 def task_of(env) -> str:
@@ -564,7 +565,8 @@ def evaluate_env(env, ensemble, cfg, run_dir, *, env_name: str, data_env_dir=Non
                      for kind in QUERY_KINDS]
         if together and CASCADE in cfg.eval.ensemble_rows:
             order = validation_order(ctx, pnets, steer)
-            rows += [_cell(ctx, pnets, CASCADE, kind, steer, len(pnets), order=order)[0]
+            rows += [_cell(ctx, pnets, CASCADE, kind, steer, len(pnets), CASCADE_VERSION,
+                           order=order)[0]
                      for kind in QUERY_KINDS]
     return rows
 

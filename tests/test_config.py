@@ -77,3 +77,29 @@ def test_missing_and_unparsable_files(tmp_path):
         config.load(f)
     with pytest.raises(ConfigError, match="KEY=VALUE"):
         config.load(None, ["data.k_train"])
+
+
+def test_per_env_planner_and_training_seed():
+    from ntq_jax.evaluate import task_of
+    from ntq_jax import make_env
+    from ntq_jax.pipeline import load_config
+
+    cfg = load_config(None, [])  # the embedded default: four point maps and rigid/0
+    assert cfg.envs[-1] == "rigid/0"
+    assert [cfg.planner.name_for(e) for e in cfg.envs] == ["astar"] * 4 + ["roadmap"]
+    assert [task_of(make_env(e)) for e in ("point/1", "rigid/0", "nlink/4")] == [
+        "point", "rigid", "nlink"]
+    # a per-map planner that does not exist is one error naming the key
+    with pytest.raises(ConfigError, match=r"planner\.per_env\[0\]\.name"):
+        load_config(None, ["planner.per_env=[{env: rigid/0, name: rrt}]"])
+    # no name: the config's planner, and the key stays out of the hash
+    plain = config.load(None, ["planner.per_env=[{env: rigid/0, time_budget: 1.0}]"])
+    assert plain.planner.name_for("rigid/0") == plain.planner.name
+    assert "name" not in plain.to_dict()["planner"]["per_env"][0]
+    # train.seed: null is the run's seed (and hashes as before); a value retrains
+    assert cfg.train.seed is None and cfg.train.seed_for(cfg.seed) == cfg.seed
+    assert "seed" not in cfg.to_dict()["train"]
+    other = load_config(None, ["train.seed=2"])
+    assert other.train.seed_for(other.seed) == 2 and other.hash() != cfg.hash()
+    with pytest.raises(ConfigError, match=r"train\.seed"):
+        load_config(None, ["train.seed=-1"])

@@ -1,0 +1,79 @@
+"""scripts/reproduce.py: one map per resumable unit, compact summaries, seed runs on the same data.
+
+A tiny point/2 run (the sizes of tests/test_golden.py) with one extra training
+seed: the summaries' contents and fingerprints, the skip of a finished map, and
+REPRODUCTION.md regenerated from them (and flagged as not paper-size).
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+from pathlib import Path
+
+import pytest
+
+from ntq_jax import reproduction
+
+ROOT = Path(__file__).resolve().parents[1]
+TINY = ["data.k_train=40", "data.gamma_queries=2000", "data.gamma_eval=false",
+        "train.epochs=2", "model.hidden=[32,32]", "eval.k_test=16", "eval.n_plan=20",
+        "eval.replan_rounds=2", "eval.replan_steps=6", "eval.gamma_queries=2000"]
+
+
+def _script():
+    spec = importlib.util.spec_from_file_location("reproduce", ROOT / "scripts" / "reproduce.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_reproduce_one_map_with_a_training_seed(tmp_path, capsys):
+    script = _script()
+    runs, results = tmp_path / "runs", tmp_path / "results"
+    argv = ["--config", str(ROOT / "configs" / "point_small.yaml"), "--env", "point/2",
+            "--runs", str(runs), "--results", str(results), "--train-seeds", "1",
+            "--no-progress", "--no-figures"] + [a for s in TINY for a in ("--set", s)]
+    assert script.main(argv) == 0
+    main = json.loads((results / "point" / "point_2" / "summary.json").read_text())
+    seed = json.loads((results / "point" / "point_2" / "seeds" / "train_seed_1" /
+                       "summary.json").read_text())
+    assert main["env"] == seed["env"] == "point/2" and main["task"] == "point"
+    assert (main["train_seed"], seed["train_seed"]) == (0, 1)
+    # same data, other models; every dataset and the models fingerprinted
+    assert main["fingerprints"]["datasets"] == seed["fingerprints"]["datasets"]
+    assert all(main["fingerprints"]["datasets"][f"D{i}"] for i in range(4))
+    assert main["fingerprints"]["models"] and (main["fingerprints"]["models"]
+                                               != seed["fingerprints"]["models"])
+    assert {r["env"] for r in main["rows"]} == {"point/2"} and len(main["rows"]) == 14
+    assert {(c["model"], c["baseline"]) for c in main["comparisons"]} >= {("PNet_3", "PNet_0")}
+    assert main["config"]["data"]["k_train"] == 40 and main["padding"] == 0.8
+    assert set(main["timings"]) == {"data", "train", "eval"}
+    # compact: no arrays
+    files = [p for p in (results / "point" / "point_2").rglob("*") if p.is_file()]
+    assert not [p for p in files if p.suffix in (".npz", ".npy")]
+    assert sum(p.stat().st_size for p in files) < 400_000
+    # the report: regenerated, current, and it says the sizes are not the paper's
+    doc = results / "REPRODUCTION.md"
+    assert doc.read_text() == reproduction.render(results)
+    assert any("K_train" in p for p in reproduction.check_summary(main))
+    # a finished map is skipped on a rerun (nothing is planned or trained again)
+    before = (results / "point" / "point_2" / "summary.json").stat().st_mtime_ns
+    capsys.readouterr()
+    assert script.main(argv) == 0
+    out = capsys.readouterr().out
+    assert out.count("summary up to date") == 2
+    assert (results / "point" / "point_2" / "summary.json").stat().st_mtime_ns == before
+
+
+@pytest.mark.parametrize("args, msg", [
+    ([], "--config is required"),
+    (["--config", str(ROOT / "configs" / "point_small.yaml"), "--env", "rigid/0"],
+     "is not a map of"),
+    (["--config", str(ROOT / "configs" / "point_small.yaml"), "--train-seeds", "a"],
+     "--train-seeds"),
+])
+def test_reproduce_usage_errors(args, msg, capsys, tmp_path):
+    assert _script().main(args + ["--results", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert msg in err and "Traceback" not in err and len(err.strip().splitlines()) == 1

@@ -394,8 +394,7 @@ def padded_world(world: World, multiple: int = 16) -> World:
 
 def plan_batch(env, pnet: Callable, queries, key: Array,
                opts: PlannerOptions = PlannerOptions(), *, chunk: int = 1024,
-               repair_width: int = 256, pad_obstacles: int = 0,
-               min_chunk: int = 1) -> NeuralPlanResult:
+               repair_width: int = 256, pad_obstacles: int = 0) -> NeuralPlanResult:
     """Plans every query with the neural planner (all of a chunk in one jitted call).
 
     1. **Coarse plan** (Alg. 1, lines 2-9): for ``n_plan`` iterations, if
@@ -435,10 +434,6 @@ def plan_batch(env, pnet: Callable, queries, key: Array,
         repair_width: batch width of the replanning calls (rounded to a power of two).
         pad_obstacles: if > 0, pad the obstacle lists to a multiple of it
             (:func:`padded_world`) so maps with similar counts share one compilation.
-        min_chunk: pad a smaller batch to at least this many rows (at most
-            ``chunk``), so it runs on the programs compiled for a larger one: a
-            few queries then cost more to plan but nothing to compile (e.g. the
-            fallbacks of :func:`plan_cascade`).
 
     Returns:
         A :class:`NeuralPlanResult` with paths trimmed to the longest one.
@@ -450,7 +445,7 @@ def plan_batch(env, pnet: Callable, queries, key: Array,
     q = _check_inputs(env, queries, opts, chunk)
     world = padded_world(env.world, pad_obstacles) if pad_obstacles > 0 else env.world
     stages = Stages(env.robot, opts, world, as_pnet(pnet))
-    b = _plan(stages, q, key, chunk, repair_width, members=1, min_chunk=min_chunk)
+    b = _plan(stages, q, key, chunk, repair_width, members=1)
     return _result(env.robot, b, stages, slice(None))
 
 
@@ -499,9 +494,10 @@ def plan_cascade(env, pnets, queries, key: Array, opts: PlannerOptions = Planner
     unsolved, and so on; each query keeps its first success.
 
     Attempt ``j`` is :func:`plan_batch` with ``pnets[order[j]]`` and key
-    ``fold_in(key, j)`` on the queries no earlier attempt solved, padded to the
-    first attempt's batch size (``min_chunk=K``: the fallbacks reuse its compiled
-    programs instead of compiling one per subset size). A query
+    ``fold_in(key, j)`` on the queries no earlier attempt solved (a smaller batch:
+    its first use of a batch size compiles the planner for it, once per process;
+    padding the fallbacks to the first batch's size instead measured 2x slower
+    planning on point/0). A query
     succeeds iff one of its attempts succeeds; its path, cost and cause are that
     attempt's. A query no attempt solves keeps the failure closest to a success
     (:data:`ntq_jax.types.CAUSE_RANK`; ties: the earliest attempt). The work
@@ -542,9 +538,8 @@ def plan_cascade(env, pnets, queries, key: Array, opts: PlannerOptions = Planner
     for j, m in enumerate(order):
         if not len(left):
             break
-        # the fallbacks run on the first attempt's compiled shapes (no compilation)
         res = plan_batch(env, pnets[m], q[left], fold_in(key, j), opts, chunk=chunk,
-                         repair_width=repair_width, min_chunk=k)
+                         repair_width=repair_width)
         seconds, compile_seconds = seconds + res.seconds, compile_seconds + res.compile_seconds
         calls[left] += res.pnet_calls
         replans[left] += res.replans
@@ -574,10 +569,10 @@ def _check_inputs(env, queries, opts: PlannerOptions, chunk: int) -> np.ndarray:
 
 
 def _plan(stages: Stages, q: np.ndarray, key, chunk: int, repair_width: int,
-          members: int, min_chunk: int = 1) -> _Batch:
+          members: int) -> _Batch:
     """Steps 1-4 of :func:`plan_batch` for ``members`` planners side by side."""
     opts = stages.opts
-    size = bucket_size(min(max(len(q), min_chunk), chunk))
+    size = bucket_size(min(len(q), chunk))
     width = bucket_size(min(repair_width, size))
     b = _Batch.empty(members * len(q), opts.max_len, q.shape[2], members)
     k_coarse, k_rep = split2(key)

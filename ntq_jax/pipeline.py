@@ -182,9 +182,18 @@ def data_digest(data_dir: Path, names: list[str]) -> str:
 
 
 def _mark(run: Path, stage: str, **fields) -> None:
-    """Records a finished stage in ``run.json``."""
+    """Records a finished stage in ``run.json``.
+
+    ``seconds`` accumulate over the invocations that finish the stage (a rerun
+    that reuses the stage's outputs adds ~0; one that redoes part of it adds
+    that part): the compute the stage has cost; ``last_seconds`` is this call's.
+    """
     f = run / "run.json"
     info = json.loads(f.read_text())
+    old = info["stages"].get(stage, {})
+    if "seconds" in fields:
+        fields["last_seconds"] = fields["seconds"]
+        fields["seconds"] = round(fields["seconds"] + float(old.get("seconds") or 0.0), 1)
     info["stages"][stage] = {"done": True, "time": time.strftime("%Y-%m-%dT%H:%M:%S"), **fields}
     artifacts.write_json(f, info)
 

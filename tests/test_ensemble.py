@@ -250,7 +250,7 @@ def test_cascade_keeps_the_first_success_and_replans_only_the_failures():
     a0 = plan_batch(env, nets[0], q, jax.random.fold_in(key, 0), OPTS)
     left = np.flatnonzero(~a0.success)
     assert a0.success[4] and len(left) == 4  # the stay-put member solves only the free query
-    a1 = plan_batch(env, nets[1], q[left], jax.random.fold_in(key, 1), OPTS, min_chunk=len(q))
+    a1 = plan_batch(env, nets[1], q[left], jax.random.fold_in(key, 1), OPTS)
     left2 = left[~a1.success]
     assert res.success.all() and res.member[4] == 0
     np.testing.assert_array_equal(res.member[left[a1.success]], 1)
@@ -271,17 +271,3 @@ def test_cascade_keeps_the_first_success_and_replans_only_the_failures():
         with pytest.raises(ValueError, match="order"):
             plan_cascade(env, nets, q, key, OPTS, order=bad)
 
-
-def test_min_chunk_reuses_the_compiled_shapes():
-    env = make("wall")
-    q = np.asarray([[[2, 5], [8, 5]], [[1, 1], [9, 6]], [[4, 9], [6, 1]], [[2, 2], [8, 8]],
-                    [[3, 3], [3.5, 3.5]], [[1, 5], [9, 5]], [[1, 9], [9, 1]], [[2, 8], [8, 2]]],
-                   np.float32)
-    net = pnet("wall", SEEKER, sigma=0.7)
-    opts = PlannerOptions(n_plan=14, replan_rounds=2, replan_steps=5)  # shapes of this test only
-    full = plan_batch(env, net, q, jax.random.key(0), opts)
-    assert full.compile_seconds > 0.05  # the first call compiles
-    again = plan_batch(env, net, q[:3], jax.random.key(1), opts, min_chunk=len(q))
-    assert again.compile_seconds < 0.05 and again.lengths.shape == (3,)
-    fresh = plan_batch(env, net, q[:3], jax.random.key(1), opts)  # 4 rows: new programs
-    assert fresh.compile_seconds > 0.05

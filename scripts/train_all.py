@@ -3,14 +3,15 @@
 
 Examples::
 
-    python scripts/train_all.py                                 # embedded default (4 point maps)
+    python scripts/train_all.py                                 # embedded default (point/0-3, rigid/0)
     python scripts/train_all.py --config configs/rigid_small.yaml
     python scripts/train_all.py --config configs/point.yaml --out runs/point_paper
     python scripts/train_all.py --set eval.k_test=100 --set envs=[point/0]
 
-Without ``--config`` the embedded default runs: the four point-robot maps at
-reduced sizes (K_train 600, a 256-256-128-64 PNet, 40 epochs, K_test 200;
-about 2-3 minutes on an idle 2-core CPU). ``--set KEY=VALUE`` overrides any config
+Without ``--config`` the embedded default runs: the four point-robot maps and
+the rigid-body map rigid/0 at reduced sizes (K_train 600, a 256-256-128-64 PNet,
+40 epochs, K_test 200; grid A* data for the point robot, the roadmap planner's
+for the rigid body; about 3-4 minutes on an idle 2-core CPU). ``--set KEY=VALUE`` overrides any config
 key (YAML values).
 
 The run folder (``--out``, default ``<out_dir>/<task>-<config hash>``) is

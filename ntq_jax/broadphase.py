@@ -57,10 +57,10 @@ BLOCK = 8
 SENTINEL_BOX = (1.0e7, 1.0e7, 1.0, 1.0)
 
 #: The most cells of an index (``nx * ny``).
-MAX_CELLS = 128 * 128
+MAX_CELLS = 256 * 256
 
 #: Target mean number of boxes per cell when the cell size is derived from the map.
-BOXES_PER_CELL = 1.0
+BOXES_PER_CELL = 0.125
 
 
 @jax.tree_util.register_dataclass
@@ -179,7 +179,8 @@ def build_index(bounds, boxes, reach: float, cell: float | None = None) -> Obsta
         for rr, cc in zip(*np.nonzero(near)):
             lists[(r0 + rr) * nx + c0 + cc].append(i)
     k = max(1, max(len(v) for v in lists))
-    k = -(-k // BLOCK) * BLOCK
+    if k > UNROLL_MAX:  # looped by fold: whole blocks
+        k = -(-k // BLOCK) * BLOCK
     table = np.tile(np.asarray(SENTINEL_BOX, np.float32), (nx * ny, k, 1))
     for c, v in enumerate(lists):
         if v:

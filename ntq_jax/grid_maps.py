@@ -375,3 +375,56 @@ def read_grid(path, *, unknown: str = "occupied", scale: float | None = None) ->
         return read_movingai(path, 1.0 if scale is None else scale)
     raise GridMapError(f"{path}: not a grid map (expected a ROS map .yaml or a MovingAI .map)")
 
+
+
+# ---------------------------------------------------------------------------
+# Writing, and a maze generator (tests, benchmarks, examples)
+# ---------------------------------------------------------------------------
+
+def write_movingai(path, occupied: np.ndarray) -> Path:
+    """Writes ``occupied`` (``(H, W)`` bool, row 0 at the bottom as in :class:`OccupancyGrid`)
+    as a MovingAI ``.map`` (``@`` blocked, ``.`` free; the file's first row is the top)."""
+    occ = np.asarray(occupied, bool)
+    h, w = occ.shape
+    rows = ["".join("@" if v else "." for v in row) for row in occ[::-1]]
+    path = Path(path)
+    path.write_text(f"type octile\nheight {h}\nwidth {w}\nmap\n" + "\n".join(rows) + "\n")
+    return path
+
+
+def maze_grid(size: int = 256, corridor: int = 1, seed: int = 0) -> np.ndarray:
+    """A perfect maze (depth-first backtracker) as ``(size, size)`` bool, True = wall.
+
+    Rooms and passages are ``corridor`` cells wide, walls one cell (the layout of
+    the MovingAI ``mazes`` set, e.g. ``maze512-8-0`` is 512 cells with corridors 8
+    wide); cells past the last whole room are wall. Deterministic in ``seed``.
+    """
+    rng = np.random.default_rng(seed)
+    step = corridor + 1
+    m = (size - 1) // step
+    if m < 1:
+        raise ValueError(f"a {size}-cell maze has no room for corridors {corridor} wide")
+    g = np.ones((size, size), bool)
+    seen = np.zeros((m, m), bool)
+
+    def room(r, c):
+        g[r * step + 1:r * step + 1 + corridor, c * step + 1:c * step + 1 + corridor] = False
+
+    stack = [(0, 0)]
+    seen[0, 0] = True
+    room(0, 0)
+    while stack:
+        r, c = stack[-1]
+        nb = [(r + dr, c + dc) for dr, dc in ((0, 1), (1, 0), (0, -1), (-1, 0))
+              if 0 <= r + dr < m and 0 <= c + dc < m and not seen[r + dr, c + dc]]
+        if not nb:
+            stack.pop()
+            continue
+        r2, c2 = nb[rng.integers(len(nb))]
+        seen[r2, c2] = True
+        room(r2, c2)
+        lo_r, lo_c = min(r, r2) * step + 1, min(c, c2) * step + 1
+        g[lo_r:lo_r + corridor + (step if r != r2 else 0),
+          lo_c:lo_c + corridor + (step if c != c2 else 0)] = False
+        stack.append((r2, c2))
+    return g

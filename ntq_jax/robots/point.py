@@ -53,7 +53,9 @@ class PointRobot:
         """Coordinate-major ``(2, N), (2, N) -> (N,)``; ``mask`` False reports blocked.
 
         On a world with a broad-phase index (:mod:`ntq_jax.broadphase`) the segments
-        run through the work queue of :func:`ntq_jax.robots.base.check_queue`: lane
+        are first tested against the boxes near their two ends (all at once; most
+        blocked segments of a cluttered map stop here), the rest run through the
+        work queue of :func:`ntq_jax.robots.base.check_queue`: lane
         by lane, the index cells along each segment (points ``2 (reach - padding)``
         apart, coarse to fine), each an exact test of the whole segment against the
         cell's boxes, stopping at the first hit. Same answers as the per-segment test.
@@ -87,6 +89,11 @@ def _indexed_steer_batch(a: Array, b: Array, world: World, padding: float,
             p, q, dataclasses.replace(world, boxes=world.boxes[:0], index=None), padding),
             in_axes=(1, 1))(a, b)
         ok = ok & disc_free
+    # a cheap first pass over every segment: the boxes near its two ends (where most blocked
+    # segments of a cluttered map are caught); only the others enter the work queue
+    for t in (0.0, 1.0):
+        ok = ok & ~jax.vmap(geometry.segment_hits_near, in_axes=(0, 0, 0, 0, None, None, None))(
+            x0, y0, x1, y1, jnp.float32(t), world, padding)
     mask = ok if mask is None else ok & mask
     n = geometry.segment_cover_steps(x0, y0, x1, y1, world.index.reach, padding)
     hits = jax.vmap(jax.vmap(geometry.segment_hits_near, in_axes=(None, None, None, None, 0, None, None)),

@@ -52,6 +52,14 @@ UNROLL_MAX = 64
 #: Obstacles per unrolled block of the looped fold.
 BLOCK = 8
 
+#: Candidates per unrolled block when a kernel loops over an index cell's list
+#: (:func:`fold_candidates`): the list's length is a multiple of it.
+INDEX_BLOCK = 4
+
+#: Candidate lists up to this length are unrolled by the cheap tests (point, segment,
+#: rectangle intersection); the distance kernels of the certified check always loop.
+INDEX_UNROLL_MAX = 16
+
 #: Sentinel box ``[cx, cy, half_w, half_h]`` padding the index's candidate lists: far from
 #: any workspace (no test against it is ever true, and its squares stay finite in float32).
 SENTINEL_BOX = (1.0e7, 1.0e7, 1.0, 1.0)
@@ -103,32 +111,41 @@ class ObstacleIndex:
         return self.boxes[self.cell_of(x, y)]
 
 
-def fold(rows: Array, f, init, combine, sentinel=None):
+def fold(rows: Array, f, init, combine, sentinel=None, unroll_max: int | None = None,
+         block: int = BLOCK):
     """``combine(acc, f(row))`` over the rows of ``rows`` (``(n, w)``), starting from ``init``.
 
-    Unrolled at trace time for ``n <= UNROLL_MAX``; otherwise a ``lax.fori_loop``
-    over blocks of :data:`BLOCK` rows (unrolled inside), the last block padded
-    with ``sentinel`` rows (which must not change ``acc``), so the compiled size
-    does not depend on ``n``.
+    Unrolled at trace time for ``n <= unroll_max`` (default :data:`UNROLL_MAX`);
+    otherwise a ``lax.fori_loop`` over blocks of ``block`` rows (unrolled
+    inside), the last block padded with ``sentinel`` rows (which must not change
+    ``acc``), so the compiled size does not depend on ``n``.
     """
     n = int(rows.shape[0])
     acc = init
-    if n <= UNROLL_MAX:
+    if n <= (UNROLL_MAX if unroll_max is None else unroll_max):
         for i in range(n):
             acc = combine(acc, f(rows[i]))
         return acc
-    blocks = -(-n // BLOCK)
-    if blocks * BLOCK > n:
-        pad = jnp.broadcast_to(jnp.asarray(sentinel, rows.dtype), (blocks * BLOCK - n, rows.shape[1]))
+    blocks = -(-n // block)
+    if blocks * block > n:
+        pad = jnp.broadcast_to(jnp.asarray(sentinel, rows.dtype), (blocks * block - n, rows.shape[1]))
         rows = jnp.concatenate([rows, pad])
 
     def body(j, acc):
-        blk = jax.lax.dynamic_slice_in_dim(rows, j * BLOCK, BLOCK)
-        for i in range(BLOCK):
+        blk = jax.lax.dynamic_slice_in_dim(rows, j * block, block)
+        for i in range(block):
             acc = combine(acc, f(blk[i]))
         return acc
 
     return jax.lax.fori_loop(0, blocks, body, acc)
+
+
+def fold_candidates(rows: Array, f, init, combine, cheap: bool = True):
+    """:func:`fold` over an index cell's candidate boxes (``(K, 4)``): unrolled up to
+    :data:`INDEX_UNROLL_MAX` candidates for ``cheap`` tests, else looped in blocks of
+    :data:`INDEX_BLOCK` (the heavier distance kernels: their compile time stays small)."""
+    return fold(rows, f, init, combine, SENTINEL_BOX,
+                unroll_max=INDEX_UNROLL_MAX if cheap else 0, block=INDEX_BLOCK)
 
 
 def choose_cell(bounds: np.ndarray, num_boxes: int, min_cell: float = 0.0) -> float:
@@ -179,8 +196,7 @@ def build_index(bounds, boxes, reach: float, cell: float | None = None) -> Obsta
         for rr, cc in zip(*np.nonzero(near)):
             lists[(r0 + rr) * nx + c0 + cc].append(i)
     k = max(1, max(len(v) for v in lists))
-    if k > UNROLL_MAX:  # looped by fold: whole blocks
-        k = -(-k // BLOCK) * BLOCK
+    k = -(-k // INDEX_BLOCK) * INDEX_BLOCK  # whole blocks of the candidates' fold
     table = np.tile(np.asarray(SENTINEL_BOX, np.float32), (nx * ny, k, 1))
     for c, v in enumerate(lists):
         if v:

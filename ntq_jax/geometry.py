@@ -193,8 +193,8 @@ def point_free(p: Array, world: World, padding: float) -> Array:
     """True when point ``p`` ``(2,)`` is in bounds and farther than ``padding`` from every obstacle."""
     x, y = p[0], p[1]
     free = in_bounds(x, y, world.bounds)
-    free = fold(_boxes_near(world, x, y, padding), lambda box: point_hits_box(x, y, box, padding),
-                free, _and_not, broadphase.SENTINEL_BOX)
+    free = _fold_boxes(world, x, y, padding, 0.0, lambda box: point_hits_box(x, y, box, padding),
+                       free)
     return fold(world.discs, lambda disc: point_hits_disc(x, y, disc, padding), free, _and_not,
                 _SENTINEL_DISC)
 
@@ -206,13 +206,13 @@ def _and_not(free, hit):
 _SENTINEL_DISC = (1.0e7, 1.0e7, 1.0)
 
 
-def _boxes_near(world: World, x, y, padding: float, rho: float = 0.0) -> Array:
-    """The boxes a shape within ``rho`` of ``(x, y)`` may touch at ``padding``: the index
-    cell's candidates when the index covers it (:func:`ntq_jax.broadphase.index_covers`),
-    else all of ``world.boxes``."""
+def _fold_boxes(world: World, x, y, padding: float, rho: float, hit, free):
+    """``free`` and not ``hit(box)`` for every box a shape within ``rho`` of ``(x, y)`` may
+    touch at ``padding``: the index cell's candidates when the index covers it
+    (:func:`ntq_jax.broadphase.index_covers`), else all of ``world.boxes``."""
     if broadphase.index_covers(world, padding, rho):
-        return world.index.candidates(x, y)
-    return world.boxes
+        return broadphase.fold_candidates(world.index.candidates(x, y), hit, free, _and_not)
+    return fold(world.boxes, hit, free, _and_not, broadphase.SENTINEL_BOX)
 
 
 # ---------------------------------------------------------------------------
@@ -320,9 +320,9 @@ def segment_hits_near(x0, y0, x1, y1, t, world: World, padding: float) -> Array:
     """True when the segment is within ``padding`` of a box listed in the index cell of
     its point at fraction ``t`` (the exact test, on the whole segment)."""
     px, py = x0 + t * (x1 - x0), y0 + t * (y1 - y0)
-    return ~fold(world.index.candidates(px, py),
-                 lambda box: segment_hits_box(x0, y0, x1, y1, box, padding),
-                 jnp.bool_(True), _and_not, broadphase.SENTINEL_BOX)
+    return ~broadphase.fold_candidates(world.index.candidates(px, py),
+                                       lambda box: segment_hits_box(x0, y0, x1, y1, box, padding),
+                                       jnp.bool_(True), _and_not)
 
 
 def segment_free_indexed(x0, y0, x1, y1, world: World, padding: float, free: Array) -> Array:
@@ -410,9 +410,8 @@ def rect_free(pose: Array, half_l: float, half_w: float, world: World, padding: 
     xs, ys = rect_corners(x, y, th, half_l, half_w)
     for px, py in zip(xs, ys):
         free = free & in_bounds(px, py, world.bounds)
-    near = _boxes_near(world, x, y, padding, math.hypot(half_l, half_w))
-    free = fold(near, lambda box: rect_hits_box(x, y, th, half_l, half_w, box, padding), free,
-                _and_not, broadphase.SENTINEL_BOX)
+    free = _fold_boxes(world, x, y, padding, math.hypot(half_l, half_w),
+                       lambda box: rect_hits_box(x, y, th, half_l, half_w, box, padding), free)
     return fold(world.discs, lambda disc: rect_hits_disc(x, y, th, half_l, half_w, disc, padding),
                 free, _and_not, _SENTINEL_DISC)
 
@@ -533,9 +532,9 @@ def _segment_clearance_indexed(x0, y0, x1, y1, world: World, padding: float) -> 
     def body(k, d2):
         t = k.astype(jnp.float32) / jnp.maximum(n, 1).astype(jnp.float32)
         px, py = x0 + t * (x1 - x0), y0 + t * (y1 - y0)
-        return fold(world.index.candidates(px, py),
-                    lambda box: segment_box_dist2(x0, y0, x1, y1, box), d2, jnp.minimum,
-                    broadphase.SENTINEL_BOX)
+        return broadphase.fold_candidates(world.index.candidates(px, py),
+                                          lambda box: segment_box_dist2(x0, y0, x1, y1, box), d2,
+                                          jnp.minimum, cheap=False)
 
     d2 = jax.lax.fori_loop(0, n + 1, body, cap * cap)
     return jnp.where(n > 0, jnp.sqrt(d2), jnp.nan)
@@ -555,9 +554,9 @@ def rect_clearance(pose: Array, half_l: float, half_w: float, world: World,
     rho = math.hypot(half_l, half_w)
     if nb and broadphase.index_covers(world, padding, rho, strict=True):
         cap = jnp.float32(world.index.reach - rho)
-        d2 = fold(world.index.candidates(x, y),
-                  lambda box: rect_box_dist2(x, y, th, half_l, half_w, box), cap * cap,
-                  jnp.minimum, broadphase.SENTINEL_BOX)
+        d2 = broadphase.fold_candidates(world.index.candidates(x, y),
+                                        lambda box: rect_box_dist2(x, y, th, half_l, half_w, box),
+                                        cap * cap, jnp.minimum, cheap=False)
         c = jnp.sqrt(d2)
     elif nb > broadphase.UNROLL_MAX:
         d2 = fold(world.boxes, lambda box: rect_box_dist2(x, y, th, half_l, half_w, box),

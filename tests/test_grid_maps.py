@@ -283,10 +283,12 @@ def test_indexed_equals_looped(robot, pad):
     plain = Env("x", env.robot, world, pad)
     object.__setattr__(plain, "world", dataclasses.replace(env.world, index=None))
     a, b = _pairs(env, rng, 3000, 0.5 if robot["kind"] == "nlink" else 3.0)
-    # pad + 5 is beyond the index's reach: the looped path
-    for p in (pad,) if robot["kind"] == "nlink" else (pad, pad + 5.0):
+    for p in (pad, pad + 5.0):  # pad + 5 is beyond the index's reach: the looped path
         np.testing.assert_array_equal(env.is_valid(a, p), plain.is_valid(a, p))
-        np.testing.assert_array_equal(env.steer_to(a, b, p), plain.steer_to(a, b, p))
+    # the rigid body's and the arm's discretised steer_to is is_valid along the motion (the
+    # same work queue either way); the point robot's has its own broad-phase queue
+    if robot["kind"] != "nlink":
+        np.testing.assert_array_equal(env.steer_to(a, b, pad), plain.steer_to(a, b, pad))
     if robot["kind"] == "point":
         return
     # the certified check's clearances: exact below the index's cap, at least the cap above it,

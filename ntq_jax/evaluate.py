@@ -74,7 +74,7 @@ from jax.tree_util import Partial
 from ntq_jax import artifacts, models
 from ntq_jax import neural_planner as NP
 from ntq_jax.data import env_slug, planner_options, resolve_planner
-from ntq_jax.planners import plan
+from ntq_jax.planners import plan, visgraph
 from ntq_jax.planners.verify import check_paths
 from ntq_jax.queries import wilson_interval
 from ntq_jax.robots.batch import distances, valid_states
@@ -174,7 +174,10 @@ def reference_plans(env, cfg, env_name: str, slug: str, queries: dict, out_dir: 
 
     ``planner`` (optional) replaces ``cfg.planner``: a callable ``(env, q, *,
     padding, seed)`` returning a :class:`ntq_jax.types.PlanResult`. The optimum is
-    the visibility graph's (``ntq_jax.plan(env, q, "visgraph", padding=0.0)``).
+    the visibility graph's (``ntq_jax.plan(env, q, "visgraph", padding=0.0)``), omitted for
+    maps with more than :data:`ntq_jax.planners.visgraph.MAX_OBSTACLES` obstacles (users'
+    grid maps: the all-pairs graph would not fit; the cost ratios to the optimum are then
+    absent from the metrics).
     """
     name = (cfg.planner.name_for(env_name) if planner is None
             else getattr(planner, "__name__", "custom"))
@@ -193,7 +196,8 @@ def reference_plans(env, cfg, env_name: str, slug: str, queries: dict, out_dir: 
             out[f"{kind}_status"] = np.asarray(res.status, np.int8)
             out[f"{kind}_paths"] = np.asarray(res.paths, np.float32)
             out[f"{kind}_lengths"] = np.asarray(res.lengths, np.int32)
-            if env.robot.kind == "point":
+            if env.robot.kind == "point" and (env.world.num_boxes + env.world.num_discs
+                                              <= visgraph.MAX_OBSTACLES):
                 opt = plan(env, q, "visgraph", padding=0.0)
                 out[f"{kind}_opt_costs"] = np.asarray(opt.costs, np.float64)
         return out

@@ -115,6 +115,7 @@ class RayExecutor:
         self.max_retries = int(max_retries)
         self.local_cpus = local_cpus
         self._ray = None
+        _import_ray()  # a missing Ray is an error before any work (Ray starts at the first task)
         self._task = None
         self.latencies: list[float] = []  # submit -> task start, seconds (see ``_timed_call``)
 

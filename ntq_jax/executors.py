@@ -117,7 +117,8 @@ class RayExecutor:
         self._ray = None
         _import_ray()  # a missing Ray is an error before any work (Ray starts at the first task)
         self._task = None
-        self.latencies: list[float] = []  # submit -> task start, seconds (see ``_timed_call``)
+        self.latencies: list[float] = []    # per task: seconds from submission to its start
+        self.task_seconds: list[float] = []  # per task: seconds of fn(*args) in the worker
 
     # -- Ray ------------------------------------------------------------------
     def ray(self):
@@ -144,7 +145,7 @@ class RayExecutor:
         return max(1, int(cpus // max(self.num_cpus, 1)))
 
     def submit(self, fn: Callable, *args):
-        """One task ``fn(*args)``: an ``ObjectRef`` of ``(seconds submit -> start, result)``."""
+        """One task ``fn(*args)``: an ``ObjectRef`` of :func:`_timed_call`'s triple."""
         if self._task is None:
             self._task = self.ray().remote(num_cpus=self.num_cpus,
                                            max_retries=self.max_retries)(_timed_call)
@@ -159,8 +160,9 @@ class RayExecutor:
             while pending:
                 done, pending = ray.wait(pending, num_returns=1)
                 for ref in done:
-                    latency, result = ray.get(ref)
+                    latency, seconds, result = ray.get(ref)
                     self.latencies.append(latency)
+                    self.task_seconds.append(seconds)
                     yield refs[ref], result
         finally:
             for ref in pending:  # the caller stopped early (an error, Ctrl-C)
@@ -178,9 +180,11 @@ class RayExecutor:
 
 
 def _timed_call(fn: Callable, submitted: float, *args):
-    """The task body: ``(seconds from submission to start, fn(*args))``."""
+    """The task body: ``(seconds from submission to start, seconds of fn, fn(*args))``."""
     started = time.time()
-    return started - submitted, fn(*args)
+    t0 = time.perf_counter()
+    out = fn(*args)
+    return started - submitted, time.perf_counter() - t0, out
 
 
 def make_executor(name: str | None = "local", address: str | None = None, **kwargs) -> Executor:

@@ -193,18 +193,18 @@ def test_local_run_interrupted_then_resumed_with_ray(ray_session, local_run, tmp
 
 
 def test_reference_roadmap_chunks_match_local(ray_session, tmp_path):
-    """The evaluation's reference, roadmap on rigid/0: chunk tasks (first one alone, which
+    """The evaluation's reference, roadmap on point/2: chunk tasks (first one alone, which
     builds the roadmap) give the single local call's paths and costs."""
     from ntq_jax.evaluate import reference_plans, test_queries
 
-    cfg = C.load(None, ["envs=[rigid/0]", "planner.name=roadmap", "planner.milestones=300",
-                        "planner.grow_rounds=0", "eval.k_test=12", "data.chunk=4"])
-    env = make_env("rigid/0")
+    cfg = C.load(None, ["envs=[point/2]", "planner.name=roadmap", "planner.milestones=200",
+                        "planner.grow_rounds=0", "eval.k_test=8", "data.chunk=4"])
+    env = make_env("point/2")
     got = {}
     for name, ex in (("local", LocalExecutor()), ("ray", RayExecutor())):
         out = tmp_path / name
-        q = test_queries(env, cfg, "rigid_0", out)
-        got[name] = reference_plans(env, cfg, "rigid/0", "rigid_0", q, out, None, ex)
+        q = test_queries(env, cfg, "point_2", out)
+        got[name] = reference_plans(env, cfg, "point/2", "point_2", q, out, None, ex)
         assert not (out / ".work").exists()
         assert len(list((out / "roadmap").glob("roadmap_*.npz"))) == 1  # built once
     a, b = got["local"], got["ray"]

@@ -171,7 +171,8 @@ class RayExecutor:
     def adapt_planner(self, plan_fn: Callable) -> Callable:
         with_options = getattr(plan_fn, "with_options", None)
         if with_options is not None and getattr(plan_fn, "name", None) == "bitstar":
-            return with_options(workers=self.num_cpus)  # the task's CPUs, not the node's
+            # the task's CPUs, not the node's; its BIT* processes kept for its next chunks
+            return with_options(workers=self.num_cpus, keep_workers=True)
         return plan_fn
 
     def __repr__(self) -> str:

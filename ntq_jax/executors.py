@@ -37,7 +37,7 @@ Usage::
 
 from __future__ import annotations
 
-import os
+import threading
 import time
 import warnings
 from typing import Any, Callable, Iterable, Iterator, Protocol, Sequence
@@ -46,6 +46,7 @@ __all__ = ["EXECUTORS", "Executor", "LocalExecutor", "RayExecutor", "make_execut
            "executor_from_config", "RAY_MISSING"]
 
 EXECUTORS = ("local", "ray")
+_INIT_LOCK = threading.Lock()  # threads of one driver share one Ray connection
 RAY_MISSING = "the ray executor needs Ray: pip install -e '.[ray]' (or pip install 'ray>=2.40')"
 
 
@@ -65,6 +66,9 @@ class Executor(Protocol):
     def adapt_planner(self, plan_fn: Callable) -> Callable:
         """The planner callable a task runs (e.g. BIT* with one worker per task CPU)."""
 
+    def start(self) -> None:
+        """Starts or joins the executor's resources now (call it from the main thread)."""
+
 
 class LocalExecutor:
     """Today's behaviour: every call in this process, in order."""
@@ -79,6 +83,9 @@ class LocalExecutor:
 
     def adapt_planner(self, plan_fn: Callable) -> Callable:
         return plan_fn
+
+    def start(self) -> None:
+        pass
 
     def __repr__(self) -> str:
         return "LocalExecutor()"
@@ -121,8 +128,17 @@ class RayExecutor:
         self.task_seconds: list[float] = []  # per task: seconds of fn(*args) in the worker
 
     # -- Ray ------------------------------------------------------------------
+    def start(self) -> None:
+        """Starts (or joins) Ray now; the scripts call it in the main thread before their
+        per-environment threads (Ray installs its signal handlers there)."""
+        self.ray()
+
     def ray(self):
         """The ``ray`` module, initialised (lazily: nothing is started before the first task)."""
+        with _INIT_LOCK:
+            return self._init()
+
+    def _init(self):
         if self._ray is None:
             ray = _import_ray()
             if not ray.is_initialized():
@@ -130,9 +146,9 @@ class RayExecutor:
                             "configure_logging": False}
                 if self.address is None:
                     kw["num_cpus"] = self.local_cpus
-                    # the workers import this package from the same interpreter
-                    kw["runtime_env"] = {"env_vars": {"JAX_PLATFORMS":
-                                                      os.environ.get("JAX_PLATFORMS", "cpu")}}
+                # the tasks are host-side work: JAX on the CPU there, never a GPU of the node
+                # (each worker process would otherwise reserve most of its memory)
+                kw["runtime_env"] = {"env_vars": {"JAX_PLATFORMS": "cpu"}}
                 with warnings.catch_warnings():  # Ray's fork+exec of its own daemons
                     warnings.filterwarnings("ignore", message=r"os\.fork\(\) was called")
                     ray.init(address=self.address, **kw)

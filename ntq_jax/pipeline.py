@@ -278,6 +278,8 @@ def run_pipeline(cfg: C.Config, run: Path, *, progress=True, figures: bool = Tru
     rows, timings = [], {}
     envs = data_mod.resolve_envs(cfg.envs)  # every env built, no two sharing a folder
     concurrent = executor is not None and executor.name != "local" and len(cfg.envs) > 1
+    if concurrent:
+        executor.start()  # in the main thread, before the environments' threads
     pool = ThreadPoolExecutor(len(cfg.envs), thread_name_prefix="ntq_jax-env") if concurrent \
         else None
     try:

@@ -75,6 +75,7 @@ def _main(argv) -> int:
     if executor.name == "local" or len(made) == 1:
         summaries = map(one, made)
     else:  # every environment's chunks in flight at once: one driver thread per environment
+        executor.start()  # in the main thread
         pool = ThreadPoolExecutor(len(made), thread_name_prefix="ntq_jax-env")
         summaries = pool.map(one, made)
     results = {}

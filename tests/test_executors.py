@@ -12,6 +12,7 @@ import signal
 import sys
 import threading
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -27,7 +28,8 @@ sys.path.insert(0, str(REPO / "scripts"))
 
 ENV = "point/2"
 SETS = ["data.k_train=40", "data.chunk=10", "data.gamma_queries=5000", "data.gamma_eval=false"]
-ARGS = ["--env", ENV, "--no-progress", "--no-figure"] + [a for s in SETS for a in ("--set", s)]
+ARGS = ["--no-progress", "--no-figure"] + [a for s in SETS for a in ("--set", s)]
+ENVS = ["--env", ENV, "--env", "point/3"]  # two maps: generated concurrently under Ray
 
 
 def _cfg(*extra: str) -> C.Config:
@@ -45,20 +47,22 @@ def _files(env_dir: Path) -> dict[str, bytes]:
 @pytest.fixture(scope="module")
 def ray_session():
     ray = pytest.importorskip("ray")
-    ray.init(num_cpus=2, include_dashboard=False, configure_logging=False,
-             runtime_env={"env_vars": {"JAX_PLATFORMS": "cpu"}})
+    with warnings.catch_warnings():  # Ray's fork+exec of its own daemons
+        warnings.filterwarnings("ignore", message=r"os\.fork\(\) was called")
+        ray.init(num_cpus=2, include_dashboard=False, configure_logging=False,
+                 runtime_env={"env_vars": {"JAX_PLATFORMS": "cpu"}})
     yield ray
     ray.shutdown()
 
 
 @pytest.fixture(scope="module")
 def local_run(tmp_path_factory):
-    """generate_data.py --executor local: the reference bytes."""
+    """generate_data.py --executor local: the reference bytes, per map folder."""
     import generate_data
 
     out = tmp_path_factory.mktemp("local")
-    assert generate_data.main(ARGS + ["--out", str(out), "--executor", "local"]) == 0
-    return _files(out / "point_2")
+    assert generate_data.main(ARGS + ENVS + ["--out", str(out), "--executor", "local"]) == 0
+    return {slug: _files(out / slug) for slug in ("point_2", "point_3")}
 
 
 @pytest.fixture
@@ -88,7 +92,8 @@ def test_config_keys_are_validated_and_left_out_of_the_hash():
 def test_ray_address_needs_the_ray_executor(capsys):
     import generate_data
 
-    assert generate_data.main(ARGS + ["--out", "/nonexistent", "--ray-address", "auto"]) == 2
+    assert generate_data.main(ARGS + ["--env", ENV, "--out", "/nonexistent",
+                                      "--ray-address", "auto"]) == 2
     assert "--ray-address needs --executor ray" in capsys.readouterr().err
 
 
@@ -96,7 +101,8 @@ def test_missing_ray_is_one_line(monkeypatch, capsys):
     import generate_data
 
     monkeypatch.setitem(sys.modules, "ray", None)  # `import ray` raises ImportError
-    assert generate_data.main(ARGS + ["--out", "/tmp/unused", "--executor", "ray"]) == 2
+    assert generate_data.main(ARGS + ["--env", ENV, "--out", "/tmp/unused",
+                                      "--executor", "ray"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert err == ["error: the ray executor needs Ray: pip install -e '.[ray]' "
                    "(or pip install 'ray>=2.40')"]
@@ -109,12 +115,14 @@ def test_missing_ray_is_one_line(monkeypatch, capsys):
 def test_generate_data_ray_is_byte_identical_to_local(ray_session, local_run, tmp_path, writes):
     import generate_data
 
-    assert generate_data.main(ARGS + ["--out", str(tmp_path), "--executor", "ray"]) == 0
-    got = _files(tmp_path / "point_2")
-    assert got.keys() == local_run.keys() and len(got) > 30
-    for k in got:
-        assert got[k] == local_run[k], k
-    assert len(writes) == len(set(writes)) == 8  # 80 pooled queries in chunks of 10
+    assert generate_data.main(ARGS + ENVS + ["--out", str(tmp_path), "--executor", "ray"]) == 0
+    for slug, want in local_run.items():
+        got = _files(tmp_path / slug)
+        assert got.keys() == want.keys() and len(got) > 30
+        for k in got:
+            assert got[k] == want[k], (slug, k)
+    assert len(writes) == 16  # per map, 80 pooled queries in chunks of 10: each written once
+    assert len(set(writes)) == 8  # (the two maps' chunk files have the same names)
 
 
 def _task_workers() -> list[int]:
@@ -164,7 +172,7 @@ def test_killed_worker_is_retried_with_identical_output(ray_session, local_run, 
     assert not t.is_alive() and "error" not in out, out.get("error")
     assert killed is not None, "no Ray worker was seen running a chunk"
     got = _files(tmp_path / "point_2")
-    assert got == local_run
+    assert got == local_run["point_2"]
     assert len(writes) == len(set(writes)) == 8  # every chunk written once, none lost
     assert out["summary"]["planned_queries"] == 80 and out["summary"]["reused_queries"] == 0
 
@@ -189,7 +197,7 @@ def test_local_run_interrupted_then_resumed_with_ray(ray_session, local_run, tmp
                                progress=False, figure=False, executor=RayExecutor())
     assert s["reused_queries"] == 30 and not s["skipped"]
     assert len(written) == len(set(written)) == 8 and set(first) <= set(written[:3])
-    assert _files(tmp_path / "point_2") == local_run
+    assert _files(tmp_path / "point_2") == local_run["point_2"]
 
 
 def test_reference_roadmap_chunks_match_local(ray_session, tmp_path):

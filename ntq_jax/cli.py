@@ -23,7 +23,8 @@ from pathlib import Path
 from typing import Callable, Iterable
 
 __all__ = ["UsageError", "EXPECTED_ERRORS", "PATH_ERRORS", "expected_error_types", "error_line",
-           "positive_int", "check_writable", "add_run_options", "start_run", "run_cli"]
+           "positive_int", "check_writable", "add_run_options", "add_executor_options",
+           "executor_of", "start_run", "run_cli"]
 
 
 class UsageError(ValueError):
@@ -94,10 +95,12 @@ def check_writable(path: str | os.PathLike, flag: str) -> None:
                          f"({e.strerror})") from None
 
 
-def add_run_options(ap, *, set_example: str, figures_help: str, cpu_devices_help: str) -> None:
+def add_run_options(ap, *, set_example: str, figures_help: str, cpu_devices_help: str,
+                    executor: bool = False) -> None:
     """The options of the scripts that run pipeline stages: ``--config``, ``--set``,
     ``--no-progress``, ``--no-compile-cache``, ``--no-figures``, ``--cpu-devices``
-    (applied by :func:`start_run`)."""
+    (applied by :func:`start_run`) and, with ``executor``, ``--executor`` and
+    ``--ray-address`` (:func:`executor_of`)."""
     ap.add_argument("--config", default=None, help="YAML config (default: the embedded default)")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help=f"config override, e.g. --set {set_example} (repeatable)")
@@ -106,6 +109,27 @@ def add_run_options(ap, *, set_example: str, figures_help: str, cpu_devices_help
                     help="do not use JAX's persistent compilation cache")
     ap.add_argument("--no-figures", action="store_true", help=figures_help)
     ap.add_argument("--cpu-devices", type=int, default=1, help=cpu_devices_help)
+    if executor:
+        add_executor_options(ap)
+
+
+def add_executor_options(ap) -> None:
+    """``--executor local|ray`` and ``--ray-address`` (read by :func:`executor_of`)."""
+    ap.add_argument("--executor", choices=("local", "ray"), default=None,
+                    help="where the planning chunks run: local (this process, the default) or "
+                         "ray (Ray tasks; overrides the config's executor)")
+    ap.add_argument("--ray-address", default=None, metavar="ADDRESS",
+                    help="with --executor ray: auto joins the cluster `ray start` made, "
+                         "<host>:<port> another one; default: start a local Ray instance")
+
+
+def executor_of(args, cfg):
+    """The executor of ``cfg`` with :func:`add_executor_options`' options overriding it."""
+    from ntq_jax.executors import executor_from_config
+    name = getattr(args, "executor", None) or cfg.executor or "local"
+    if getattr(args, "ray_address", None) and name != "ray":
+        raise UsageError("--ray-address needs --executor ray (or executor: ray in the config)")
+    return executor_from_config(cfg, name, getattr(args, "ray_address", None))
 
 
 def start_run(args) -> None:

@@ -472,12 +472,24 @@ class Config:
         envs: preset names or JSON map paths.
         seed: master seed; every stage derives its keys from it.
         out_dir: where run folders are written.
+        executor: where the host-side planning chunks run, ``local`` (null, the
+            default: in this process) or ``ray`` (Ray tasks, :mod:`ntq_jax.executors`);
+            the scripts' ``--executor`` overrides it.
+        ray_address: the Ray cluster to join with ``executor: ray`` (``auto``: the
+            one ``ray start`` made on this node; null: start a local instance);
+            ``--ray-address`` overrides it.
+
+    ``executor`` and ``ray_address`` say where the work runs, not what is
+    computed: they are not part of :meth:`hash`, so a run folder made with one
+    executor is resumed with the other.
     """
 
     task: str = "point"
     envs: tuple[str, ...] = ("point/0", "point/1", "point/2", "point/3")
     seed: int = 0
     out_dir: str = "runs"
+    executor: Optional[str] = None
+    ray_address: Optional[str] = None
     sampling: SamplingConfig = dataclasses.field(default_factory=SamplingConfig)
     data: DataConfig = dataclasses.field(default_factory=DataConfig)
     planner: PlannerConfig = dataclasses.field(default_factory=PlannerConfig)
@@ -485,8 +497,16 @@ class Config:
     train: TrainConfig = dataclasses.field(default_factory=TrainConfig)
     eval: EvalConfig = dataclasses.field(default_factory=EvalConfig)
 
+    _OMIT_NONE = ("executor", "ray_address")
+    #: keys that say where the work runs, not what it computes (left out of :meth:`hash`)
+    RUNTIME_KEYS = ("executor", "ray_address")
+
     def validate(self, p: str = ""):
         pre = f"{p}." if p else ""
+        _check(self.executor in (None, "local", "ray"), f"{pre}executor",
+               f"must be local or ray (or null: local), got {self.executor!r}")
+        _check(self.ray_address is None or bool(self.ray_address.strip()), f"{pre}ray_address",
+               "must be auto, <host>:<port> or null (start a local Ray instance)")
         _check(self.task in ("point", "rigid", "nlink"), f"{pre}task",
                f"must be point, rigid or nlink; got {self.task!r}")
         _check(len(self.envs) >= 1, f"{pre}envs", "must list at least one environment")
@@ -501,7 +521,8 @@ class Config:
 
     def hash(self) -> str:
         """A short stable hash of the resolved config (for metadata and resume checks)."""
-        blob = json.dumps(self.to_dict(), sort_keys=True).encode()
+        plain = {k: v for k, v in self.to_dict().items() if k not in self.RUNTIME_KEYS}
+        blob = json.dumps(plain, sort_keys=True).encode()
         return hashlib.sha256(blob).hexdigest()[:16]
 
 

@@ -196,7 +196,7 @@ def _open_folder(cfg: C.Config, env_name: str, out: Path) -> None:
 
 def _size_unit(cfg_k: C.Config, env, env_name: str, k: int, names: list[str],
                prefixes: list[dict], out: Path, data_dir: Path, eval_dir: Path, progress,
-               log: Callable[[str], None]) -> list[dict]:
+               log: Callable[[str], None], executor=None) -> list[dict]:
     """Trains and evaluates one size, or reuses its finished ``result.json``."""
     size_dir = out / "sizes" / str(k)
     result = size_dir / "result.json"
@@ -232,7 +232,7 @@ def _size_unit(cfg_k: C.Config, env, env_name: str, k: int, names: list[str],
     log(f"[size {k}] evaluate: {cfg_k.eval.k_test} uniform + {cfg_k.eval.k_test} non-trivial "
         "test queries")
     eval_rows = evaluate_env(env, ens, cfg_k, size_dir, env_name=env_name, data_env_dir=data_dir,
-                             eval_dir=eval_dir, log=log)
+                             eval_dir=eval_dir, log=log, executor=executor)
     rows = curve_rows(k, names, prefixes, eval_rows)
     artifacts.write_json(result, {"fingerprint": fp, "size": k, "rows": rows,
                                   "seconds": {"train": round(t1 - t0, 1),
@@ -243,7 +243,7 @@ def _size_unit(cfg_k: C.Config, env, env_name: str, k: int, names: list[str],
 
 def run_curve(cfg: C.Config, env_name: str, sizes: Sequence[int], out: str | Path, *,
               progress=True, figures: bool = True,
-              log: Callable[[str], None] = print) -> dict:
+              log: Callable[[str], None] = print, executor=None) -> dict:
     """Generates the data at ``max(sizes)``, then trains and evaluates every size.
 
     Args:
@@ -254,6 +254,8 @@ def run_curve(cfg: C.Config, env_name: str, sizes: Sequence[int], out: str | Pat
         progress: progress bars (:func:`ntq_jax.progress.open_bar`).
         figures: write ``curve.png``.
         log: one-line progress messages.
+        executor: where the planning chunks run (data and the reference;
+            :mod:`ntq_jax.executors`; None: in this process).
 
     Returns:
         ``{"json": ..., "md": ..., "png": ... or None}``: the written files.
@@ -273,7 +275,7 @@ def run_curve(cfg: C.Config, env_name: str, sizes: Sequence[int], out: str | Pat
     log(f"[{env_name}] data: {sizes[-1]} queries x {len(cfg.data.datasets)} datasets "
         f"({cfg.planner.name_for(env_name)}), generated once for sizes {sizes}")
     summary = data_mod.generate_datasets(env, gen_cfg, out / "data", env_name=env_name,
-                                         progress=progress, figure=False)
+                                         progress=progress, figure=False, executor=executor)
     data_dir = Path(summary["env_dir"])
     datasets = data_mod.load_datasets(data_dir)
     names = data_mod.dataset_names(len(datasets))
@@ -283,7 +285,7 @@ def run_curve(cfg: C.Config, env_name: str, sizes: Sequence[int], out: str | Pat
         for k in sizes:
             prefixes = [prefix_dataset(ds, k) for ds in datasets]
             rows += _size_unit(size_config(cfg, env_name, k), env, env_name, k, names, prefixes,
-                               out, data_dir, out / "eval" / slug, progress, log)
+                               out, data_dir, out / "eval" / slug, progress, log, executor)
             bar.update(1)
     doc = {"env": env_name, "env_slug": slug, "config_hash": cfg.hash(), "sizes": sizes,
            "datasets": [{"name": nm, "p_nt": d.p_nt, "prune": d.prune}

@@ -16,6 +16,21 @@ every problem is one :class:`EnvError` line naming the key, the row and the
 expected form. A discretised robot's ``resolution`` is bounded below by
 :func:`check_resolution` (at most :data:`MAX_STATES_PER_MOTION` states per motion).
 
+A user's occupancy grid (:mod:`ntq_jax.grid_maps`: a ROS ``map_server`` YAML
+or a MovingAI ``.map``) loads with ``make_env("office.yaml", robot=...,
+padding=...)`` or through a small JSON that names it::
+
+    {"name": "office", "grid": "office.yaml", "robot": {"kind": "point"},
+     "padding": 0.1, "unknown": "occupied", "scale": 1.0}
+
+(``grid`` relative to the JSON file; ``unknown``: ROS maps only, what unknown
+cells become; ``scale``: MovingAI only, world units per cell). Its occupied
+cells become boxes (:func:`ntq_jax.grid_maps.rectangle_cover`, exact), its
+extent the bounds; ``Env.grid`` keeps the grid (grid A* plans on it). A world
+with more than :data:`ntq_jax.broadphase.UNROLL_MAX` boxes gets a broad-phase
+index (:func:`index_reach`), which makes the kernels scale with the obstacle
+count and changes no answer.
+
 Every method that touches geometry takes ``padding=``: ``None`` (default) is
 the environment's own padding, the data-generation geometry of the paper;
 ``padding=0`` is the evaluation geometry.
@@ -35,7 +50,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ntq_jax import artifacts, geometry, validation
+from ntq_jax import artifacts, broadphase, geometry, grid_maps, validation
 from ntq_jax import queries as Q
 from ntq_jax.geometry import World
 from ntq_jax.presets import PRESETS
@@ -46,6 +61,7 @@ from ntq_jax.robots.batch import distance_batch, is_valid_batch, steer_to_batch
 Array = jax.Array
 
 _JSON_KEYS = {"name", "robot", "bounds", "boxes", "discs", "padding"}
+_GRID_JSON_KEYS = {"name", "grid", "robot", "padding", "unknown", "scale"}
 
 
 #: The most states a discretised ``steer_to`` may check on one motion between two valid
@@ -85,6 +101,20 @@ def check_resolution(robot: Robot, world: World) -> None:
             f"use resolution >= {floor:.3g}{unit} (at most {MAX_STATES_PER_MOTION} states per motion)")
 
 
+def index_reach(robot: Robot, world: World, padding: float) -> tuple[float, float]:
+    """``(reach, cell)`` of the broad-phase index ``Env`` gives a world with many boxes.
+
+    ``cell`` from the box density (:func:`ntq_jax.broadphase.choose_cell`);
+    ``reach = padding + rho + cell / 2`` with ``rho`` the robot's footprint radius
+    (the rigid body's half diagonal, 0 for the point and the arm's links): every
+    check at the environment's padding or less uses the index, and segments are
+    covered by cells about one cell apart.
+    """
+    rho = float(getattr(robot, "half_diagonal", 0.0))
+    cell = broadphase.choose_cell(np.asarray(world.bounds), world.num_boxes)
+    return float(padding) + rho + 0.5 * cell, cell
+
+
 @dataclasses.dataclass(frozen=True, eq=False)
 class Env:
     """A planning environment.
@@ -94,18 +124,24 @@ class Env:
         robot: the robot description (static, hashable).
         world: workspace bounds and obstacles (a pytree of arrays).
         padding: clearance used for data generation (``>= 0``).
+        grid: the :class:`ntq_jax.grid_maps.OccupancyGrid` the world was imported
+            from, or None (grid A* plans on it at its own resolution).
     """
 
     name: str
     robot: Robot
     world: World
     padding: float
+    grid: grid_maps.OccupancyGrid | None = None
 
     def __post_init__(self):
         try:
             check_resolution(self.robot, self.world)
         except ValueError as e:
             raise EnvError(f"{self.name}: {e}") from None
+        if self.world.num_boxes > broadphase.UNROLL_MAX and self.world.index is None:
+            reach, cell = index_reach(self.robot, self.world, self.padding)
+            object.__setattr__(self, "world", broadphase.with_index(self.world, reach, cell))
 
     def content_hash(self) -> str:
         """sha256 (hex) of what the environment is, not what it is called: the robot's
@@ -235,7 +271,40 @@ class Env:
         return artifacts.write_json(path, self.to_json())
 
     @staticmethod
-    def from_json(spec: dict[str, Any], where: str = "environment") -> "Env":
+    def from_grid(path: str | os.PathLike, robot: dict | Robot | None = None,
+                  padding: float = 0.0, name: str | None = None, unknown: str = "occupied",
+                  scale: float | None = None, where: str | None = None) -> "Env":
+        """An environment from a grid map file (ROS ``.yaml`` or MovingAI ``.map``).
+
+        ``robot``: a robot JSON dict or a Robot (default the point robot);
+        ``name`` defaults to the file's stem. See :mod:`ntq_jax.grid_maps`.
+
+        Raises:
+            EnvError: one line naming the file and the line or field.
+        """
+        where = where or f"environment file {str(path)!r}"
+        try:
+            grid = grid_maps.read_grid(path, unknown=unknown, scale=scale)
+        except grid_maps.GridMapError as e:
+            raise EnvError(str(e)) from None
+        if robot is None:
+            robot = {"kind": "point"}
+        if isinstance(robot, dict):
+            try:
+                robot = robot_from_json(robot, where=f"{where}: robot")
+            except (TypeError, ValueError) as e:
+                raise EnvError(str(e)) from None
+        try:
+            padding = validation.number(padding, "padding", minimum=0)
+            world = grid_maps.grid_world(grid)
+            check_resolution(robot, world)
+        except (TypeError, ValueError) as e:
+            raise EnvError(f"{where}: {e}") from None
+        return Env(name or Path(path).stem, robot, world, padding, grid)
+
+    @staticmethod
+    def from_json(spec: dict[str, Any], where: str = "environment",
+                  base_dir: str | os.PathLike | None = None) -> "Env":
         """Builds an Env from a JSON dict; every problem is one :class:`EnvError` naming the key.
 
         Strict (see the module docstring): exact row widths, finite numbers only
@@ -244,6 +313,8 @@ class Env:
         """
         if not isinstance(spec, dict):
             raise EnvError(f"{where}: expected a JSON object, got {type(spec).__name__}")
+        if "grid" in spec:
+            return Env._from_grid_json(spec, where, base_dir)
         unknown = sorted(set(spec) - _JSON_KEYS)
         if unknown:
             raise EnvError(f"{where}: unknown key(s) {unknown}; allowed: {sorted(_JSON_KEYS)}")
@@ -265,17 +336,63 @@ class Env:
             raise EnvError(f"{where}: {e}") from None
         return Env(name, robot, world, padding)
 
+    @staticmethod
+    def _from_grid_json(spec: dict[str, Any], where: str, base_dir) -> "Env":
+        """The ``{"grid": ...}`` form (see the module docstring)."""
+        unknown = sorted(set(spec) - _GRID_JSON_KEYS)
+        if unknown:
+            raise EnvError(f"{where}: unknown key(s) {unknown}; a grid map JSON allows "
+                           f"{sorted(_GRID_JSON_KEYS)}")
+        grid = spec["grid"]
+        if not isinstance(grid, str) or not grid:
+            raise EnvError(f"{where}: grid must be the path of a ROS .yaml or MovingAI .map file, "
+                           f"got {validation.short_repr(grid)}")
+        path = Path(grid)
+        if not path.is_absolute() and base_dir is not None:
+            path = Path(base_dir) / path
+        name = spec.get("name", path.stem)
+        if not isinstance(name, str) or not name:
+            raise EnvError(f"{where}: name must be a non-empty string, got {validation.short_repr(name)}")
+        policy = spec.get("unknown", "occupied")
+        if policy not in grid_maps.UNKNOWN_POLICIES:
+            raise EnvError(f"{where}: unknown must be one of {list(grid_maps.UNKNOWN_POLICIES)}, "
+                           f"got {validation.short_repr(policy)}")
+        if "unknown" in spec and path.suffix.lower() == ".map":
+            raise EnvError(f"{where}: 'unknown' is for ROS maps; a MovingAI map has no unknown cells")
+        if "robot" not in spec:
+            raise EnvError(f"{where}: missing required key 'robot'")
+        return Env.from_grid(path, spec["robot"], spec.get("padding", 0.0), name, policy,
+                             spec.get("scale"), where=where)
 
-def make_env(name_or_path: str | os.PathLike) -> Env:
-    """A preset by name (``point/0..3``, ``rigid/0..3``, ``nlink/2|4|6``) or a JSON map file.
+
+def make_env(name_or_path: str | os.PathLike, *, robot: dict | Robot | None = None,
+             padding: float | None = None, unknown: str = "occupied",
+             scale: float | None = None) -> Env:
+    """A preset by name (``point/0..3``, ``rigid/0..3``, ``nlink/2|4|6``), a JSON map file,
+    or a grid map file (a ROS map ``.yaml``/``.yml`` or a MovingAI ``.map``).
+
+    ``robot``, ``padding``, ``unknown`` and ``scale`` are for grid map files
+    (default: the point robot, padding 0, unknown cells occupied, one unit per
+    MovingAI cell); a JSON file that names a grid (``{"grid": ...}``) carries them
+    itself. See :mod:`ntq_jax.grid_maps`.
 
     Raises:
         EnvError: unknown preset (listing the presets), unreadable or invalid file.
     """
     name = str(name_or_path)
+    path = Path(name)
+    grid_file = path.suffix.lower() in (".yaml", ".yml", ".map")
+    if not grid_file and (robot is not None or padding is not None or scale is not None
+                          or unknown != "occupied"):
+        raise EnvError(f"{name!r}: robot, padding, unknown and scale are for grid map files "
+                       "(.yaml, .map); a preset or a JSON map carries its own")
     if name in PRESETS:
         return Env.from_json(PRESETS[name], where=f"preset {name}")
-    path = Path(name)
+    if grid_file:
+        if path.is_dir() or not path.is_file():
+            raise EnvError(f"grid map file {name!r} does not exist")
+        return Env.from_grid(path, robot, 0.0 if padding is None else padding, unknown=unknown,
+                             scale=scale)
     if path.suffix.lower() == ".json" or path.exists():
         if path.is_dir():
             raise EnvError(f"environment file {name!r} is a directory, not a JSON map file")
@@ -285,6 +402,6 @@ def make_env(name_or_path: str | os.PathLike) -> Env:
             spec = json.loads(path.read_text())
         except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
             raise EnvError(f"environment file {name!r} is not valid JSON: {e}") from None
-        return Env.from_json(spec, where=f"environment file {name!r}")
-    raise EnvError(f"unknown environment {name!r}: use a preset ({', '.join(PRESETS)}) "
-                   "or the path of a JSON map file")
+        return Env.from_json(spec, where=f"environment file {name!r}", base_dir=path.parent)
+    raise EnvError(f"unknown environment {name!r}: use a preset ({', '.join(PRESETS)}), "
+                   "the path of a JSON map file, or a grid map (.yaml, .map)")

@@ -61,6 +61,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import json
+import shutil
 import time
 import zlib
 from pathlib import Path
@@ -74,7 +75,8 @@ from jax.tree_util import Partial
 from ntq_jax import artifacts, models
 from ntq_jax import neural_planner as NP
 from ntq_jax.data import env_slug, planner_options, resolve_planner
-from ntq_jax.planners import plan
+from ntq_jax.data.planning import plan_pool
+from ntq_jax.planners import plan, visgraph
 from ntq_jax.planners.verify import check_paths
 from ntq_jax.queries import wilson_interval
 from ntq_jax.robots.batch import distances, valid_states
@@ -169,12 +171,22 @@ def test_queries(env, cfg, slug: str, out_dir: Path) -> dict[str, np.ndarray]:
 
 
 def reference_plans(env, cfg, env_name: str, slug: str, queries: dict, out_dir: Path,
-                    planner: Callable | None = None) -> dict:
+                    planner: Callable | None = None, executor=None) -> dict:
     """Reference (and, for point robots, optimum) costs and paths on padding 0, cached.
 
     ``planner`` (optional) replaces ``cfg.planner``: a callable ``(env, q, *,
     padding, seed)`` returning a :class:`ntq_jax.types.PlanResult`. The optimum is
-    the visibility graph's (``ntq_jax.plan(env, q, "visgraph", padding=0.0)``).
+    the visibility graph's (``ntq_jax.plan(env, q, "visgraph", padding=0.0)``), omitted for
+    maps with more than :data:`ntq_jax.planners.visgraph.MAX_OBSTACLES` obstacles (users'
+    grid maps: the all-pairs graph would not fit; the cost ratios to the optimum are then
+    absent from the metrics).
+
+    ``executor`` (:mod:`ntq_jax.executors`; None or local: one call in this
+    process, as always): with Ray the config's planner runs in chunks of
+    ``data.chunk`` queries as tasks, resumable in ``<out_dir>/.work/`` (the
+    chunks written by the driver, :func:`ntq_jax.data.planning.plan_pool`).
+    A* (grid, visgraph, roadmap) give the same references either way; BIT*'s
+    queries then get their chunks' seeds (it is not reproducible anyway).
     """
     name = (cfg.planner.name_for(env_name) if planner is None
             else getattr(planner, "__name__", "custom"))
@@ -187,27 +199,37 @@ def reference_plans(env, cfg, env_name: str, slug: str, queries: dict, out_dir: 
         for kind in QUERY_KINDS:
             q = queries[kind]
             t0 = time.perf_counter()
-            res = _run_reference(env, q, cfg, env_name, planner, out_dir)
+            res = _run_reference(env, q, cfg, env_name, planner, out_dir, executor,
+                                 Path(out_dir) / ".work" / f"reference_{fp[:16]}_{kind}")
             out[f"{kind}_seconds"] = time.perf_counter() - t0
             out[f"{kind}_costs"] = np.asarray(res.costs, np.float64)
             out[f"{kind}_status"] = np.asarray(res.status, np.int8)
             out[f"{kind}_paths"] = np.asarray(res.paths, np.float32)
             out[f"{kind}_lengths"] = np.asarray(res.lengths, np.int32)
-            if env.robot.kind == "point":
+            if env.robot.kind == "point" and (env.world.num_boxes + env.world.num_discs
+                                              <= visgraph.MAX_OBSTACLES):
                 opt = plan(env, q, "visgraph", padding=0.0)
                 out[f"{kind}_opt_costs"] = np.asarray(opt.costs, np.float64)
         return out
 
-    return artifacts.compute_or_load(Path(out_dir) / "reference.npz", fp, compute)
+    got = artifacts.compute_or_load(Path(out_dir) / "reference.npz", fp, compute)
+    shutil.rmtree(Path(out_dir) / ".work", ignore_errors=True)
+    return got
 
 
-def _run_reference(env, q, cfg, env_name, planner, out_dir: Path):
+def _run_reference(env, q, cfg, env_name, planner, out_dir: Path, executor=None,
+                   work: Path | None = None):
     if planner is not None:
         return planner(env, q, padding=0.0, seed=cfg.seed)
     name = cfg.planner.name_for(env_name)
     run, _ = resolve_planner(name, planner_options(cfg, env_name, name, evaluation=True),
                              cache_dir=Path(out_dir) / "roadmap")
-    return run(env, q, padding=0.0, seed=cfg.seed)
+    if executor is None or executor.name == "local":
+        return run(env, q, padding=0.0, seed=cfg.seed)
+    work.mkdir(parents=True, exist_ok=True)
+    return plan_pool(env, q, run, verify=False, padding=0.0, seed=cfg.seed,
+                     chunk=cfg.data.chunk, work=work, progress=False,
+                     executor=executor).result
 
 
 # ---------------------------------------------------------------------------
@@ -510,7 +532,8 @@ def _row(ctx: _EnvEval, m: int | str, kind: str, steer, f: Path, got: dict) -> d
 
 def evaluate_env(env, ensemble, cfg, run_dir, *, env_name: str, data_env_dir=None,
                  planner: Callable | None = None, members: Sequence[int] | None = None,
-                 eval_dir=None, log: Callable[[str], None] = print) -> list[dict]:
+                 eval_dir=None, log: Callable[[str], None] = print, executor=None
+                 ) -> list[dict]:
     """Evaluates every member of ``ensemble`` on one environment (see the module docstring).
 
     Args:
@@ -530,6 +553,7 @@ def evaluate_env(env, ensemble, cfg, run_dir, *, env_name: str, data_env_dir=Non
             the learning curve's sizes (``ntq_jax.curve``), which then plan on the
             same test queries and compute the references once.
         log: progress messages.
+        executor: where the reference planner's chunks run (:func:`reference_plans`).
 
     Returns:
         One result row (dict) per (model, query kind, steerTo): per steerTo variant
@@ -544,7 +568,8 @@ def evaluate_env(env, ensemble, cfg, run_dir, *, env_name: str, data_env_dir=Non
     members = list(range(len(pnets)) if members is None else members)
     queries = test_queries(env, cfg, slug, out_dir)
     ctx = _EnvEval(env, cfg, run_dir, env_name, slug, queries,
-                   reference_plans(env, cfg, env_name, slug, queries, out_dir, planner),
+                   reference_plans(env, cfg, env_name, slug, queries, out_dir, planner,
+                                   executor),
                    _gamma(env, cfg, data_env_dir, slug, out_dir),
                    _data_planner(cfg, env_name, data_env_dir),
                    {kind: in_band(env, q) for kind, q in queries.items()}, log)

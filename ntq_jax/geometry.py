@@ -13,10 +13,14 @@ coordinate-major ``(d, N)`` arrays (``jax.vmap(f, in_axes=1)``), which makes the
 vmapped code purely elementwise over contiguous ``(N,)`` rows, the fast layout
 on CPU (BENCHMARKS.md compares it with ``(N, d)`` rows).
 
-The obstacle loop is unrolled at trace time (one fused elementwise expression
-per obstacle), so the number of boxes and discs is part of the compiled shape
-while their values are traced: a map with the same obstacle counts never
-recompiles. ``padding`` is a static Python float, so the common ``padding=0``
+Up to :data:`ntq_jax.broadphase.UNROLL_MAX` obstacles, the obstacle loop is
+unrolled at trace time (one fused elementwise expression per obstacle), so the
+number of boxes and discs is part of the compiled shape while their values are
+traced: a map with the same obstacle counts never recompiles. Above it (users'
+grid maps with thousands of boxes) the kernels loop over obstacle blocks, and a
+world with a broad-phase index (:mod:`ntq_jax.broadphase`, ``World.index``)
+tests only the boxes near the query: compile time and memory do not grow with
+the obstacle count, and the answers are the same. ``padding`` is a static Python float, so the common ``padding=0``
 case compiles to the cheaper closed-set test.
 
 None of the kernels divides, so tangent and degenerate cases never produce NaN.
@@ -42,7 +46,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ntq_jax import validation
+from ntq_jax import broadphase, validation
+from ntq_jax.broadphase import ObstacleIndex, fold
 
 Array = jax.Array
 
@@ -62,11 +67,15 @@ class World:
         bounds: ``(2, 2)`` float32, ``[[xmin, xmax], [ymin, ymax]]``.
         boxes: ``(B, 4)`` float32, ``[cx, cy, half_w, half_h]`` per row.
         discs: ``(C, 3)`` float32, ``[cx, cy, r]`` per row.
+        index: None, or a broad-phase :class:`ntq_jax.broadphase.ObstacleIndex` of
+            ``boxes`` (:func:`ntq_jax.broadphase.with_index`; ``Env`` adds one to maps
+            with more than ``UNROLL_MAX`` boxes). It changes the speed, never the answers.
     """
 
     bounds: Array
     boxes: Array
     discs: Array
+    index: ObstacleIndex | None = None
 
     @staticmethod
     def create(bounds, boxes=(), discs=()) -> "World":
@@ -184,11 +193,26 @@ def point_free(p: Array, world: World, padding: float) -> Array:
     """True when point ``p`` ``(2,)`` is in bounds and farther than ``padding`` from every obstacle."""
     x, y = p[0], p[1]
     free = in_bounds(x, y, world.bounds)
-    for i in range(world.boxes.shape[0]):
-        free = free & ~point_hits_box(x, y, world.boxes[i], padding)
-    for i in range(world.discs.shape[0]):
-        free = free & ~point_hits_disc(x, y, world.discs[i], padding)
-    return free
+    free = _fold_boxes(world, x, y, padding, 0.0, lambda box: point_hits_box(x, y, box, padding),
+                       free)
+    return fold(world.discs, lambda disc: point_hits_disc(x, y, disc, padding), free, _and_not,
+                _SENTINEL_DISC)
+
+
+def _and_not(free, hit):
+    return free & ~hit
+
+
+_SENTINEL_DISC = (1.0e7, 1.0e7, 1.0)
+
+
+def _fold_boxes(world: World, x, y, padding: float, rho: float, hit, free):
+    """``free`` and not ``hit(box)`` for every box a shape within ``rho`` of ``(x, y)`` may
+    touch at ``padding``: the index cell's candidates when the index covers it
+    (:func:`ntq_jax.broadphase.index_covers`), else all of ``world.boxes``."""
+    if broadphase.index_covers(world, padding, rho):
+        return broadphase.fold_candidates(world.index.candidates(x, y), hit, free, _and_not)
+    return fold(world.boxes, hit, free, _and_not, broadphase.SENTINEL_BOX)
 
 
 # ---------------------------------------------------------------------------
@@ -272,11 +296,50 @@ def segment_free(p0: Array, p1: Array, world: World, padding: float,
     free = jnp.isfinite(x0 + y0 + x1 + y1)
     if check_bounds:
         free = free & in_bounds(x0, y0, world.bounds) & in_bounds(x1, y1, world.bounds)
-    for i in range(world.boxes.shape[0]):
-        free = free & ~segment_hits_box(x0, y0, x1, y1, world.boxes[i], padding)
-    for i in range(world.discs.shape[0]):
-        free = free & ~segment_hits_disc(x0, y0, x1, y1, world.discs[i], padding)
-    return free
+    if broadphase.index_covers(world, padding, strict=True):
+        free = segment_free_indexed(x0, y0, x1, y1, world, padding, free)
+    else:
+        free = fold(world.boxes, lambda box: segment_hits_box(x0, y0, x1, y1, box, padding),
+                    free, _and_not, broadphase.SENTINEL_BOX)
+    return fold(world.discs, lambda disc: segment_hits_disc(x0, y0, x1, y1, disc, padding),
+                free, _and_not, _SENTINEL_DISC)
+
+
+def segment_cover_steps(x0, y0, x1, y1, reach: float, padding: float) -> Array:
+    """``n >= 1``: the points ``t = k / n``, ``k = 0..n``, of the segment are close enough
+    for the broad phase (every point of the segment within ``reach - padding`` of one of
+    them, with a margin for rounding); 0 for a non-finite segment."""
+    h = 2.0 * (reach - padding) * (1.0 - 1e-3)
+    dx, dy = x1 - x0, y1 - y0
+    length = jnp.sqrt(dx * dx + dy * dy)
+    n = jnp.maximum(jnp.ceil(length * jnp.float32(1.0 / h)), 1.0)
+    return jnp.where(jnp.isfinite(n), jnp.minimum(n, 2.0 ** 30), 0.0).astype(jnp.int32)
+
+
+def segment_hits_near(x0, y0, x1, y1, t, world: World, padding: float) -> Array:
+    """True when the segment is within ``padding`` of a box listed in the index cell of
+    its point at fraction ``t`` (the exact test, on the whole segment)."""
+    px, py = x0 + t * (x1 - x0), y0 + t * (y1 - y0)
+    return ~broadphase.fold_candidates(world.index.candidates(px, py),
+                                       lambda box: segment_hits_box(x0, y0, x1, y1, box, padding),
+                                       jnp.bool_(True), _and_not)
+
+
+def segment_free_indexed(x0, y0, x1, y1, world: World, padding: float, free: Array) -> Array:
+    """``free`` and the segment clear of every box, through the broad phase: the cells of
+    the points of :func:`segment_cover_steps`, in a loop that stops at the first hit."""
+    n = segment_cover_steps(x0, y0, x1, y1, world.index.reach, padding)
+
+    def cond(carry):
+        k, ok = carry
+        return ok & (k <= n)
+
+    def body(carry):
+        k, ok = carry
+        t = k.astype(jnp.float32) / n.astype(jnp.float32)
+        return k + 1, ok & ~segment_hits_near(x0, y0, x1, y1, t, world, padding)
+
+    return jax.lax.while_loop(cond, body, (jnp.int32(0), free & (n > 0)))[1]
 
 
 # ---------------------------------------------------------------------------
@@ -347,11 +410,10 @@ def rect_free(pose: Array, half_l: float, half_w: float, world: World, padding: 
     xs, ys = rect_corners(x, y, th, half_l, half_w)
     for px, py in zip(xs, ys):
         free = free & in_bounds(px, py, world.bounds)
-    for i in range(world.boxes.shape[0]):
-        free = free & ~rect_hits_box(x, y, th, half_l, half_w, world.boxes[i], padding)
-    for i in range(world.discs.shape[0]):
-        free = free & ~rect_hits_disc(x, y, th, half_l, half_w, world.discs[i], padding)
-    return free
+    free = _fold_boxes(world, x, y, padding, math.hypot(half_l, half_w),
+                       lambda box: rect_hits_box(x, y, th, half_l, half_w, box, padding), free)
+    return fold(world.discs, lambda disc: rect_hits_disc(x, y, th, half_l, half_w, disc, padding),
+                free, _and_not, _SENTINEL_DISC)
 
 
 # ---------------------------------------------------------------------------
@@ -430,28 +492,84 @@ def wall_clearance(x, y, bounds: Array) -> Array:
                        jnp.minimum(y - bounds[1, 0], bounds[1, 1] - y))
 
 
-def segment_clearance(x0, y0, x1, y1, world: World) -> Array:
-    """Distance from the closed segment to the nearest obstacle (``inf`` without obstacles)."""
+def segment_clearance(x0, y0, x1, y1, world: World, padding: float = 0.0) -> Array:
+    """Distance from the closed segment to the nearest obstacle (``inf`` without obstacles).
+
+    With a broad-phase index that covers ``padding`` (the clearance the caller
+    will subtract), a lower bound instead: the exact distance when it is below
+    the cap ``(reach + padding) / 2``, else at least the cap (> ``padding``), so
+    the sign of ``clearance - padding`` is exact (:mod:`ntq_jax.broadphase`).
+    """
     c = jnp.float32(jnp.inf)
-    if world.boxes.shape[0]:
+    nb = world.boxes.shape[0]
+    if nb and broadphase.index_covers(world, padding, strict=True):
+        c = _segment_clearance_indexed(x0, y0, x1, y1, world, padding)
+    elif nb > broadphase.UNROLL_MAX:
+        d2 = fold(world.boxes, lambda box: segment_box_dist2(x0, y0, x1, y1, box),
+                  jnp.float32(jnp.inf), jnp.minimum, broadphase.SENTINEL_BOX)
+        c = jnp.sqrt(d2)
+    elif nb:
         d2 = segment_box_dist2(x0, y0, x1, y1, world.boxes[0])
         for i in range(1, world.boxes.shape[0]):
             d2 = jnp.minimum(d2, segment_box_dist2(x0, y0, x1, y1, world.boxes[i]))
         c = jnp.sqrt(d2)
+    if world.discs.shape[0] > broadphase.UNROLL_MAX:
+        return fold(world.discs, lambda disc: segment_disc_dist(x0, y0, x1, y1, disc), c,
+                    jnp.minimum, _SENTINEL_DISC)
     for i in range(world.discs.shape[0]):
         c = jnp.minimum(c, segment_disc_dist(x0, y0, x1, y1, world.discs[i]))
     return c
 
 
-def rect_clearance(pose: Array, half_l: float, half_w: float, world: World) -> Array:
-    """Distance from the oriented rectangle at ``pose`` to the nearest obstacle (``inf`` without)."""
+def _segment_clearance_indexed(x0, y0, x1, y1, world: World, padding: float) -> Array:
+    """Broad-phase segment clearance, capped (see :func:`segment_clearance`): the cells of
+    points spaced for a half-gap of ``(reach - padding) / 2``."""
+    reach = world.index.reach
+    half = 0.5 * (reach - padding)
+    cap = jnp.float32(reach - half)  # every box nearer than this is found
+    n = segment_cover_steps(x0, y0, x1, y1, reach - half, padding)
+
+    def body(k, d2):
+        t = k.astype(jnp.float32) / jnp.maximum(n, 1).astype(jnp.float32)
+        px, py = x0 + t * (x1 - x0), y0 + t * (y1 - y0)
+        return broadphase.fold_candidates(world.index.candidates(px, py),
+                                          lambda box: segment_box_dist2(x0, y0, x1, y1, box), d2,
+                                          jnp.minimum, cheap=False)
+
+    d2 = jax.lax.fori_loop(0, n + 1, body, cap * cap)
+    return jnp.where(n > 0, jnp.sqrt(d2), jnp.nan)
+
+
+def rect_clearance(pose: Array, half_l: float, half_w: float, world: World,
+                   padding: float = 0.0) -> Array:
+    """Distance from the oriented rectangle at ``pose`` to the nearest obstacle (``inf`` without).
+
+    With a broad-phase index that covers ``padding`` and the rectangle's half
+    diagonal ``rho``, a lower bound instead: exact below the cap ``reach - rho``
+    (> ``padding``), at least the cap otherwise (:mod:`ntq_jax.broadphase`).
+    """
     x, y, th = pose[0], pose[1], pose[2]
     c = jnp.float32(jnp.inf)
-    if world.boxes.shape[0]:
+    nb = world.boxes.shape[0]
+    rho = math.hypot(half_l, half_w)
+    if nb and broadphase.index_covers(world, padding, rho, strict=True):
+        cap = jnp.float32(world.index.reach - rho)
+        d2 = broadphase.fold_candidates(world.index.candidates(x, y),
+                                        lambda box: rect_box_dist2(x, y, th, half_l, half_w, box),
+                                        cap * cap, jnp.minimum, cheap=False)
+        c = jnp.sqrt(d2)
+    elif nb > broadphase.UNROLL_MAX:
+        d2 = fold(world.boxes, lambda box: rect_box_dist2(x, y, th, half_l, half_w, box),
+                  jnp.float32(jnp.inf), jnp.minimum, broadphase.SENTINEL_BOX)
+        c = jnp.sqrt(d2)
+    elif nb:
         d2 = rect_box_dist2(x, y, th, half_l, half_w, world.boxes[0])
         for i in range(1, world.boxes.shape[0]):
             d2 = jnp.minimum(d2, rect_box_dist2(x, y, th, half_l, half_w, world.boxes[i]))
         c = jnp.sqrt(d2)
+    if world.discs.shape[0] > broadphase.UNROLL_MAX:
+        return fold(world.discs, lambda disc: rect_disc_dist(x, y, th, half_l, half_w, disc), c,
+                    jnp.minimum, _SENTINEL_DISC)
     for i in range(world.discs.shape[0]):
         c = jnp.minimum(c, rect_disc_dist(x, y, th, half_l, half_w, world.discs[i]))
     return c

@@ -388,8 +388,9 @@ def padded_world(world: World, multiple: int = 16) -> World:
         extra = jnp.tile(jnp.asarray(row, a.dtype)[None], (m - n, 1))
         return jnp.concatenate([a, extra]) if m > n else a
 
+    # a broad-phase index stays valid: it holds its own copies of the real boxes
     return World(world.bounds, pad(world.boxes, [1e6, 1e6, 1.0, 1.0]),
-                 pad(world.discs, [1e6, 1e6, 1.0]))
+                 pad(world.discs, [1e6, 1e6, 1.0]), world.index)
 
 
 def plan_batch(env, pnet: Callable, queries, key: Array,

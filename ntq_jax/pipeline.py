@@ -31,6 +31,7 @@ import json
 import os
 import shutil
 import time
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 from typing import Callable
 
@@ -40,7 +41,7 @@ from ntq_jax import artifacts, config as C
 from ntq_jax import data as data_mod
 from ntq_jax import training
 from ntq_jax.data import env_slug
-from ntq_jax.evaluate import evaluate_env
+from ntq_jax.evaluate import evaluate_env, reference_plans, test_queries
 from ntq_jax.report import write_report
 from ntq_jax.version import __version__
 
@@ -198,16 +199,40 @@ def _mark(run: Path, stage: str, **fields) -> None:
     artifacts.write_json(f, info)
 
 
-def _run_env(cfg: C.Config, run: Path, name: str, env, *, progress, figures: bool,
-             log: Callable[[str], None]) -> tuple[list[dict], dict]:
-    """Data -> training -> evaluation for one environment; returns its rows and timings."""
-    slug = env_slug(name, env)
-    # -- data ----------------------------------------------------------------
+def _host_stage(cfg: C.Config, run: Path, name: str, env, *, progress, figures: bool,
+                log: Callable[[str], None], executor=None) -> tuple[dict, float]:
+    """The host-side work of one environment, ``(data summary, seconds)``: its datasets and,
+    with a non-local executor, the evaluation's test queries and reference (which need no
+    model), so that they are planned while other environments train."""
     t0 = time.perf_counter()
     log(f"[{name}] data: {cfg.data.k_train_for(name)} queries x {len(cfg.data.datasets)} "
         f"datasets ({cfg.planner.name_for(name)})")
     summary = data_mod.generate_datasets(env, cfg, run / "data", env_name=name,
-                                         progress=progress, figure=figures)
+                                         progress=progress, figure=figures, executor=executor)
+    if executor is not None and executor.name != "local":
+        slug = env_slug(name, env)
+        out_dir = run / "eval" / slug
+        reference_plans(env, cfg, name, slug, test_queries(env, cfg, slug, out_dir), out_dir,
+                        None, executor)
+    return summary, time.perf_counter() - t0
+
+
+def _run_env(cfg: C.Config, run: Path, name: str, env, *, progress, figures: bool,
+             log: Callable[[str], None], executor=None, host: Future | None = None
+             ) -> tuple[list[dict], dict]:
+    """Data -> training -> evaluation for one environment; returns its rows and timings.
+
+    ``host``: the environment's :func:`_host_stage` already running in a thread (Ray).
+    """
+    slug = env_slug(name, env)
+    # -- data ----------------------------------------------------------------
+    t0 = time.perf_counter()
+    if host is None:
+        summary, _ = _host_stage(cfg, run, name, env, progress=progress, figures=figures,
+                                 log=log, executor=executor)
+    else:
+        summary, seconds = host.result()
+        t0 = time.perf_counter() - seconds  # the stage's own time, not the wait for it
     data_dir = Path(summary["env_dir"])
     for ds, why in summary.get("damaged", {}).items():
         log(f"[{name}] data: {ds} failed verification ({why}); "
@@ -234,14 +259,15 @@ def _run_env(cfg: C.Config, run: Path, name: str, env, *, progress, figures: boo
     # -- evaluation ------------------------------------------------------------
     log(f"[{name}] evaluate: K_test = {cfg.eval.k_test} uniform + {cfg.eval.k_test} "
         f"non-trivial queries, {ens.num_members} models, steerTo {list(cfg.eval.steer)}")
-    rows = evaluate_env(env, ens, cfg, run, env_name=name, data_env_dir=data_dir, log=log)
+    rows = evaluate_env(env, ens, cfg, run, env_name=name, data_env_dir=data_dir, log=log,
+                        executor=executor)
     t3 = time.perf_counter()
     _mark(run, f"eval/{slug}", seconds=round(t3 - t2, 1))
     return rows, {"data": t1 - t0, "train": t2 - t1, "eval": t3 - t2}
 
 
 def run_pipeline(cfg: C.Config, run: Path, *, progress=True, figures: bool = True,
-                 log: Callable[[str], None] = print) -> dict:
+                 log: Callable[[str], None] = print, executor=None) -> dict:
     """Runs every stage for every environment of ``cfg``; returns the report's file paths.
 
     Args:
@@ -250,13 +276,33 @@ def run_pipeline(cfg: C.Config, run: Path, *, progress=True, figures: bool = Tru
         progress: progress bars (see :mod:`ntq_jax.progress`).
         figures: write the PNG figures.
         log: one-line progress messages.
+        executor: where the planning chunks run (:mod:`ntq_jax.executors`; None:
+            local, every stage of every environment in turn, as always). With a
+            non-local executor (Ray) every environment's host-side stage (data,
+            test queries, reference) starts at once, one driver thread each
+            submitting its chunks as tasks, and the environments are trained and
+            evaluated in the config's order as their data arrive: the cluster
+            plans while this process trains. The outputs are the same.
     """
     rows, timings = [], {}
     envs = data_mod.resolve_envs(cfg.envs)  # every env built, no two sharing a folder
-    for name in cfg.envs:
-        env_rows, timings[name] = _run_env(cfg, run, name, envs[name], progress=progress,
-                                           figures=figures, log=log)
-        rows += env_rows
+    concurrent = executor is not None and executor.name != "local" and len(cfg.envs) > 1
+    if concurrent:
+        executor.start()  # in the main thread, before the environments' threads
+    pool = ThreadPoolExecutor(len(cfg.envs), thread_name_prefix="ntq_jax-env") if concurrent \
+        else None
+    try:
+        hosts = {name: pool.submit(_host_stage, cfg, run, name, envs[name], progress=progress,
+                                   figures=figures, log=log, executor=executor)
+                 for name in cfg.envs} if pool else {}
+        for name in cfg.envs:
+            env_rows, timings[name] = _run_env(cfg, run, name, envs[name], progress=progress,
+                                               figures=figures, log=log, executor=executor,
+                                               host=hosts.get(name))
+            rows += env_rows
+    finally:
+        if pool is not None:
+            pool.shutdown(wait=True, cancel_futures=True)
     meta = {"config": cfg.to_dict(), "config_hash": cfg.hash(), "timings": timings,
             "package_version": __version__}
     out = write_report(run, rows, envs, meta=meta, figures=figures)

@@ -25,7 +25,7 @@ import sys
 import time
 from pathlib import Path
 
-from ntq_jax.cli import add_run_options, run_cli, start_run
+from ntq_jax.cli import add_run_options, executor_of, run_cli, start_run
 
 
 def main(argv=None) -> int:
@@ -44,7 +44,7 @@ def _main(argv) -> int:
                          "to resume)")
     add_run_options(ap, set_example="train.epochs=20", figures_help="skip curve.png",
                     cpu_devices_help="JAX CPU devices to create (the PNets train on separate "
-                    "cores); default 1")
+                    "cores); default 1", executor=True)
     args = ap.parse_args(argv)
     start_run(args)  # before any JAX operation
     from ntq_jax.curve import parse_sizes, run_curve
@@ -60,7 +60,7 @@ def _main(argv) -> int:
     print(f"curve folder: {out}", flush=True)
     t0 = time.perf_counter()
     files = run_curve(cfg, env_name, sizes, out, progress=not args.no_progress,
-                      figures=not args.no_figures)
+                      figures=not args.no_figures, executor=executor_of(args, cfg))
     print()
     print(Path(files["md"]).read_text())
     print(f"done in {time.perf_counter() - t0:.0f} s; curve folder: {out}")

@@ -85,7 +85,9 @@ def _one(cfg, name: str, env, run: Path, out: Path, *, args, command: str,
         _link_tree(data_from / "data" / slug, run / "data" / slug)
     print(f"[{name}] run folder: {run}", flush=True)
     t0 = time.perf_counter()
-    run_pipeline(cfg, run, progress=not args.no_progress, figures=not args.no_figures)
+    from ntq_jax.cli import executor_of
+    run_pipeline(cfg, run, progress=not args.no_progress, figures=not args.no_figures,
+                 executor=executor_of(args, cfg))
     path = write_summary(run, name, env, out, command=command)
     print(f"[{name}] done in {time.perf_counter() - t0:.0f} s; summary: {path}", flush=True)
 
@@ -111,7 +113,8 @@ def _main(argv) -> int:
     ap.add_argument("--report-only", action="store_true",
                     help="only regenerate REPRODUCTION.md from the summaries")
     add_run_options(ap, set_example="eval.k_test=100", figures_help="skip the PNG figures",
-                    cpu_devices_help="JAX CPU devices to create (one per core); default 1")
+                    cpu_devices_help="JAX CPU devices to create (one per core); default 1",
+                    executor=True)
     args = ap.parse_args(argv)
     results = Path(args.results)
     if args.report_only:

@@ -14,6 +14,12 @@ the rigid-body map rigid/0 at reduced sizes (K_train 600, a 256-256-128-64 PNet,
 for the rigid body; about 3-4 minutes on an idle 2-core CPU). ``--set KEY=VALUE`` overrides any config
 key (YAML values).
 
+``--executor ray`` runs the planning chunks (data generation, the evaluation's
+reference) as Ray tasks and overlaps the environments' data generation with the
+training of the ones whose data is ready; ``--ray-address auto`` joins a running
+cluster (README, "Running on a Ray cluster"). The outputs do not depend on the
+executor.
+
 The run folder (``--out``, default ``<out_dir>/<task>-<config hash>``) is
 described in :mod:`ntq_jax.pipeline`. Rerunning the same command after an
 interruption resumes it (datasets are verified against their checksums first;
@@ -30,7 +36,7 @@ import argparse
 import sys
 import time
 
-from ntq_jax.cli import add_run_options, run_cli, start_run
+from ntq_jax.cli import add_run_options, executor_of, run_cli, start_run
 from ntq_jax.pipeline import load_config, prepare_run, run_pipeline
 
 
@@ -51,14 +57,16 @@ def _main(argv) -> int:
     add_run_options(ap, set_example="eval.k_test=100", figures_help="skip the PNG figures",
                     cpu_devices_help="JAX CPU devices to create (one per core): the four PNets "
                     "train on separate cores (speed: BENCHMARKS.md); results then differ from a "
-                    "one-device run at float level. Default 1")
+                    "one-device run at float level. Default 1", executor=True)
     args = ap.parse_args(argv)
     start_run(args)  # before any JAX operation
     cfg = load_config(args.config, args.set)
+    executor = executor_of(args, cfg)
     run = prepare_run(cfg, args.out, overwrite=args.overwrite)  # validates before writing
     print(f"run folder: {run}", flush=True)
     t0 = time.perf_counter()
-    out = run_pipeline(cfg, run, progress=not args.no_progress, figures=not args.no_figures)
+    out = run_pipeline(cfg, run, progress=not args.no_progress, figures=not args.no_figures,
+                       executor=executor)
     print()
     print((run / "tables.md").read_text())
     print(f"done in {time.perf_counter() - t0:.0f} s; run folder: {run}")

@@ -270,6 +270,31 @@ def test_a_killed_worker_does_not_lose_the_batch(rigid_batch):
 
 
 @needs_ompl
+def test_kept_workers_are_reused_with_the_same_results(rigid_batch):
+    """``keep_workers`` (the Ray executor's tasks): the next call with the same settings
+    reuses the idle worker instead of starting one; the results are those of fresh workers
+    (``stop_on_first``, seeded per query); other settings stop the idle workers."""
+    env, q, ref = rigid_batch
+    try:
+        calls = [plan_bitstar(env, q[:4], time_budget=1.0, workers=1, stop_on_first=True,
+                              seed=2, keep_workers=True) for _ in range(2)]
+        assert calls[0].info["workers"] == 1 and "workers_reused" not in calls[0].info
+        assert calls[1].info["workers"] == 0 and calls[1].info["workers_reused"] == 1
+        for res in calls:
+            for i in range(4):
+                np.testing.assert_array_equal(res.path(i), ref.path(i))
+        kept = [w for ws in ompl_bridge._IDLE.values() for w in ws]
+        assert len(kept) == 1 and kept[0].proc.is_alive()
+        other = plan_bitstar(env, q[:1], time_budget=0.5, workers=1, stop_on_first=True,
+                             keep_workers=True)
+        assert other.info["workers"] == 1 and not kept[0].proc.is_alive()
+    finally:
+        for ws in ompl_bridge._IDLE.values():
+            ompl_bridge._stop_workers(ws)
+        ompl_bridge._IDLE.clear()
+
+
+@needs_ompl
 def test_no_path_is_a_status_not_an_exception():
     """A goal walled off from the start: no path after the budget (TIMEOUT: BIT* is anytime,
     so it proves nothing), nothing raised."""

@@ -115,7 +115,7 @@ def env_slug(name: str, env: Env | None = None) -> str:
             the map file; raises :class:`~ntq_jax.envs.EnvError` if it cannot).
     """
     s = str(name)
-    readable = Path(s).stem if s.lower().endswith(".json") else s
+    readable = Path(s).stem if s.lower().endswith((".json", ".yaml", ".yml", ".map")) else s
     readable = re.sub(r"[^A-Za-z0-9_.-]+", "_", readable).strip("_.-") or "env"
     if s in PRESETS and (env is None or env.content_hash() == _preset_hash(s)):
         return readable

@@ -319,7 +319,7 @@ def _timed(timings: dict, stage: str):
 # ---------------------------------------------------------------------------
 
 def generate_datasets(env, config, out_dir, *, env_name: str | None = None, planner=None,
-                      progress=True, figure: bool = True) -> dict:
+                      progress=True, figure: bool = True, executor=None) -> dict:
     """Generates D0..D3 (``config.data.datasets``) for one environment (Alg. 2 + 4).
 
     Writes ``<out_dir>/<env_slug>/env.json``, ``D<i>/`` (:mod:`ntq_jax.data.format`)
@@ -337,6 +337,10 @@ def generate_datasets(env, config, out_dir, *, env_name: str | None = None, plan
             results are verified with :func:`ntq_jax.planners.verify.finalize`).
         progress: progress bars per stage (:func:`ntq_jax.progress.open_bar`; True = tqdm).
         figure: write the PNG figure.
+        executor: where the planning chunks run (:mod:`ntq_jax.executors`; None:
+            in this process). The outputs do not depend on it (for the
+            deterministic planners, byte for byte), and a run interrupted under
+            one executor resumes under the other.
 
     Returns:
         A summary dict: ``env_dir``, ``datasets`` (name -> statistics), ``timings``
@@ -368,7 +372,7 @@ def generate_datasets(env, config, out_dir, *, env_name: str | None = None, plan
             planned = plan_pool(env, pools.queries, run.plan_fn, verify=run.verify,
                                 padding=run.padding, seed=config.seed, chunk=config.data.chunk,
                                 work=work, progress=progress,
-                                desc=f"{run.slug}: plan ({run.planner_name})")
+                                desc=f"{run.slug}: plan ({run.planner_name})", executor=executor)
         _warn_rejected(run, planned)
         with _timed(timings, "check"):
             blocked = ~steer_to_pairs(env.robot, env.world, pools.queries[:, 0],

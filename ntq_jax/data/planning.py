@@ -28,7 +28,8 @@ from ntq_jax.planners.verify import finalize
 from ntq_jax.progress import open_bar
 from ntq_jax.types import PlanResult, PlanStatus
 
-__all__ = ["planner_options", "resolve_planner", "PoolPlan", "chunk_ranges", "plan_pool"]
+__all__ = ["planner_options", "resolve_planner", "NamedPlanner", "PoolPlan", "chunk_ranges",
+           "plan_chunk", "plan_pool"]
 
 _CHUNK_FILE = re.compile(r"plan_(\d+)_(\d+)\.npz")
 _CHUNK_KEYS = ("queries", "paths", "lengths", "costs", "status", "rejected")
@@ -76,10 +77,29 @@ def resolve_planner(planner, options: dict, cache_dir: Path | None = None
         return planner, getattr(planner, "__name__", "custom")
     name = str(planner)
     extra = {"cache_dir": cache_dir} if name == "roadmap" and cache_dir is not None else {}
+    return NamedPlanner(name, dict(options), extra), name
 
-    def run(env, queries, *, padding, seed=0):
-        return plan(env, queries, planner=name, padding=padding, seed=seed, **options, **extra)
-    return run, name
+
+class NamedPlanner:
+    """``(env, queries, *, padding, seed) -> PlanResult`` of a registered planner and options.
+
+    A plain picklable object (an executor sends it to its tasks); ``extra`` holds
+    the options that are not part of the run's identity (the roadmap cache folder).
+    """
+
+    def __init__(self, name: str, options: dict, extra: dict | None = None):
+        self.name, self.options, self.extra = name, dict(options), dict(extra or {})
+
+    def __call__(self, env, queries, *, padding, seed=0):
+        return plan(env, queries, planner=self.name, padding=padding, seed=seed, **self.options,
+                    **self.extra)
+
+    def with_options(self, **options) -> "NamedPlanner":
+        """The same planner with ``options`` replaced (e.g. BIT*'s ``workers`` in a task)."""
+        return NamedPlanner(self.name, {**self.options, **options}, self.extra)
+
+    def __repr__(self) -> str:
+        return f"NamedPlanner({self.name!r}, {self.options!r})"
 
 
 class PoolPlan(NamedTuple):
@@ -169,8 +189,32 @@ def _merge(parts, results, n: int, d: int) -> tuple[PlanResult, np.ndarray]:
     return PlanResult(paths, lengths, costs, status, {}), rejected
 
 
+#: Test hook: called with the path of every chunk file the driver writes (None: nothing).
+chunk_written: Callable[[Path], None] | None = None
+
+_TASK_ENVS: dict[str, object] = {}  # a task process's environments by fingerprint (see plan_chunk)
+
+
+def plan_chunk(env_key: str | None, env, queries: np.ndarray, plan_fn: Callable, verify: bool,
+               padding: float, seed: int) -> tuple[PlanResult, np.ndarray]:
+    """One chunk, a pure function of its arguments: ``(verified result without info, rejected)``.
+
+    Runs in the driver (local executor) or in a task (Ray). ``env_key`` (the
+    environment's fingerprint, None in the driver) lets a task process keep ONE
+    environment object per map across its tasks, so the planners' per-environment
+    caches (grids, roadmaps in memory) stay warm.
+    """
+    if env_key is not None:
+        env = _TASK_ENVS.setdefault(env_key, env)
+        if len(_TASK_ENVS) > 8:
+            _TASK_ENVS.pop(next(iter(_TASK_ENVS)))
+    res, rej = _plan_chunk(env, queries, plan_fn, verify, padding, seed)
+    return PlanResult(res.paths, res.lengths, res.costs, res.status, {}), rej
+
+
 def plan_pool(env, pool: np.ndarray, plan_fn: Callable, *, verify: bool, padding: float,
-              seed: int, chunk: int, work: Path, progress=None, desc: str = "plan") -> PoolPlan:
+              seed: int, chunk: int, work: Path, progress=None, desc: str = "plan",
+              executor=None) -> PoolPlan:
     """Plans ``pool`` ``(n, 2, d)`` in chunks, reusing the completed chunk files in ``work``.
 
     Args:
@@ -182,24 +226,50 @@ def plan_pool(env, pool: np.ndarray, plan_fn: Callable, *, verify: bool, padding
         chunk: queries per new chunk.
         work: the folder of the chunk files.
         progress: a progress bar request (:func:`ntq_jax.progress.open_bar`).
+        executor: where the missing chunks run (:mod:`ntq_jax.executors`; None: in
+            this process, in order). The results are written here, by the
+            driver, atomically, each once, as they arrive; the ``roadmap``
+            planner's first chunk runs alone first, so that the roadmap is built
+            once (and cached in its folder) before the other chunks search it.
     """
+    from ntq_jax.executors import LocalExecutor
+
+    executor = executor or LocalExecutor()
     n, d = len(pool), pool.shape[2]
     parts = chunk_ranges(n, chunk, _completed_chunks(work, n))
-    results, reused = [], 0
+    results: list = [None] * len(parts)
+    reused, todo = 0, []
     with open_bar(progress, desc=desc, total=n, unit="query") as bar:
-        for lo, hi, path in parts:
+        for j, (lo, hi, path) in enumerate(parts):
             got = _load_chunk(path, pool[lo:hi]) if path is not None else None
             if got is not None:
                 reused += hi - lo
+                results[j] = got
+                bar.update(hi - lo)
             else:
                 if path is not None:  # stale or damaged: plan again
                     path.unlink(missing_ok=True)
-                got = _plan_chunk(env, pool[lo:hi], plan_fn, verify, padding, chunk_seed(seed, lo))
-                res, rej = got
-                artifacts.save_npz(work / f"plan_{lo:09d}_{hi:09d}.npz", queries=pool[lo:hi],
-                                   paths=res.paths, lengths=res.lengths, costs=res.costs,
-                                   status=res.status, rejected=rej)
-            results.append(got)
-            bar.update(hi - lo)
+                todo.append(j)
+        if todo:
+            env_key = None if executor.name == "local" else artifacts.fingerprint(env.to_json())
+            task_fn = executor.adapt_planner(plan_fn)
+            items = [(env_key, env, pool[parts[j][0]:parts[j][1]], task_fn, verify, padding,
+                      chunk_seed(seed, parts[j][0])) for j in todo]
+            first = 1 if (executor.slots > 1 and len(todo) > 1
+                          and getattr(plan_fn, "name", None) == "roadmap") else 0
+            for batch in ([(0, items[:first])] if first else []) + [(first, items[first:])]:
+                off, its = batch
+                for i, got in executor.imap_unordered(plan_chunk, its):
+                    j = todo[off + i]
+                    lo, hi, _ = parts[j]
+                    res, rej = got
+                    out = artifacts.save_npz(work / f"plan_{lo:09d}_{hi:09d}.npz",
+                                             queries=pool[lo:hi], paths=res.paths,
+                                             lengths=res.lengths, costs=res.costs,
+                                             status=res.status, rejected=rej)
+                    if chunk_written is not None:
+                        chunk_written(out)
+                    results[j] = got
+                    bar.update(hi - lo)
     result, rejected = _merge(parts, results, n, d)
     return PoolPlan(result, rejected, reused)

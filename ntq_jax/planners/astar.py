@@ -250,7 +250,9 @@ def config_grid(env, resolution: float, padding: float) -> ConfigGrid:
 
     Cell ``(i, j)`` (row ``i`` = second coordinate, column ``j`` = first) is
     occupied when its centre ``lo + ((j + 0.5) r, (i + 0.5) r)`` is not a valid
-    state. For the point robot this equals ``env.rasterize(resolution, padding)``.
+    state. For the point robot this equals ``env.rasterize(resolution, padding)``;
+    for a point robot on a map imported from a grid (``env.grid``) at the grid's own
+    resolution and padding 0 it is the map's own occupancy grid, read as is.
     """
     if env.dim != 2:
         raise ValueError(f"the grid A* planner needs a 2-D configuration space (point robot or "
@@ -258,8 +260,21 @@ def config_grid(env, resolution: float, padding: float) -> ConfigGrid:
     resolution = float_option("astar", "resolution", resolution)
     grid_shape(env, resolution)  # 2 x 2 to MAX_GRID_SIDE cells a side, before building anything
     robot, world = env.robot, env.world
+    own = map_grid(env)
+    if own is not None and (float(resolution) != own.resolution or float(padding) != 0.0):
+        own = None
     return _GRIDS.get(env, (float(resolution), float(padding)),
-                      lambda: _build_config_grid(robot, world, float(resolution), float(padding)))
+                      lambda: _build_config_grid(robot, world, float(resolution), float(padding), own))
+
+
+def map_grid(env):
+    """The occupancy grid a point robot's map was imported from (``env.grid``), or None.
+
+    The grid A* planner plans on it, at its own resolution (the ``resolution``
+    option is then ignored): cells are the map's cells, with no re-rasterisation.
+    """
+    grid = getattr(env, "grid", None)
+    return grid if grid is not None and env.robot.kind == "point" else None
 
 
 def grid_shape(env, resolution: float) -> tuple[int, int]:
@@ -285,9 +300,11 @@ def grid_shape(env, resolution: float) -> tuple[int, int]:
     return h, w
 
 
-def _build_config_grid(robot, world, resolution: float, padding: float) -> ConfigGrid:
+def _build_config_grid(robot, world, resolution: float, padding: float, own=None) -> ConfigGrid:
     lo, hi = (np.asarray(v, np.float64) for v in robot.config_bounds(world))
-    if robot.kind == "point":
+    if own is not None:
+        occ = own.occupied
+    elif robot.kind == "point":
         occ = rasterize(world, resolution, padding)
     else:
         w = int(round((hi[0] - lo[0]) / resolution))
@@ -383,7 +400,9 @@ def plan_astar(env, queries, *, padding: float, seed: int = 0, resolution: float
         seed: unused (deterministic).
         resolution: grid cell side (workspace units or radians): a finite number
             > 0 giving 2 to ``MAX_GRID_SIDE`` cells along each side of the
-            configuration box (see :func:`grid_shape`).
+            configuration box (see :func:`grid_shape`). Ignored for a point robot
+            on a map imported from a grid: A* plans on the map's own cells
+            (:func:`map_grid`).
         smooth: shortcut the grid paths (greedy farthest-visible rule).
         chunk_size: queries per :func:`astar` call; ``smooth_chunk``: paths per
             shortcutting call.
@@ -407,11 +426,16 @@ def plan_astar(env, queries, *, padding: float, seed: int = 0, resolution: float
     smooth_chunk = int_option("astar", "smooth_chunk", smooth_chunk, 1)
     check = motion_check_option("astar", check)
     _check_astar_options(astar_options)
+    own = map_grid(env)
+    if own is not None:
+        resolution = own.resolution
     q = np.asarray(queries, np.float32)
     t0 = time.perf_counter()
     grid = config_grid(env, resolution, float(padding))
     k, d = q.shape[0], q.shape[2]
     info: dict = {"planner": "astar", "resolution": float(resolution), "grid_shape": grid.occ.shape}
+    if own is not None:
+        info["map_grid"] = True
     status = np.full(k, PlanStatus.NO_PATH, np.int8)
     valid = valid_queries(env, q, padding)
     status[~valid] = PlanStatus.INVALID

@@ -37,6 +37,7 @@ import importlib.util
 import math
 import multiprocessing as mp
 import os
+import pickle
 import sys
 import threading
 import time
@@ -80,7 +81,7 @@ def plan_bitstar(env, queries, *, padding: float | None = None, seed: int = 0,
                  time_budget: float = 1.0, workers: int = 0, stop_on_first: bool = False,
                  chunk_size: int | None = None, ompl_log_level: str = "error",
                  hang_timeout: float | None = None, startup_timeout: float = 300.0,
-                 check: str = "discretized",
+                 check: str = "discretized", keep_workers: bool = False,
                  _crash_on: Mapping[int, int] | None = None) -> PlanResult:
     """Solves a batch of queries with OMPL's BIT* in parallel worker processes.
 
@@ -102,6 +103,11 @@ def plan_bitstar(env, queries, *, padding: float | None = None, seed: int = 0,
         check: the motion check of the final verification of BIT*'s paths (BIT*
             itself checks motions with our discretised check); see
             :func:`ntq_jax.robots.batch.motion_check`.
+        keep_workers: keep the worker processes alive, idle, after the call, and
+            reuse them in the next call with the same map, padding, budget and
+            settings (in this process; idle workers of other settings are
+            stopped). Saves a process start per call when one process plans many
+            chunks (the Ray executor's tasks); the results do not depend on it.
         _crash_on: test hook, ``{query index: attempts}``: the worker calls
             ``os._exit`` when it starts that query on attempt ``< attempts``
             (``1`` = crash once, then solved on retry; ``2`` = CRASHED).
@@ -128,6 +134,7 @@ def plan_bitstar(env, queries, *, padding: float | None = None, seed: int = 0,
     hang_timeout = float_option("bitstar", "hang_timeout", hang_timeout, none_ok=True)
     startup_timeout = float_option("bitstar", "startup_timeout", startup_timeout)
     check = motion_check_option("bitstar", check)
+    keep_workers = bool_option("bitstar", "keep_workers", keep_workers)
     pad = env.resolve_padding(padding)
     n = q.shape[0]
     seeds = query_seeds(seed, n)
@@ -143,7 +150,7 @@ def plan_bitstar(env, queries, *, padding: float | None = None, seed: int = 0,
                        dict(_crash_on or {}))
         hang = 3.0 * time_budget + 30.0 if hang_timeout is None else hang_timeout
         pool = _WorkerPool(worker_args, q, seeds, todo, min(workers, len(todo)), chunk_size,
-                           hang, startup_timeout, results)
+                           hang, startup_timeout, results, keep=keep_workers)
         pool.run()
     res = _verified_result(env, q, pad, results, seeds, time_budget, check)
     res.info["wall_time"] = time.perf_counter() - t_wall
@@ -205,6 +212,22 @@ def _verified_result(env, q: np.ndarray, pad: float, r: _Results, seeds: np.ndar
 
 _MAIN_LOCK = threading.Lock()
 
+#: ``keep_workers``: idle worker processes by their pickled settings (one setting kept).
+_IDLE: dict[bytes, list] = {}
+
+
+def _stop_workers(workers) -> None:
+    """Asks ``workers`` to stop, waits up to 5 s in all, then kills what is left."""
+    for w in workers:
+        try:
+            w.conn.send(("stop",))
+        except (OSError, ValueError):
+            pass
+    deadline = time.monotonic() + 5.0
+    for w in workers:
+        w.proc.join(timeout=max(0.0, deadline - time.monotonic()))
+        w.kill()
+
 
 @contextlib.contextmanager
 def _main_hidden():
@@ -265,7 +288,8 @@ class _WorkerPool:
 
     def __init__(self, worker_args: tuple, q: np.ndarray, seeds: np.ndarray,
                  todo: collections.deque, n_workers: int, chunk_size: int | None,
-                 hang_timeout: float, startup_timeout: float, results: _Results):
+                 hang_timeout: float, startup_timeout: float, results: _Results,
+                 keep: bool = False):
         if chunk_size is None:
             chunk_size = max(1, min(8, len(todo) // (4 * n_workers)))
         self.chunk_size = max(1, int(chunk_size))
@@ -280,6 +304,8 @@ class _WorkerPool:
         self.pool: list[_Worker] = []
         self.max_deaths = 2 * len(todo) + n_workers  # each death charges >= 1 query, each <= twice
         self.startup_failures = 0  # consecutive workers that died before getting ready
+        self.keep = keep
+        self.key = pickle.dumps(worker_args) if keep else b""
 
     def run(self) -> None:
         try:
@@ -298,6 +324,16 @@ class _WorkerPool:
             self.close()
 
     def spawn(self) -> _Worker:
+        if self.keep:
+            idle = _IDLE.get(self.key, [])
+            while idle:
+                w = idle.pop()
+                if w.proc.is_alive():  # an idle worker of an earlier call: same settings
+                    w.assigned, w.current, w.since = [], None, time.monotonic()
+                    self.pool.append(w)
+                    self.info["workers_reused"] = self.info.get("workers_reused", 0) + 1
+                    return w
+                w.kill()
         w = _Worker(self.ctx, self.worker_args)
         self.pool.append(w)
         self.info["workers"] += 1
@@ -339,15 +375,16 @@ class _WorkerPool:
                 self.todo.appendleft(i)
 
     def close(self) -> None:
-        for w in self.pool:
-            try:
-                w.conn.send(("stop",))
-            except (OSError, ValueError):
-                pass
-        deadline = time.monotonic() + 5.0
-        for w in self.pool:
-            w.proc.join(timeout=max(0.0, deadline - time.monotonic()))
-            w.kill()
+        if self.keep:
+            for other in [k for k in _IDLE if k != self.key]:  # one setting's workers kept
+                _stop_workers(_IDLE.pop(other))
+            idle = _IDLE.setdefault(self.key, [])
+            for w in list(self.pool):
+                if (w.ready and not w.assigned and w.current is None and w.proc.is_alive()
+                        and len(idle) < (os.cpu_count() or 1)):
+                    idle.append(w)
+                    self.pool.remove(w)
+        _stop_workers(self.pool)
 
     def _give_up(self) -> None:
         why = self.info["errors"].get("worker", "workers died before getting ready")

@@ -375,6 +375,22 @@ class VisGraph:
 _GRAPHS = EnvCache(per_env=4)
 
 
+#: The most obstacles (boxes + discs) the visibility graph is built for: its all-pairs
+#: tables grow with the square of the node count (4 per box, more with padding), so a
+#: map imported from a grid (thousands of boxes) is refused with a clear message; the
+#: reference there is grid A* on the map's own grid.
+MAX_OBSTACLES = 500
+
+
+def check_size(env) -> None:
+    """ValueError when ``env`` has more than :data:`MAX_OBSTACLES` obstacles (see there)."""
+    n = env.world.num_boxes + env.world.num_discs
+    if n > MAX_OBSTACLES:
+        raise ValueError(f"the 'visgraph' planner builds all-pairs tables and is limited to "
+                         f"{MAX_OBSTACLES} obstacles; {env.name} has {n}: use 'astar' (on a map "
+                         "imported from a grid it plans on the map's own cells) or 'bitstar'")
+
+
 def plan_visgraph(env, queries, *, padding: float | None = None, seed: int = 0,
                   eps: float | None = None, arc_step: float | None = None,
                   chunk_size: int = 8192, check: str = "discretized") -> PlanResult:
@@ -407,6 +423,7 @@ def plan_visgraph(env, queries, *, padding: float | None = None, seed: int = 0,
     if env.robot.kind != "point":
         raise ValueError(f"the 'visgraph' planner is for the point robot only; {env.name} has a "
                          f"{env.robot.kind!r} robot: use 'bitstar' (or 'astar' for the 2-link arm)")
+    check_size(env)
     pad = env.resolve_padding(padding)
     q = np.asarray(queries, np.float32)
     step = DEFAULT_ARC_STEP if arc_step is None else arc_step

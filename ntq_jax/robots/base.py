@@ -175,15 +175,34 @@ def discretized_steer_to_batch(robot, a: Array, b: Array, world: World, padding:
     d, num = a.shape
     if num == 0:
         return jnp.zeros((0,), bool)
-    lanes = min(lanes, num)
     n = jax.vmap(_steps, in_axes=(None, 1, 1, None))(robot, a, b, resolution)
+    interpolate = jax.vmap(jax.vmap(robot.interpolate, in_axes=(None, None, 0), out_axes=1),
+                           in_axes=(1, 1, 1), out_axes=2)
+    is_valid = jax.vmap(jax.vmap(robot.is_valid, in_axes=(1, None, None)), in_axes=(1, None, None))
+
+    def valid_at(ap, bp, t):
+        return is_valid(interpolate(ap, bp, t), world, padding)
+
+    return check_queue(a, b, n, valid_at, mask, lanes, per_step)
+
+
+def check_queue(a: Array, b: Array, n: Array, valid_at, mask: Array | None = None,
+                lanes: int = QUEUE_LANES, per_step: int = CHECKS_PER_STEP) -> Array:
+    """The work queue of :func:`discretized_steer_to_batch` for any per-motion check.
+
+    Motion ``i`` (columns of the coordinate-major ``a``, ``b`` ``(d, N)``) is free
+    when ``valid_at`` holds at all ``t = k / n[i]``, ``k = 0..n[i]`` (in the
+    coarse-to-fine order of :func:`_check_index`); ``n[i] = 0`` (or ``mask``
+    False) reports it blocked unchecked. ``valid_at(ap, bp, t)`` gets the
+    lanes' motions ``(d, lanes)`` and fractions ``t`` ``(per_step, lanes)`` and
+    returns ``(per_step, lanes)`` bool.
+    """
+    d, num = a.shape
+    lanes = min(lanes, num)
     if mask is not None:
         n = jnp.where(mask, n, 0)
     order = _longest_first(n)  # the queue, longest motions first; the n = 0 ones (not checked) last
     work = jnp.sum(n > 0, dtype=jnp.int32)  # queue positions >= work hold nothing to check
-    interpolate = jax.vmap(jax.vmap(robot.interpolate, in_axes=(None, None, 0), out_axes=1),
-                           in_axes=(1, 1, 1), out_axes=2)
-    is_valid = jax.vmap(jax.vmap(robot.is_valid, in_axes=(1, None, None)), in_axes=(1, None, None))
     ahead = jnp.arange(per_step, dtype=jnp.int32)[:, None]
 
     def check(pos, k):
@@ -196,7 +215,7 @@ def discretized_steer_to_batch(robot, a: Array, b: Array, world: World, padding:
         # lanes): a flat (d, per_step * lanes) layout stops XLA from vectorising
         ap = jnp.stack([a[j][i] for j in range(d)])
         bp = jnp.stack([b[j][i] for j in range(d)])
-        return is_valid(interpolate(ap, bp, t), world, padding)
+        return valid_at(ap, bp, t)
 
     def cond(carry):
         return jnp.any(carry[1] < work)  # some lane still holds a motion

@@ -127,7 +127,8 @@ class NLinkArm(DiscretizedSteering, CertifiedSteering):
         base = geometry.wall_clearance(xs[0], ys[0], world.bounds)
         parts = []
         for k in range(self.dim):
-            c = jnp.minimum(geometry.segment_clearance(xs[k], ys[k], xs[k + 1], ys[k + 1], world)
+            c = jnp.minimum(geometry.segment_clearance(xs[k], ys[k], xs[k + 1], ys[k + 1], world,
+                                                      padding)
                             - padding, geometry.wall_clearance(xs[k + 1], ys[k + 1], world.bounds))
             parts.append(jnp.minimum(c, base) if k == 0 else c)
         c = jnp.stack(parts)

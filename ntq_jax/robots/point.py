@@ -7,8 +7,9 @@ import dataclasses
 import jax
 import jax.numpy as jnp
 
-from ntq_jax import geometry
+from ntq_jax import broadphase, geometry
 from ntq_jax.geometry import World
+from ntq_jax.robots.base import check_queue
 
 Array = jax.Array
 
@@ -49,7 +50,18 @@ class PointRobot:
 
     def steer_to_batch(self, a: Array, b: Array, world: World, padding: float,
                        mask: Array | None = None) -> Array:
-        """Coordinate-major ``(2, N), (2, N) -> (N,)``; ``mask`` False reports blocked."""
+        """Coordinate-major ``(2, N), (2, N) -> (N,)``; ``mask`` False reports blocked.
+
+        On a world with a broad-phase index (:mod:`ntq_jax.broadphase`) the segments
+        are first tested against the boxes near their two ends (all at once; most
+        blocked segments of a cluttered map stop here), the rest run through the
+        work queue of :func:`ntq_jax.robots.base.check_queue`: lane
+        by lane, the index cells along each segment (points ``2 (reach - padding)``
+        apart, coarse to fine), each an exact test of the whole segment against the
+        cell's boxes, stopping at the first hit. Same answers as the per-segment test.
+        """
+        if broadphase.index_covers(world, padding, strict=True) and a.shape[1] > 0:
+            return _indexed_steer_batch(a, b, world, padding, mask)
         free = jax.vmap(self.steer_to, in_axes=(1, 1, None, None))(a, b, world, padding)
         return free if mask is None else free & mask
 
@@ -60,3 +72,34 @@ class PointRobot:
 
     def to_json(self) -> dict:
         return {"kind": "point"}
+
+
+#: Index cells each lane of the point robot's broad-phase queue checks per iteration.
+INDEXED_CHECKS_PER_STEP = 2
+
+
+def _indexed_steer_batch(a: Array, b: Array, world: World, padding: float,
+                         mask: Array | None) -> Array:
+    """:meth:`PointRobot.steer_to_batch` through the broad phase (see there)."""
+    x0, y0, x1, y1 = a[0], a[1], b[0], b[1]
+    ok = (jnp.isfinite(x0 + y0 + x1 + y1) & geometry.in_bounds(x0, y0, world.bounds)
+          & geometry.in_bounds(x1, y1, world.bounds))
+    if world.discs.shape[0]:
+        disc_free = jax.vmap(lambda p, q: geometry.segment_free(
+            p, q, dataclasses.replace(world, boxes=world.boxes[:0], index=None), padding),
+            in_axes=(1, 1))(a, b)
+        ok = ok & disc_free
+    # a cheap first pass over every segment: the boxes near its two ends (where most blocked
+    # segments of a cluttered map are caught); only the others enter the work queue
+    for t in (0.0, 1.0):
+        ok = ok & ~jax.vmap(geometry.segment_hits_near, in_axes=(0, 0, 0, 0, None, None, None))(
+            x0, y0, x1, y1, jnp.float32(t), world, padding)
+    mask = ok if mask is None else ok & mask
+    n = geometry.segment_cover_steps(x0, y0, x1, y1, world.index.reach, padding)
+    hits = jax.vmap(jax.vmap(geometry.segment_hits_near, in_axes=(None, None, None, None, 0, None, None)),
+                    in_axes=(0, 0, 0, 0, 1, None, None), out_axes=1)
+
+    def valid_at(ap, bp, t):
+        return ~hits(ap[0], ap[1], bp[0], bp[1], t, world, padding)
+
+    return check_queue(a, b, n, valid_at, mask, per_step=INDEXED_CHECKS_PER_STEP)

@@ -159,7 +159,7 @@ class RigidBody(DiscretizedSteering, CertifiedSteering):
         non-finite ``q`` or ``|theta| >= ANGLE_LIMIT``; theta is reduced as in :meth:`is_valid`."""
         hl, hw = 0.5 * self.length, 0.5 * self.width
         q = _reduced(q)
-        c = geometry.rect_clearance(q, hl, hw, world) - padding
+        c = geometry.rect_clearance(q, hl, hw, world, padding) - padding
         xs, ys = geometry.rect_corners(q[0], q[1], q[2], hl, hw)
         for px, py in zip(xs, ys):
             c = jnp.minimum(c, geometry.wall_clearance(px, py, world.bounds))

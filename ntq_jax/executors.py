@@ -1,0 +1,230 @@
+"""Where the host-side planning chunks run: in this process (``local``) or as Ray tasks (``ray``).
+
+An executor is a small strategy injected into the stages that plan in chunks
+(:func:`ntq_jax.data.planning.plan_pool`, the evaluation's reference planning,
+:mod:`ntq_jax.pipeline`'s per-environment data stage). The compute code stays
+free of executor knowledge: a chunk is a pure function of its arguments
+(environment, queries, planner and options, padding, the chunk's seed) that
+returns arrays; the DRIVER writes each chunk's result atomically into the run
+folder as it arrives, so the run folder stays the single source of truth and a
+run can be resumed with either executor.
+
+* :class:`LocalExecutor` (``executor: local``, the default): every chunk runs in
+  this process, one after the other, exactly as before this module existed
+  (bit for bit; BIT* still uses its own worker processes, ``planner.workers``).
+* :class:`RayExecutor` (``executor: ray``): every chunk is a Ray task
+  (``num_cpus`` per task, default 1), retried by Ray up to ``max_retries``
+  times when its worker process dies (``ray.remote(max_retries=...)``). A
+  retried task gets the same arguments, so the same planner seed: the chunk's
+  seed is derived from its position in the pool (``planning.chunk_seed``),
+  never from the attempt or the worker. Results come back in completion order
+  (``ray.wait``) and the driver writes each once. ``address=None`` starts a
+  local Ray instance; ``"auto"`` joins the running cluster (``ray start``).
+
+Only the driver writes chunk files. The one thing a task writes itself is the
+``roadmap`` planner's on-disk roadmap cache (``<run>/data/<env>/roadmap``,
+written atomically): on a cluster the run folder must therefore be on a path
+every node sees (NFS or similar, same path on every node), or each node builds
+its own copy of the roadmap.
+
+Usage::
+
+    from ntq_jax.executors import make_executor
+    ex = make_executor("ray", address="auto")
+    for i, result in ex.imap_unordered(fn, [(a, b), (c, d)]):
+        ...  # result of fn(*items[i])
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+import warnings
+from typing import Any, Callable, Iterable, Iterator, Protocol, Sequence
+
+__all__ = ["EXECUTORS", "Executor", "LocalExecutor", "RayExecutor", "make_executor",
+           "executor_from_config", "RAY_MISSING"]
+
+EXECUTORS = ("local", "ray")
+_INIT_LOCK = threading.Lock()  # threads of one driver share one Ray connection
+RAY_MISSING = "the ray executor needs Ray: pip install -e '.[ray]' (or pip install 'ray>=2.40')"
+
+
+class Executor(Protocol):
+    """Runs independent calls ``fn(*args)``; the results come back as ``(index, result)``."""
+
+    name: str
+
+    @property
+    def slots(self) -> int:
+        """How many calls run at the same time (1 for the local executor)."""
+
+    def imap_unordered(self, fn: Callable, items: Sequence[tuple]
+                       ) -> Iterator[tuple[int, Any]]:
+        """``(i, fn(*items[i]))`` for every item, in completion order."""
+
+    def adapt_planner(self, plan_fn: Callable) -> Callable:
+        """The planner callable a task runs (e.g. BIT* with one worker per task CPU)."""
+
+    def start(self) -> None:
+        """Starts or joins the executor's resources now (call it from the main thread)."""
+
+
+class LocalExecutor:
+    """Today's behaviour: every call in this process, in order."""
+
+    name = "local"
+    slots = 1
+
+    def imap_unordered(self, fn: Callable, items: Sequence[tuple]
+                       ) -> Iterator[tuple[int, Any]]:
+        for i, args in enumerate(items):
+            yield i, fn(*args)
+
+    def adapt_planner(self, plan_fn: Callable) -> Callable:
+        return plan_fn
+
+    def start(self) -> None:
+        pass
+
+    def __repr__(self) -> str:
+        return "LocalExecutor()"
+
+
+def _import_ray():
+    try:
+        import ray
+    except ImportError:
+        from ntq_jax.cli import UsageError
+        raise UsageError(RAY_MISSING) from None
+    return ray
+
+
+class RayExecutor:
+    """Every call a Ray task with ``num_cpus`` CPUs, retried ``max_retries`` times on worker death.
+
+    Args:
+        address: ``None`` starts a local Ray instance (``num_cpus`` CPUs for it:
+            ``local_cpus``); ``"auto"`` or ``"<host>:<port>"`` joins a cluster.
+            When Ray is already initialised in this process it is used as it is.
+        num_cpus: CPUs each task reserves (BIT* runs that many worker processes
+            in a task).
+        max_retries: Ray's ``max_retries``: re-executions of a task whose worker died.
+        local_cpus: CPUs of a local instance started here (None: every core).
+    """
+
+    name = "ray"
+
+    def __init__(self, address: str | None = None, *, num_cpus: int = 1, max_retries: int = 3,
+                 local_cpus: int | None = None):
+        self.address = address
+        self.num_cpus = int(num_cpus)
+        self.max_retries = int(max_retries)
+        self.local_cpus = local_cpus
+        self._ray = None
+        _import_ray()  # a missing Ray is an error before any work (Ray starts at the first task)
+        self._task = None
+        self.latencies: list[float] = []    # per task: seconds from submission to its start
+        self.task_seconds: list[float] = []  # per task: seconds of fn(*args) in the worker
+
+    # -- Ray ------------------------------------------------------------------
+    def start(self) -> None:
+        """Starts (or joins) Ray now; the scripts call it in the main thread before their
+        per-environment threads (Ray installs its signal handlers there)."""
+        self.ray()
+
+    def ray(self):
+        """The ``ray`` module, initialised (lazily: nothing is started before the first task)."""
+        with _INIT_LOCK:
+            return self._init()
+
+    def _init(self):
+        if self._ray is None:
+            ray = _import_ray()
+            if not ray.is_initialized():
+                kw: dict = {"include_dashboard": False, "log_to_driver": True,
+                            "configure_logging": False}
+                if self.address is None:
+                    kw["num_cpus"] = self.local_cpus
+                # the tasks are host-side work: JAX on the CPU there, never a GPU of the node
+                # (each worker process would otherwise reserve most of its memory)
+                kw["runtime_env"] = {"env_vars": {"JAX_PLATFORMS": "cpu"}}
+                with warnings.catch_warnings():  # Ray's fork+exec of its own daemons
+                    warnings.filterwarnings("ignore", message=r"os\.fork\(\) was called")
+                    ray.init(address=self.address, **kw)
+            self._ray = ray
+        return self._ray
+
+    @property
+    def slots(self) -> int:
+        cpus = self.ray().cluster_resources().get("CPU", 1)
+        return max(1, int(cpus // max(self.num_cpus, 1)))
+
+    def submit(self, fn: Callable, *args):
+        """One task ``fn(*args)``: an ``ObjectRef`` of :func:`_timed_call`'s triple."""
+        if self._task is None:
+            self._task = self.ray().remote(num_cpus=self.num_cpus,
+                                           max_retries=self.max_retries)(_timed_call)
+        return self._task.remote(fn, time.time(), *args)
+
+    def imap_unordered(self, fn: Callable, items: Sequence[tuple]
+                       ) -> Iterator[tuple[int, Any]]:
+        ray = self.ray()
+        refs = {self.submit(fn, *args): i for i, args in enumerate(items)}
+        pending = list(refs)
+        try:
+            while pending:
+                done, pending = ray.wait(pending, num_returns=1)
+                for ref in done:
+                    latency, seconds, result = ray.get(ref)
+                    self.latencies.append(latency)
+                    self.task_seconds.append(seconds)
+                    yield refs[ref], result
+        finally:
+            for ref in pending:  # the caller stopped early (an error, Ctrl-C)
+                ray.cancel(ref, force=True)
+
+    def adapt_planner(self, plan_fn: Callable) -> Callable:
+        with_options = getattr(plan_fn, "with_options", None)
+        if with_options is not None and getattr(plan_fn, "name", None) == "bitstar":
+            # the task's CPUs, not the node's; its BIT* processes kept for its next chunks
+            return with_options(workers=self.num_cpus, keep_workers=True)
+        return plan_fn
+
+    def __repr__(self) -> str:
+        return (f"RayExecutor(address={self.address!r}, num_cpus={self.num_cpus}, "
+                f"max_retries={self.max_retries})")
+
+
+def _timed_call(fn: Callable, submitted: float, *args):
+    """The task body: ``(seconds from submission to start, seconds of fn, fn(*args))``."""
+    started = time.time()
+    t0 = time.perf_counter()
+    out = fn(*args)
+    return started - submitted, time.perf_counter() - t0, out
+
+
+def make_executor(name: str | None = "local", address: str | None = None, **kwargs) -> Executor:
+    """``local`` (default) or ``ray`` (``address``: None = a local instance, ``auto`` = a cluster)."""
+    name = name or "local"
+    if name == "local":
+        return LocalExecutor()
+    if name == "ray":
+        return RayExecutor(address, **kwargs)
+    raise ValueError(f"executor must be one of {', '.join(EXECUTORS)}, got {name!r}")
+
+
+def executor_from_config(cfg, name: str | None = None, address: str | None = None) -> Executor:
+    """The executor of ``cfg.executor`` / ``cfg.ray_address``, ``name``/``address`` overriding."""
+    name = name or getattr(cfg, "executor", None) or "local"
+    address = address if address is not None else getattr(cfg, "ray_address", None)
+    return make_executor(name, address)
+
+
+def run_all(executor: Executor, fn: Callable, items: Iterable[tuple]) -> list:
+    """Every ``fn(*item)`` through ``executor``, in item order."""
+    items = list(items)
+    out: list = [None] * len(items)
+    for i, r in executor.imap_unordered(fn, items):
+        out[i] = r
+    return out

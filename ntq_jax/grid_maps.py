@@ -132,13 +132,18 @@ def grid_world(grid: OccupancyGrid):
 # MovingAI
 # ---------------------------------------------------------------------------
 
-def _text_lines(path: Path) -> list[str]:
+def _read_text(path: Path) -> str:
+    """The UTF-8 text of a map file; one :class:`GridMapError` line if unreadable."""
     try:
-        text = path.read_bytes().decode("utf-8")
+        return path.read_bytes().decode("utf-8")
     except OSError as e:
         raise GridMapError(f"cannot read map file {str(path)!r}: {e.strerror or e}") from None
     except UnicodeDecodeError as e:
         raise GridMapError(f"{path}: not a text file ({e.reason} at byte {e.start})") from None
+
+
+def _text_lines(path: Path) -> list[str]:
+    text = _read_text(path)
     return text.replace("\r\n", "\n").replace("\r", "\n").split("\n")
 
 
@@ -307,12 +312,7 @@ def read_ros_map(path, unknown: str = "occupied") -> OccupancyGrid:
     path = Path(path)
     if unknown not in UNKNOWN_POLICIES:
         raise GridMapError(f"unknown must be one of {UNKNOWN_POLICIES}, got {unknown!r}")
-    try:
-        text = path.read_bytes().decode("utf-8")
-    except OSError as e:
-        raise GridMapError(f"cannot read map file {str(path)!r}: {e.strerror or e}") from None
-    except UnicodeDecodeError as e:
-        raise GridMapError(f"{path}: not a text file ({e.reason} at byte {e.start})") from None
+    text = _read_text(path)
     try:
         spec = yaml.safe_load(text)
     except yaml.YAMLError as e:

@@ -418,7 +418,9 @@ def test_robot_clearance_matches_shapely(robot):
     near, pos, total = np.sum(stats, 0)
     if not arm:  # the rigid poses are built near contact; the arm's are uniform
         assert near > 0.2 * total, (near, total)
-    assert 0.1 * total < pos < 0.9 * total, (pos, total)
+    # non-vacuous: both clear and colliding states among the checked ones (the worlds are
+    # random: a sparse draw once gave 93 % clear arm states, so the bound is 5 %..95 %)
+    assert 0.05 * total < pos < 0.95 * total, (pos, total)
 
 
 def boundary_states(rng, env: Env, pad: float, n: int):

@@ -56,8 +56,8 @@ from jax.tree_util import Partial
 
 from ntq_jax.batching import bucket_size, group_chunks, pad_rows, padded_chunks
 from ntq_jax.geometry import World
-from ntq_jax.neural_steps import (EnsemblePNet, MemberBlocks, Stages, cost_jit, fold_in,
-                                  is_key_stack, split2)
+from ntq_jax.neural_steps import (CHECK_ROWS, EnsemblePNet, MemberBlocks, Stages, cost_jit,
+                                  fold_in, is_key_stack, split2)
 from ntq_jax.robots.certified import MOTION_CHECKS
 from ntq_jax.types import CAUSE_RANK, PlanCause
 
@@ -262,16 +262,17 @@ def _member_rows(b: _Batch, rows: np.ndarray) -> list[np.ndarray]:
 
 
 def _coarse(stages: Stages, b: _Batch, q: np.ndarray, key, size: int) -> None:
-    """Steps 1-3 (coarse plan, contraction, feasibility) of every query, chunks of ``size``
-    (per member: ``size`` rows of each member side by side)."""
+    """Steps 1-3 (coarse plan, contraction, feasibility) of every query: the coarse plans in
+    chunks of ``size`` (per member: ``size`` rows of each member side by side), then the
+    paths that reached their goal contracted and checked (:func:`_recheck`)."""
     k = len(q)
     for lo, idx, act in group_chunks([np.arange(k)] * b.members, size):
         rows = idx + np.repeat(np.arange(b.members) * k, size)
         out = stages("coarse", stages.pnet, fold_in(key, lo // size),
                      jnp.asarray(q[idx, 0]), jnp.asarray(q[idx, 1]), jnp.asarray(act))
-        for dst, src in zip((b.paths, b.lengths, b.valid, b.reached, b.feasible, b.blocked,
-                             b.calls), out):
+        for dst, src in zip((b.paths, b.lengths, b.valid, b.reached, b.calls), out):
             dst[rows[act]] = src[act]
+    _recheck(stages, b, np.flatnonzero(b.reached))
 
 
 def _window_validity(stages: Stages, b: _Batch, todo: np.ndarray, width: int) -> np.ndarray:
@@ -303,9 +304,9 @@ def _reconnect(stages: Stages, b: _Batch, rows, wa, wb, key, width: int):
     return sub, ns, conn
 
 
-def _recheck(stages: Stages, b: _Batch, todo: np.ndarray, width: int) -> None:
-    """Contraction and feasibility check of the paths ``todo`` after their repair."""
-    for lo, m, (sel,), mask in padded_chunks([np.arange(len(todo))], width):
+def _recheck(stages: Stages, b: _Batch, todo: np.ndarray) -> None:
+    """Contraction and feasibility check of the paths ``todo`` (:data:`CHECK_ROWS` per call)."""
+    for lo, m, (sel,), mask in padded_chunks([np.arange(len(todo))], CHECK_ROWS):
         o = stages("check", jnp.asarray(b.paths[todo[sel]]), jnp.asarray(b.lengths[todo[sel]]),
                    jnp.asarray(mask))
         idx = todo[lo:lo + m]
@@ -331,7 +332,7 @@ def _replan_round(stages: Stages, b: _Batch, todo: np.ndarray, key, width: int) 
         out = splice(b.paths[i], int(b.lengths[i]), wa[w], wb[w], sub[w, :ns[w]])
         if out is not None:
             b.paths[i], b.lengths[i] = out
-    _recheck(stages, b, todo, width)
+    _recheck(stages, b, todo)
     b.replans[todo] += 1
 
 
@@ -496,9 +497,9 @@ def plan_cascade(env, pnets, queries, key: Array, opts: PlannerOptions = Planner
 
     Attempt ``j`` is :func:`plan_batch` with ``pnets[order[j]]`` and key
     ``fold_in(key, j)`` on the queries no earlier attempt solved (a smaller batch:
-    its first use of a batch size compiles the planner for it, once per process;
-    padding the fallbacks to the first batch's size instead measured 2x slower
-    planning on point/0). A query
+    its first use of a batch size compiles the coarse plan and the neural connection
+    for it, once per process; the check stage has one size. Padding the fallbacks to
+    the first batch's size instead measured 2x slower planning on point/0). A query
     succeeds iff one of its attempts succeeds; its path, cost and cause are that
     attempt's. A query no attempt solves keeps the failure closest to a success
     (:data:`ntq_jax.types.CAUSE_RANK`; ties: the earliest attempt). The work

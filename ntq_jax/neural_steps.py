@@ -31,6 +31,11 @@ from ntq_jax.robots.batch import is_valid_cm, steer_to_cm
 Array = jax.Array
 
 COMPILED_CACHE_SIZE = 64  # compiled stages kept (the least recently used is dropped first)
+# Paths per call of the check stage (contraction and feasibility), whatever the batch size:
+# the stage holding the motion check, the slowest to compile, compiles once per robot,
+# options and map instead of once per batch size. Masked padding rows cost little (their
+# motions are never swept).
+CHECK_ROWS = 256
 
 
 # ---------------------------------------------------------------------------
@@ -367,7 +372,11 @@ def _contract_and_check(robot, world, opts, p, n, mask, do_contract: bool):
 # ---------------------------------------------------------------------------
 
 def coarse_core(robot, opts, world, pnet, key, starts, goals, active):
-    """Coarse plan, contraction and feasibility check of a batch (one jitted call)."""
+    """Coarse plan of a batch (one jitted call): ``(p, n, valid, reached, calls)``.
+
+    Its contraction and feasibility check are :func:`check_core`'s, a separate
+    stage of a fixed shape (:data:`CHECK_ROWS` paths) compiled once per process.
+    """
     length = opts.max_len
     valid = (active & is_valid_cm(robot, world, starts.T, opts.eval_padding)
              & is_valid_cm(robot, world, goals.T, opts.eval_padding))
@@ -378,9 +387,7 @@ def coarse_core(robot, opts, world, pnet, key, starts, goals, active):
     else:
         p, n, reached, calls = _forward(robot, world, pnet, key, starts, goals, valid, opts,
                                         length)
-    p, n, feasible, blocked = _contract_and_check(robot, world, opts, p, n, reached,
-                                                  opts.steer and opts.contract)
-    return p, n, valid, reached, feasible, blocked, calls
+    return p, n, valid, reached, calls
 
 
 def valid_core(robot, opts, world, p, n):
@@ -405,11 +412,12 @@ def connect_core(robot, opts, world, pnet, key, a, b, active):
 
 
 def check_core(robot, opts, world, p, n, todo):
-    """Contraction (if on) and the feasibility check of the rows ``todo`` (one jitted call).
+    """Contraction (with steerTo, if on) and the feasibility check of the rows ``todo``
+    (one jitted call; the planner calls it on :data:`CHECK_ROWS` paths at a time).
 
     Returns ``(p, n, feasible, blocked)``.
     """
-    return _contract_and_check(robot, world, opts, p, n, todo, opts.contract)
+    return _contract_and_check(robot, world, opts, p, n, todo, opts.steer and opts.contract)
 
 
 def cost_core(robot, p, n):

@@ -341,12 +341,33 @@ def _stay(key, current, goal):
 
 def test_compiled_stages_are_bounded(monkeypatch):
     from ntq_jax import neural_steps
-    monkeypatch.setattr(neural_steps, "COMPILED_CACHE_SIZE", 2)
+    monkeypatch.setattr(neural_steps, "COMPILED_CACHE_SIZE", 4)
     env = make("straight")
     q = np.asarray([[[1, 2], [9, 8]]], np.float32)
-    for n_plan in (1, 2, 3):  # one compiled stage (coarse) per option set
+    for n_plan in (1, 2, 3):  # two compiled stages (coarse, check) per option set
         res = plan_batch(env, _stay, q, jax.random.key(0),
                          PlannerOptions(n_plan=n_plan, replan_rounds=0))
-        assert res.success[0] and len(neural_steps._COMPILED) <= 2
+        assert res.success[0] and len(neural_steps._COMPILED) <= 4
     sigs = list(neural_steps._COMPILED)
-    assert [s[2].n_plan for s in sigs] == [2, 3]  # the least recently used went first
+    assert [s[2].n_plan for s in sigs] == [2, 2, 3, 3]  # the least recently used went first
+    assert [s[0] for s in sigs] == ["coarse", "check"] * 2
+
+
+def test_check_stage_compiles_once_for_every_batch_size():
+    """The contraction and feasibility check run on CHECK_ROWS paths per call, so batches of
+    other sizes (the cascade's fallbacks) reuse its one compilation; results are per row."""
+    from ntq_jax import neural_steps
+    env = make("wall")
+    opts = PlannerOptions(n_plan=4, replan_rounds=0)
+    rng = np.random.default_rng(3)
+    q = rng.uniform(0.5, 9.5, (300, 2, 2)).astype(np.float32)
+    neural_steps._COMPILED.clear()
+    big = plan_batch(env, _stay, q, jax.random.key(0), opts)
+    small = plan_batch(env, _stay, q[:5], jax.random.key(0), opts)
+    checks = [s for s in neural_steps._COMPILED if s[0] == "check"]
+    coarse = [s for s in neural_steps._COMPILED if s[0] == "coarse"]
+    assert len(checks) == 1 and len(coarse) == 2
+    assert (neural_steps.CHECK_ROWS,) in [shape for shape, _ in checks[0][-1]]  # the mask
+    assert 0 < big.success.sum() < len(q)  # both kinds of rows
+    np.testing.assert_array_equal(small.success, big.success[:5])
+    np.testing.assert_array_equal(small.lengths, big.lengths[:5])

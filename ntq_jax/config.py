@@ -221,6 +221,12 @@ class PlannerConfig:
         time_budget: BIT* seconds per query during data generation.
         eval_time_budget: BIT* seconds per query at evaluation.
         workers: BIT* worker processes (0 = number of cores).
+        smooth_data: shortcut the data planner's paths (``astar``, ``roadmap``) before
+            they become training samples: null (the default) or true shortcut them
+            (few waypoints, each a corner of the path); false keeps the planner's raw
+            waypoints (grid cells, roadmap nodes: many short segments, like BIT*'s
+            graph vertices). The evaluation reference is always shortcut. Left out of
+            the config hash when null.
         per_env: per-environment planners and budgets (:class:`PlannerEnvOverride`);
             read them with :meth:`name_for`, :meth:`time_budget_for` and
             :meth:`eval_time_budget_for`.
@@ -234,7 +240,9 @@ class PlannerConfig:
     time_budget: float = 3.0
     eval_time_budget: float = 2.0
     workers: int = 0
+    smooth_data: Optional[bool] = None
     per_env: tuple[PlannerEnvOverride, ...] = ()
+    _OMIT_NONE = ("smooth_data",)
 
     def validate(self, p: str):
         _check(self.name in PLANNERS, f"{p}.name",

@@ -2,6 +2,7 @@
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from ntq_jax import config
@@ -103,3 +104,35 @@ def test_per_env_planner_and_training_seed():
     assert other.train.seed_for(other.seed) == 2 and other.hash() != cfg.hash()
     with pytest.raises(ConfigError, match=r"train\.seed"):
         load_config(None, ["train.seed=-1"])
+
+
+def test_smooth_data_reaches_the_data_planner_only():
+    """planner.smooth_data: null keeps the hash and the planners' default (shortcut paths);
+    false reaches astar/roadmap data generation, never the evaluation reference."""
+    from ntq_jax import make_env
+    from ntq_jax.data.planning import planner_options
+    from ntq_jax.pipeline import load_config
+    from ntq_jax.planners import plan
+
+    cfg = load_config(None, [])
+    assert "smooth_data" not in cfg.to_dict()["planner"]
+    assert "smooth" not in planner_options(cfg, "rigid/0")
+    raw = load_config(None, ["planner.smooth_data=false"])
+    assert raw.hash() != cfg.hash()
+    assert planner_options(raw, "rigid/0")["smooth"] is False
+    assert planner_options(raw, "point/0")["smooth"] is False
+    assert "smooth" not in planner_options(raw, "rigid/0", evaluation=True)
+    with pytest.raises(ConfigError, match=r"planner\.smooth_data"):
+        load_config(None, ["planner.smooth_data=maybe"])
+    # the option changes the paths: raw grid paths keep their many cell centres
+    env = make_env("point/0")
+    rng = np.random.default_rng(0)
+    lo, hi = np.asarray(env.world.bounds)[:, 0], np.asarray(env.world.bounds)[:, 1]
+    q = rng.uniform(lo, hi, (40, 2, 2)).astype(np.float32)
+    kw = planner_options(raw, "point/0")
+    smooth = plan(env, q, "astar", padding=env.padding, resolution=kw["resolution"])
+    rough = plan(env, q, "astar", padding=env.padding, **kw)
+    both = (smooth.lengths >= 2) & (rough.lengths >= 2)
+    assert both.sum() >= 10
+    assert np.all(rough.lengths[both] >= smooth.lengths[both])
+    assert np.mean(rough.lengths[both]) > 3 * np.mean(smooth.lengths[both])

@@ -44,11 +44,14 @@ def planner_options(config, env_name: str, name: str | None = None, *,
     evaluation budget instead of the data-generation one, and the evaluation's
     motion check (``config.eval.motion_check``) for the planner's checks and the
     verification of its paths. Data generation keeps the planners' default, the
-    discretised check (the paper's), at the data padding.
+    discretised check (the paper's), at the data padding, and passes
+    ``planner.smooth_data`` (when set) to ``astar`` and ``roadmap``.
     """
     pc = config.planner
     name = name or pc.name_for(env_name)
     extra = {"check": config.eval.motion_check} if evaluation else {}
+    if not evaluation and pc.smooth_data is not None and name in ("astar", "roadmap"):
+        extra["smooth"] = bool(pc.smooth_data)
     if name == "astar":
         return {"resolution": pc.resolution, **extra}
     if name == "bitstar":

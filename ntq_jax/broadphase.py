@@ -30,6 +30,22 @@ looped fold above :data:`UNROLL_MAX` discs). Clearances (the certified check)
 from the index are exact up to a cap, ``reach - rho``: a lower bound of the
 true distance that is exact whenever the distance is below the cap, which is
 all the certified check's proof needs.
+
+The index also keeps a *blocked-cell bitmap* for the point robot's batched
+``steer_to`` (:attr:`ObstacleIndex.blocked`): a second uniform grid, its own
+cell side ``bcell`` (the index cell, or finer down to the thinnest box so that
+the cells of an imported occupancy grid line up with the grid's own cells; at
+most :data:`BITMAP_MAX_CELLS` cells), one byte per cell, set when the closed
+cell lies inside one box (computed on the host; exact for grid-derived maps,
+conservative for arbitrary boxes: a cell covered only by the union of several
+boxes is not set). A point at least ``margin`` inside a set cell
+(:meth:`ObstacleIndex.certainly_blocked`) is inside a box by more than the
+float32 rounding of the queries' interpolated points, so a segment through it
+is blocked at every padding ``>= 0`` (the exact kernels agree: their tests hold
+with a slack of about ``margin |b - a|``). The bitmap only ever says "blocked";
+everything it leaves undecided goes through the exact narrow phase. A map with
+no set cell keeps ``blocked = None`` (the first pass is then left out at trace
+time).
 """
 
 from __future__ import annotations
@@ -70,6 +86,9 @@ MAX_CELLS = 256 * 256
 #: Target mean number of boxes per cell when the cell size is derived from the map.
 BOXES_PER_CELL = 0.125
 
+#: The most cells of the blocked-cell bitmap (one byte each).
+BITMAP_MAX_CELLS = 1024 * 1024
+
 
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)
@@ -83,6 +102,13 @@ class ObstacleIndex:
         cell: the cells' side (static).
         nx, ny: the grid's columns and rows (static).
         reach: the distance from a cell within which every box is listed (static).
+        blocked: None, or the blocked-cell bitmap (see the module docstring):
+            ``(bny * bnx,)`` uint8, cell ``row * bnx + col`` is 1 when the closed cell
+            lies inside one box.
+        bcell, bnx, bny: the bitmap's cell side, columns and rows (static; its lower-left
+            corner is the grid's, ``(x0, y0)``).
+        margin: how far inside a set bitmap cell a point must be for
+            :meth:`certainly_blocked` (static, in world units).
     """
 
     boxes: Array
@@ -92,6 +118,11 @@ class ObstacleIndex:
     nx: int = dataclasses.field(metadata=dict(static=True))
     ny: int = dataclasses.field(metadata=dict(static=True))
     reach: float = dataclasses.field(metadata=dict(static=True))
+    blocked: Array | None = None
+    bcell: float = dataclasses.field(default=1.0, metadata=dict(static=True))
+    bnx: int = dataclasses.field(default=0, metadata=dict(static=True))
+    bny: int = dataclasses.field(default=0, metadata=dict(static=True))
+    margin: float = dataclasses.field(default=0.0, metadata=dict(static=True))
 
     @property
     def capacity(self) -> int:
@@ -109,6 +140,23 @@ class ObstacleIndex:
     def candidates(self, x: Array, y: Array) -> Array:
         """``(K, 4)``: the boxes listed in the cell of ``(x, y)``."""
         return self.boxes[self.cell_of(x, y)]
+
+    def certainly_blocked(self, x: Array, y: Array) -> Array:
+        """True when ``(x, y)`` is at least :attr:`margin` inside a set cell of the
+        blocked-cell bitmap, hence inside a box (False without a bitmap, outside the
+        grid and for NaN)."""
+        if self.blocked is None:
+            return jnp.zeros(jnp.broadcast_shapes(jnp.shape(x), jnp.shape(y)), bool)
+        inv = jnp.float32(1.0 / self.bcell)
+        m = jnp.float32(self.margin / self.bcell)
+        u, v = (x - self.x0) * inv, (y - self.y0) * inv
+        col, row = jnp.floor(u), jnp.floor(v)
+        fu, fv = u - col, v - row
+        inside = ((fu >= m) & (fu <= 1.0 - m) & (fv >= m) & (fv <= 1.0 - m)
+                  & (col >= 0.0) & (col < self.bnx) & (row >= 0.0) & (row < self.bny))
+        col = jnp.clip(jnp.where(inside, col, 0.0), 0, self.bnx - 1).astype(jnp.int32)
+        row = jnp.clip(jnp.where(inside, row, 0.0), 0, self.bny - 1).astype(jnp.int32)
+        return inside & (self.blocked.at[row * self.bnx + col].get(mode="promise_in_bounds") != 0)
 
 
 def fold(rows: Array, f, init, combine, sentinel=None, unroll_max: int | None = None,
@@ -201,7 +249,74 @@ def build_index(bounds, boxes, reach: float, cell: float | None = None) -> Obsta
     for c, v in enumerate(lists):
         if v:
             table[c, :len(v)] = bx[v]
-    return ObstacleIndex(jnp.asarray(table), x0, y0, float(cell), int(nx), int(ny), float(reach))
+    extent = float(np.max(np.abs(bx[:, :2]) + bx[:, 2:], initial=0.0))
+    bitmap = blocked_bitmap(b, bx, float(cell), max(scale, extent))
+    if bitmap is None:
+        return ObstacleIndex(jnp.asarray(table), x0, y0, float(cell), int(nx), int(ny), float(reach))
+    blocked, bcell, margin = bitmap
+    return ObstacleIndex(jnp.asarray(table), x0, y0, float(cell), int(nx), int(ny), float(reach),
+                         jnp.asarray(blocked.ravel()), bcell, int(blocked.shape[1]),
+                         int(blocked.shape[0]), margin)
+
+
+def bitmap_cell(bounds: np.ndarray, boxes: np.ndarray, cell: float) -> float:
+    """The blocked-cell bitmap's cell side: the index ``cell``, or ``cell / s`` for the
+    smallest integer ``s`` that makes it no larger than the thinnest box (so an imported
+    grid's cells, whose walls are at least one grid cell thick, line up with the
+    bitmap's), at most :data:`BITMAP_MAX_CELLS` cells."""
+    b = np.asarray(bounds, np.float64)
+    w, h = b[0, 1] - b[0, 0], b[1, 1] - b[1, 0]
+    thin = float(2.0 * np.min(boxes[:, 2:])) if len(boxes) else cell
+    s = max(1, math.ceil(cell / thin * (1.0 - 1e-9))) if thin > 0 else 1
+    bcell = cell / s
+    floor = math.sqrt(w * h / BITMAP_MAX_CELLS)
+    while bcell < floor * (1.0 - 1e-9) and s > 1:
+        s -= 1
+        bcell = cell / s
+    return bcell
+
+
+def blocked_bitmap(bounds, boxes, cell: float, scale: float):
+    """``(blocked, bcell, margin)`` of the blocked-cell bitmap (module docstring), or None
+    when no cell is blocked (``scale``: the largest coordinate of the bounds and boxes,
+    which sets the float32 rounding the ``margin`` must absorb): ``blocked`` ``(bny, bnx)`` uint8 is 1 where the closed cell
+    ``[x0 + c bcell, x0 + (c + 1) bcell] x [...]`` lies inside one box (up to a tolerance
+    of ``margin / 2``, which :meth:`ObstacleIndex.certainly_blocked` leaves as slack)."""
+    b = np.asarray(bounds, np.float64)
+    bx = np.asarray(boxes, np.float64).reshape(-1, 4)
+    if not len(bx):
+        return None
+    bcell = bitmap_cell(b, bx, cell)
+    x0, y0 = float(b[0, 0]), float(b[1, 0])
+    nx = max(1, math.ceil((b[0, 1] - x0) / bcell))
+    ny = max(1, math.ceil((b[1, 1] - y0) / bcell))
+    margin = 1e-3 * bcell + 1e-5 * max(scale, 1.0)
+    if margin >= 0.25 * bcell:
+        return None
+    tol = 0.5 * margin
+    # cells [x0 + c bcell, x0 + (c + 1) bcell] within [cx - hw - tol, cx + hw + tol]
+    c0 = np.maximum(np.ceil((bx[:, 0] - bx[:, 2] - tol - x0) / bcell), 0)
+    c1 = np.minimum(np.floor((bx[:, 0] + bx[:, 2] + tol - x0) / bcell) - 1, nx - 1)
+    r0 = np.maximum(np.ceil((bx[:, 1] - bx[:, 3] - tol - y0) / bcell), 0)
+    r1 = np.minimum(np.floor((bx[:, 1] + bx[:, 3] + tol - y0) / bcell) - 1, ny - 1)
+    # the float division above may round an edge cell in: keep only cells whose edges
+    # really are within the grown box
+    c0 = c0 + (x0 + c0 * bcell < bx[:, 0] - bx[:, 2] - tol)
+    c1 = c1 - (x0 + (c1 + 1) * bcell > bx[:, 0] + bx[:, 2] + tol)
+    r0 = r0 + (y0 + r0 * bcell < bx[:, 1] - bx[:, 3] - tol)
+    r1 = r1 - (y0 + (r1 + 1) * bcell > bx[:, 1] + bx[:, 3] + tol)
+    # a 2-D difference array: +1 at (r0, c0), -1 past the corners, then prefix sums
+    keep = (c0 <= c1) & (r0 <= r1)
+    c0, c1, r0, r1 = (v[keep].astype(np.int64) for v in (c0, c1, r0, r1))
+    if not len(c0):
+        return None
+    diff = np.zeros((ny + 1, nx + 1), np.int64)
+    np.add.at(diff, (r0, c0), 1)
+    np.add.at(diff, (r0, c1 + 1), -1)
+    np.add.at(diff, (r1 + 1, c0), -1)
+    np.add.at(diff, (r1 + 1, c1 + 1), 1)
+    blocked = (np.cumsum(np.cumsum(diff, 0), 1)[:ny, :nx] > 0).astype(np.uint8)
+    return blocked, float(bcell), float(margin)
 
 
 def with_index(world, reach: float, cell: float | None = None):

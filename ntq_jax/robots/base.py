@@ -156,6 +156,36 @@ def _longest_first(n: Array) -> Array:
     return jax.lax.sort(key) & ((1 << idx_bits) - 1)
 
 
+def flag_queue(flags: Array) -> tuple:
+    """A queue for :func:`check_queue`'s ``queue`` of the motions where ``flags`` (``(N,)``
+    bool) holds, in index order, without sorting or scattering ``N`` elements.
+
+    The flags are packed into one 32-bit word per 32 motions, with a running count of
+    set bits per word (elementwise work and a prefix sum over ``N / 32`` words);
+    ``pick(pos)`` finds the word holding the ``pos``-th set flag by binary search
+    and the flag within the word by a binary search over bit counts, for the
+    queue's few lanes at a time. Returns ``(pick, work)``, ``work`` the number of
+    set flags.
+    """
+    num = flags.shape[0]
+    words = -(-num // 32)
+    f = jnp.pad(flags, (0, words * 32 - num)).reshape(words, 32)
+    bit = jnp.left_shift(jnp.uint32(1), jnp.arange(32, dtype=jnp.uint32))
+    word = jnp.sum(jnp.where(f, bit, jnp.uint32(0)), axis=1, dtype=jnp.uint32)
+    ends = jnp.cumsum(jax.lax.population_count(word).astype(jnp.int32))  # set flags up to each word
+
+    def pick(pos):
+        w = jnp.minimum(jnp.searchsorted(ends, pos, side="right"), words - 1).astype(jnp.int32)
+        r = pos - (ends[w] - jax.lax.population_count(word[w]).astype(jnp.int32))
+        bits, j = word[w], jnp.zeros_like(pos)
+        for s in (16, 8, 4, 2, 1):  # the r-th set bit: the largest j with r set bits below it
+            below = jax.lax.population_count(bits & (jnp.left_shift(jnp.uint32(1), (j + s).astype(jnp.uint32)) - 1))
+            j = jnp.where(below.astype(jnp.int32) <= r, j + s, j)
+        return jnp.minimum(w * 32 + j, num - 1)
+
+    return pick, ends[-1]
+
+
 def discretized_steer_to_batch(robot, a: Array, b: Array, world: World, padding: float,
                                resolution: float, mask: Array | None = None,
                                lanes: int = QUEUE_LANES, per_step: int = CHECKS_PER_STEP) -> Array:
@@ -187,7 +217,8 @@ def discretized_steer_to_batch(robot, a: Array, b: Array, world: World, padding:
 
 
 def check_queue(a: Array, b: Array, n: Array, valid_at, mask: Array | None = None,
-                lanes: int = QUEUE_LANES, per_step: int = CHECKS_PER_STEP) -> Array:
+                lanes: int = QUEUE_LANES, per_step: int = CHECKS_PER_STEP,
+                queue: tuple | None = None, tail_lanes: int | None = None) -> Array:
     """The work queue of :func:`discretized_steer_to_batch` for any per-motion check.
 
     Motion ``i`` (columns of the coordinate-major ``a``, ``b`` ``(d, N)``) is free
@@ -196,18 +227,56 @@ def check_queue(a: Array, b: Array, n: Array, valid_at, mask: Array | None = Non
     False) reports it blocked unchecked. ``valid_at(ap, bp, t)`` gets the
     lanes' motions ``(d, lanes)`` and fractions ``t`` ``(per_step, lanes)`` and
     returns ``(per_step, lanes)`` bool.
+
+    ``queue``: ``(pick, work)``, the queue given by the caller instead of the
+    longest-first sort (e.g. :func:`flag_queue`): ``pick(pos)`` maps queue
+    positions (int32, any shape) to motions, and positions ``0 .. work - 1`` must
+    list, in any order, exactly the motions with ``n > 0`` (and ``mask``); the
+    motions not listed are reported blocked.
+
+    ``tail_lanes``: once the queue is empty and at most ``tail_lanes`` lanes still
+    hold a motion, those motions move to ``tail_lanes`` lanes that each check
+    ``per_step * lanes / tail_lanes`` states per iteration (the same states, so
+    the same answers): the last long motions then take a few iterations instead of
+    ``n / per_step`` iterations that each cost all ``lanes`` lanes' checks.
     """
     d, num = a.shape
     lanes = min(lanes, num)
     if mask is not None:
         n = jnp.where(mask, n, 0)
-    order = _longest_first(n)  # the queue, longest motions first; the n = 0 ones (not checked) last
-    work = jnp.sum(n > 0, dtype=jnp.int32)  # queue positions >= work hold nothing to check
+    if queue is None:
+        order = _longest_first(n)  # the queue, longest motions first; the n = 0 ones (not checked) last
+        work = jnp.sum(n > 0, dtype=jnp.int32)  # queue positions >= work hold nothing to check
+
+        def pick(pos):
+            return order[jnp.minimum(pos, num - 1)]
+    else:
+        pick, work = queue
+    if tail_lanes is None or tail_lanes >= lanes:
+        return _queue_loop(a, b, n, valid_at, pick, work, per_step, lanes)
+    _, pos, k, out = _queue_loop(a, b, n, valid_at, pick, work, per_step, lanes,
+                                 stop_lanes=tail_lanes)
+    # the (at most tail_lanes) lanes still busy, moved to the first tail lanes (the others idle)
+    busy = pos < work
+    slot = jnp.where(busy, jnp.cumsum(busy, dtype=jnp.int32) - 1, tail_lanes)
+    pos = jnp.full((tail_lanes,), work, jnp.int32).at[slot].set(pos, mode="drop")
+    k = jnp.zeros((tail_lanes,), jnp.int32).at[slot].set(k, mode="drop")
+    return _queue_loop(a, b, n, valid_at, pick, work, per_step * lanes // tail_lanes, tail_lanes,
+                       (work, pos, k, out))
+
+
+def _queue_loop(a, b, n, valid_at, pick, work, per_step: int, lanes: int, state=None,
+                stop_lanes: int | None = None):
+    """The loop of :func:`check_queue`, from the first ``lanes`` motions of the queue or from
+    ``state = (head, pos, k, out)``: until every lane is idle (returns ``out``), or
+    (``stop_lanes``) until the queue is empty and at most ``stop_lanes`` lanes are busy
+    (returns the state, the busy lanes' checks from ``k`` on still to do)."""
+    d, num = a.shape
     ahead = jnp.arange(per_step, dtype=jnp.int32)[:, None]
 
     def check(pos, k):
         """Validity ``(per_step, lanes)`` of the next ``per_step`` states of each lane's motion."""
-        i = order[jnp.minimum(pos, num - 1)]
+        i = pick(pos)
         nq = jnp.maximum(n[i], 1)
         t = _check_index(k + ahead, nq).astype(a.dtype) / nq.astype(a.dtype)  # (per_step, lanes)
         # gathered one coordinate row at a time and broadcast over the checks, the
@@ -218,7 +287,10 @@ def check_queue(a: Array, b: Array, n: Array, valid_at, mask: Array | None = Non
         return valid_at(ap, bp, t)
 
     def cond(carry):
-        return jnp.any(carry[1] < work)  # some lane still holds a motion
+        if stop_lanes is None:
+            return jnp.any(carry[1] < work)  # some lane still holds a motion
+        busy = jnp.sum(carry[1] < work, dtype=jnp.int32)
+        return (busy > 0) & ((carry[0] < work) | (busy > stop_lanes))
 
     def body(carry):
         # ``valid`` comes from the end of the previous iteration: as a loop-carried
@@ -226,7 +298,7 @@ def check_queue(a: Array, b: Array, n: Array, valid_at, mask: Array | None = Non
         # otherwise fuse the validity test into each of its consumers below
         # (computing it twice, or inside the reduction)
         head, pos, k, valid, out = carry
-        i = order[jnp.minimum(pos, num - 1)]
+        i = pick(pos)
         nq = n[i]
         ok = jnp.all(valid | (k + ahead > nq), axis=0)  # checks past the last state do not count
         done = (pos < work) & (~ok | (k + per_step > nq))
@@ -237,7 +309,12 @@ def check_queue(a: Array, b: Array, n: Array, valid_at, mask: Array | None = Non
         k = jnp.where(done, 0, k + per_step)
         return head, pos, k, check(pos, k), out
 
-    pos = jnp.arange(lanes, dtype=jnp.int32)
-    k = jnp.zeros_like(pos)
-    init = (jnp.int32(lanes), pos, k, check(pos, k), jnp.zeros((num,), bool))
-    return jax.lax.while_loop(cond, body, init)[4]
+    if state is None:
+        pos = jnp.arange(lanes, dtype=jnp.int32)
+        k = jnp.zeros_like(pos)
+        init = (jnp.int32(lanes), pos, k, check(pos, k), jnp.zeros((num,), bool))
+    else:
+        head, pos, k, out = state
+        init = (head, pos, k, check(pos, k), out)
+    head, pos, k, _, out = jax.lax.while_loop(cond, body, init)
+    return out if stop_lanes is None else (head, pos, k, out)

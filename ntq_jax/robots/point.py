@@ -9,7 +9,7 @@ import jax.numpy as jnp
 
 from ntq_jax import broadphase, geometry
 from ntq_jax.geometry import World
-from ntq_jax.robots.base import check_queue
+from ntq_jax.robots.base import check_queue, flag_queue
 
 Array = jax.Array
 
@@ -59,6 +59,14 @@ class PointRobot:
         by lane, the index cells along each segment (points ``2 (reach - padding)``
         apart, coarse to fine), each an exact test of the whole segment against the
         cell's boxes, stopping at the first hit. Same answers as the per-segment test.
+
+        When the index has a blocked-cell bitmap (:attr:`ntq_jax.broadphase.ObstacleIndex.blocked`,
+        e.g. an imported occupancy grid), the first pass is the bitmap instead: a
+        segment whose ends or one of :data:`BITMAP_SAMPLES` evenly spaced points lie
+        well inside a cell that lies inside a box is blocked (one byte read per point,
+        certain at any padding); only the others are queued (in index order,
+        :func:`ntq_jax.robots.base.flag_queue`, without sorting the batch) for the
+        exact test above. Same answers.
         """
         if broadphase.index_covers(world, padding, strict=True) and a.shape[1] > 0:
             return _indexed_steer_batch(a, b, world, padding, mask)
@@ -77,6 +85,12 @@ class PointRobot:
 #: Index cells each lane of the point robot's broad-phase queue checks per iteration.
 INDEXED_CHECKS_PER_STEP = 2
 
+#: Lanes of the queue's tail (:func:`ntq_jax.robots.base.check_queue`) after the bitmap's first pass.
+INDEXED_TAIL_LANES = 32
+
+#: Points between the ends of each segment that the blocked-cell bitmap's first pass reads.
+BITMAP_SAMPLES = 8
+
 
 def _indexed_steer_batch(a: Array, b: Array, world: World, padding: float,
                          mask: Array | None) -> Array:
@@ -89,17 +103,29 @@ def _indexed_steer_batch(a: Array, b: Array, world: World, padding: float,
             p, q, dataclasses.replace(world, boxes=world.boxes[:0], index=None), padding),
             in_axes=(1, 1))(a, b)
         ok = ok & disc_free
-    # a cheap first pass over every segment: the boxes near its two ends (where most blocked
-    # segments of a cluttered map are caught); only the others enter the work queue
-    for t in (0.0, 1.0):
-        ok = ok & ~jax.vmap(geometry.segment_hits_near, in_axes=(0, 0, 0, 0, None, None, None))(
-            x0, y0, x1, y1, jnp.float32(t), world, padding)
+    index = world.index
     mask = ok if mask is None else ok & mask
-    n = geometry.segment_cover_steps(x0, y0, x1, y1, world.index.reach, padding)
+    n = geometry.segment_cover_steps(x0, y0, x1, y1, index.reach, padding)
     hits = jax.vmap(jax.vmap(geometry.segment_hits_near, in_axes=(None, None, None, None, 0, None, None)),
                     in_axes=(0, 0, 0, 0, 1, None, None), out_axes=1)
 
     def valid_at(ap, bp, t):
         return ~hits(ap[0], ap[1], bp[0], bp[1], t, world, padding)
 
+    if index.blocked is not None:
+        # the bitmap's first pass: blocked where a sample point is certainly inside a box
+        blocked = index.certainly_blocked(x0, y0) | index.certainly_blocked(x1, y1)
+        for k in range(1, BITMAP_SAMPLES + 1):
+            t = jnp.float32(k / (BITMAP_SAMPLES + 1))
+            blocked = blocked | index.certainly_blocked(x0 + t * (x1 - x0), y0 + t * (y1 - y0))
+        # computed once (XLA would otherwise fuse the bitmap reads into each consumer)
+        todo = jax.lax.optimization_barrier(mask & ~blocked & (n > 0))
+        return check_queue(a, b, jnp.where(todo, n, 0), valid_at, per_step=INDEXED_CHECKS_PER_STEP,
+                           queue=flag_queue(todo), tail_lanes=INDEXED_TAIL_LANES)
+    # a cheap first pass over every segment: the boxes near its two ends (where most blocked
+    # segments of a cluttered map are caught); only the others enter the work queue
+    for t in (0.0, 1.0):
+        ok = ok & ~jax.vmap(geometry.segment_hits_near, in_axes=(0, 0, 0, 0, None, None, None))(
+            x0, y0, x1, y1, jnp.float32(t), world, padding)
+    mask = ok & mask
     return check_queue(a, b, n, valid_at, mask, per_step=INDEXED_CHECKS_PER_STEP)

@@ -32,10 +32,11 @@ true distance that is exact whenever the distance is below the cap, which is
 all the certified check's proof needs.
 
 The index also keeps a *blocked-cell bitmap* for the point robot's batched
-``steer_to`` (:attr:`ObstacleIndex.blocked`): a second uniform grid, its own
-cell side ``bcell`` (the index cell, or finer down to the thinnest box so that
-the cells of an imported occupancy grid line up with the grid's own cells; at
-most :data:`BITMAP_MAX_CELLS` cells), one byte per cell, set when the closed
+``steer_to`` (:attr:`ObstacleIndex.blocked`): a second uniform grid from the
+same corner, its own cell side ``bcell`` (the thinnest box's extent, or a
+fraction of it no larger than the index cell, so that the cells of an imported
+occupancy grid are the grid's own cells; at most :data:`BITMAP_MAX_CELLS`
+cells, :func:`bitmap_cell`), one byte per cell, set when the closed
 cell lies inside one box (computed on the host; exact for grid-derived maps,
 conservative for arbitrary boxes: a cell covered only by the union of several
 boxes is not set). A point at least ``margin`` inside a set cell
@@ -260,19 +261,20 @@ def build_index(bounds, boxes, reach: float, cell: float | None = None) -> Obsta
 
 
 def bitmap_cell(bounds: np.ndarray, boxes: np.ndarray, cell: float) -> float:
-    """The blocked-cell bitmap's cell side: the index ``cell``, or ``cell / s`` for the
-    smallest integer ``s`` that makes it no larger than the thinnest box (so an imported
-    grid's cells, whose walls are at least one grid cell thick, line up with the
-    bitmap's), at most :data:`BITMAP_MAX_CELLS` cells."""
+    """The blocked-cell bitmap's cell side: the thinnest box's extent ``thin`` (the grid's
+    resolution for an imported occupancy grid, whose walls are at least one grid cell thick:
+    the bitmap's cells are then the grid's cells), divided by the smallest integer that makes
+    it no larger than the index ``cell``; when that would make more than :data:`BITMAP_MAX_CELLS`
+    cells (up to rounding), the smallest multiple of ``thin`` that does not instead."""
     b = np.asarray(bounds, np.float64)
     w, h = b[0, 1] - b[0, 0], b[1, 1] - b[1, 0]
     thin = float(2.0 * np.min(boxes[:, 2:])) if len(boxes) else cell
-    s = max(1, math.ceil(cell / thin * (1.0 - 1e-9))) if thin > 0 else 1
-    bcell = cell / s
+    if not thin > 0:
+        return cell
+    bcell = thin / max(1, math.ceil(thin / cell * (1.0 - 1e-6)))  # float32 boxes
     floor = math.sqrt(w * h / BITMAP_MAX_CELLS)
-    while bcell < floor * (1.0 - 1e-9) and s > 1:
-        s -= 1
-        bcell = cell / s
+    if bcell < floor:
+        bcell = thin * math.ceil(floor / thin * (1.0 - 1e-6))
     return bcell
 
 
@@ -288,8 +290,8 @@ def blocked_bitmap(bounds, boxes, cell: float, scale: float):
         return None
     bcell = bitmap_cell(b, bx, cell)
     x0, y0 = float(b[0, 0]), float(b[1, 0])
-    nx = max(1, math.ceil((b[0, 1] - x0) / bcell))
-    ny = max(1, math.ceil((b[1, 1] - y0) / bcell))
+    nx = max(1, math.ceil((b[0, 1] - x0) / bcell * (1.0 - 1e-6)))  # cells past the bounds: 0
+    ny = max(1, math.ceil((b[1, 1] - y0) / bcell * (1.0 - 1e-6)))
     margin = 1e-3 * bcell + 1e-5 * max(scale, 1.0)
     if margin >= 0.25 * bcell:
         return None

@@ -1,0 +1,243 @@
+"""The blocked-cell bitmap of the broad-phase index (issue 18) and the point robot's batched
+steer_to that uses it: the bitmap is exact on imported grids and never marks a cell that is not
+inside a box; the indexed steer_to (bitmap first pass, flag queue, queue tail) gives exactly the
+answers of the unindexed exact kernel, on random grid maps and adversarial segments (along cell
+edges, through cell corners, endpoints on cell boundaries), at padding 0 and above."""
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings, strategies as st
+
+import ntq_jax as nj
+from ntq_jax import broadphase, geometry, grid_maps
+from ntq_jax.geometry import World
+from ntq_jax.robots import PointRobot, base
+
+GRID = 24  # cells per side of the random grid maps (fixed: one compiled program per setting)
+MAX_BOXES = 160  # the boxes of a map padded to this count with far-away sentinels
+MAX_K = 24  # an index cell's candidate rows, padded to this count
+
+
+def _grid_world(occ, res, origin):
+    return grid_maps.grid_world(grid_maps.OccupancyGrid(occ, res, origin))
+
+
+def _padded(world: World, reach: float, cell: float) -> World:
+    """``world`` with its index, boxes and candidate lists padded to fixed sizes (sentinels)."""
+    nb = world.num_boxes
+    assert nb <= MAX_BOXES
+    sentinel = jnp.asarray(broadphase.SENTINEL_BOX, jnp.float32)
+    boxes = jnp.concatenate([world.boxes, jnp.broadcast_to(sentinel, (MAX_BOXES - nb, 4))])
+    index = broadphase.build_index(world.bounds, world.boxes, reach, cell)
+    k = index.capacity
+    assert k <= MAX_K
+    table = jnp.concatenate([index.boxes, jnp.broadcast_to(sentinel, (index.boxes.shape[0], MAX_K - k, 4))],
+                            axis=1)
+    return dataclasses.replace(world, boxes=boxes, index=dataclasses.replace(index, boxes=table))
+
+
+_exact = jax.jit(lambda a, b, world, padding: jax.vmap(geometry.segment_free, in_axes=(1, 1, None, None))(
+    a, b, world, padding), static_argnums=3)
+_indexed = jax.jit(lambda a, b, world, padding: PointRobot().steer_to_batch(a, b, world, padding),
+                   static_argnums=3)
+
+
+def _segments(rng, n, res, origin):
+    """Random segments of four kinds, coordinate-major: uniform, with grid-vertex endpoints
+    (through cell corners), along grid lines (cell edges), and endpoints on cell boundaries."""
+    x0, y0 = origin
+    span = GRID * res
+    out = []
+    k = n // 4
+    # uniform in the workspace (short and long)
+    a = rng.uniform(0, span, (k, 2))
+    out.append((a, np.where(rng.random((k, 1)) < 0.5, a + rng.normal(0, 2 * res, a.shape),
+                            rng.uniform(0, span, (k, 2)))))
+    # grid vertices: through cell corners (diagonals of cells and of blocks of cells)
+    out.append((rng.integers(0, GRID + 1, (k, 2)) * res, rng.integers(0, GRID + 1, (k, 2)) * res))
+    # along grid lines: a shared x (or y) that is a cell edge
+    line = rng.integers(0, GRID + 1, k) * res
+    s, t = rng.uniform(0, span, k), rng.uniform(0, span, k)
+    vertical = rng.random(k) < 0.5
+    a = np.where(vertical[:, None], np.c_[line, s], np.c_[s, line])
+    b = np.where(vertical[:, None], np.c_[line, t], np.c_[t, line])
+    out.append((a, b))
+    # endpoints on cell boundaries: one coordinate on a grid line, the other anywhere
+    def on_edge(m):
+        p = rng.uniform(0, span, (m, 2))
+        j = rng.integers(0, 2, m)
+        p[np.arange(m), j] = rng.integers(0, GRID + 1, m) * res
+        return p
+    out.append((on_edge(n - 3 * k), on_edge(n - 3 * k)))
+    a = np.concatenate([p for p, _ in out]) + [x0, y0]
+    b = np.concatenate([q for _, q in out]) + [x0, y0]
+    return (jnp.asarray(a.T, jnp.float32), jnp.asarray(b.T, jnp.float32))
+
+
+# ---------------------------------------------------------------------------
+# The bitmap
+# ---------------------------------------------------------------------------
+
+@pytest.mark.parametrize("res, origin", [(1.0, (0.0, 0.0)), (0.05, (-3.2, 1.7)), (0.3, (10.0, -4.0))])
+def test_bitmap_is_the_grid(res, origin):
+    """On an imported grid whose index cells are the grid's (or a multiple of them), the
+    bitmap is exactly the occupancy grid at the grid's resolution."""
+    rng = np.random.default_rng(3)
+    occ = rng.random((GRID, GRID + 5)) < 0.4
+    world = _grid_world(occ, res, origin)
+    for cell in (res, 2 * res, 3 * res):
+        index = broadphase.build_index(world.bounds, world.boxes, 0.5 * cell, cell)
+        assert index.blocked is not None
+        assert index.bcell == pytest.approx(res, rel=1e-6)
+        got = np.asarray(index.blocked).reshape(index.bny, index.bnx)
+        np.testing.assert_array_equal(got, occ)
+
+
+@given(seed=st.integers(0, 10 ** 6), cell=st.sampled_from([0.3, 0.5, 1.0, 1.7]))
+@settings(max_examples=30, deadline=None)
+def test_bitmap_cells_lie_inside_one_box(seed, cell):
+    """Arbitrary boxes: every set cell lies inside one box (conservative), and the bitmap is
+    not empty when a box contains whole cells."""
+    rng = np.random.default_rng(seed)
+    bounds = np.array([[0.0, 20.0], [0.0, 15.0]])
+    boxes = np.c_[rng.uniform(0, 20, (40, 2)), rng.uniform(0.05, 2.5, (40, 2))]
+    got = broadphase.blocked_bitmap(bounds, boxes, cell, 20.0)
+    if got is None:
+        return
+    blocked, bcell, margin = got
+    rows, cols = np.nonzero(blocked)
+    lo_x, lo_y = cols * bcell, rows * bcell
+    hi_x, hi_y = lo_x + bcell, lo_y + bcell
+    tol = 0.5 * margin
+    inside = ((lo_x[:, None] >= boxes[:, 0] - boxes[:, 2] - tol) & (hi_x[:, None] <= boxes[:, 0] + boxes[:, 2] + tol)
+              & (lo_y[:, None] >= boxes[:, 1] - boxes[:, 3] - tol) & (hi_y[:, None] <= boxes[:, 1] + boxes[:, 3] + tol))
+    assert inside.any(axis=1).all()
+    # the points certainly_blocked accepts: at least margin inside a set cell, so inside a box
+    index = broadphase.ObstacleIndex(jnp.zeros((1, 4, 4)), 0.0, 0.0, 20.0, 1, 1, 1.0,
+                                     jnp.asarray(blocked.ravel()), bcell, blocked.shape[1],
+                                     blocked.shape[0], margin)
+    pts = rng.uniform(0, 20, (4000, 2)).astype(np.float32)
+    hit = np.asarray(index.certainly_blocked(jnp.asarray(pts[:, 0]), jnp.asarray(pts[:, 1])))
+    p = pts[hit].astype(np.float64)
+    in_box = ((np.abs(p[:, None, 0] - boxes[:, 0]) < boxes[:, 2]) & (np.abs(p[:, None, 1] - boxes[:, 1]) < boxes[:, 3]))
+    assert in_box.any(axis=1).all()
+
+
+def test_no_bitmap_without_whole_cells():
+    """A box that contains no whole bitmap cell: no bitmap, and steer_to takes the path
+    without the first pass (same answers as the exact kernel)."""
+    bounds = np.array([[0.0, 20.0], [0.0, 20.0]])
+    boxes = np.array([[5.05, 5.05, 0.3, 0.3]] * 70)  # more than UNROLL_MAX: Env indexes it
+    assert broadphase.blocked_bitmap(bounds, boxes, 1.0, 20.0) is None
+    env = nj.Env("x", PointRobot(), World.create(bounds, boxes), 0.1)
+    assert env.world.index is not None and env.world.index.blocked is None
+    rng = np.random.default_rng(0)
+    a = rng.uniform(3, 7, (500, 2)).astype(np.float32)
+    b = rng.uniform(3, 7, (500, 2)).astype(np.float32)
+    ref = _exact(jnp.asarray(a.T), jnp.asarray(b.T), dataclasses.replace(env.world, index=None), 0.1)
+    np.testing.assert_array_equal(np.asarray(env.steer_to(a, b)), np.asarray(ref))
+
+
+# ---------------------------------------------------------------------------
+# The flag queue
+# ---------------------------------------------------------------------------
+
+@pytest.mark.parametrize("num", [1, 31, 32, 33, 1000, 4099])
+@pytest.mark.parametrize("density", [0.0, 0.01, 0.5, 1.0])
+def test_flag_queue_lists_the_flags_in_order(num, density):
+    rng = np.random.default_rng(num)
+    flags = rng.random(num) < density
+    pick, work = jax.jit(lambda f: (lambda p, w: (p(jnp.arange(num, dtype=jnp.int32)), w))(
+        *base.flag_queue(f)))(jnp.asarray(flags))
+    ref = np.flatnonzero(flags)
+    assert int(work) == len(ref)
+    np.testing.assert_array_equal(np.asarray(pick)[:len(ref)], ref)
+
+
+# ---------------------------------------------------------------------------
+# steer_to: indexed with the bitmap against the unindexed exact kernel
+# ---------------------------------------------------------------------------
+
+@given(seed=st.integers(0, 10 ** 6), density=st.sampled_from([0.1, 0.35, 0.6]),
+       setting=st.sampled_from([(1.0, (0.0, 0.0), 1), (0.05, (-3.2, 1.7), 1), (0.5, (2.0, 3.0), 2)]),
+       pad_cells=st.sampled_from([0.0, 0.1, 0.5]))
+@settings(max_examples=24, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+def test_indexed_steer_equals_exact_on_random_grids(seed, density, setting, pad_cells):
+    """Random occupancy grids (exact rectangle cover), index cells of 1 or 2 grid cells,
+    padding 0 or a fraction of a cell, segments of the four kinds of :func:`_segments`."""
+    res, origin, per_cell = setting
+    rng = np.random.default_rng(seed)
+    occ = rng.random((GRID, GRID)) < density
+    occ[rng.integers(0, GRID), :] = True  # a wall: long boxes
+    world = _grid_world(occ, res, origin)
+    if world.num_boxes > MAX_BOXES:
+        return
+    pad = float(np.float32(pad_cells * res))
+    cell = per_cell * res
+    world = _padded(world, pad + 0.5 * cell, cell)
+    assert world.index.blocked is not None
+    a, b = _segments(rng, 2000, res, origin)
+    got = np.asarray(_indexed(a, b, world, pad))
+    ref = np.asarray(_exact(a, b, dataclasses.replace(world, index=None), pad))
+    np.testing.assert_array_equal(got, ref)
+
+
+@pytest.mark.parametrize("pad", [0.0, 0.2])
+def test_maze_steer_equals_exact(tmp_path, pad):
+    """The 256 x 256 benchmark maze through Env (the bitmap path, queue tail included): random
+    pairs, short pairs and grid-vertex pairs against the unindexed exact kernel."""
+    path = grid_maps.write_movingai(tmp_path / "maze.map", grid_maps.maze_grid(64, seed=4))
+    env = nj.make_env(path, padding=0.2)
+    assert env.world.index is not None and env.world.index.blocked is not None
+    rng = np.random.default_rng(1)
+    n = 6000
+    a = rng.uniform(0, 64, (n, 2))
+    b = np.where(rng.random((n, 1)) < 0.5, a + rng.normal(0, 1.5, a.shape), rng.uniform(0, 64, (n, 2)))
+    v = rng.integers(0, 65, (n // 2, 2)).astype(np.float64)
+    a = np.concatenate([a, v]).astype(np.float32)
+    b = np.concatenate([b, v + rng.integers(-3, 4, v.shape)]).astype(np.float32)
+    got = np.asarray(env.steer_to(a, b, padding=pad))
+    ref = np.asarray(_exact(jnp.asarray(a.T), jnp.asarray(b.T),
+                            dataclasses.replace(env.world, index=None), pad))
+    np.testing.assert_array_equal(got, ref)
+    assert 0 < got.sum() < len(got)
+
+
+@given(seed=st.integers(0, 10 ** 6), cell=st.sampled_from([0.5, 1.0]), pad=st.sampled_from([0.0, 0.1, 0.3]))
+@settings(max_examples=16, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+def test_indexed_steer_equals_exact_on_random_boxes(seed, cell, pad):
+    """Arbitrary (overlapping, unaligned) boxes: the bitmap is only conservative there;
+    segments uniform, short, and from box corners and edges."""
+    rng = np.random.default_rng(seed)
+    n = 100
+    # centres in [2, 18], half sizes in [0.3, 2] with one of exactly 0.3: the bitmap's cell and
+    # margin, hence the compiled program, depend only on the index cell
+    boxes = np.c_[rng.uniform(2, 18, (n, 2)), rng.uniform(0.3, 2.0, (n, 2))].astype(np.float32)
+    boxes[0, 2:] = 0.3
+    world = World.create([[0, 20], [0, 20]], boxes)
+    index = broadphase.build_index(world.bounds, world.boxes, pad + 0.5 * cell, cell)
+    k = index.capacity
+    if k > 2 * MAX_K:
+        return
+    sentinel = jnp.asarray(broadphase.SENTINEL_BOX, jnp.float32)
+    table = jnp.concatenate([index.boxes, jnp.broadcast_to(sentinel, (index.boxes.shape[0], 2 * MAX_K - k, 4))],
+                            axis=1)
+    world = dataclasses.replace(world, index=dataclasses.replace(index, boxes=table))
+    assert world.index.blocked is not None
+    m = 3000
+    a = rng.uniform(0, 20, (m, 2))
+    b = np.where(rng.random((m, 1)) < 0.5, a + rng.normal(0, 1.5, a.shape), rng.uniform(0, 20, (m, 2)))
+    # box corners and points on box edges as endpoints
+    j = rng.integers(0, n, m // 3)
+    corner = boxes[j, :2] + boxes[j, 2:] * rng.choice([-1.0, 1.0], (m // 3, 2))
+    a[: m // 3] = corner
+    edge = boxes[j, :2] + boxes[j, 2:] * np.c_[rng.uniform(-1, 1, m // 3), rng.choice([-1.0, 1.0], m // 3)]
+    b[m // 3: 2 * (m // 3)] = edge
+    a, b = (jnp.asarray(np.clip(v, 0, 20).T, jnp.float32) for v in (a, b))
+    got = np.asarray(_indexed(a, b, world, pad))
+    ref = np.asarray(_exact(a, b, dataclasses.replace(world, index=None), pad))
+    np.testing.assert_array_equal(got, ref)

@@ -162,9 +162,9 @@ def flag_queue(flags: Array) -> tuple:
 
     The flags are packed into one 32-bit word per 32 motions, with a running count of
     set bits per word (elementwise work and a prefix sum over ``N / 32`` words);
-    ``pick(pos)`` finds the word holding the ``pos``-th set flag by binary search
-    and the flag within the word by a binary search over bit counts, for the
-    queue's few lanes at a time. Returns ``(pick, work)``, ``work`` the number of
+    ``pick(pos)`` finds the word holding the ``pos``-th set flag by a binary search
+    over the counts and the flag within the word by a binary search over bit
+    counts (both unrolled), for the queue's few lanes at a time. Returns ``(pick, work)``, ``work`` the number of
     set flags.
     """
     num = flags.shape[0]
@@ -175,7 +175,12 @@ def flag_queue(flags: Array) -> tuple:
     ends = jnp.cumsum(jax.lax.population_count(word).astype(jnp.int32))  # set flags up to each word
 
     def pick(pos):
-        w = jnp.minimum(jnp.searchsorted(ends, pos, side="right"), words - 1).astype(jnp.int32)
+        # w: the number of words whose flags all lie before position pos (a binary search,
+        # unrolled: a searchsorted loop would cost a loop per step of the queue)
+        w = jnp.zeros_like(pos)
+        for s in (1 << j for j in reversed(range(max(1, words.bit_length())))):
+            w = jnp.where((w + s <= words) & (ends[jnp.minimum(w + s, words) - 1] <= pos), w + s, w)
+        w = jnp.minimum(w, words - 1)
         r = pos - (ends[w] - jax.lax.population_count(word[w]).astype(jnp.int32))
         bits, j = word[w], jnp.zeros_like(pos)
         for s in (16, 8, 4, 2, 1):  # the r-th set bit: the largest j with r set bits below it
@@ -232,7 +237,8 @@ def check_queue(a: Array, b: Array, n: Array, valid_at, mask: Array | None = Non
     longest-first sort (e.g. :func:`flag_queue`): ``pick(pos)`` maps queue
     positions (int32, any shape) to motions, and positions ``0 .. work - 1`` must
     list, in any order, exactly the motions with ``n > 0`` (and ``mask``); the
-    motions not listed are reported blocked.
+    motions not listed are reported blocked. With a ``queue``, ``n`` may also be a
+    function of the motions' indices (computed for the lanes' motions only).
 
     ``tail_lanes``: once the queue is empty and at most ``tail_lanes`` lanes still
     hold a motion, those motions move to ``tail_lanes`` lanes that each check
@@ -277,7 +283,7 @@ def _queue_loop(a, b, n, valid_at, pick, work, per_step: int, lanes: int, state=
     def check(pos, k):
         """Validity ``(per_step, lanes)`` of the next ``per_step`` states of each lane's motion."""
         i = pick(pos)
-        nq = jnp.maximum(n[i], 1)
+        nq = jnp.maximum(n(i) if callable(n) else n[i], 1)
         t = _check_index(k + ahead, nq).astype(a.dtype) / nq.astype(a.dtype)  # (per_step, lanes)
         # gathered one coordinate row at a time and broadcast over the checks, the
         # states stay coordinate-major with the lanes as the minor axis (d, per_step,
@@ -299,7 +305,7 @@ def _queue_loop(a, b, n, valid_at, pick, work, per_step: int, lanes: int, state=
         # (computing it twice, or inside the reduction)
         head, pos, k, valid, out = carry
         i = pick(pos)
-        nq = n[i]
+        nq = n(i) if callable(n) else n[i]
         ok = jnp.all(valid | (k + ahead > nq), axis=0)  # checks past the last state do not count
         done = (pos < work) & (~ok | (k + per_step > nq))
         out = out.at[jnp.where(done, i, num)].set(ok, mode="drop")

@@ -105,7 +105,6 @@ def _indexed_steer_batch(a: Array, b: Array, world: World, padding: float,
         ok = ok & disc_free
     index = world.index
     mask = ok if mask is None else ok & mask
-    n = geometry.segment_cover_steps(x0, y0, x1, y1, index.reach, padding)
     hits = jax.vmap(jax.vmap(geometry.segment_hits_near, in_axes=(None, None, None, None, 0, None, None)),
                     in_axes=(0, 0, 0, 0, 1, None, None), out_axes=1)
 
@@ -118,9 +117,12 @@ def _indexed_steer_batch(a: Array, b: Array, world: World, padding: float,
         for k in range(1, BITMAP_SAMPLES + 1):
             t = jnp.float32(k / (BITMAP_SAMPLES + 1))
             blocked = blocked | index.certainly_blocked(x0 + t * (x1 - x0), y0 + t * (y1 - y0))
-        # computed once (XLA would otherwise fuse the bitmap reads into each consumer)
-        todo = jax.lax.optimization_barrier(mask & ~blocked & (n > 0))
-        return check_queue(a, b, jnp.where(todo, n, 0), valid_at, per_step=INDEXED_CHECKS_PER_STEP,
+        todo = mask & ~blocked  # finite, so n >= 1: n is computed for the queue's lanes only
+
+        def steps(i):  # sliced here, inside the queue's loop: no copies of the rows
+            return geometry.segment_cover_steps(a[0][i], a[1][i], b[0][i], b[1][i], index.reach, padding)
+
+        return check_queue(a, b, steps, valid_at, per_step=INDEXED_CHECKS_PER_STEP,
                            queue=flag_queue(todo), tail_lanes=INDEXED_TAIL_LANES)
     # a cheap first pass over every segment: the boxes near its two ends (where most blocked
     # segments of a cluttered map are caught); only the others enter the work queue
@@ -128,4 +130,5 @@ def _indexed_steer_batch(a: Array, b: Array, world: World, padding: float,
         ok = ok & ~jax.vmap(geometry.segment_hits_near, in_axes=(0, 0, 0, 0, None, None, None))(
             x0, y0, x1, y1, jnp.float32(t), world, padding)
     mask = ok & mask
+    n = geometry.segment_cover_steps(x0, y0, x1, y1, index.reach, padding)
     return check_queue(a, b, n, valid_at, mask, per_step=INDEXED_CHECKS_PER_STEP)

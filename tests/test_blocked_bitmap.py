@@ -205,6 +205,11 @@ def test_maze_steer_equals_exact(tmp_path, pad):
                             dataclasses.replace(env.world, index=None), pad))
     np.testing.assert_array_equal(got, ref)
     assert 0 < got.sum() < len(got)
+    # a mask (as the planners pass it): the masked-out motions are blocked, the others unchanged
+    mask = jnp.asarray(rng.random(len(a)) < 0.7)
+    masked = jax.jit(lambda a, b, w, m: PointRobot().steer_to_batch(a, b, w, pad, m))(
+        jnp.asarray(a.T), jnp.asarray(b.T), env.world, mask)
+    np.testing.assert_array_equal(np.asarray(masked), ref & np.asarray(mask))
 
 
 @given(seed=st.integers(0, 10 ** 6), cell=st.sampled_from([0.5, 1.0]), pad=st.sampled_from([0.0, 0.1, 0.3]))

@@ -200,6 +200,8 @@ def test_maze_steer_equals_exact(tmp_path, pad):
     v = rng.integers(0, 65, (n // 2, 2)).astype(np.float64)
     a = np.concatenate([a, v]).astype(np.float32)
     b = np.concatenate([b, v + rng.integers(-3, 4, v.shape)]).astype(np.float32)
+    # non-finite and out-of-bounds ends: blocked, unchecked
+    a[:4] = [[np.nan, 3.0], [np.inf, 5.0], [-1.0, 5.5], [30.5, 70.0]]
     got = np.asarray(env.steer_to(a, b, padding=pad))
     ref = np.asarray(_exact(jnp.asarray(a.T), jnp.asarray(b.T),
                             dataclasses.replace(env.world, index=None), pad))

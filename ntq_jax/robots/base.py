@@ -14,6 +14,7 @@ than ``jax.vmap(steer_to)``).
 
 from __future__ import annotations
 
+import math
 from typing import Protocol
 
 import jax
@@ -161,11 +162,12 @@ def flag_queue(flags: Array) -> tuple:
     bool) holds, in index order, without sorting or scattering ``N`` elements.
 
     The flags are packed into one 32-bit word per 32 motions, with a running count of
-    set bits per word (elementwise work and a prefix sum over ``N / 32`` words);
-    ``pick(pos)`` finds the word holding the ``pos``-th set flag by a binary search
-    over the counts and the flag within the word by a binary search over bit
-    counts (both unrolled), for the queue's few lanes at a time. Returns ``(pick, work)``, ``work`` the number of
-    set flags.
+    set bits per word (elementwise work and a prefix sum over ``N / 32`` words).
+    ``pick(pos)`` finds the word holding the ``pos``-th set flag by comparing ``pos``
+    with the counts at the ends of about ``sqrt(N / 32)`` groups of words, then with
+    the counts of the words of its group (two small vectorised comparisons, for the
+    queue's few lanes at a time), and the flag within the word by a binary search
+    over bit counts. Returns ``(pick, work)``, ``work`` the number of set flags.
     """
     num = flags.shape[0]
     words = -(-num // 32)
@@ -173,14 +175,15 @@ def flag_queue(flags: Array) -> tuple:
     bit = jnp.left_shift(jnp.uint32(1), jnp.arange(32, dtype=jnp.uint32))
     word = jnp.sum(jnp.where(f, bit, jnp.uint32(0)), axis=1, dtype=jnp.uint32)
     ends = jnp.cumsum(jax.lax.population_count(word).astype(jnp.int32))  # set flags up to each word
+    group = max(1, math.isqrt(words))
+    groups = -(-words // group)
+    grid = jnp.pad(ends, (0, groups * group - words), mode="edge").reshape(groups, group)
+    group_ends = grid[:, -1]
 
     def pick(pos):
-        # w: the number of words whose flags all lie before position pos (a binary search,
-        # unrolled: a searchsorted loop would cost a loop per step of the queue)
-        w = jnp.zeros_like(pos)
-        for s in (1 << j for j in reversed(range(max(1, words.bit_length())))):
-            w = jnp.where((w + s <= words) & (ends[jnp.minimum(w + s, words) - 1] <= pos), w + s, w)
-        w = jnp.minimum(w, words - 1)
+        p = pos[..., None]
+        g = jnp.minimum(jnp.sum(group_ends <= p, axis=-1, dtype=jnp.int32), groups - 1)
+        w = jnp.minimum(g * group + jnp.sum(grid[g] <= p, axis=-1, dtype=jnp.int32), words - 1)
         r = pos - (ends[w] - jax.lax.population_count(word[w]).astype(jnp.int32))
         bits, j = word[w], jnp.zeros_like(pos)
         for s in (16, 8, 4, 2, 1):  # the r-th set bit: the largest j with r set bits below it

@@ -45,8 +45,8 @@ float32 rounding of the queries' interpolated points, so a segment through it
 is blocked at every padding ``>= 0`` (the exact kernels agree: their tests hold
 with a slack of about ``margin |b - a|``). The bitmap only ever says "blocked";
 everything it leaves undecided goes through the exact narrow phase. A map with
-no set cell keeps ``blocked = None`` (the first pass is then left out at trace
-time).
+fewer than :data:`BITMAP_MIN_FILL` of its cells set (e.g. scattered small boxes)
+keeps ``blocked = None``: the first pass is then left out at trace time.
 """
 
 from __future__ import annotations
@@ -89,6 +89,10 @@ BOXES_PER_CELL = 0.125
 
 #: The most cells of the blocked-cell bitmap (one byte each).
 BITMAP_MAX_CELLS = 1024 * 1024
+
+#: The least fraction of set cells for which an index keeps its blocked-cell bitmap: with
+#: fewer, the bitmap decides too few segments to pay for its reads (BENCHMARKS.md).
+BITMAP_MIN_FILL = 0.1
 
 
 @jax.tree_util.register_dataclass
@@ -278,14 +282,16 @@ def bitmap_cell(bounds: np.ndarray, boxes: np.ndarray, cell: float) -> float:
     return bcell
 
 
-def blocked_bitmap(bounds, boxes, cell: float, scale: float):
+def blocked_bitmap(bounds, boxes, cell: float, scale: float, min_fill: float | None = None):
     """``(blocked, bcell, margin)`` of the blocked-cell bitmap (module docstring), or None
-    when no cell is blocked (``scale``: the largest coordinate of the bounds and boxes,
-    which sets the float32 rounding the ``margin`` must absorb): ``blocked`` ``(bny, bnx)`` uint8 is 1 where the closed cell
+    when fewer than ``min_fill`` (default :data:`BITMAP_MIN_FILL`) of its cells are blocked
+    (``scale``: the largest coordinate of the bounds and boxes, which sets the float32
+    rounding the ``margin`` must absorb): ``blocked`` ``(bny, bnx)`` uint8 is 1 where the closed cell
     ``[x0 + c bcell, x0 + (c + 1) bcell] x [...]`` lies inside one box (up to a tolerance
     of ``margin / 2``, which :meth:`ObstacleIndex.certainly_blocked` leaves as slack)."""
     b = np.asarray(bounds, np.float64)
     bx = np.asarray(boxes, np.float64).reshape(-1, 4)
+    min_fill = BITMAP_MIN_FILL if min_fill is None else min_fill
     if not len(bx):
         return None
     bcell = bitmap_cell(b, bx, cell)
@@ -318,6 +324,8 @@ def blocked_bitmap(bounds, boxes, cell: float, scale: float):
     np.add.at(diff, (r1 + 1, c0), -1)
     np.add.at(diff, (r1 + 1, c1 + 1), 1)
     blocked = (np.cumsum(np.cumsum(diff, 0), 1)[:ny, :nx] > 0).astype(np.uint8)
+    if blocked.mean() < min_fill:
+        return None
     return blocked, float(bcell), float(margin)
 
 

@@ -66,7 +66,9 @@ class PointRobot:
         well inside a cell that lies inside a box is blocked (one byte read per point,
         certain at any padding); only the others are queued (in index order,
         :func:`ntq_jax.robots.base.flag_queue`, without sorting the batch) for the
-        exact test above. Same answers.
+        exact test above, their cover steps computed for the queue's lanes only, and
+        the last long motions finish on :data:`INDEXED_TAIL_LANES` lanes that check
+        more cells per step. Same answers.
         """
         if broadphase.index_covers(world, padding, strict=True) and a.shape[1] > 0:
             return _indexed_steer_batch(a, b, world, padding, mask)

@@ -261,31 +261,35 @@ def check_queue(a: Array, b: Array, n: Array, valid_at, mask: Array | None = Non
             return order[jnp.minimum(pos, num - 1)]
     else:
         pick, work = queue
+    cache = queue is not None  # the lanes' motions carried through the loop, picked once
     if tail_lanes is None or tail_lanes >= lanes:
-        return _queue_loop(a, b, n, valid_at, pick, work, per_step, lanes)
+        return _queue_loop(a, b, n, valid_at, pick, work, per_step, lanes, cache=cache)
     _, pos, k, out = _queue_loop(a, b, n, valid_at, pick, work, per_step, lanes,
-                                 stop_lanes=tail_lanes)
+                                 stop_lanes=tail_lanes, cache=cache)
     # the (at most tail_lanes) lanes still busy, moved to the first tail lanes (the others idle)
     busy = pos < work
     slot = jnp.where(busy, jnp.cumsum(busy, dtype=jnp.int32) - 1, tail_lanes)
     pos = jnp.full((tail_lanes,), work, jnp.int32).at[slot].set(pos, mode="drop")
     k = jnp.zeros((tail_lanes,), jnp.int32).at[slot].set(k, mode="drop")
     return _queue_loop(a, b, n, valid_at, pick, work, per_step * lanes // tail_lanes, tail_lanes,
-                       (work, pos, k, out))
+                       (work, pos, k, out), cache=cache)
 
 
 def _queue_loop(a, b, n, valid_at, pick, work, per_step: int, lanes: int, state=None,
-                stop_lanes: int | None = None):
+                stop_lanes: int | None = None, cache: bool = False):
     """The loop of :func:`check_queue`, from the first ``lanes`` motions of the queue or from
     ``state = (head, pos, k, out)``: until every lane is idle (returns ``out``), or
     (``stop_lanes``) until the queue is empty and at most ``stop_lanes`` lanes are busy
-    (returns the state, the busy lanes' checks from ``k`` on still to do)."""
+    (returns the state, the busy lanes' checks from ``k`` on still to do). ``cache``: the
+    lanes' motions ``pick(pos)`` are carried through the loop instead of picked twice
+    per iteration."""
     d, num = a.shape
     ahead = jnp.arange(per_step, dtype=jnp.int32)[:, None]
 
-    def check(pos, k):
+    def check(pos, k, i=None):
         """Validity ``(per_step, lanes)`` of the next ``per_step`` states of each lane's motion."""
-        i = pick(pos)
+        if i is None:
+            i = pick(pos)
         nq = jnp.maximum(n(i) if callable(n) else n[i], 1)
         t = _check_index(k + ahead, nq).astype(a.dtype) / nq.astype(a.dtype)  # (per_step, lanes)
         # gathered one coordinate row at a time and broadcast over the checks, the
@@ -306,8 +310,8 @@ def _queue_loop(a, b, n, valid_at, pick, work, per_step: int, lanes: int, state=
         # value it is computed once, in one elementwise loop, where XLA would
         # otherwise fuse the validity test into each of its consumers below
         # (computing it twice, or inside the reduction)
-        head, pos, k, valid, out = carry
-        i = pick(pos)
+        head, pos, k, valid, out = carry[:5]
+        i = carry[5] if cache else pick(pos)
         nq = n(i) if callable(n) else n[i]
         ok = jnp.all(valid | (k + ahead > nq), axis=0)  # checks past the last state do not count
         done = (pos < work) & (~ok | (k + per_step > nq))
@@ -316,14 +320,24 @@ def _queue_loop(a, b, n, valid_at, pick, work, per_step: int, lanes: int, state=
         pos = jnp.where(done, head + jnp.cumsum(done, dtype=jnp.int32) - 1, pos)
         head = head + jnp.sum(done, dtype=jnp.int32)
         k = jnp.where(done, 0, k + per_step)
+        if cache:
+            i = pick(pos)
+            return head, pos, k, check(pos, k, i), out, i
         return head, pos, k, check(pos, k), out
 
-    if state is None:
+    if state is None and not cache:
         pos = jnp.arange(lanes, dtype=jnp.int32)
         k = jnp.zeros_like(pos)
         init = (jnp.int32(lanes), pos, k, check(pos, k), jnp.zeros((num,), bool))
     else:
+        if state is None:
+            pos = jnp.arange(lanes, dtype=jnp.int32)
+            state = (jnp.int32(lanes), pos, jnp.zeros_like(pos), jnp.zeros((num,), bool))
         head, pos, k, out = state
-        init = (head, pos, k, check(pos, k), out)
-    head, pos, k, _, out = jax.lax.while_loop(cond, body, init)
+        if cache:
+            i = pick(pos)
+            init = (head, pos, k, check(pos, k, i), out, i)
+        else:
+            init = (head, pos, k, check(pos, k), out)
+    head, pos, k, _, out = jax.lax.while_loop(cond, body, init)[:5]
     return out if stop_lanes is None else (head, pos, k, out)

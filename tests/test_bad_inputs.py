@@ -748,10 +748,18 @@ def test_gamma_script_refuses_a_run_longer_than_max_hours(tmp_path, capsys):
 
 def test_gamma_script_ctrl_c_prints_the_estimate_so_far(tmp_path):
     out = tmp_path / "gamma.json"
-    proc = subprocess.Popen([sys.executable, str(ROOT / "scripts" / "measure_gamma.py"),
-                             "--queries", "1e12", "--max-hours", "inf", "--no-progress",
-                             "--json", str(out)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=_env())
+    # A shell without job control starts a background job (`nohup pytest &`) with SIGINT
+    # ignored, and an ignored signal stays ignored in the child; a handled one is reset to
+    # the default at exec, so the child's Python turns Ctrl-C into KeyboardInterrupt again
+    before = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        proc = subprocess.Popen([sys.executable, str(ROOT / "scripts" / "measure_gamma.py"),
+                                 "--queries", "1e12", "--max-hours", "inf", "--no-progress",
+                                 "--json", str(out)],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                env=_env())
+    finally:
+        signal.signal(signal.SIGINT, before)
     try:
         first = proc.stderr.readline()  # the time estimate: streaming has started
         assert "queries/s: about" in first

@@ -165,7 +165,7 @@ def test_flag_queue_lists_the_flags_in_order(num, density):
 @given(seed=st.integers(0, 10 ** 6), density=st.sampled_from([0.15, 0.35, 0.6]),
        setting=st.sampled_from([(1.0, (0.0, 0.0), 1), (0.05, (-3.2, 1.7), 1), (0.5, (2.0, 3.0), 2)]),
        pad_cells=st.sampled_from([0.0, 0.1, 0.5]))
-@settings(max_examples=24, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=14, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 def test_indexed_steer_equals_exact_on_random_grids(seed, density, setting, pad_cells):
     """Random occupancy grids (exact rectangle cover), index cells of 1 or 2 grid cells,
     padding 0 or a fraction of a cell, segments of the four kinds of :func:`_segments`."""
@@ -215,7 +215,7 @@ def test_maze_steer_equals_exact(tmp_path, pad):
 
 
 @given(seed=st.integers(0, 10 ** 6), cell=st.sampled_from([0.5, 1.0]), pad=st.sampled_from([0.0, 0.1, 0.3]))
-@settings(max_examples=16, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=10, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 def test_indexed_steer_equals_exact_on_random_boxes(seed, cell, pad):
     """Arbitrary (overlapping, unaligned) boxes: the bitmap is only conservative there;
     segments uniform, short, and from box corners and edges."""

@@ -1,0 +1,87 @@
+#!/usr/bin/env python
+"""Plans one map's data query pools with a chosen planner and keeps the chunks as a record.
+
+Example (the paper's own data planner on rigid/0, 3 s per query, one worker)::
+
+    python scripts/record_paths.py --config configs/rigid.yaml --env rigid/0 \\
+        --planner bitstar --pools N,U --chunk 50 --workers 1 \\
+        --out results/data_paths/bitstar_rigid_0
+
+The pools are the ones ``generate_data.py`` samples for the same config and map
+(``U``: uniform queries, ``N``: non-trivial queries; the same seeds, the same
+data padding). Each pool is planned in chunks of ``--chunk`` queries into
+``<out>/<pool>/plan_<start>_<stop>.npz`` (``queries``, ``paths`` NaN-padded,
+``lengths``, ``costs``, ``status`` as :class:`ntq_jax.types.PlanStatus`,
+``rejected``), each written atomically when it finishes; rerunning the same
+command resumes from the finished chunks. ``<out>/record.json`` names the map,
+the planner, its options and the pools' sizes.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from ntq_jax.cli import run_cli
+
+
+def main(argv=None) -> int:
+    """The command line; expected errors are one ``error:`` line and exit code 2."""
+    return run_cli(lambda: _main(argv))
+
+
+def _main(argv) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--config", required=True, help="YAML config of the data run")
+    ap.add_argument("--env", required=True, help="the map, e.g. rigid/0")
+    ap.add_argument("--planner", default=None, help="planner name (default: the config's)")
+    ap.add_argument("--pools", default="N,U", help="pools to plan, in order (default N,U)")
+    ap.add_argument("--chunk", type=int, default=50, help="queries per chunk file")
+    ap.add_argument("--workers", type=int, default=None, help="BIT* worker processes")
+    ap.add_argument("--out", required=True, help="output folder of the record")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="config override (repeatable)")
+    ap.add_argument("--no-progress", action="store_true", help="no progress bars")
+    args = ap.parse_args(argv)
+
+    from ntq_jax import artifacts, make_env
+    from ntq_jax import config as C
+    from ntq_jax.data.generate import resolve_run
+    from ntq_jax.data.planning import plan_pool
+    from ntq_jax.data.pools import sample_pools
+
+    overrides = list(args.set)
+    if args.planner:
+        overrides.append(f"planner.name={args.planner}")
+    if args.workers is not None:
+        overrides.append(f"planner.workers={args.workers}")
+    cfg = C.load(args.config, overrides)
+    env = make_env(args.env)
+    out = Path(args.out)
+    run = resolve_run(env, cfg, out / ".tmp_unused", args.env, None)
+    pools = sample_pools(env, run.keys, run.n_u, run.n_nt, run.padding, cfg.sampling.n_max,
+                         not args.no_progress, f"{run.slug}: sample queries")
+    spans = {"U": (0, pools.n_u), "N": (pools.n_u, len(pools.queries))}
+    order = [p.strip() for p in args.pools.split(",") if p.strip()]
+    if not order or any(p not in spans for p in order):
+        raise ValueError(f"--pools must list U and/or N, got {args.pools!r}")
+    out.mkdir(parents=True, exist_ok=True)
+    artifacts.write_json(out / "record.json", {
+        "env": args.env, "config": args.config, "overrides": overrides,
+        "planner": run.planner_name, "options": run.options, "padding": run.padding,
+        "seed": cfg.seed, "pools": {k: v[1] - v[0] for k, v in spans.items()},
+        "fingerprint": run.fingerprint}, default=artifacts.json_default)
+    for name in order:
+        lo, hi = spans[name]
+        work = out / name
+        work.mkdir(exist_ok=True)
+        plan_pool(env, pools.queries[lo:hi], run.plan_fn, verify=run.verify,
+                  padding=run.padding, seed=cfg.seed + (0 if name == "U" else 1),
+                  chunk=args.chunk, work=work, progress=not args.no_progress,
+                  desc=f"{run.slug}: {name} ({run.planner_name})")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -186,15 +186,17 @@ class PlannerEnvOverride:
         time_budget: BIT* seconds per query for data (``None`` = ``planner.time_budget``).
         eval_time_budget: BIT* seconds at evaluation (``None`` = ``planner.eval_time_budget``).
         name: the planner of this environment (``None`` = ``planner.name``).
+        data_paths: the data paths of this environment (``None`` = ``planner.data_paths``).
     """
 
     env: str
     time_budget: Optional[float] = None
     eval_time_budget: Optional[float] = None
     name: Optional[str] = None
+    data_paths: typing.Union[float, str, None] = None
 
     # left out of to_dict (and so of the config hash) when None: configs hash as before
-    _OMIT_NONE = ("name",)
+    _OMIT_NONE = ("name", "data_paths")
 
     def validate(self, p: str):
         _check(bool(self.env), f"{p}.env", "must name an environment")
@@ -203,9 +205,21 @@ class PlannerEnvOverride:
         for k in ("time_budget", "eval_time_budget"):
             v = getattr(self, k)
             _check(v is None or v > 0, f"{p}.{k}", f"must be > 0 or null, got {v}")
+        why = validate_mode(self.data_paths)
+        _check(why is None, f"{p}.data_paths", why or "")
 
 
 PLANNERS = ("astar", "visgraph", "bitstar", "roadmap")
+DATA_PATH_MODES = ("raw", "shortcut")  # or a number: the resampling spacing
+
+
+def validate_mode(mode) -> str | None:
+    """Why ``mode`` is not a ``data_paths`` value (:mod:`ntq_jax.data.path_modes`), or None."""
+    if mode is None or mode in DATA_PATH_MODES:
+        return None
+    if isinstance(mode, (int, float)) and not isinstance(mode, bool):
+        return None if math.isfinite(mode) and mode > 0 else f"a spacing must be > 0, got {mode}"
+    return f"must be raw, shortcut, a spacing > 0 or null; got {mode!r}"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -221,12 +235,18 @@ class PlannerConfig:
         time_budget: BIT* seconds per query during data generation.
         eval_time_budget: BIT* seconds per query at evaluation.
         workers: BIT* worker processes (0 = number of cores).
-        smooth_data: shortcut the data planner's paths (``astar``, ``roadmap``) before
-            they become training samples: null (the default) or true shortcut them
-            (few waypoints, each a corner of the path); false keeps the planner's raw
-            waypoints (grid cells, roadmap nodes: many short segments, like BIT*'s
-            graph vertices). The evaluation reference is always shortcut. Left out of
-            the config hash when null.
+        data_paths: the data planner's output before includeData
+            (:mod:`ntq_jax.data.path_modes`): ``raw`` (the planner's own
+            waypoints: grid cells, roadmap nodes, BIT*'s vertices; pruning drops
+            every waypoint that sees the goal), ``shortcut`` (a few corners;
+            pruning drops only the step into the goal), a number ``s`` (the
+            shortcut resampled to at most ``s`` between waypoints, robot metric:
+            BIT*-like density) or null (the planner's default: shortcut for
+            ``astar``/``roadmap``, raw for ``bitstar``/``visgraph``; left out of the
+            config hash). The evaluation reference is always the default.
+        smooth_data: the earlier spelling of ``data_paths`` (``false`` = ``raw``,
+            ``true`` = ``shortcut``); kept so that older configs load and hash as
+            they did. Not together with ``data_paths``.
         per_env: per-environment planners and budgets (:class:`PlannerEnvOverride`);
             read them with :meth:`name_for`, :meth:`time_budget_for` and
             :meth:`eval_time_budget_for`.
@@ -240,9 +260,10 @@ class PlannerConfig:
     time_budget: float = 3.0
     eval_time_budget: float = 2.0
     workers: int = 0
+    data_paths: typing.Union[float, str, None] = None
     smooth_data: Optional[bool] = None
     per_env: tuple[PlannerEnvOverride, ...] = ()
-    _OMIT_NONE = ("smooth_data",)
+    _OMIT_NONE = ("data_paths", "smooth_data")
 
     def validate(self, p: str):
         _check(self.name in PLANNERS, f"{p}.name",
@@ -257,6 +278,11 @@ class PlannerConfig:
         _check(self.eval_time_budget > 0, f"{p}.eval_time_budget",
                f"must be > 0, got {self.eval_time_budget}")
         _check(self.workers >= 0, f"{p}.workers", f"must be >= 0, got {self.workers}")
+        why = validate_mode(self.data_paths)
+        _check(why is None, f"{p}.data_paths", why or "")
+        _check(self.data_paths is None or self.smooth_data is None, f"{p}.smooth_data",
+               "is the earlier spelling of data_paths; set only data_paths "
+               "(raw for false, shortcut for true)")
         for i, o in enumerate(self.per_env):
             o.validate(f"{p}.per_env[{i}]")
         names = [o.env for o in self.per_env]
@@ -279,6 +305,13 @@ class PlannerConfig:
     def eval_time_budget_for(self, env: str) -> float:
         """BIT* evaluation seconds per query for ``env``."""
         return self._for(env, "eval_time_budget")
+
+    def data_paths_for(self, env: str):
+        """The data paths of ``env`` (:mod:`ntq_jax.data.path_modes`; None: the planner's default)."""
+        mode = self._for(env, "data_paths")
+        if mode is None and self.smooth_data is not None:
+            return "shortcut" if self.smooth_data else "raw"
+        return mode
 
 
 @dataclasses.dataclass(frozen=True)

@@ -13,7 +13,8 @@ data padding). Each pool is planned in chunks of ``--chunk`` queries into
 ``<out>/<pool>/plan_<start>_<stop>.npz`` (``queries``, ``paths`` NaN-padded,
 ``lengths``, ``costs``, ``status`` as :class:`ntq_jax.types.PlanStatus`,
 ``rejected``), each written atomically when it finishes; rerunning the same
-command resumes from the finished chunks. ``<out>/record.json`` names the map,
+command resumes from the finished chunks; ``--limit`` plans a prefix of each
+pool (the full run later resumes from its chunks). ``<out>/record.json`` names the map,
 the planner, its options and the pools' sizes.
 """
 
@@ -22,7 +23,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ntq_jax.cli import run_cli
+from ntq_jax.cli import positive_int, run_cli
 
 
 def main(argv=None) -> int:
@@ -39,6 +40,9 @@ def _main(argv) -> int:
     ap.add_argument("--pools", default="N,U", help="pools to plan, in order (default N,U)")
     ap.add_argument("--chunk", type=int, default=50, help="queries per chunk file")
     ap.add_argument("--workers", type=int, default=None, help="BIT* worker processes")
+    ap.add_argument("--limit", type=int, default=None,
+                    help="plan only the first LIMIT queries of each pool (a prefix: the same "
+                         "chunk files as the full run, which resumes from them)")
     ap.add_argument("--out", required=True, help="output folder of the record")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help="config override (repeatable)")
@@ -74,6 +78,8 @@ def _main(argv) -> int:
         "fingerprint": run.fingerprint}, default=artifacts.json_default)
     for name in order:
         lo, hi = spans[name]
+        if args.limit is not None:
+            hi = min(hi, lo + positive_int("--limit", args.limit))
         work = out / name
         work.mkdir(exist_ok=True)
         plan_pool(env, pools.queries[lo:hi], run.plan_fn, verify=run.verify,

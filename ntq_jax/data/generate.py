@@ -56,6 +56,7 @@ from ntq_jax.data.format import (CONFIG_FILE, FORMAT, FORMAT_VERSION, damaged_da
                                  dataset_names, env_slug, npy_sha256, plot_environment,
                                  write_dataset)
 from ntq_jax.data.include import include_data, prune_probability, prune_rng
+from ntq_jax.data.path_modes import shape_paths
 from ntq_jax.data.planning import PoolPlan, plan_pool, planner_options, resolve_planner
 from ntq_jax.data.pools import (Keys, Pools, mixing_bits, pool_index, pool_sizes, run_keys,
                                 sample_pools)
@@ -93,6 +94,7 @@ class RunSpec(NamedTuple):
     keys: Keys
     bits: list[np.ndarray]
     fingerprint: str
+    data_paths: float | str | None = None  # planner.data_paths (ntq_jax.data.path_modes)
 
     @property
     def n_u(self) -> int:
@@ -120,15 +122,18 @@ def resolve_run(env, config, out_dir, env_name: str | None, planner) -> RunSpec:
     keys = run_keys(config.seed, slug)
     bits = [mixing_bits(keys.mix, k, s.p_nt) for s in specs]
     n_u, n_nt = pool_sizes(bits)
+    mode = config.planner.data_paths_for(env_name)
     fp = artifacts.fingerprint({
         "format": FORMAT_VERSION, "env": env.to_json(), "env_name": env_name, "seed": config.seed,
         "pad": pad, "prune_pad": prune_pad, "planner": planner_name, "options": options,
         "n_max": config.sampling.n_max, "n_u": n_u, "n_nt": n_nt, "k": k,
         "datasets": [[s.p_nt, s.prune] for s in specs],
         "gamma_queries": dc.gamma_queries, "gamma_eval": dc.gamma_eval,
+        # only when set: the fingerprints of runs with the planners' default paths stay
+        **({} if mode is None else {"data_paths": mode}),
     }, default=artifacts.json_default)
     return RunSpec(env_name, slug, Path(out_dir) / slug, dataset_names(len(specs)), specs, k,
-                   pad, prune_pad, plan_fn, planner_name, options, custom, keys, bits, fp)
+                   pad, prune_pad, plan_fn, planner_name, options, custom, keys, bits, fp, mode)
 
 
 # ---------------------------------------------------------------------------
@@ -251,7 +256,8 @@ def common_meta(env, config, run: RunSpec, g_data: dict, g_eval: dict) -> dict:
         "format": FORMAT, "format_version": FORMAT_VERSION, "env": env.name,
         "env_name": run.env_name, "env_slug": run.slug, "seed": config.seed, "k_train": run.k,
         "padding": run.padding, "prune_padding": run.prune_padding,
-        "planner": {"name": run.planner_name, "options": run.options},
+        "planner": {"name": run.planner_name, "options": run.options,
+                    **({} if run.data_paths is None else {"data_paths": run.data_paths})},
         "sampling": {"n_max": config.sampling.n_max}, "gamma_nt": g_data, "gamma_nt_eval": g_eval,
         "package_version": __version__, "config_hash": config.hash(),
         "fingerprint": run.fingerprint, "query_kind_values": _QUERY_KINDS,
@@ -374,6 +380,16 @@ def generate_datasets(env, config, out_dir, *, env_name: str | None = None, plan
                                 work=work, progress=progress,
                                 desc=f"{run.slug}: plan ({run.planner_name})", executor=executor)
         _warn_rejected(run, planned)
+        with _timed(timings, "shape"):
+            shaped, shaping = shape_paths(env, planned.result, run.data_paths,
+                                          "custom" if run.verify else run.planner_name,
+                                          run.padding)
+            planned = planned._replace(result=shaped)
+        if shaping["shortcut_kept"] or shaping["resample_kept"]:
+            warnings.warn(f"{run.env_name}: data_paths {run.data_paths}: "
+                          f"{shaping['shortcut_kept'] + shaping['resample_kept']} path(s) kept "
+                          "as planned (their shortcut or resampled form failed the check)",
+                          RuntimeWarning, stacklevel=2)
         with _timed(timings, "check"):
             blocked = ~steer_to_pairs(env.robot, env.world, pools.queries[:, 0],
                                       pools.queries[:, 1], run.padding)
@@ -418,4 +434,5 @@ def generate_datasets(env, config, out_dir, *, env_name: str | None = None, plan
     timings["total"] = time.perf_counter() - t_all
     return {"env_dir": str(run.env_dir), "skipped": False, "fingerprint": run.fingerprint,
             "timings": timings, "reused_queries": planned.reused, "datasets": summary,
-            "damaged": damaged, "rewritten": rewritten, "planned_queries": len(pools.queries)}
+            "damaged": damaged, "rewritten": rewritten, "planned_queries": len(pools.queries),
+            "data_paths": shaping}

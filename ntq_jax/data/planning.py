@@ -23,6 +23,7 @@ from typing import Callable, NamedTuple, Optional
 import numpy as np
 
 from ntq_jax import artifacts
+from ntq_jax.data.path_modes import planner_smooth
 from ntq_jax.planners import plan
 from ntq_jax.planners.verify import finalize
 from ntq_jax.progress import open_bar
@@ -44,14 +45,16 @@ def planner_options(config, env_name: str, name: str | None = None, *,
     evaluation budget instead of the data-generation one, and the evaluation's
     motion check (``config.eval.motion_check``) for the planner's checks and the
     verification of its paths. Data generation keeps the planners' default, the
-    discretised check (the paper's), at the data padding, and passes
-    ``planner.smooth_data`` (when set) to ``astar`` and ``roadmap``.
+    discretised check (the paper's), at the data padding, and passes the
+    ``smooth`` option of ``planner.data_paths`` (when set) to ``astar`` and
+    ``roadmap`` (:func:`ntq_jax.data.path_modes.planner_smooth`).
     """
     pc = config.planner
     name = name or pc.name_for(env_name)
     extra = {"check": config.eval.motion_check} if evaluation else {}
-    if not evaluation and pc.smooth_data is not None and name in ("astar", "roadmap"):
-        extra["smooth"] = bool(pc.smooth_data)
+    smooth = None if evaluation else planner_smooth(pc.data_paths_for(env_name), name)
+    if smooth is not None:
+        extra["smooth"] = smooth
     if name == "astar":
         return {"resolution": pc.resolution, **extra}
     if name == "bitstar":

@@ -1,0 +1,158 @@
+"""planner.data_paths: raw / shortcut / resampled data paths, and what pruning then removes."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from shapely.geometry import LineString, box
+
+from ntq_jax import Env, config, make_env
+from ntq_jax.config import ConfigError
+from ntq_jax.data.include import include_data
+from ntq_jax.data.path_modes import shape_paths
+from ntq_jax.data.planning import planner_options
+from ntq_jax.planners import plan
+from ntq_jax.planners.resample import resample_paths
+from ntq_jax.robots.batch import distances
+
+WALLS = {"name": "walls", "robot": {"kind": "point"}, "bounds": [[0, 10], [0, 10]],
+         "boxes": [[3, 3.5, 0.5, 3.5], [7, 6.5, 0.5, 3.5]], "discs": [], "padding": 0.2}
+
+
+def _costs(robot, p, n):
+    return np.array([distances(robot, p[b, :n[b] - 1], p[b, 1:n[b]]).astype(np.float64).sum()
+                     for b in range(len(n))])
+
+
+def test_resampled_segments_never_exceed_the_spacing_and_keep_vertices_and_cost():
+    for name in ("point/0", "rigid/0", "nlink/4"):
+        env = make_env(name)
+        rng = np.random.default_rng(1)
+        lo, hi = (np.asarray(a) for a in env.robot.config_bounds(env.world))
+        n = np.array([5, 2, 1, 0, 7])
+        p = np.full((5, 7, env.dim), np.nan, np.float32)
+        for b, m in enumerate(n):
+            p[b, :m] = rng.uniform(lo, hi, (m, env.dim))
+        for spacing in (0.05, 0.7, 100.0):
+            out, m = resample_paths(env.robot, p, n, spacing)
+            assert m[2] == 1 and m[3] == 0 and np.isnan(out[3]).all()
+            np.testing.assert_array_equal(out[2, 0], p[2, 0])
+            for b in (0, 1, 4):
+                q = out[b, :m[b]]
+                d = distances(env.robot, q[:-1], q[1:])
+                assert d.max() <= spacing * (1 + 1e-5) + 1e-6, (name, spacing, d.max())
+                assert np.isnan(out[b, m[b]:]).all()
+                # every input vertex is kept exactly, in order
+                idx = [int(np.flatnonzero((q == v).all(1))[0]) for v in p[b, :n[b]]]
+                assert idx == sorted(idx) and idx[0] == 0 and idx[-1] == m[b] - 1
+            if spacing == 100.0:
+                np.testing.assert_array_equal(m, n)  # nothing to insert
+            np.testing.assert_allclose(_costs(env.robot, out, m)[[0, 1, 4]],
+                                       _costs(env.robot, p, n)[[0, 1, 4]], rtol=1e-5)
+
+
+def test_resample_rejects_bad_spacing():
+    env = make_env("point/0")
+    p = np.zeros((1, 2, 2), np.float32)
+    for bad in (0.0, -1.0, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="spacing"):
+            resample_paths(env.robot, p, np.array([2]), bad)
+
+
+def _plan_modes(env, q, planner, **kw):
+    raw = plan(env, q, planner, padding=env.padding, smooth=False, **kw)
+    cut = plan(env, q, planner, padding=env.padding, **kw)
+    return raw, cut
+
+
+def test_modes_on_a_tiny_map():
+    """raw keeps the planner's vertices, shortcut is the planner's default, a number resamples
+    the shortcut path (same cost, segments <= spacing) and bitstar-like planners are
+    shortcut here."""
+    env = Env.from_json(WALLS)
+    q = np.array([[[1, 1], [9, 9]], [[1, 9], [9, 1]], [[5, 1], [5, 9]]], np.float32)
+    raw, cut = _plan_modes(env, q, "astar", resolution=0.25)
+    assert raw.solved.all() and cut.solved.all()
+    same, _ = shape_paths(env, raw, "raw", "astar", env.padding)
+    assert same is raw  # the planner's own vertices, untouched
+    assert (raw.lengths > 3 * cut.lengths).all()
+    res, info = shape_paths(env, cut, 0.5, "astar", env.padding)
+    assert info == {"mode": 0.5, "shortcut_kept": 0, "resample_kept": 0}
+    np.testing.assert_allclose(res.costs, cut.costs, rtol=1e-5)
+    for b in range(3):
+        pr, pc = res.path(b), cut.path(b)
+        assert (distances(env.robot, pr[:-1], pr[1:]) <= 0.5 * (1 + 1e-5)).all()
+        assert all((pr == v).all(1).any() for v in pc)  # the corners are kept
+    # a planner without its own smoothing (here: the raw grid path as a "custom" planner)
+    # is shortcut by shape_paths: the result equals the planner's own shortcut's cost
+    sc, info = shape_paths(env, raw, "shortcut", "custom", env.padding)
+    assert info["shortcut_kept"] == 0
+    assert (sc.lengths <= raw.lengths).all() and (sc.costs <= raw.costs + 1e-4).all()
+    assert (sc.lengths < raw.lengths / 3).all()
+
+
+def _clearance(path):
+    """Shapely: ``(n-1, boxes)`` distance of each ``(pi_i, pi_end)`` to each box."""
+    polys = [box(cx - hx, cy - hy, cx + hx, cy + hy) for cx, cy, hx, hy in WALLS["boxes"]]
+    end = path[-1]
+    return np.array([[LineString([p, end]).distance(b) if not np.array_equal(p, end)
+                      else b.distance(LineString([p, p + 1e-9])) for b in polys]
+                     for p in path[:-1]])
+
+
+@settings(max_examples=15, deadline=None)
+@given(st.integers(0, 10_000))
+def test_pruning_on_a_resampled_path_removes_exactly_the_trivial_samples(seed):
+    """On multi-vertex paths, pruning drops exactly the samples whose (pi_i, pi_end) is free
+    (shapely oracle), keeps the rest in order, and the unpruned set has one sample per segment."""
+    env = Env.from_json(WALLS)
+    rng = np.random.default_rng(seed)
+    q = rng.uniform(0.5, 9.5, (8, 2, 2)).astype(np.float32)
+    res = plan(env, q, "astar", padding=env.padding, resolution=0.25)
+    res, _ = shape_paths(env, res, 0.6, "astar", env.padding)
+    rows = np.flatnonzero(res.solved)
+    paths, lens = res.paths[rows], res.lengths[rows]
+    full = include_data(env, paths, lens, prune=False, padding=env.padding)
+    pruned = include_data(env, paths, lens, prune=True, padding=env.padding)
+    for j in range(len(rows)):
+        path = paths[j, :lens[j]]
+        assert (full[2] == j).sum() == lens[j] - 1
+        clear = _clearance(path) - env.padding
+        if (np.abs(clear) < 1e-4).any():
+            continue  # a connection grazing the padding: float32 and shapely may disagree
+        trivial = (clear > 0).all(axis=1)
+        np.testing.assert_array_equal(pruned[0][pruned[2] == j][:, :2], path[:-1][~trivial])
+        np.testing.assert_array_equal(pruned[1][pruned[2] == j], path[1:][~trivial])
+
+
+def test_config_key_reaches_the_data_planner_and_the_fingerprint():
+    from ntq_jax.data.generate import resolve_run
+
+    base = config.load(None, [])
+    assert "data_paths" not in base.to_dict()["planner"]
+    assert planner_options(base, "rigid/0", "roadmap").get("smooth") is None
+    for mode, smooth in (("raw", False), ("shortcut", True), (0.4, True)):
+        cfg = config.load(None, [f"planner.data_paths={mode}"])
+        assert cfg.planner.data_paths_for("rigid/0") == mode
+        assert planner_options(cfg, "rigid/0", "roadmap")["smooth"] is smooth
+        assert "smooth" not in planner_options(cfg, "rigid/0", "bitstar")
+        assert "smooth" not in planner_options(cfg, "rigid/0", "roadmap", evaluation=True)
+        assert cfg.hash() != base.hash()
+    env = make_env("point/0")
+    fps = {resolve_run(env, config.load(None, [f"planner.data_paths={m}"]), "/tmp/x",
+                       "point/0", None).fingerprint for m in ("raw", "shortcut", 0.4, 0.5)}
+    assert len(fps) == 4
+    # per environment, and the earlier spelling smooth_data
+    cfg = config.load(None, ["planner.per_env=[{env: rigid/0, data_paths: 0.3}]"])
+    assert cfg.planner.data_paths_for("rigid/0") == 0.3
+    assert cfg.planner.data_paths_for("point/0") is None
+    old = config.load(None, ["planner.smooth_data=false"])
+    assert old.planner.data_paths_for("point/0") == "raw"
+    assert "data_paths" not in old.to_dict()["planner"]
+    for bad, msg in (("fast", "raw, shortcut"), ("0", "> 0"), ("-1", "> 0"), ("true", "")):
+        with pytest.raises(ConfigError, match=r"planner\.data_paths"):
+            config.load(None, [f"planner.data_paths={bad}"])
+    with pytest.raises(ConfigError, match=r"planner\.smooth_data"):
+        config.load(None, ["planner.smooth_data=false", "planner.data_paths=raw"])

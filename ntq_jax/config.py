@@ -110,10 +110,17 @@ class DataEnvOverride:
     Attributes:
         env: the environment name exactly as listed in ``envs``.
         k_train: queries per dataset for this environment (``None`` = ``data.k_train``).
+        paths_from: a folder of recorded data paths of this map
+            (``scripts/record_paths.py``: ``record.json``, ``U/`` and ``N/`` chunk
+            files, e.g. ``results/data_paths/bitstar/rigid_0``): the pools' queries
+            it holds are taken from it instead of being planned (their queries must
+            be this run's, byte for byte); the rest are planned as usual.
     """
 
     env: str
     k_train: Optional[int] = None
+    paths_from: Optional[str] = None
+    _OMIT_NONE = ("paths_from",)
 
     def validate(self, p: str):
         _check(bool(self.env), f"{p}.env", "must name an environment")
@@ -166,6 +173,10 @@ class DataConfig:
             o.validate(f"{p}.per_env[{i}]")
         names = [o.env for o in self.per_env]
         _check(len(set(names)) == len(names), f"{p}.per_env", f"lists an environment twice: {names}")
+
+    def paths_from_for(self, env: str) -> str | None:
+        """The recorded data paths of ``env`` (its override's ``paths_from``), or None."""
+        return next((o.paths_from for o in self.per_env if o.env == env), None)
 
     def k_train_for(self, env: str) -> int:
         """Queries per dataset for ``env`` (its override, else ``k_train``)."""

@@ -11,7 +11,9 @@ and what proves where they came from, for one environment of a finished run
                          comparisons (this map's, as in results.json),
                          fingerprints (per dataset the digest of its arrays'
                          sha256 checksums; one digest of the trained ensemble's
-                         files), timings (seconds of data / train / eval),
+                         files), datasets (per dataset the planned paths
+                         used, samples written and mean states per data
+                         path), timings (seconds of data / train / eval),
                          finished, command
     <dir>/tables.md, tables.tex, config.yaml   the run's report and exact config
     <dir>/figures/*.png  the success figure and this map's figures
@@ -34,8 +36,8 @@ from ntq_jax.version import __version__
 
 SCHEMA = 1
 
-__all__ = ["SCHEMA", "dataset_fingerprints", "models_fingerprint", "write_summary",
-           "read_summary"]
+__all__ = ["SCHEMA", "dataset_fingerprints", "dataset_sizes", "models_fingerprint",
+           "write_summary", "read_summary"]
 
 
 def dataset_fingerprints(data_env_dir: Path, names: list[str]) -> dict[str, str | None]:
@@ -45,6 +47,20 @@ def dataset_fingerprints(data_env_dir: Path, names: list[str]) -> dict[str, str 
         try:
             meta = json.loads((Path(data_env_dir) / nm / "meta.json").read_text())
             out[nm] = artifacts.fingerprint({a: v["sha256"] for a, v in meta["arrays"].items()})
+        except (OSError, ValueError, KeyError, TypeError):
+            out[nm] = None
+    return out
+
+
+def dataset_sizes(data_env_dir: Path, names: list[str]) -> dict[str, dict | None]:
+    """Per dataset ``{"paths", "samples", "states_per_path"}`` from its ``meta.json``'s
+    stats (planned paths used, rows written, mean states per data path); None if absent."""
+    out = {}
+    for nm in names:
+        try:
+            st = json.loads((Path(data_env_dir) / nm / "meta.json").read_text())["stats"]
+            out[nm] = {"paths": int(st["paths"]), "samples": int(st["samples"]),
+                       "states_per_path": float(st["mean_waypoints"])}
         except (OSError, ValueError, KeyError, TypeError):
             out[nm] = None
     return out
@@ -106,6 +122,7 @@ def write_summary(run: Path, env_name: str, env, out_dir: Path, *, command: str 
         "padding": float(env.padding), "rows": rows, "comparisons": comps,
         "fingerprints": {"datasets": dataset_fingerprints(run / "data" / slug, names),
                          "models": models_fingerprint(run / "models" / slug)},
+        "datasets": dataset_sizes(run / "data" / slug, names),
         "timings": timings or _stage_seconds(run, slug),
         "finished": time.strftime("%Y-%m-%dT%H:%M:%S"), "command": command,
     }

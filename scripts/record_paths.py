@@ -63,7 +63,7 @@ def _main(argv) -> int:
     cfg = C.load(args.config, overrides)
     env = make_env(args.env)
     out = Path(args.out)
-    run = resolve_run(env, cfg, out / ".tmp_unused", args.env, None)
+    run = resolve_run(env, cfg, Path(cfg.out_dir) / "data", args.env, None)  # roadmap cache there
     pools = sample_pools(env, run.keys, run.n_u, run.n_nt, run.padding, cfg.sampling.n_max,
                          not args.no_progress, f"{run.slug}: sample queries")
     spans = {"U": (0, pools.n_u), "N": (pools.n_u, len(pools.queries))}

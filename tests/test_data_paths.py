@@ -156,3 +156,53 @@ def test_config_key_reaches_the_data_planner_and_the_fingerprint():
             config.load(None, [f"planner.data_paths={bad}"])
     with pytest.raises(ConfigError, match=r"planner\.smooth_data"):
         config.load(None, ["planner.smooth_data=false", "planner.data_paths=raw"])
+
+
+def _record_script():
+    import importlib.util
+    from pathlib import Path
+    root = Path(__file__).resolve().parents[1]
+    spec = importlib.util.spec_from_file_location("record_paths",
+                                                  root / "scripts" / "record_paths.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_datasets_rebuild_from_a_record_without_planning(tmp_path, monkeypatch):
+    """A record (scripts/record_paths.py) serves data generation: the same datasets as
+    planning the pools, with no chunk planned; a record of other queries is refused."""
+    from ntq_jax import data
+    from ntq_jax.data import planning
+
+    sets = ["data.k_train=12", "data.gamma_queries=500", "data.gamma_eval=false"]
+    rec = tmp_path / "rec"
+    argv = ["--config", "configs/point_small.yaml", "--env", "point/2", "--planner", "astar",
+            "--chunk", "5", "--out", str(rec), "--no-progress"]
+    assert _record_script().main(argv + [a for s in sets for a in ("--set", s)]) == 0
+    assert sorted(p.name for p in (rec / "N").iterdir())[0] == "plan_000000000_000000005.npz"
+    env = make_env("point/2")
+    plain = config.load("configs/point_small.yaml", sets)
+    data.generate_datasets(env, plain, tmp_path / "planned", env_name="point/2",
+                           progress=False, figure=False)
+    written = []
+    monkeypatch.setattr(planning, "chunk_written", written.append)
+    cfg = config.load("configs/point_small.yaml",
+                      sets + [f"data.per_env=[{{env: point/2, paths_from: '{rec}'}}]"])
+    out = data.generate_datasets(env, cfg, tmp_path / "replayed", env_name="point/2",
+                                 progress=False, figure=False)
+    assert written == [] and out["reused_queries"] == out["planned_queries"] == 24
+    for ds in ("D0", "D1", "D2", "D3"):
+        for arr in ("inputs", "targets", "paths", "queries"):
+            np.testing.assert_array_equal(
+                np.load(tmp_path / "planned" / "point_2" / ds / f"{arr}.npy"),
+                np.load(tmp_path / "replayed" / "point_2" / ds / f"{arr}.npy"))
+    other = config.load("configs/point_small.yaml", sets + [
+        "seed=1", f"data.per_env=[{{env: point/2, paths_from: '{rec}'}}]"])
+    with pytest.raises(ValueError, match="not this run's pool rows"):
+        data.generate_datasets(env, other, tmp_path / "other", env_name="point/2",
+                               progress=False, figure=False)
+    with pytest.raises(ValueError, match="records point/2"):
+        data.generate_datasets(make_env("point/1"), config.load(
+            "configs/point_small.yaml", sets + [f"data.per_env=[{{env: point/1, paths_from: '{rec}'}}]"]),
+            tmp_path / "p1", env_name="point/1", progress=False, figure=False)

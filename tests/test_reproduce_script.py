@@ -48,6 +48,12 @@ def test_reproduce_one_map_with_a_training_seed(tmp_path, capsys):
     assert {r["env"] for r in main["rows"]} == {"point/2"} and len(main["rows"]) == 14
     assert {(c["model"], c["baseline"]) for c in main["comparisons"]} >= {("PNet_3", "PNet_0")}
     assert main["config"]["data"]["k_train"] == 40 and main["padding"] == 0.8
+    # the datasets' sizes: D3 is D2's paths with pruned samples
+    ds = main["datasets"]
+    assert ds == seed["datasets"] and set(ds) == {"D0", "D1", "D2", "D3"}
+    assert ds["D3"]["paths"] == ds["D2"]["paths"] > 0
+    assert 0 < ds["D3"]["samples"] < ds["D2"]["samples"]
+    assert ds["D3"]["states_per_path"] == ds["D2"]["states_per_path"] >= 2
     assert set(main["timings"]) == {"data", "train", "eval"}
     # compact: no arrays
     files = [p for p in (results / "point" / "point_2").rglob("*") if p.is_file()]

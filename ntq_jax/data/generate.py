@@ -57,7 +57,8 @@ from ntq_jax.data.format import (CONFIG_FILE, FORMAT, FORMAT_VERSION, damaged_da
                                  write_dataset)
 from ntq_jax.data.include import include_data, prune_probability, prune_rng
 from ntq_jax.data.path_modes import shape_paths
-from ntq_jax.data.planning import PoolPlan, plan_pool, planner_options, resolve_planner
+from ntq_jax.data.planning import (PoolPlan, plan_pool, planner_options, resolve_planner,
+                                   seed_from_record)
 from ntq_jax.data.pools import (Keys, Pools, mixing_bits, pool_index, pool_sizes, run_keys,
                                 sample_pools)
 from ntq_jax.progress import open_bar
@@ -131,6 +132,8 @@ def resolve_run(env, config, out_dir, env_name: str | None, planner) -> RunSpec:
         "gamma_queries": dc.gamma_queries, "gamma_eval": dc.gamma_eval,
         # only when set: the fingerprints of runs with the planners' default paths stay
         **({} if mode is None else {"data_paths": mode}),
+        **({} if dc.paths_from_for(env_name) is None
+           else {"paths_from": str(dc.paths_from_for(env_name))}),
     }, default=artifacts.json_default)
     return RunSpec(env_name, slug, Path(out_dir) / slug, dataset_names(len(specs)), specs, k,
                    pad, prune_pad, plan_fn, planner_name, options, custom, keys, bits, fp, mode)
@@ -368,6 +371,11 @@ def generate_datasets(env, config, out_dir, *, env_name: str | None = None, plan
     with _timed(timings, "sample"):
         pools = sample_pools(env, run.keys, run.n_u, run.n_nt, run.padding,
                              config.sampling.n_max, progress, f"{run.slug}: sample queries")
+
+    record = config.data.paths_from_for(run.env_name)
+    if record is not None:
+        seed_from_record(work, Path(record), pools.queries, pools.n_u, env_name=run.env_name,
+                         padding=run.padding)
 
     with ThreadPoolExecutor(1, thread_name_prefix="ntq_jax-gamma") as gamma_thread:
         # 2. gamma_nt of the map, in the background while the planner runs

@@ -30,7 +30,7 @@ from ntq_jax.progress import open_bar
 from ntq_jax.types import PlanResult, PlanStatus
 
 __all__ = ["planner_options", "resolve_planner", "NamedPlanner", "PoolPlan", "chunk_ranges",
-           "plan_chunk", "plan_pool"]
+           "plan_chunk", "plan_pool", "seed_from_record"]
 
 _CHUNK_FILE = re.compile(r"plan_(\d+)_(\d+)\.npz")
 _CHUNK_KEYS = ("queries", "paths", "lengths", "costs", "status", "rejected")
@@ -279,3 +279,50 @@ def plan_pool(env, pool: np.ndarray, plan_fn: Callable, *, verify: bool, padding
                     bar.update(hi - lo)
     result, rejected = _merge(parts, results, n, d)
     return PoolPlan(result, rejected, reused)
+
+
+def seed_from_record(work: Path, record: Path, pool: np.ndarray, n_u: int, *, env_name: str,
+                     padding: float) -> int:
+    """Copies a record's chunk files (``scripts/record_paths.py``) into ``work``.
+
+    The record's ``U/plan_<a>_<b>.npz`` become ``plan_<a>_<b>.npz`` and its
+    ``N/plan_<a>_<b>.npz`` become ``plan_<n_u+a>_<n_u+b>.npz`` (the pooled rows),
+    so that :func:`plan_pool` reuses them instead of planning those queries.
+    Chunks beyond the pools are ignored (a larger record serves a smaller run).
+
+    Returns:
+        The number of queries seeded.
+
+    Raises:
+        ValueError: the record is of another map or padding, or a chunk's queries
+            are not this run's (the message names the chunk).
+        FileNotFoundError: no ``record.json`` in ``record``.
+    """
+    import json
+
+    record = Path(record)
+    meta = json.loads((record / "record.json").read_text())
+    if meta.get("env") != env_name or not np.isclose(float(meta.get("padding", -1)), padding):
+        raise ValueError(f"{record} records {meta.get('env')} at padding {meta.get('padding')}, "
+                         f"not {env_name} at {padding}: point data.per_env's paths_from at "
+                         "this map's record")
+    spans = {"U": (0, n_u), "N": (n_u, len(pool))}
+    seeded = 0
+    for name, (lo0, hi0) in spans.items():
+        for f in sorted((record / name).glob("plan_*_*.npz")):
+            m = _CHUNK_FILE.fullmatch(f.name)
+            if m is None:
+                continue
+            a, b = lo0 + int(m.group(1)), lo0 + int(m.group(2))
+            if b > hi0:
+                continue
+            with np.load(f) as z:
+                same = np.array_equal(z["queries"], pool[a:b])
+            if not same:
+                raise ValueError(f"{f}: its queries are not this run's pool rows {a}..{b} (the "
+                                 "record was made with another config, seed or sampler)")
+            dest = work / f"plan_{a:09d}_{b:09d}.npz"
+            if not dest.exists():
+                artifacts.write_bytes(dest, f.read_bytes())
+            seeded += b - a
+    return seeded

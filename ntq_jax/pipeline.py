@@ -56,8 +56,10 @@ DEFAULT = {
     "envs": ["point/0", "point/1", "point/2", "point/3", "rigid/0"],
     "seed": 0,
     "data": {"k_train": 600, "gamma_queries": 200_000},
+    # rigid/0's data paths: the roadmap's shortcut paths resampled to at most 0.6 apart,
+    # BIT*'s density (configs/rigid.yaml says why)
     "planner": {"name": "astar", "resolution": 0.1,
-                "per_env": [{"env": "rigid/0", "name": "roadmap"}]},
+                "per_env": [{"env": "rigid/0", "name": "roadmap", "data_paths": 0.6}]},
     "model": {"hidden": [256, 256, 128, 64]},
     "train": {"epochs": 40, "batch_size": 100},
     "eval": {"k_test": 200, "n_plan": 50, "steer": [True]},

@@ -1,0 +1,309 @@
+#!/usr/bin/env python
+"""What decides PNet_3 vs PNet_0: a factor study over data paths, planner budgets and test band.
+
+Examples::
+
+    python scripts/factor_study.py --list               # every cell and whether it is done
+    python scripts/factor_study.py --next               # run the first pending cell
+    python scripts/factor_study.py --cell rigid_0/density/ours
+    python scripts/factor_study.py --report-only        # results/factors/README.md only
+
+Factors, on point/0, point/3, rigid/0, rigid/2 and nlink/4 at the paper's sizes
+(``configs/<task>.yaml``):
+
+* data paths (``planner.data_paths``): ``shortcut`` (a few corners), ``density``
+  (the shortcut resampled to BIT*'s states per path: the task's default),
+  ``raw`` (the planner's own waypoints) and, on rigid/0, ``bitstar`` (the
+  committed BIT* record at the paper's 3 s, ``results/data_paths/bitstar/rigid_0``);
+* neural planner budgets: ``ours`` (the config's) and ``mpnet`` (MPNet's: 80
+  coarse steps, 10 replanning rounds, 50 steps per reconnection), evaluated on
+  the same trained PNets;
+* test band: every test query, in band (both endpoints valid at the data
+  padding, where training states lie) and out of band, from the same runs.
+
+A cell is one map, data mode and budget: its run in ``<runs>/<map>/<data>/<budget>/``
+(resumable), its summary (:mod:`ntq_jax.summaries`) and ``paired.json`` (PNet_k
+- PNet_0 per query kind, steerTo and band: Newcombe interval, McNemar p) in
+``<results>/<map>/<data>/<budget>/``. ``--seeds`` cells retrain the same data with
+training seeds 1 and 2 (``.../seeds/train_seed_<k>/``). Commit each cell as it
+finishes; ``README.md`` is regenerated from every finished cell.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import sys
+import time
+from pathlib import Path
+from typing import NamedTuple
+
+from ntq_jax.cli import UsageError, run_cli
+
+MAPS = {"rigid/0": "rigid", "point/0": "point", "nlink/4": "nlink", "rigid/2": "rigid",
+        "point/3": "point"}  # in the order --next runs them
+MPNET_BUDGETS = ["eval.n_plan=80", "eval.replan_rounds=10", "eval.replan_steps=50"]
+BITSTAR_RECORD = "results/data_paths/bitstar/rigid_0"
+#: BIT*-like spacings where the task config's default is not a spacing (see README.md)
+DENSITY: dict[str, float] = {}
+HEADLINE_DATA = "density"  # the cells whose sign the headline reads: three training seeds
+
+
+class Cell(NamedTuple):
+    map: str
+    data: str
+    budget: str
+    train_seed: int = 0
+
+    @property
+    def slug(self) -> str:
+        return self.map.replace("/", "_")
+
+    @property
+    def key(self) -> str:
+        base = f"{self.slug}/{self.data}/{self.budget}"
+        return base + (f"/seeds/train_seed_{self.train_seed}" if self.train_seed else "")
+
+
+def data_overrides(cell: Cell, cfg) -> list[str]:
+    """The ``--set`` overrides of the cell's data paths (``cfg``: the map's task config)."""
+    if cell.data == "bitstar":
+        return [f"planner.per_env=[{{env: {cell.map}, name: roadmap, data_paths: raw}}]",
+                f"data.per_env=[{{env: {cell.map}, paths_from: {BITSTAR_RECORD}}}]"]
+    if cell.data in ("shortcut", "raw"):
+        return [f"planner.data_paths={cell.data}"]
+    spacing = DENSITY.get(cell.map, cfg.planner.data_paths_for(cell.map))
+    if isinstance(spacing, bool) or not isinstance(spacing, (int, float)):
+        raise UsageError(f"{cell.map}: no resampling spacing for the density cells (set "
+                         "planner.data_paths in its task config)")
+    return [f"planner.data_paths={spacing}"]
+
+
+def cells(seeds: bool = True) -> list[Cell]:
+    out = []
+    for m in MAPS:
+        for data in ("density", "shortcut", "raw") + (("bitstar",) if m == "rigid/0" else ()):
+            for budget in ("ours", "mpnet"):
+                out.append(Cell(m, data, budget))
+            if seeds and data == HEADLINE_DATA:
+                out += [Cell(m, data, "ours", k) for k in (1, 2)]
+    return out
+
+
+def record_rows(record: Path, pool: str) -> int:
+    """Queries of ``pool`` the record's chunk files cover, from row 0 without a gap."""
+    import re
+    spans = sorted((int(m.group(1)), int(m.group(2))) for f in (record / pool).glob("*.npz")
+                   if (m := re.fullmatch(r"plan_(\d+)_(\d+)\.npz", f.name)))
+    end = 0
+    for lo, hi in spans:
+        if lo > end:
+            break
+        end = max(end, hi)
+    return end
+
+
+def ready(cell: Cell) -> str | None:
+    """Why the cell cannot run yet, or None."""
+    if cell.data == "bitstar":
+        rec = Path(BITSTAR_RECORD)
+        try:
+            pools = json.loads((rec / "record.json").read_text())["pools"]
+        except (OSError, ValueError, KeyError):
+            return f"no BIT* record in {rec}"
+        have = {p: record_rows(rec, p) for p in ("U", "N")}
+        if any(have[p] < pools[p] for p in ("U", "N")):
+            return (f"the BIT* record covers U {have['U']}/{pools['U']}, N {have['N']}/"
+                    f"{pools['N']} (resume: python scripts/record_paths.py --config "
+                    "configs/rigid.yaml --env rigid/0 --planner bitstar --workers 1 "
+                    f"--out {rec})")
+    return None
+
+
+def _link_tree(src: Path, dst: Path) -> None:
+    for p in src.rglob("*"):
+        q = dst / p.relative_to(src)
+        if p.is_dir():
+            q.mkdir(parents=True, exist_ok=True)
+        elif not q.exists():
+            q.parent.mkdir(parents=True, exist_ok=True)
+            try:
+                os.link(p, q)
+            except OSError:
+                shutil.copy2(p, q)
+
+
+def cell_config(cell: Cell, extra: list[str] = ()):
+    """The cell's resolved config and its ``--set`` overrides (``extra`` last)."""
+    from ntq_jax.pipeline import load_config
+    task = MAPS[cell.map]
+    path = f"configs/{task}.yaml"
+    base = load_config(path, [f"envs=[{cell.map}]", *extra])
+    sets = [f"envs=[{cell.map}]", *data_overrides(cell, base)]
+    if cell.budget == "mpnet":
+        sets += MPNET_BUDGETS
+    if cell.train_seed:
+        sets.append(f"train.seed={cell.train_seed}")
+    sets += list(extra)
+    return load_config(path, sets), sets
+
+
+def paired(run: Path, cell: Cell, env) -> list[dict]:
+    """PNet_k - PNet_0 per query kind, steerTo and band, from the run's saved paths."""
+    import numpy as np
+
+    from ntq_jax.evaluate import in_band
+    from ntq_jax.stats import mcnemar_exact, paired_success_difference
+
+    res = json.loads((run / "results.json").read_text())
+    qs = np.load(run / "eval" / cell.slug / "queries.npz")
+    out = []
+    rows = {(r["model"], r["query_kind"], r["steer"]): r for r in res["rows"]}
+    for (model, kind, steer), r in sorted(rows.items(), key=str):
+        if model not in ("PNet_1", "PNet_2", "PNet_3"):
+            continue
+        base = rows.get(("PNet_0", kind, steer))
+        if base is None:
+            continue
+        a = np.load(run / r["paths_file"])["success"]
+        b = np.load(run / base["paths_file"])["success"]
+        band = in_band(env, qs[kind])
+        for part, mask in (("all", np.ones_like(band)), ("in_band", band), ("out_band", ~band)):
+            row = {"model": model, "baseline": "PNet_0", "query_kind": kind, "steer": steer,
+                   "band": part, "n": int(mask.sum())}
+            if mask.any():
+                d = paired_success_difference(a[mask], b[mask])
+                row.update(success=float(a[mask].mean()), baseline_success=float(b[mask].mean()),
+                           only_a=d["only_a"], only_b=d["only_b"], success_diff=d["diff"],
+                           success_diff_ci95=d["ci"],
+                           mcnemar_p=mcnemar_exact(d["only_a"], d["only_b"]))
+            out.append(row)
+    return out
+
+
+def run_cell(cell: Cell, runs: Path, results: Path, progress: bool, extra: list[str] = ()
+             ) -> None:
+    from ntq_jax import make_env
+    from ntq_jax.pipeline import prepare_run, run_pipeline
+    from ntq_jax.summaries import read_summary, write_summary
+
+    cfg, sets = cell_config(cell, extra)
+    out = results / cell.key
+    old = read_summary(out)
+    if old is not None and old.get("config_hash") == cfg.hash() and (out / "paired.json").is_file():
+        print(f"[{cell.key}] up to date", flush=True)
+        return
+    why = ready(cell)
+    if why:
+        raise UsageError(f"{cell.key}: {why}")
+    env = make_env(cell.map)
+    run = prepare_run(cfg, runs / cell.key)
+    if cell.budget != "ours" or cell.train_seed:  # the same data (and models for a budget)
+        base = runs / Cell(cell.map, cell.data, "ours").key
+        if not (base / "results.json").is_file():
+            raise UsageError(f"{cell.key} needs {Cell(cell.map, cell.data, 'ours').key} first")
+        _link_tree(base / "data" / cell.slug, run / "data" / cell.slug)
+        if not cell.train_seed:
+            _link_tree(base / "models" / cell.slug, run / "models" / cell.slug)
+            _link_tree(base / "eval" / cell.slug, run / "eval" / cell.slug)
+    t0 = time.perf_counter()
+    print(f"[{cell.key}] run folder {run}", flush=True)
+    run_pipeline(cfg, run, progress=progress, figures=False)
+    cmd = f"python scripts/factor_study.py --cell {cell.key}"
+    write_summary(run, cell.map, env, out, command=cmd)
+    from ntq_jax import artifacts
+    artifacts.write_json(out / "paired.json", {"cell": cell._asdict(), "sets": sets,
+                                               "paired": paired(run, cell, env)})
+    print(f"[{cell.key}] done in {time.perf_counter() - t0:.0f} s", flush=True)
+
+
+def report(results: Path) -> Path:
+    """``<results>/README.md``: PNet_k - PNet_0 per cell (every finished one)."""
+    lines = [
+        "# Factor study: what decides PNet_3 vs PNet_0",
+        "",
+        "Generated by `python scripts/factor_study.py --report-only` from the cells below",
+        "(`python scripts/factor_study.py --list`). Success difference PNet_k - PNet_0 on the",
+        "same test queries (K_test per kind: the task config's), with its 95 % Newcombe interval and",
+        "McNemar's exact p; `in`/`out`: test queries with both endpoints valid at the data",
+        "padding (in band) or not.",
+        "",
+        "| map | data paths | budgets | seed | kind | steerTo | model | all | in band | out of band |",
+        "|---|---|---|---:|---|---|---|---|---|---|",
+    ]
+    for f in sorted(results.rglob("paired.json")):
+        p = json.loads(f.read_text())
+        c = p["cell"]
+        by = {}
+        for r in p["paired"]:
+            by.setdefault((r["query_kind"], r["steer"], r["model"]), {})[r["band"]] = r
+        for (kind, steer, model), parts in sorted(by.items(), key=str):
+            cellf = []
+            for band in ("all", "in_band", "out_band"):
+                r = parts.get(band)
+                if not r or "success_diff" not in r:
+                    cellf.append("-")
+                    continue
+                lo, hi = r["success_diff_ci95"]
+                cellf.append(f"{r['success_diff']:+.3f} [{lo:+.3f}, {hi:+.3f}] p={r['mcnemar_p']:.2g}"
+                             f" (n={r['n']})")
+            lines.append(f"| {c['map']} | {c['data']} | {c['budget']} | {c['train_seed']} | "
+                         f"{kind} | {'yes' if steer else 'no'} | {model} | " + " | ".join(cellf)
+                         + " |")
+    path = results / "README.md"
+    from ntq_jax import artifacts
+    artifacts.write_text(path, "\n".join(lines) + "\n")
+    return path
+
+
+def main(argv=None) -> int:
+    return run_cli(lambda: _main(argv))
+
+
+def _main(argv) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--list", action="store_true", help="list the cells and their state")
+    ap.add_argument("--next", action="store_true", help="run the first pending, ready cell")
+    ap.add_argument("--cell", action="append", default=[], help="run this cell (repeatable)")
+    ap.add_argument("--report-only", action="store_true", help="only regenerate README.md")
+    ap.add_argument("--runs", default="runs/factors")
+    ap.add_argument("--results", default="results/factors")
+    ap.add_argument("--no-progress", action="store_true")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="config override for every cell (smaller sizes for a trial run)")
+    args = ap.parse_args(argv)
+    runs, results = Path(args.runs), Path(args.results)
+    all_cells = {c.key: c for c in cells()}
+    if args.report_only:
+        print(f"report: {report(results)}")
+        return 0
+    if args.list or not (args.next or args.cell):
+        for c in all_cells.values():
+            done = (results / c.key / "paired.json").is_file()
+            print(f"{'done   ' if done else 'pending'} {c.key}"
+                  + ("" if done else f"  ({ready(c)})" if ready(c) else ""))
+        return 0
+    todo = [all_cells[k] for k in args.cell if k in all_cells]
+    unknown = [k for k in args.cell if k not in all_cells]
+    if unknown:
+        raise UsageError(f"--cell {unknown[0]}: not a cell (see --list)")
+    if args.next:
+        done = lambda c: (results / c.key / "paired.json").is_file()  # noqa: E731
+        base_done = lambda c: c.budget == "ours" and not c.train_seed or done(  # noqa: E731
+            Cell(c.map, c.data, "ours"))
+        todo = [c for c in all_cells.values() if not done(c) and ready(c) is None
+                and base_done(c)][:1]
+        if not todo:
+            print("nothing to run")
+            return 0
+    for c in todo:
+        run_cell(c, runs, results, not args.no_progress, args.set)
+        print(f"report: {report(results)}", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

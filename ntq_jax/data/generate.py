@@ -393,11 +393,6 @@ def generate_datasets(env, config, out_dir, *, env_name: str | None = None, plan
                                           "custom" if run.verify else run.planner_name,
                                           run.padding)
             planned = planned._replace(result=shaped)
-        if shaping["shortcut_kept"] or shaping["resample_kept"]:
-            warnings.warn(f"{run.env_name}: data_paths {run.data_paths}: "
-                          f"{shaping['shortcut_kept'] + shaping['resample_kept']} path(s) kept "
-                          "as planned (their shortcut or resampled form failed the check)",
-                          RuntimeWarning, stacklevel=2)
         with _timed(timings, "check"):
             blocked = ~steer_to_pairs(env.robot, env.world, pools.queries[:, 0],
                                       pools.queries[:, 1], run.padding)

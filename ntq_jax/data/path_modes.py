@@ -64,7 +64,9 @@ def shape_paths(env, result: PlanResult, mode, planner: str, padding: float,
         ``(result, info)``: the shaped paths (same queries and statuses; costs
         recomputed) and ``{"mode", "shortcut_kept", "resample_kept"}``: paths left
         as they were because their shortcut or resampled form failed the check
-        (they are counted, never dropped).
+        (counted, never dropped; a resampled path can fail where its shortcut
+        passed because the discretised check then samples other states of the
+        same segments).
     """
     if not (mode in (None, "raw", "shortcut") or (isinstance(mode, (int, float))
                                                   and not isinstance(mode, bool) and mode > 0)):

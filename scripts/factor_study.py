@@ -11,13 +11,14 @@ Examples::
 Factors, on point/0, point/3, rigid/0, rigid/2 and nlink/4 at the paper's sizes
 (``configs/<task>.yaml``):
 
-* data paths (``planner.data_paths``): ``shortcut`` (a few corners), ``density``
-  (the shortcut resampled to BIT*'s states per path: the task's default),
+* data paths (``planner.data_paths``): ``shortcut`` (a few corners: the point
+  robot's default), ``density`` (the shortcut resampled to BIT*'s states per
+  path: the rigid body's and the arms' default),
   ``raw`` (the planner's own waypoints) and, on rigid/0, ``bitstar`` (the
   committed BIT* record at the paper's 3 s, ``results/data_paths/bitstar/rigid_0``);
 * neural planner budgets: ``ours`` (the config's) and ``mpnet`` (MPNet's: 80
   coarse steps, 10 replanning rounds, 50 steps per reconnection), evaluated on
-  the same trained PNets;
+  the same trained PNets of the default data paths;
 * test band: every test query, in band (both endpoints valid at the data
   padding, where training states lie) and out of band, from the same runs.
 
@@ -26,7 +27,9 @@ A cell is one map, data mode and budget: its run in ``<runs>/<map>/<data>/<budge
 - PNet_0 per query kind, steerTo and band: Newcombe interval, McNemar p) in
 ``<results>/<map>/<data>/<budget>/``. ``--seeds`` cells retrain the same data with
 training seeds 1 and 2 (``.../seeds/train_seed_<k>/``). Commit each cell as it
-finishes; ``README.md`` is regenerated from every finished cell.
+finishes; ``README.md`` is regenerated from every finished cell. The cells of a
+task's default data paths with its budgets are ``scripts/reproduce.py``'s runs
+(``--paper-runs``): either script resumes the other's.
 """
 
 from __future__ import annotations
@@ -48,7 +51,11 @@ MPNET_BUDGETS = ["eval.n_plan=80", "eval.replan_rounds=10", "eval.replan_steps=5
 BITSTAR_RECORD = "results/data_paths/bitstar/rigid_0"
 #: BIT*-like spacings where the task config's default is not a spacing (see README.md)
 DENSITY: dict[str, float] = {}
-HEADLINE_DATA = "density"  # the cells whose sign the headline reads: three training seeds
+
+
+def default_data(map_name: str) -> str:
+    """The data mode of the task's config: the cells the headline reads (three seeds)."""
+    return "shortcut" if MAPS[map_name] == "point" else "density"
 
 
 class Cell(NamedTuple):
@@ -82,13 +89,16 @@ def data_overrides(cell: Cell, cfg) -> list[str]:
 
 
 def cells(seeds: bool = True) -> list[Cell]:
+    """Every cell, in the order ``--next`` runs them: per map, each data mode with the
+    config's budgets, then MPNet's budgets on the default data, then the default's
+    training seeds 1 and 2 (one factor varied at a time around the task's default)."""
     out = []
     for m in MAPS:
-        for data in ("density", "shortcut", "raw") + (("bitstar",) if m == "rigid/0" else ()):
-            for budget in ("ours", "mpnet"):
-                out.append(Cell(m, data, budget))
-            if seeds and data == HEADLINE_DATA:
-                out += [Cell(m, data, "ours", k) for k in (1, 2)]
+        modes = ("density", "shortcut", "raw") + (("bitstar",) if m == "rigid/0" else ())
+        out += [Cell(m, data, "ours") for data in modes]
+        out.append(Cell(m, default_data(m), "mpnet"))
+        if seeds:
+            out += [Cell(m, default_data(m), "ours", k) for k in (1, 2)]
     return out
 
 
@@ -107,6 +117,8 @@ def record_rows(record: Path, pool: str) -> int:
 
 def ready(cell: Cell) -> str | None:
     """Why the cell cannot run yet, or None."""
+    if cell.data == "density" and MAPS[cell.map] == "point" and cell.map not in DENSITY:
+        return "no BIT*-like spacing measured for the point robot yet (DENSITY)"
     if cell.data == "bitstar":
         rec = Path(BITSTAR_RECORD)
         try:
@@ -183,8 +195,19 @@ def paired(run: Path, cell: Cell, env) -> list[dict]:
     return out
 
 
-def run_cell(cell: Cell, runs: Path, results: Path, progress: bool, extra: list[str] = ()
-             ) -> None:
+def run_folder(cell: Cell, runs: Path, paper_runs: Path | None) -> Path:
+    """The cell's run folder. The density cells with the config's budgets are the task's
+    default runs: with ``paper_runs`` they live where ``scripts/reproduce.py`` keeps its
+    runs (``<paper_runs>/<task>/<map>[-train_seed_<k>]``), so that either script resumes
+    the other's run (their configs are the same)."""
+    if paper_runs is None or cell.data != default_data(cell.map) or cell.budget != "ours":
+        return runs / cell.key
+    name = cell.slug + (f"-train_seed_{cell.train_seed}" if cell.train_seed else "")
+    return paper_runs / MAPS[cell.map] / name
+
+
+def run_cell(cell: Cell, runs: Path, results: Path, progress: bool, extra: list[str] = (),
+             paper_runs: Path | None = None) -> None:
     from ntq_jax import make_env
     from ntq_jax.pipeline import prepare_run, run_pipeline
     from ntq_jax.summaries import read_summary, write_summary
@@ -199,9 +222,9 @@ def run_cell(cell: Cell, runs: Path, results: Path, progress: bool, extra: list[
     if why:
         raise UsageError(f"{cell.key}: {why}")
     env = make_env(cell.map)
-    run = prepare_run(cfg, runs / cell.key)
+    run = prepare_run(cfg, run_folder(cell, runs, paper_runs))
     if cell.budget != "ours" or cell.train_seed:  # the same data (and models for a budget)
-        base = runs / Cell(cell.map, cell.data, "ours").key
+        base = run_folder(Cell(cell.map, cell.data, "ours"), runs, paper_runs)
         if not (base / "results.json").is_file():
             raise UsageError(f"{cell.key} needs {Cell(cell.map, cell.data, 'ours').key} first")
         _link_tree(base / "data" / cell.slug, run / "data" / cell.slug)
@@ -271,6 +294,9 @@ def _main(argv) -> int:
     ap.add_argument("--report-only", action="store_true", help="only regenerate README.md")
     ap.add_argument("--runs", default="runs/factors")
     ap.add_argument("--results", default="results/factors")
+    ap.add_argument("--paper-runs", default="runs/paper",
+                    help="scripts/reproduce.py's run folders, shared by the default cells "
+                         "('none': keep them under --runs)")
     ap.add_argument("--no-progress", action="store_true")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help="config override for every cell (smaller sizes for a trial run)")
@@ -300,7 +326,8 @@ def _main(argv) -> int:
             print("nothing to run")
             return 0
     for c in todo:
-        run_cell(c, runs, results, not args.no_progress, args.set)
+        run_cell(c, runs, results, not args.no_progress, args.set,
+                 None if args.paper_runs == "none" else Path(args.paper_runs))
         print(f"report: {report(results)}", flush=True)
     return 0
 

@@ -116,8 +116,10 @@ def test_smooth_data_reaches_the_data_planner_only():
 
     cfg = load_config(None, [])
     assert "smooth_data" not in cfg.to_dict()["planner"]
-    assert "smooth" not in planner_options(cfg, "rigid/0")
-    raw = load_config(None, ["planner.smooth_data=false"])
+    assert "smooth" not in planner_options(cfg, "point/0")
+    # the embedded default resamples rigid/0's (shortcut) roadmap paths: data_paths 0.6
+    assert planner_options(cfg, "rigid/0")["smooth"] is True
+    raw = load_config(None, ["planner.smooth_data=false", "planner.per_env=[]"])
     assert raw.hash() != cfg.hash()
     assert planner_options(raw, "rigid/0")["smooth"] is False
     assert planner_options(raw, "point/0")["smooth"] is False

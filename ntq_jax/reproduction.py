@@ -926,7 +926,14 @@ def seed_variance_diffs(summaries, env: str) -> list[dict]:
 # ---------------------------------------------------------------------------
 
 
-def _header(summaries) -> list[str]:
+def _root_label(root) -> str:
+    """``root`` as the repository spells it (from its ``results`` folder on), whatever the
+    working directory."""
+    parts = Path(root).resolve().parts
+    return "/".join(parts[parts.index("results"):]) if "results" in parts else Path(root).name
+
+
+def _header(summaries, label: str = "results/paper") -> list[str]:
     cmds = sorted({s.get("command") for s in summaries if s.get("command")})
     out = ["# Reproduction of the paper's Tables I-IV", "",
            'Paper: Sagar Suhas Joshi and Panagiotis Tsiotras, "Non-Trivial Query Sampling For '
@@ -935,8 +942,8 @@ def _header(summaries) -> list[str]:
            "",
            "Generated from the committed summaries (`<task>/<map>/summary.json`, seed runs in "
            "`<task>/<map>/seeds/train_seed_<k>/summary.json`) by "
-           "`python -m ntq_jax.reproduction results/paper` (do not edit by hand; "
-           "`python -m ntq_jax.reproduction results/paper --check` tells whether it is current; "
+           f"`python -m ntq_jax.reproduction {label}` (do not edit by hand; "
+           f"`python -m ntq_jax.reproduction {label} --check` tells whether it is current; "
            "`python scripts/reproduce.py --report-only` regenerates it too). "
            "The summaries were made with:", ""]
     out += [f"    {c}" for c in cmds] or ["    (no summary yet: `python scripts/reproduce.py ...`)"]
@@ -1149,7 +1156,7 @@ def _claims_md(summaries) -> list[str]:
 def render(root) -> str:
     """The whole ``REPRODUCTION.md`` of the summaries under ``root`` (deterministic)."""
     summaries = load_summaries(root)
-    lines = (_header(summaries) + _coverage(summaries) + _tables(summaries) + _times(summaries)
+    lines = (_header(summaries, _root_label(root)) + _coverage(summaries) + _tables(summaries) + _times(summaries)
              + _seeds(summaries) + _claims_md(summaries))
     return "\n".join(lines).rstrip("\n") + "\n"
 

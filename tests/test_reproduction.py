@@ -139,7 +139,9 @@ def test_render_is_deterministic_and_puts_the_paper_next_to_ours(tmp_path):
     assert "gamma_nt 0.310 [0.308, 0.312] (paper 0.311)" in text
     assert "| PNet_3 | PNet_0 | non-trivial | +0.060 [0.020, 0.100] |" in text
     assert "python scripts/reproduce.py --env point/0" in text
-    assert "python -m ntq_jax.reproduction results/paper" in text
+    # the command names the folder as the repository spells it, from results/ on
+    assert f"python -m ntq_jax.reproduction {tmp_path.name} --check" in text
+    assert R._root_label(REPO / "results" / "ablations" / "x") == "results/ablations/x"
     assert "roadmap (data: roadmap)" in text
     assert "| point/0 | 10.0 | 20.0 | 5.5 | 35.5 |" in text
 
@@ -449,23 +451,36 @@ def test_summaries_are_not_modified(tmp_path):
 # ---------------------------------------------------------------------------
 
 
-def _committed():
-    summaries = R.load_summaries(PAPER_ROOT)
+#: every committed reproduction: the current defaults, and the earlier shortcut-path one
+COMMITTED = [PAPER_ROOT, REPO / "results" / "ablations" / "shortcut_paths"]
+
+
+def _committed(root):
+    summaries = R.load_summaries(root)
     if not summaries:
-        pytest.skip("no summary committed under results/paper yet (scripts/reproduce.py)")
+        pytest.skip(f"no summary committed under {root} yet (scripts/reproduce.py)")
     return summaries
 
 
-def test_committed_reproduction_md_is_current():
-    _committed()
-    doc = PAPER_ROOT / R.DOC_NAME
-    assert doc.exists(), "results/paper/REPRODUCTION.md missing: python -m ntq_jax.reproduction"
-    assert doc.read_text(encoding="utf-8") == R.render(PAPER_ROOT), (
-        "results/paper/REPRODUCTION.md is stale: python -m ntq_jax.reproduction results/paper")
+@pytest.mark.parametrize("root", COMMITTED, ids=lambda p: p.name)
+def test_committed_reproduction_md_is_current(root):
+    _committed(root)
+    doc = root / R.DOC_NAME
+    assert doc.exists(), f"{root}/REPRODUCTION.md missing: python -m ntq_jax.reproduction"
+    assert doc.read_text(encoding="utf-8") == R.render(root), (
+        f"{root}/REPRODUCTION.md is stale: python -m ntq_jax.reproduction {root}")
 
 
-def test_committed_summaries_are_paper_size():
-    summaries = _committed()
+def test_the_shortcut_path_reproduction_is_complete():
+    """The earlier reproduction stays whole: all 11 maps and the three seed maps."""
+    summaries = R.load_summaries(COMMITTED[1])
+    assert len([s for s in summaries if "seeds" not in str(s["_path"])]) == 11
+    assert len([s for s in summaries if "seeds" in str(s["_path"])]) == 6
+
+
+@pytest.mark.parametrize("root", COMMITTED, ids=lambda p: p.name)
+def test_committed_summaries_are_paper_size(root):
+    summaries = _committed(root)
     bad = {s["_path"]: p for s in summaries if (p := R.check_summary(s))}
     assert not bad, bad
     assert R.check_seed_runs(summaries) == []

@@ -207,7 +207,7 @@ def run_folder(cell: Cell, runs: Path, paper_runs: Path | None) -> Path:
 
 
 def run_cell(cell: Cell, runs: Path, results: Path, progress: bool, extra: list[str] = (),
-             paper_runs: Path | None = None) -> None:
+             paper_runs: Path | None = None, paper_results: Path | None = None) -> None:
     from ntq_jax import make_env
     from ntq_jax.pipeline import prepare_run, run_pipeline
     from ntq_jax.summaries import read_summary, write_summary
@@ -236,6 +236,17 @@ def run_cell(cell: Cell, runs: Path, results: Path, progress: bool, extra: list[
     run_pipeline(cfg, run, progress=progress, figures=False)
     cmd = f"python scripts/factor_study.py --cell {cell.key}"
     write_summary(run, cell.map, env, out, command=cmd)
+    if paper_results is not None and run == run_folder(cell, runs, paper_runs) != runs / cell.key:
+        # a default cell is also the task's reproduction of this map (Tables I-IV)
+        task = MAPS[cell.map]
+        dest = paper_results / task / cell.slug
+        rcmd = f"python scripts/reproduce.py --config configs/{task}.yaml --env {cell.map}"
+        if cell.train_seed:
+            dest, rcmd = (dest / "seeds" / f"train_seed_{cell.train_seed}",
+                          rcmd + f" --train-seeds {cell.train_seed}")
+        write_summary(run, cell.map, env, dest, command=rcmd)
+        from ntq_jax import reproduction
+        print(f"report: {reproduction.write(paper_results)}", flush=True)
     from ntq_jax import artifacts
     artifacts.write_json(out / "paired.json", {"cell": cell._asdict(), "sets": sets,
                                                "paired": paired(run, cell, env)})
@@ -297,6 +308,9 @@ def _main(argv) -> int:
     ap.add_argument("--paper-runs", default="runs/paper",
                     help="scripts/reproduce.py's run folders, shared by the default cells "
                          "('none': keep them under --runs)")
+    ap.add_argument("--paper-results", default="results/paper",
+                    help="where a default cell also writes its map's reproduction summary "
+                         "and REPRODUCTION.md (as scripts/reproduce.py would)")
     ap.add_argument("--no-progress", action="store_true")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help="config override for every cell (smaller sizes for a trial run)")
@@ -326,8 +340,10 @@ def _main(argv) -> int:
             print("nothing to run")
             return 0
     for c in todo:
+        paper = args.paper_runs != "none"
         run_cell(c, runs, results, not args.no_progress, args.set,
-                 None if args.paper_runs == "none" else Path(args.paper_runs))
+                 Path(args.paper_runs) if paper else None,
+                 Path(args.paper_results) if paper else None)
         print(f"report: {report(results)}", flush=True)
     return 0
 

@@ -429,6 +429,13 @@ class EvalConfig:
             metric (Euclidean for the point robot and the arm's joints;
             ``||dp|| + angle_weight * |dtheta|`` on the shortest arc for the rigid
             body); a start already within it is reached with a path of one state.
+        delta_norm: the distance of that goal test: null or ``robot`` (the robot's
+            metric, above) or ``l2`` (``||pi_end - x_g||_2`` on the raw state
+            vector, angles not wrapped: the paper's text). Left out of the hash when null.
+        nosteer_check: without steerTo, success needs every segment collision-free
+            (null or true, ours); false is the paper's "only executing the lines 8
+            and 9" of Alg. 1 (success once the goal test passes, the path's
+            segments not checked). Left out of the hash when null.
         replan_rounds: neural replanning rounds.
         replan_steps: PNet predictions per repaired segment in a replanning round.
         bidirectional: MPNet's bidirectional coarse plan instead of Alg. 1's forward one.
@@ -471,6 +478,8 @@ class EvalConfig:
     n_plan: int = 50
     steer: tuple[bool, ...] = (True,)
     delta: float = 1.0
+    delta_norm: Optional[str] = None
+    nosteer_check: Optional[bool] = None
     replan_rounds: int = 5
     replan_steps: int = 20
     bidirectional: bool = False
@@ -481,7 +490,7 @@ class EvalConfig:
     ensemble: Optional[tuple[str, ...]] = None
 
     # left out of to_dict (and so of the config hash) when None: configs hash as before
-    _OMIT_NONE = ("ensemble",)
+    _OMIT_NONE = ("ensemble", "delta_norm", "nosteer_check")
 
     @property
     def ensemble_rows(self) -> tuple[str, ...]:
@@ -500,6 +509,8 @@ class EvalConfig:
         _check(self.n_plan >= 1, f"{p}.n_plan", f"must be >= 1, got {self.n_plan}")
         _check(len(self.steer) >= 1, f"{p}.steer", "must list at least one of true, false")
         _check(self.delta > 0, f"{p}.delta", f"must be > 0, got {self.delta}")
+        _check(self.delta_norm in (None, "robot", "l2"), f"{p}.delta_norm",
+               f"must be robot, l2 or null, got {self.delta_norm!r}")
         _check(self.replan_rounds >= 0, f"{p}.replan_rounds",
                f"must be >= 0, got {self.replan_rounds}")
         _check(self.replan_steps >= 1, f"{p}.replan_steps",

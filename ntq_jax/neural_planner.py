@@ -63,6 +63,7 @@ from ntq_jax.types import CAUSE_RANK, PlanCause
 
 Array = jax.Array
 
+DELTA_NORMS = ("robot", "l2")
 ALGORITHM_VERSION = 4  # bump when planning results change (saved evaluations are then redone)
 
 
@@ -76,6 +77,12 @@ class PlannerOptions:
         delta: goal tolerance of the variant without steerTo, in the robot's cost metric
             (``robot.distance``: Euclidean for the point robot and the arm's joints;
             ``||dp|| + angle_weight * |dtheta|`` on the shortest arc for the rigid body).
+        delta_norm: the goal test's distance without steerTo: ``"robot"`` (the robot's
+            metric, above) or ``"l2"`` (``||pi_end - x_g||_2`` on the raw state
+            vector, angles not wrapped: the paper's text, Sec. V).
+        nosteer_check: without steerTo, a reached path counts as a success only if
+            every segment passes the feasibility check (True); False is the paper's
+            "only executing the lines 8 and 9" (success once the goal test passes).
         replan_rounds: neural replanning rounds (0 disables replanning).
         replan_steps: PNet predictions per repaired segment.
         bidirectional: MPNet's bidirectional coarse plan instead of Alg. 1's forward one.
@@ -92,6 +99,8 @@ class PlannerOptions:
     n_plan: int = 50
     steer: bool = True
     delta: float = 1.0
+    delta_norm: str = "robot"
+    nosteer_check: bool = True
     replan_rounds: int = 5
     replan_steps: int = 20
     bidirectional: bool = False
@@ -103,6 +112,8 @@ class PlannerOptions:
     def __post_init__(self):
         if self.eval_check not in MOTION_CHECKS:
             raise ValueError(f"eval_check must be one of {MOTION_CHECKS}, got {self.eval_check!r}")
+        if self.delta_norm not in DELTA_NORMS:
+            raise ValueError(f"delta_norm must be one of {DELTA_NORMS}, got {self.delta_norm!r}")
         if self.n_plan < 1:
             raise ValueError(f"n_plan must be >= 1, got {self.n_plan}")
         if not (self.delta > 0 and math.isfinite(self.delta)):
@@ -126,7 +137,9 @@ class PlannerOptions:
         """Options from an :class:`ntq_jax.config.EvalConfig` (``steer`` overrides its first entry)."""
         return PlannerOptions(
             n_plan=ev.n_plan, steer=ev.steer[0] if steer is None else bool(steer),
-            delta=ev.delta, replan_rounds=ev.replan_rounds, replan_steps=ev.replan_steps,
+            delta=ev.delta, delta_norm=ev.delta_norm or "robot",
+            nosteer_check=True if ev.nosteer_check is None else bool(ev.nosteer_check),
+            replan_rounds=ev.replan_rounds, replan_steps=ev.replan_steps,
             bidirectional=ev.bidirectional, eval_check=ev.motion_check)
 
 

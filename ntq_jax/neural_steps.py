@@ -310,7 +310,8 @@ def _forward(robot, world, pnet, key, starts, goals, active, opts, length):
     """Alg. 1's coarse plan (with or without steerTo), all queries stepping together.
 
     Without steerTo a query is reached once its path's end (the start included)
-    is within ``opts.delta`` of the goal in the robot's metric (``robot.distance``);
+    is within ``opts.delta`` of the goal in the robot's metric (``robot.distance``;
+    ``opts.delta_norm == "l2"``: the raw state vector's Euclidean norm);
     the goal is not appended, so a start already that close keeps a path of one state.
     """
     num, d = starts.shape
@@ -318,7 +319,9 @@ def _forward(robot, world, pnet, key, starts, goals, active, opts, length):
     k = proposals_per_call(pnet)
     p = jnp.full((num, length, d), jnp.nan, starts.dtype).at[:, 0].set(starts)
 
-    def near(x):  # within delta of the goal in the robot's metric (angles wrap)
+    def near(x):  # within delta of the goal: robot metric (angles wrap) or raw-vector L2
+        if opts.delta_norm == "l2":
+            return jnp.sqrt(jnp.sum((x - goals) ** 2, axis=-1)) <= opts.delta
         return jax.vmap(robot.distance)(x, goals) <= opts.delta
 
     def cond(c):
@@ -355,7 +358,8 @@ def _contract_and_check(robot, world, opts, p, n, mask, do_contract: bool):
     """Contraction (if ``do_contract``) and the feasibility check of the rows ``mask``.
 
     Returns ``(p, n, feasible, blocked)``: ``blocked (N, L-1)`` are the segments in
-    collision at ``eval_padding``; ``feasible`` rows have none. A path of one state
+    collision at ``eval_padding``; ``feasible`` rows have none (without steerTo and
+    ``opts.nosteer_check`` False: every row with a state). A path of one state
     (without steerTo, a start within ``delta`` of the goal) has no segment and is
     feasible: its state is the query's start, already checked valid.
     """
@@ -363,7 +367,9 @@ def _contract_and_check(robot, world, opts, p, n, mask, do_contract: bool):
         p, n = contract(robot, world, p, n, opts.plan_padding, mask)
     free, seg = _segments(robot, world, p, n, opts.eval_padding, mask, opts.eval_check)
     blocked = seg & ~free
-    feasible = mask & (n >= 1) & ~jnp.any(blocked, axis=1)
+    feasible = mask & (n >= 1)
+    if opts.steer or opts.nosteer_check:  # else: the paper's variant, not checked
+        feasible = feasible & ~jnp.any(blocked, axis=1)
     return p, n, feasible, blocked
 
 

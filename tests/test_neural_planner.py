@@ -230,6 +230,37 @@ def test_without_steer_to_delta_is_in_the_robots_metric():
     assert np.linalg.norm(res.path(0)[-1] - q[0, 1]) > 6
 
 
+def test_without_steer_to_the_papers_goal_test_and_unchecked_paths():
+    """delta_norm="l2" is the paper's ||pi_end - x_g||_2 on the raw vector (angles not
+    wrapped); nosteer_check=False is its "lines 8 and 9 only" (segments not checked)."""
+    from ntq_jax import config
+    env = _rigid_env()
+    q = np.asarray([[[2, 2, 0], [8, 2, -np.pi]]], np.float32)
+    l2 = PlannerOptions(n_plan=5, steer=False, delta=0.1, delta_norm="l2")
+    res = plan_batch(env, _flip_to_pi, q, jax.random.key(0), l2)
+    assert not res.success[0] and res.cause[0] == PlanCause.NO_PATH and res.pnet_calls[0] == 5
+    wall = np.asarray([[[2, 5], [8, 5]]], np.float32)
+    net = pnet("wall", SEEKER)
+    checked = plan_batch(make("wall"), net, wall, jax.random.key(0),
+                         PlannerOptions(n_plan=12, steer=False, delta=1.0))
+    loose = plan_batch(make("wall"), net, wall, jax.random.key(0),
+                       PlannerOptions(n_plan=12, steer=False, delta=1.0, nosteer_check=False))
+    assert checked.cause[0] == PlanCause.INFEASIBLE and not checked.success[0]
+    assert loose.cause[0] == PlanCause.SUCCESS and loose.success[0]
+    np.testing.assert_array_equal(loose.path(0), checked.paths[0, :checked.lengths[0]])
+    assert not shapely_free("wall", loose.path(0))  # through the wall, as the option says
+    # from the config (null: ours, left out of the hash)
+    cfg = config.load(None, ["eval.delta_norm=l2", "eval.nosteer_check=false"])
+    o = PlannerOptions.from_config(cfg.eval, steer=False)
+    assert (o.delta_norm, o.nosteer_check) == ("l2", False)
+    base = config.load(None, [])
+    o = PlannerOptions.from_config(base.eval, steer=False)
+    assert (o.delta_norm, o.nosteer_check) == ("robot", True)
+    assert "delta_norm" not in base.to_dict()["eval"] and cfg.hash() != base.hash()
+    with pytest.raises(ValueError, match="delta_norm"):
+        PlannerOptions(delta_norm="l1")
+
+
 def test_without_steer_to_a_start_within_delta_is_solved():
     """A start already within delta of the goal is reached like a last prediction would be."""
     nosteer = PlannerOptions(n_plan=12, steer=False, delta=1.0)

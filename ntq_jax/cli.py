@@ -22,13 +22,12 @@ import tempfile
 from pathlib import Path
 from typing import Callable, Iterable
 
+from ntq_jax.errors import UsageError  # re-exported: the scripts import it from here
+
 __all__ = ["UsageError", "EXPECTED_ERRORS", "PATH_ERRORS", "expected_error_types", "error_line",
            "positive_int", "check_writable", "add_run_options", "add_executor_options",
            "executor_of", "start_run", "run_cli"]
 
-
-class UsageError(ValueError):
-    """A command-line argument that cannot be used (the message names the option and the fix)."""
 
 #: ``(module, class name)`` of the package's expected exceptions. They are looked
 #: up in :data:`sys.modules` only: an exception can only be raised by a module

@@ -59,7 +59,7 @@ import yaml
 from ntq_jax import artifacts, config as C
 from ntq_jax import data as data_mod
 from ntq_jax import training
-from ntq_jax.cli import UsageError
+from ntq_jax.errors import UsageError
 from ntq_jax.data import env_slug
 from ntq_jax.evaluate import evaluate_env
 from ntq_jax.progress import open_bar

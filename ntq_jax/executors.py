@@ -95,7 +95,7 @@ def _import_ray():
     try:
         import ray
     except ImportError:
-        from ntq_jax.cli import UsageError
+        from ntq_jax.errors import UsageError
         raise UsageError(RAY_MISSING) from None
     return ray
 

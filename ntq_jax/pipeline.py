@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import time
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -41,6 +42,7 @@ from ntq_jax import artifacts, config as C
 from ntq_jax import data as data_mod
 from ntq_jax import training
 from ntq_jax.data import env_slug
+from ntq_jax.data.format import ARRAY_SPECS
 from ntq_jax.evaluate import evaluate_env, reference_plans, test_queries
 from ntq_jax.report import write_report
 from ntq_jax.version import __version__
@@ -69,6 +71,21 @@ DEFAULT = {
 #: What a run folder may hold (``--overwrite`` deletes only folders made of these).
 RUN_ENTRIES = frozenset({"config.yaml", "run.json", "data", "models", "eval", "paths",
                          "results.json", "results.csv", "tables.md", "tables.tex", "figures"})
+#: Every file a run writes, as a pattern of its path in the run folder (``<env>``: one
+#: folder name): what ``--overwrite`` may delete. Anything else stops it.
+RUN_FILES = re.compile("|".join(f"(?:{p})" for p in (
+    r"(config\.yaml|run\.json|results\.json|results\.csv|tables\.md|tables\.tex)",
+    r"figures/[^/]+\.png",
+    r"data/[^/]+/(env\.json|config\.yaml|figure\.png)",
+    rf"data/[^/]+/D\d+/(({'|'.join(ARRAY_SPECS)})\.npy|meta\.json)",
+    r"(data|eval)/[^/]+/roadmap/roadmap_[0-9a-f]+\.npz",
+    r"data/[^/]+/\.work/.+",
+    r"eval/[^/]+/[a-z_]+\.(npz|json)",
+    r"models/[^/]+/(config\.json|curves\.png|history\.csv|history\.jsonl)",
+    r"models/[^/]+/(checkpoints|ensemble)/.+",
+    r"paths/[^/]+/[A-Za-z0-9_.+-]+\.npz",
+    r"(.+/)?\.[^/]+\.tmp-[^/]+",  # an interrupted atomic write
+)))
 _NEW_OUT = "pass a new --out"
 
 
@@ -110,12 +127,25 @@ def _refuse_or_clear(run: Path, why: str, overwrite: bool) -> None:
     if not overwrite:
         raise PipelineError(f"{run}: {why}; {_NEW_OUT}, or add --overwrite to delete this "
                             "folder and start over")
-    foreign = sorted(p.name for p in run.iterdir()
-                     if p.name not in RUN_ENTRIES and not p.name.startswith("."))
+    foreign = foreign_files(run)
     if foreign:
-        raise PipelineError(f"{run}: {why}, and it holds {', '.join(foreign[:5])} which are not "
-                            f"a run's files; --overwrite refuses to delete it: {_NEW_OUT}")
+        more = f" and {len(foreign) - 5} more" if len(foreign) > 5 else ""
+        raise PipelineError(f"{run}: {why}, and it holds {', '.join(foreign[:5])}{more}, which "
+                            f"are not a run's files; --overwrite refuses to delete it: {_NEW_OUT}")
     shutil.rmtree(run)
+
+
+def foreign_files(run: Path) -> list[str]:
+    """The files (and links) under ``run`` that no run writes (:data:`RUN_FILES`), sorted;
+    checked over the whole tree before ``--overwrite`` deletes anything."""
+    out = []
+    for root, dirs, files in os.walk(run):
+        rel = Path(root).relative_to(run)
+        for name in files + [d for d in dirs if os.path.islink(os.path.join(root, d))]:
+            path = (rel / name).as_posix()
+            if not RUN_FILES.fullmatch(path):
+                out.append(path)
+    return sorted(out)
 
 
 def _check_writable(run: Path) -> None:

@@ -180,6 +180,24 @@ def test_run_foreign_config_refused_and_overwrite_starts_over(run_copy, capsys):
     assert "- 16" in (run / "config.yaml").read_text()
 
 
+@pytest.mark.parametrize("mine", ["figures/mine.txt", "models/point_2/notes.md",
+                                  "data/point_2/my_queries.csv", "data/point_2/D0/keep.npy",
+                                  "paths/point_2/analysis/out.txt"])
+def test_overwrite_never_deletes_a_users_file_in_a_subfolder(run_copy, mine):
+    """--overwrite checks the whole tree against what a run writes before deleting anything."""
+    from ntq_jax.pipeline import PipelineError, foreign_files, load_config, prepare_run
+
+    assert foreign_files(run_copy) == []  # every file a run writes is known as one
+    (run_copy / mine).parent.mkdir(parents=True, exist_ok=True)
+    (run_copy / mine).write_text("a user's file")
+    before = _listing(run_copy)
+    cfg = load_config(None, TINY + ["model.hidden=[16,16]"])
+    with pytest.raises(PipelineError, match="refuses to delete") as e:
+        prepare_run(cfg, run_copy, overwrite=True)
+    assert mine in str(e.value)
+    assert _listing(run_copy) == before and (run_copy / mine).read_text() == "a user's file"
+
+
 def _advised_command(msg: str) -> list[str]:
     assert "regenerate it with: python scripts/generate_data.py" in msg, msg
     cmd = msg.split("regenerate it with: ", 1)[1].split(" (it rewrites", 1)[0]

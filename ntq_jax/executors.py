@@ -37,6 +37,8 @@ Usage::
 
 from __future__ import annotations
 
+import os
+import socket
 import threading
 import time
 import warnings
@@ -100,6 +102,58 @@ def _import_ray():
     return ray
 
 
+RAY_CONNECT_TIMEOUT = 3.0  # seconds to reach a cluster's head before it is called unreachable
+
+
+def _ray_current_cluster() -> str | None:
+    """The address ``ray start --head`` left for ``auto`` on this machine (Ray's own lookup:
+    ``RAY_ADDRESS``, then ``<tmp>/ray/ray_current_cluster``), or None."""
+    import tempfile
+    env = os.environ.get("RAY_ADDRESS")
+    if env:
+        return env
+    for root in {tempfile.gettempdir(), "/tmp"}:
+        f = os.path.join(root, "ray", "ray_current_cluster")
+        try:
+            with open(f) as fh:
+                text = fh.read().strip()
+        except OSError:
+            continue
+        if text:
+            return text
+    return None
+
+
+def check_ray_address(address: str, timeout: float = RAY_CONNECT_TIMEOUT) -> None:
+    """Raises a ``UsageError`` naming ``address`` unless a Ray head answers there.
+
+    ``address`` is ``auto`` (the cluster ``ray start --head`` started on this machine),
+    ``<host>:<port>`` or ``ray://<host>:<port>`` (Ray Client). The head's port must
+    accept a TCP connection within ``timeout`` seconds; nothing else is started.
+    """
+    from ntq_jax.errors import UsageError
+    fix = ("start one with 'ray start --head' (then --ray-address auto), pass the head "
+           "node's <host>:<port>, or leave --ray-address out to start a local Ray instance")
+    given = address
+    if address == "auto":
+        found = _ray_current_cluster()
+        if found is None:
+            raise UsageError(f"--ray-address auto: no Ray cluster is running on this machine; "
+                             f"{fix}")
+        address = found
+    target = address.split("://", 1)[1] if "://" in address else address
+    host, sep, port = target.rpartition(":")
+    if not sep or not host or not port.isdigit() or not 0 < int(port) < 65536:
+        raise UsageError(f"--ray-address {given!r}: expected auto, <host>:<port> or "
+                         f"ray://<host>:<port>; {fix}")
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout).close()
+    except OSError as e:
+        why = "timed out" if isinstance(e, TimeoutError) else (e.strerror or type(e).__name__)
+        raise UsageError(f"--ray-address {given}: no Ray cluster answers at {host}:{port} "
+                         f"({why} after at most {timeout:g} s); {fix}") from None
+
+
 class RayExecutor:
     """Every call a Ray task with ``num_cpus`` CPUs, retried ``max_retries`` times on worker death.
 
@@ -122,7 +176,9 @@ class RayExecutor:
         self.max_retries = int(max_retries)
         self.local_cpus = local_cpus
         self._ray = None
-        _import_ray()  # a missing Ray is an error before any work (Ray starts at the first task)
+        ray = _import_ray()  # a missing Ray is an error before any work (Ray starts at the first task)
+        if address is not None and not ray.is_initialized():
+            check_ray_address(address)  # an unreachable cluster is an error now, in seconds
         self._task = None
         self.latencies: list[float] = []    # per task: seconds from submission to its start
         self.task_seconds: list[float] = []  # per task: seconds of fn(*args) in the worker

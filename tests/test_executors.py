@@ -230,3 +230,35 @@ def test_reference_roadmap_chunks_match_local(ray_session, tmp_path):
         w = int(a[f"{kind}_lengths"].max())
         np.testing.assert_array_equal(a[f"{kind}_paths"][:, :w], b[f"{kind}_paths"][:, :w])
     assert json.dumps(str(a["planner"])) == json.dumps(str(b["planner"]))
+
+
+@pytest.mark.parametrize("address, words", [
+    ("127.0.0.1:1", ["127.0.0.1:1", "no Ray cluster answers"]),
+    ("not-an-address", ["not-an-address", "expected auto"]),
+    ("host:99999", ["host:99999", "expected auto"]),
+    ("auto", ["auto", "no Ray cluster is running"]),
+])
+def test_an_unreachable_ray_cluster_is_one_line_in_seconds_before_anything_is_written(
+        address, words, tmp_path, capsys, monkeypatch):
+    """--ray-address that cannot be reached: exit 2 within seconds, one error line naming
+    the address, no run folder (the probe's 127.0.0.1:1 hung for minutes)."""
+    pytest.importorskip("ray")
+    import importlib.util
+    import time
+    from pathlib import Path
+    monkeypatch.delenv("RAY_ADDRESS", raising=False)
+    monkeypatch.setattr("tempfile.tempdir", str(tmp_path))  # no ray_current_cluster there
+    import ntq_jax.executors as X
+    if address == "auto" and X._ray_current_cluster() is not None:
+        pytest.skip("a Ray cluster is running on this machine")
+    root = Path(__file__).resolve().parents[1]
+    spec = importlib.util.spec_from_file_location("train_all", root / "scripts" / "train_all.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    out = tmp_path / "run"
+    t0 = time.perf_counter()
+    assert mod.main(["--executor", "ray", "--ray-address", address, "--out", str(out)]) == 2
+    assert time.perf_counter() - t0 < 30
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error:") and all(w in err[0] for w in words)
+    assert not out.exists()

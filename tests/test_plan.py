@@ -212,3 +212,15 @@ def test_planner_caches_are_bounded_and_do_not_keep_environments_alive():
     for key in (1, 2, 1, 3, 1, 2):
         cache.get(other, key, lambda k=key: built.append(k) or k)
     assert built == [1, 2, 3, 2]  # at most 2 settings per env, least recently used dropped
+
+
+@pytest.mark.parametrize("name, planners", [("point/0", ["astar", "visgraph", "roadmap",
+                                                         "bitstar"]),
+                                            ("rigid/0", ["roadmap", "bitstar"])])
+def test_no_queries_give_an_empty_result_on_every_planner(name, planners):
+    env = make_env(name)
+    for p in planners:
+        r = plan(env, np.zeros((0, 2, env.dim), np.float32), p,
+                 **({"milestones": 300} if p == "roadmap" else {}))
+        assert r.paths.shape[0] == r.lengths.shape[0] == r.costs.shape[0] == 0, p
+        assert r.status.shape == (0,) and r.paths.shape[2] == env.dim, p

@@ -301,7 +301,7 @@ def plan_roadmap(env, queries, *, padding: float | None = None, seed: int = 0,
     paths: list[np.ndarray | None] = [None] * nq
     for r in range(int(grow_rounds) + 1):
         todo = np.flatnonzero((status == PlanStatus.NO_PATH)
-                              & np.array([p is None for p in paths]))
+                              & np.array([p is None for p in paths], bool))
         if not len(todo):
             break
         tb = time.perf_counter()

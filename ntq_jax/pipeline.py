@@ -43,6 +43,7 @@ from ntq_jax import data as data_mod
 from ntq_jax import training
 from ntq_jax.data import env_slug
 from ntq_jax.data.format import ARRAY_SPECS
+from ntq_jax.planners.options import unsupported_robot
 from ntq_jax.evaluate import evaluate_env, reference_plans, test_queries
 from ntq_jax.report import write_report
 from ntq_jax.version import __version__
@@ -178,10 +179,11 @@ def prepare_run(cfg: C.Config, out: str | Path | None, *, overwrite: bool = Fals
     Raises:
         EnvError: an environment of ``cfg.envs`` cannot be made, or two of them
             would share a folder.
+        PipelineError: an environment's planner cannot plan for its robot.
         PipelineError: ``out`` is a file or not writable, or a non-empty folder
             that is not a run of this config (the message says how to proceed).
     """
-    data_mod.resolve_envs(cfg.envs)  # raises EnvError before anything is written
+    check_planners(cfg, data_mod.resolve_envs(cfg.envs))  # before anything is written
     run = run_folder(cfg, out)
     _check_writable(run)
     if run.is_dir() and any(run.iterdir()):
@@ -200,6 +202,18 @@ def prepare_run(cfg: C.Config, out: str | Path | None, *, overwrite: bool = Fals
     if not cfg_file.is_file() or cfg_file.read_text() != text:
         artifacts.write_text(cfg_file, text)
     return run
+
+
+def check_planners(cfg: C.Config, envs: dict) -> None:
+    """Raises a :class:`PipelineError` when an environment's planner cannot plan for its robot
+    (``planner.name`` or its ``per_env`` entry; the message names the key and the fix)."""
+    for name, env in envs.items():
+        planner = cfg.planner.name_for(name)
+        why = unsupported_robot(planner, env)
+        if why:
+            key = ("planner.per_env" if any(o.env == name and o.name for o in cfg.planner.per_env)
+                   else "planner.name")
+            raise PipelineError(f"{key} {planner} for {name}: {why}")
 
 
 def data_digest(data_dir: Path, names: list[str]) -> str:

@@ -65,6 +65,8 @@ def _main(argv) -> int:
     if out.exists() and not out.is_dir():
         raise NotADirectoryError(20, "Not a directory (--out must be a folder)", str(out))
     made = {name: make_env(name) for name in envs}  # every env valid before any work
+    from ntq_jax.pipeline import check_planners
+    check_planners(cfg, made)
     executor = executor_of(args, cfg)
 
     def one(name):

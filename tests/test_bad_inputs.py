@@ -127,12 +127,20 @@ def _bad_out_case(tmp_path, case):
     if case == "bad_config_key":
         return ["--out", str(tmp_path / "new"), "--set", "data.k_trian=3"], tmp_path / "new", \
             ["k_trian", "k_train"]
+    if case == "visgraph_rigid":
+        return ["--out", str(tmp_path / "new"), "--set", "envs=[rigid/0]", "--set",
+                "planner.name=visgraph", "--set", "planner.per_env=[]"], tmp_path / "new", \
+            ["planner.name visgraph", "point robot only", "roadmap"]
+    if case == "astar_arm":
+        return ["--out", str(tmp_path / "new"), "--set", "envs=[point/0, nlink/6]", "--set",
+                "planner.per_env=[{env: nlink/6, name: astar}]"], tmp_path / "new", \
+            ["planner.per_env astar for nlink/6", "2-D configuration space"]
     raise AssertionError(case)
 
 
 @pytest.mark.parametrize("case", ["unknown_env", "out_is_file", "out_under_file", "read_only",
                                   "cpu_devices_0", "not_a_run_folder", "overwrite_foreign_folder",
-                                  "bad_config_key"])
+                                  "bad_config_key", "visgraph_rigid", "astar_arm"])
 def test_run_bad_out_or_config_is_one_error_and_writes_nothing(tmp_path, capsys, case):
     args, keep, words = _bad_out_case(tmp_path, case)
     before = _listing(tmp_path)

@@ -33,7 +33,7 @@ from ntq_jax.planners.grid_graph import MAX_GRID_SIDE, GridGraph, prepare_grid
 from ntq_jax.planners.jps import (MAX_OPEN_CAPACITY, MAX_QUERIES_PER_CALL, cells_from_jump_points,
                                   search)
 from ntq_jax.planners.options import (bool_option, check_option_names, float_option, int_option,
-                                      motion_check_option)
+                                      motion_check_option, unsupported_robot)
 from ntq_jax.planners.smoothing import shortcut_paths
 from ntq_jax.planners.verify import finalize, valid_queries
 from ntq_jax.robots.batch import steer_to_pairs, valid_states
@@ -254,9 +254,9 @@ def config_grid(env, resolution: float, padding: float) -> ConfigGrid:
     for a point robot on a map imported from a grid (``env.grid``) at the grid's own
     resolution and padding 0 it is the map's own occupancy grid, read as is.
     """
-    if env.dim != 2:
-        raise ValueError(f"the grid A* planner needs a 2-D configuration space (point robot or "
-                         f"2-link arm); {env.name} has dimension {env.dim}: use 'bitstar'")
+    why = unsupported_robot("astar", env)
+    if why:
+        raise ValueError(why)
     resolution = float_option("astar", "resolution", resolution)
     grid_shape(env, resolution)  # 2 x 2 to MAX_GRID_SIDE cells a side, before building anything
     robot, world = env.robot, env.world

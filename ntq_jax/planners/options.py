@@ -21,6 +21,7 @@ from ntq_jax.queries import check_count
 from ntq_jax.robots.certified import MOTION_CHECKS
 
 __all__ = [
+    "unsupported_robot",
     "bool_option",
     "check_option_names",
     "float_option",
@@ -93,3 +94,15 @@ def check_option_names(planner: str, fn: Callable, options: Iterable[str],
         raise TypeError(f"{planner}: unknown option{'s' if len(unknown) > 1 else ''} "
                         f"{', '.join(map(repr, unknown))}; its options are "
                         f"{', '.join(sorted(known))}")
+
+
+def unsupported_robot(planner: str, env) -> str | None:
+    """Why the built-in ``planner`` cannot plan for ``env``'s robot (the fix named), or None."""
+    if planner == "astar" and env.dim != 2:
+        return (f"the grid A* planner needs a 2-D configuration space (point robot or 2-link "
+                f"arm); {env.name} has dimension {env.dim}: use 'roadmap' or 'bitstar'")
+    if planner == "visgraph" and env.robot.kind != "point":
+        return (f"the 'visgraph' planner is for the point robot only; {env.name} has a "
+                f"{env.robot.kind!r} robot: use 'roadmap' or 'bitstar' (or 'astar' for the "
+                "2-link arm)")
+    return None

@@ -55,7 +55,8 @@ from scipy.sparse.csgraph import shortest_path
 from ntq_jax.batching import bucket_size, map_chunks
 from ntq_jax.geometry import KERNEL_COMPILER_OPTIONS, World
 from ntq_jax.planners.env_cache import EnvCache
-from ntq_jax.planners.options import float_option, int_option, motion_check_option
+from ntq_jax.planners.options import (float_option, int_option, motion_check_option,
+                                      unsupported_robot)
 from ntq_jax.planners.verify import finalize
 from ntq_jax.robots.batch import is_valid_cm, steer_to_cm, steer_to_pairs, valid_states
 from ntq_jax.types import PlanResult, PlanStatus
@@ -420,9 +421,9 @@ def plan_visgraph(env, queries, *, padding: float | None = None, seed: int = 0,
     arc_step = float_option("visgraph", "arc_step", arc_step, maximum=math.pi / 2, none_ok=True)
     chunk_size = int_option("visgraph", "chunk_size", chunk_size, 1)
     check = motion_check_option("visgraph", check)
-    if env.robot.kind != "point":
-        raise ValueError(f"the 'visgraph' planner is for the point robot only; {env.name} has a "
-                         f"{env.robot.kind!r} robot: use 'bitstar' (or 'astar' for the 2-link arm)")
+    why = unsupported_robot("visgraph", env)
+    if why:
+        raise ValueError(why)
     check_size(env)
     pad = env.resolve_padding(padding)
     q = np.asarray(queries, np.float32)

@@ -38,6 +38,7 @@ EXPECTED_ERRORS: tuple[tuple[str, str], ...] = (
     ("ntq_jax.data.format", "DatasetError"),
     ("ntq_jax.training.checkpoint", "CheckpointError"),
     ("ntq_jax.pipeline", "PipelineError"),
+    ("ntq_jax.queries", "FreeSpaceTooSmall"),
 )
 
 #: Path errors and the fix each one calls for.

@@ -869,3 +869,24 @@ def test_api_json_of_gamma_script_round_trip(tmp_path, capsys):
     data = json.loads(out.read_text())
     assert data["queries"] == 2000 and 0 < data["gamma"] < 1
     assert f"gamma_nt = {data['gamma']:.6f}" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("boxes, words, warned", [
+    ([], ["D3", "pruning removed every segment", "drop D3 from data.datasets"], 2),
+    ([[5, 5, 6, 6]], ["valid"], 0),  # every state occupied: the sampler's one line
+])
+def test_an_empty_or_full_map_through_train_all_is_one_line(tmp_path, capsys, boxes, words,
+                                                            warned):
+    """No obstacles: D3 (pruned) is empty, said before any training; no free space: the
+    sampler's FreeSpaceTooSmall, one line (both were tracebacks)."""
+    f = tmp_path / "m.json"
+    f.write_text(json.dumps({**_POINT_MAP, "boxes": boxes, "discs": []}))
+    args = [a for s in TINY if not s.startswith("envs=") for a in ("--set", s)]
+    code = _script("train_all").main(args + ["--set", f"envs=[{f}]", "--out",
+                                             str(tmp_path / "run"), "--no-progress",
+                                             "--no-figures"])
+    assert code == 2
+    line = _one_error_line(capsys.readouterr().err, warned)  # the generator's warning first
+    for w in words:
+        assert w in line, (w, line)
+    assert not (tmp_path / "run" / "models" / "m" / "ensemble").exists()

@@ -48,6 +48,7 @@ import numpy as np
 
 from ntq_jax import artifacts, data, models
 from ntq_jax.config import ModelConfig, TrainConfig
+from ntq_jax.data.format import DatasetError
 from ntq_jax.envs import make_env
 from ntq_jax.progress import Bar, Progress, open_bar
 from ntq_jax.training import devices
@@ -313,6 +314,12 @@ def train_from_folder(env_dir: str | os.PathLike, cfg, out_dir: str | os.PathLik
     env_dir = Path(env_dir)
     env = make_env(env_dir / "env.json")
     datasets = data.load_datasets(env_dir)
+    for i, ds in enumerate(datasets):
+        if len(ds.inputs) == 0:  # one line with the generator's reason, before any training
+            why = next((w for w in ds.meta.get("warnings", []) if "no samples" in w),
+                       f"{env_dir} D{i} has no samples")
+            raise DatasetError(f"{why}. PNet_{i} cannot be trained on an empty dataset: drop "
+                               f"D{i} from data.datasets (or use a map where it has samples)")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     artifacts.write_text(out / "config.json", json.dumps(cfg.to_dict(), indent=1))

@@ -19,6 +19,9 @@ Factors, on point/0, point/3, rigid/0, rigid/2 and nlink/4 at the paper's sizes
 * neural planner budgets: ``ours`` (the config's) and ``mpnet`` (MPNet's: 80
   coarse steps, 10 replanning rounds, 50 steps per reconnection), evaluated on
   the same trained PNets of the default data paths;
+* without steerTo (Table III, the rigid maps): the paper's goal test
+  (``||pi_end - x_g||_2`` on the raw state vector), its unchecked paths ("only
+  the lines 8 and 9"), and both, against ours (robot metric, paths checked);
 * test band: every test query, in band (both endpoints valid at the data
   padding, where training states lie) and out of band, from the same runs.
 
@@ -47,7 +50,17 @@ from ntq_jax.cli import UsageError, run_cli
 
 MAPS = {"rigid/0": "rigid", "point/0": "point", "nlink/4": "nlink", "rigid/2": "rigid",
         "point/3": "point"}  # in the order --next runs them
-MPNET_BUDGETS = ["eval.n_plan=80", "eval.replan_rounds=10", "eval.replan_steps=50"]
+#: evaluation variants on the same trained PNets (a cell's ``budget``): MPNet's budgets, and
+#: the paper's variant without steerTo (Table III): its goal test ||pi_end - x_g||_2 <= delta
+#: on the raw state vector, and "only the lines 8 and 9" (the path's segments not checked)
+EVAL_VARIANTS = {
+    "ours": [],
+    "mpnet": ["eval.n_plan=80", "eval.replan_rounds=10", "eval.replan_steps=50"],
+    "nosteer_l2": ["eval.delta_norm=l2"],
+    "nosteer_unchecked": ["eval.nosteer_check=false"],
+    "nosteer_paper": ["eval.delta_norm=l2", "eval.nosteer_check=false"],
+}
+MPNET_BUDGETS = EVAL_VARIANTS["mpnet"]
 BITSTAR_RECORD = "results/data_paths/bitstar/rigid_0"
 #: BIT*-like spacings where the task config's default is not a spacing (see README.md)
 DENSITY: dict[str, float] = {}
@@ -97,6 +110,9 @@ def cells(seeds: bool = True) -> list[Cell]:
         modes = ("density", "shortcut", "raw") + (("bitstar",) if m == "rigid/0" else ())
         out += [Cell(m, data, "ours") for data in modes]
         out.append(Cell(m, default_data(m), "mpnet"))
+        if MAPS[m] == "rigid":  # Table III: the rigid body without steerTo
+            out += [Cell(m, default_data(m), v) for v in ("nosteer_l2", "nosteer_unchecked",
+                                                         "nosteer_paper")]
         if seeds:
             out += [Cell(m, default_data(m), "ours", k) for k in (1, 2)]
     return out
@@ -154,8 +170,7 @@ def cell_config(cell: Cell, extra: list[str] = ()):
     path = f"configs/{task}.yaml"
     base = load_config(path, [f"envs=[{cell.map}]", *extra])
     sets = [f"envs=[{cell.map}]", *data_overrides(cell, base)]
-    if cell.budget == "mpnet":
-        sets += MPNET_BUDGETS
+    sets += EVAL_VARIANTS[cell.budget]
     if cell.train_seed:
         sets.append(f"train.seed={cell.train_seed}")
     sets += list(extra)

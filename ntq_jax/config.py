@@ -704,7 +704,13 @@ def apply_overrides(data: dict, overrides: list[str] | None) -> dict:
         if "=" not in ov:
             raise ConfigError(f"override {ov!r}: expected KEY=VALUE, e.g. data.k_train=100")
         k, v = ov.split("=", 1)
-        _set_dotted(data, k.strip(), yaml.safe_load(v))
+        try:
+            value = yaml.safe_load(v)
+        except yaml.YAMLError as e:
+            why = getattr(e, "problem", None) or type(e).__name__
+            raise ConfigError(f"override {ov!r}: the value is not valid YAML ({why}); quote "
+                              "it in the shell, e.g. --set 'envs=[point/0, point/1]'") from None
+        _set_dotted(data, k.strip(), value)
     return data
 
 
@@ -722,7 +728,10 @@ def load(path: str | Path | None = None, overrides: list[str] | None = None) -> 
         if not p.is_file():
             raise ConfigError(f"{where}: config file not found")
         try:
-            data = yaml.safe_load(p.read_text()) or {}
+            data = yaml.safe_load(p.read_text(encoding="utf-8")) or {}
+        except UnicodeDecodeError:
+            raise ConfigError(f"{where}: not a text (UTF-8) file; a config is YAML, e.g. "
+                              "configs/point.yaml") from None
         except yaml.YAMLError as e:
             raise ConfigError(f"{where}: not valid YAML: {e}") from None
     if overrides:

@@ -43,6 +43,7 @@ from ntq_jax import data as data_mod
 from ntq_jax import training
 from ntq_jax.data import env_slug
 from ntq_jax.data.format import ARRAY_SPECS
+from ntq_jax.envs import EnvError
 from ntq_jax.planners.options import unsupported_robot
 from ntq_jax.evaluate import evaluate_env, reference_plans, test_queries
 from ntq_jax.report import write_report
@@ -206,7 +207,18 @@ def prepare_run(cfg: C.Config, out: str | Path | None, *, overwrite: bool = Fals
 
 def check_planners(cfg: C.Config, envs: dict) -> None:
     """Raises a :class:`PipelineError` when an environment's planner cannot plan for its robot
-    (``planner.name`` or its ``per_env`` entry; the message names the key and the fix)."""
+    (``planner.name`` or its ``per_env`` entry; the message names the key and the fix), or
+    when a ``per_env`` entry names no environment at all (a typo would be ignored: an entry
+    for a map that is not in ``envs`` is kept, so one config serves each of its maps)."""
+    for section in ("data", "planner"):
+        for i, o in enumerate(getattr(cfg, section).per_env):
+            if o.env in envs:
+                continue
+            try:
+                data_mod.resolve_envs([o.env])
+            except EnvError as e:
+                raise PipelineError(f"{section}.per_env[{i}].env {o.env!r} is not an "
+                                    f"environment ({e}); the run's are {', '.join(envs)}") from None
     for name, env in envs.items():
         planner = cfg.planner.name_for(name)
         why = unsupported_robot(planner, env)

@@ -127,6 +127,18 @@ def _bad_out_case(tmp_path, case):
     if case == "bad_config_key":
         return ["--out", str(tmp_path / "new"), "--set", "data.k_trian=3"], tmp_path / "new", \
             ["k_trian", "k_train"]
+    if case == "bad_set_yaml":
+        return ["--out", str(tmp_path / "new"), "--set", "data.k_train=[1,"], \
+            tmp_path / "new", ["data.k_train=[1,", "not valid YAML", "quote"]
+    if case == "binary_config":
+        f = tmp_path / "bin.yaml"
+        f.write_bytes(bytes(range(256)))
+        return ["--out", str(tmp_path / "new"), "--config", str(f)], tmp_path / "new", \
+            ["bin.yaml", "not a text"]
+    if case == "per_env_typo":
+        return ["--out", str(tmp_path / "new"), "--set",
+                "data.per_env=[{env: point/9, k_train: 5}]"], tmp_path / "new", \
+            ["data.per_env[0].env", "point/9", "not an environment"]
     if case == "visgraph_rigid":
         return ["--out", str(tmp_path / "new"), "--set", "envs=[rigid/0]", "--set",
                 "planner.name=visgraph", "--set", "planner.per_env=[]"], tmp_path / "new", \
@@ -140,7 +152,8 @@ def _bad_out_case(tmp_path, case):
 
 @pytest.mark.parametrize("case", ["unknown_env", "out_is_file", "out_under_file", "read_only",
                                   "cpu_devices_0", "not_a_run_folder", "overwrite_foreign_folder",
-                                  "bad_config_key", "visgraph_rigid", "astar_arm"])
+                                  "bad_config_key", "visgraph_rigid", "astar_arm",
+                                  "bad_set_yaml", "binary_config", "per_env_typo"])
 def test_run_bad_out_or_config_is_one_error_and_writes_nothing(tmp_path, capsys, case):
     args, keep, words = _bad_out_case(tmp_path, case)
     before = _listing(tmp_path)

@@ -166,6 +166,15 @@ class Env:
 
     def _states(self, x, what: str) -> Array:
         if not (isinstance(x, jax.Array) and x.dtype == jnp.float32):
+            if not hasattr(x, "dtype"):
+                try:
+                    x = np.asarray(x)
+                except (TypeError, ValueError) as e:
+                    raise TypeError(f"{what} must be an (N, {self.dim}) array of real numbers, "
+                                    f"got {type(x).__name__} ({e})") from None
+            if np.dtype(x.dtype).kind not in "fiu":  # not bool, complex, strings, objects
+                raise TypeError(f"{what} must be an (N, {self.dim}) array of real numbers, got "
+                                f"dtype {np.dtype(x.dtype)}")
             x = jnp.asarray(x, jnp.float32)
         if x.ndim != 2 or x.shape[1] != self.dim:
             raise ValueError(f"{what} must have shape (N, {self.dim}) for {self.name} "

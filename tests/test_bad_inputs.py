@@ -903,3 +903,16 @@ def test_an_empty_or_full_map_through_train_all_is_one_line(tmp_path, capsys, bo
     for w in words:
         assert w in line, (w, line)
     assert not (tmp_path / "run" / "models" / "m" / "ensemble").exists()
+
+
+@pytest.mark.parametrize("bad", [[["1", "1"]], np.array([[True, False]]),
+                                 np.array([[1 + 1j, 2]]), [[1, [2]]]],
+                         ids=["strings", "bool", "complex", "ragged"])
+def test_states_must_be_real_numbers(bad):
+    """steer_to / is_valid / distance refuse non-real input (["1","1"] was True)."""
+    env = nj.make_env("point/0")
+    for call in (lambda: env.steer_to(bad, bad), lambda: env.is_valid(bad),
+                 lambda: env.distance(bad, bad)):
+        with pytest.raises(TypeError, match="real numbers"):
+            call()
+    assert bool(env.is_valid(np.array([[1, 1]], np.int64))[0])  # integers are numbers

@@ -374,13 +374,14 @@ class Env:
                              spec.get("scale"), where=where)
 
 
-def make_env(name_or_path: str | os.PathLike, *, robot: dict | Robot | None = None,
+def make_env(name_or_path: str | os.PathLike, *, robot: str | dict | Robot | None = None,
              padding: float | None = None, unknown: str = "occupied",
              scale: float | None = None) -> Env:
     """A preset by name (``point/0..3``, ``rigid/0..3``, ``nlink/2|4|6``), a JSON map file,
     or a grid map file (a ROS map ``.yaml``/``.yml`` or a MovingAI ``.map``).
 
-    ``robot``, ``padding``, ``unknown`` and ``scale`` are for grid map files
+    ``robot`` (a kind such as ``"rigid_body"``, a robot JSON dict or a Robot),
+    ``padding``, ``unknown`` (ROS maps) and ``scale`` are for grid map files
     (default: the point robot, padding 0, unknown cells occupied, one unit per
     MovingAI cell); a JSON file that names a grid (``{"grid": ...}``) carries them
     itself. See :mod:`ntq_jax.grid_maps`.
@@ -400,6 +401,14 @@ def make_env(name_or_path: str | os.PathLike, *, robot: dict | Robot | None = No
     if grid_file:
         if path.is_dir() or not path.is_file():
             raise EnvError(f"grid map file {name!r} does not exist")
+        if isinstance(robot, str):  # a robot kind, as the command line takes it
+            robot = {"kind": robot}
+        if robot is not None and not isinstance(robot, dict) and not hasattr(robot, "is_valid"):
+            raise EnvError(f"{name!r}: robot must be a kind (point, rigid_body, nlink), a robot "
+                           f"JSON dict or a Robot, got {type(robot).__name__}")
+        if path.suffix.lower() == ".map" and unknown != "occupied":
+            raise EnvError(f"{name!r}: unknown={unknown!r} is for ROS maps; a MovingAI map has "
+                           "no unknown cells (its passable and blocked characters are fixed)")
         return Env.from_grid(path, robot, 0.0 if padding is None else padding, unknown=unknown,
                              scale=scale)
     if path.suffix.lower() == ".json" or path.exists():

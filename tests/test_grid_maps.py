@@ -376,3 +376,16 @@ def test_astar_plans_on_the_maps_own_grid(tmp_path):
 
 def _big_map(tmp_path):
     return grid_maps.write_movingai(tmp_path / "big.map", grid_maps.maze_grid(128, 1, seed=2))
+
+
+def test_make_env_takes_a_robot_kind_and_refuses_what_it_cannot_use(tmp_path):
+    from ntq_jax import make_env
+    from ntq_jax.envs import EnvError
+    p = tmp_path / "m.map"
+    p.write_bytes(MOVINGAI.encode())
+    assert make_env(str(p), robot="point").robot.kind == "point"  # the CLI's kind strings
+    assert make_env(str(p), robot={"kind": "point"}).robot.kind == "point"
+    with pytest.raises(EnvError, match="robot must be a kind"):
+        make_env(str(p), robot=3)
+    with pytest.raises(EnvError, match="unknown='free' is for ROS maps"):
+        make_env(str(p), unknown="free")

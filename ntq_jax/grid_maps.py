@@ -39,6 +39,7 @@ import re
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 from ntq_jax import validation
 
@@ -135,7 +136,7 @@ def grid_world(grid: OccupancyGrid):
 def _read_text(path: Path) -> str:
     """The UTF-8 text of a map file; one :class:`GridMapError` line if unreadable."""
     try:
-        return path.read_bytes().decode("utf-8")
+        return path.read_bytes().decode("utf-8").removeprefix("\ufeff")  # a BOM is no content
     except OSError as e:
         raise GridMapError(f"cannot read map file {str(path)!r}: {e.strerror or e}") from None
     except UnicodeDecodeError as e:
@@ -207,6 +208,17 @@ def read_movingai(path, scale: float = 1.0) -> OccupancyGrid:
 # ROS map_server
 # ---------------------------------------------------------------------------
 
+class _RosLoader(yaml.SafeLoader):
+    """PyYAML's safe loader reading ``5e-2`` as a number, as map_server (yaml-cpp) does: YAML
+    1.1, which PyYAML follows, needs a dot in a float (``5.0e-2``)."""
+
+
+_RosLoader.yaml_implicit_resolvers = {k: list(v) for k, v in
+                                      yaml.SafeLoader.yaml_implicit_resolvers.items()}
+_RosLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?(?:[0-9][0-9_]*)(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"), list("-+0123456789"))
+
 _ROS_KEYS = {"image", "resolution", "origin", "occupied_thresh", "free_thresh", "negate", "mode"}
 
 
@@ -252,6 +264,9 @@ def _read_pgm(path: Path) -> np.ndarray:
             px = np.asarray([int(t) for t in body], np.float64).reshape(h, w)
         except ValueError:
             raise GridMapError(f"{path}: PGM pixel values must be integers") from None
+        if px.size and not (px.min() >= 0 and px.max() <= maxval):
+            raise GridMapError(f"{path}: PGM pixel values must be in [0, {maxval}] (the header's "
+                               f"maxval), found {px.min():g}..{px.max():g}")
     return px * (255.0 / maxval)
 
 
@@ -307,14 +322,12 @@ def read_ros_map(path, unknown: str = "occupied") -> OccupancyGrid:
     Raises:
         GridMapError: naming the file and the field (or the YAML line).
     """
-    import yaml
-
     path = Path(path)
     if unknown not in UNKNOWN_POLICIES:
         raise GridMapError(f"unknown must be one of {UNKNOWN_POLICIES}, got {unknown!r}")
     text = _read_text(path)
     try:
-        spec = yaml.safe_load(text)
+        spec = yaml.load(text, Loader=_RosLoader)  # noqa: S506 (a SafeLoader)
     except yaml.YAMLError as e:
         mark = getattr(e, "problem_mark", None)
         where = f"line {mark.line + 1}" if mark is not None else "YAML"

@@ -389,3 +389,31 @@ def test_make_env_takes_a_robot_kind_and_refuses_what_it_cannot_use(tmp_path):
         make_env(str(p), robot=3)
     with pytest.raises(EnvError, match="unknown='free' is for ROS maps"):
         make_env(str(p), unknown="free")
+
+
+def test_ros_exponents_bom_and_p2_pixel_range(tmp_path):
+    """map_server reads ``resolution: 5e-2`` as a number (PyYAML alone: a string); a BOM is
+    no content; P2 pixels outside [0, maxval] are refused."""
+    _pgm_p5(tmp_path / "m.pgm", PIXELS)
+    y = tmp_path / "m.yaml"
+    y.write_bytes(("\ufeffimage: m.pgm\nresolution: 5e-2\n"
+                   "origin: [-1e0, 2.0, 0.0]\nnegate: 0\noccupied_thresh: 0.65\n"
+                   "free_thresh: 0.196\n").encode())
+    g = grid_maps.read_ros_map(y)
+    assert g.resolution == 0.05 and g.origin == (-1.0, 2.0)
+    np.testing.assert_array_equal(g.occupied, _expected(PIXELS))
+    m = tmp_path / "bom.map"
+    m.write_bytes(("\ufeff" + MOVINGAI).encode())
+    np.testing.assert_array_equal(grid_maps.read_movingai(m).occupied,
+                                  grid_maps.read_movingai(_plain(tmp_path)).occupied)
+    for bad in ("256", "-1"):
+        img = tmp_path / f"bad{bad}.pgm"
+        img.write_text(f"P2\n2 1\n255\n0 {bad}\n")
+        with pytest.raises(grid_maps.GridMapError, match=r"pixel values must be in \[0, 255\]"):
+            grid_maps.read_ros_map(_yaml(tmp_path / f"bad{bad}.yaml", img.name))
+
+
+def _plain(tmp_path):
+    p = tmp_path / "plain.map"
+    p.write_bytes(MOVINGAI.encode())
+    return p

@@ -25,7 +25,7 @@ from typing import Callable, Iterable
 from ntq_jax.errors import UsageError  # re-exported: the scripts import it from here
 
 __all__ = ["UsageError", "EXPECTED_ERRORS", "PATH_ERRORS", "expected_error_types", "error_line",
-           "positive_int", "check_writable", "add_run_options", "add_executor_options",
+           "positive_int", "seed_arg", "check_writable", "add_run_options", "add_executor_options",
            "executor_of", "start_run", "run_cli"]
 
 
@@ -68,6 +68,21 @@ def positive_int(option: str, value: int) -> int:
     """``value`` if it is >= 1, else a :class:`UsageError` naming ``option``."""
     if value < 1:
         raise UsageError(f"{option} {value}: expected a positive integer (1 or more)")
+    return value
+
+
+SEED_MAX = 2**32 - 1  # jax.random.key takes a 32-bit seed (larger values wrap or overflow)
+
+
+def seed_arg(text: str) -> int:
+    """An argparse ``type`` for a PRNG seed: an integer in ``[0, 2**32 - 1]``."""
+    import argparse
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+    if not 0 <= value <= SEED_MAX:
+        raise argparse.ArgumentTypeError(f"must be in [0, {SEED_MAX}], got {text}")
     return value
 
 

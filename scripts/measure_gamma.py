@@ -27,7 +27,7 @@ import sys
 import time
 from pathlib import Path
 
-from ntq_jax.cli import UsageError, check_writable, run_cli
+from ntq_jax.cli import UsageError, check_writable, run_cli, seed_arg
 
 MAX_QUERIES = 10**15  # ~80 days at the fastest measured rate (1.5e8 queries/s, point robot)
 INTERRUPTED = 130     # the shell's exit code for a process ended by SIGINT
@@ -139,7 +139,7 @@ def _run(argv) -> int:
                     f"{MAX_QUERIES:.0e})")
     ap.add_argument("--padding", type=_padding, default=0.0,
                     help="clearance of the geometry (default 0: the evaluation geometry)")
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--seed", type=seed_arg, default=0, help="PRNG seed, 0 .. 2**32-1")
     ap.add_argument("--chunk", type=_chunk, default=None,
                     help="candidate queries per compiled chunk (default: 4M point, 32k others)")
     ap.add_argument("--max-hours", type=_hours, default=24.0,

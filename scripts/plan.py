@@ -17,13 +17,14 @@ shows the map, the neural path and, for point robots, the exact optimum.
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 from pathlib import Path
 
 
 import ntq_jax as nj
 from ntq_jax import artifacts
-from ntq_jax.cli import UsageError, check_writable, run_cli
+from ntq_jax.cli import UsageError, check_writable, run_cli, seed_arg
 
 
 class PlanError(UsageError):
@@ -90,6 +91,9 @@ def plan_one(run, model: int, start, goal, *, env_name=None, steer: bool = True,
     s = _check_state(env, start, "start")
     g = _check_state(env, goal, "goal")
     png = Path(png) if png else run / "figures" / f"plan_{slug}_PNet_{model}.png"
+    if png.suffix.lower() not in FIGURE_SUFFIXES:
+        raise PlanError(f"--png {png}: the figure's format comes from its extension; use one of "
+                        f"{', '.join(FIGURE_SUFFIXES)}")
     check_writable(png, "--png")  # before loading the models and planning
     try:
         ens = load_ensemble(run / "models" / slug)
@@ -125,16 +129,28 @@ def main(argv=None) -> int:
     return run_cli(lambda: _main(argv))
 
 
+def _model(text: str) -> int:
+    """``N`` or ``PNet_<N>`` (as the tables name the members)."""
+    m = re.fullmatch(r"(?:PNet_)?(\d+)", text.strip())
+    if m is None:
+        raise argparse.ArgumentTypeError(f"expected N or PNet_<N> (e.g. 3 or PNet_3), got {text!r}")
+    return int(m.group(1))
+
+
+FIGURE_SUFFIXES = (".png", ".pdf", ".svg", ".jpg", ".jpeg")
+
+
 def _main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--run", required=True, help="run folder of scripts/train_all.py")
-    ap.add_argument("--model", type=int, required=True, help="ensemble member (PNet_<N>)")
+    ap.add_argument("--model", type=_model, required=True,
+                    help="ensemble member: N or PNet_<N>")
     ap.add_argument("--start", type=float, nargs="+", required=True, help="start state")
     ap.add_argument("--goal", type=float, nargs="+", required=True, help="goal state")
     ap.add_argument("--env", default=None, help="environment (needed when the run has several)")
     ap.add_argument("--no-steer", action="store_true", help="the variant without steerTo")
-    ap.add_argument("--seed", type=int, default=0, help="dropout seed")
+    ap.add_argument("--seed", type=seed_arg, default=0, help="dropout seed, 0 .. 2**32-1")
     ap.add_argument("--png", default=None, help="output figure")
     ap.add_argument("--no-compile-cache", action="store_true",
                     help="do not use JAX's persistent compilation cache")

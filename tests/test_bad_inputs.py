@@ -746,6 +746,8 @@ def _env():
     (["--queries", "2.5"], "argument --queries: must be a whole number >= 1"),
     (["--chunk", "1e12"], "argument --chunk: must be at most"),
     (["--max-hours", "0"], "argument --max-hours: must be a number of hours > 0"),
+    (["--seed=-1"], "argument --seed: must be in [0, 4294967295], got -1"),
+    (["--seed", str(2**64)], "argument --seed: must be in [0, 4294967295]"),
 ])
 def test_gamma_script_bad_arguments(tmp_path, capsys, argv, message):
     mg = _script("measure_gamma")
@@ -862,6 +864,21 @@ def test_plan_script_png_unwritable_is_checked_first(bare_run, tmp_path, capsys)
         assert len(lines) == 1 and lines[0].startswith("error: --png") and message in lines[0]
         assert captured.out == ""
     assert _files(tmp_path) == before
+
+
+def test_plan_script_takes_pnet_names_and_checks_the_figure_format_first(bare_run, tmp_path,
+                                                                          capsys):
+    plan = _script("plan")
+    assert plan._model("PNet_3") == plan._model("3") == 3
+    assert plan.main(["--run", str(bare_run), "--model", "PNet_0", "--start", "1", "1",
+                      "--goal", "2", "2", "--png", str(tmp_path / "p.xyz"),
+                      "--no-compile-cache"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--png" in err[0] and ".png, .pdf" in err[0]
+    with pytest.raises(SystemExit):
+        plan.main(["--run", str(bare_run), "--model", "PNet_x", "--start", "1", "1",
+                   "--goal", "2", "2"])
+    assert "expected N or PNet_<N>" in capsys.readouterr().err
 
 
 def test_plan_script_default_png_checked_after_the_states(bare_run, capsys):

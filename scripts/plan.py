@@ -91,10 +91,10 @@ def plan_one(run, model: int, start, goal, *, env_name=None, steer: bool = True,
     s = _check_state(env, start, "start")
     g = _check_state(env, goal, "goal")
     png = Path(png) if png else run / "figures" / f"plan_{slug}_PNet_{model}.png"
+    check_writable(png, "--png")  # before loading the models and planning
     if png.suffix.lower() not in FIGURE_SUFFIXES:
         raise PlanError(f"--png {png}: the figure's format comes from its extension; use one of "
                         f"{', '.join(FIGURE_SUFFIXES)}")
-    check_writable(png, "--png")  # before loading the models and planning
     try:
         ens = load_ensemble(run / "models" / slug)
     except CheckpointError as e:

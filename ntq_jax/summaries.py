@@ -11,7 +11,7 @@ and what proves where they came from, for one environment of a finished run
                          comparisons (this map's, as in results.json),
                          fingerprints (per dataset the digest of its arrays'
                          sha256 checksums; one digest of the trained ensemble's
-                         files), datasets (per dataset the planned paths
+                         weights), datasets (per dataset the planned paths
                          used, samples written and mean states per data
                          path), timings (seconds of data / train / eval),
                          finished, command
@@ -67,15 +67,24 @@ def dataset_sizes(data_env_dir: Path, names: list[str]) -> dict[str, dict | None
 
 
 def models_fingerprint(model_dir: Path) -> str | None:
-    """sha256 over the trained ensemble's files (``<model_dir>/ensemble``), None if absent."""
-    root = Path(model_dir) / "ensemble"
-    files = sorted(p for p in root.rglob("*") if p.is_file()) if root.is_dir() else []
-    if not files:
+    """sha256 over the trained ensemble's weights (every parameter array's key path, dtype,
+    shape and bytes), None if there is no readable ensemble. The weights, not the files:
+    Orbax's files hold timestamps, so equal weights saved twice would differ."""
+    import jax
+    import numpy as np
+
+    from ntq_jax.training import CheckpointError, load_ensemble
+    if not (Path(model_dir) / "ensemble").is_dir():
+        return None
+    try:
+        ens = load_ensemble(model_dir)
+    except (CheckpointError, OSError, ValueError):
         return None
     h = hashlib.sha256()
-    for p in files:
-        h.update(str(p.relative_to(root)).encode())
-        h.update(hashlib.sha256(p.read_bytes()).digest())
+    for path, leaf in jax.tree_util.tree_leaves_with_path(ens.params):
+        a = np.ascontiguousarray(np.asarray(leaf))
+        h.update(f"{jax.tree_util.keystr(path)} {a.dtype.str} {a.shape}".encode())
+        h.update(a.tobytes())
     return h.hexdigest()
 
 

@@ -501,3 +501,23 @@ def test_render_tolerates_missing_values(tmp_path):
     probs = R.check_summary(R.load_summaries(tmp_path)[0])
     assert "dataset fingerprints missing: D3" in probs
     assert "timings of data/train/eval missing" in probs
+
+
+def test_models_fingerprint_hashes_the_weights_not_the_files(tmp_path):
+    """Equal weights saved twice (Orbax files with other timestamps) fingerprint the same;
+    other weights do not."""
+    import time
+    from ntq_jax import make_env, models
+    from ntq_jax.config import ModelConfig
+    from ntq_jax.summaries import models_fingerprint
+    from ntq_jax.training import save_ensemble
+
+    spec = models.ModelSpec.from_env(make_env("point/2"), ModelConfig(hidden=(8,), dropout_layers=1))
+    ens = models.init_ensemble(spec, 0, 2)
+    save_ensemble(ens, tmp_path / "a" / "ensemble")
+    time.sleep(1.1)
+    save_ensemble(ens, tmp_path / "b" / "ensemble")
+    save_ensemble(models.init_ensemble(spec, 1, 2), tmp_path / "c" / "ensemble")
+    fa, fb, fc = (models_fingerprint(tmp_path / n) for n in "abc")
+    assert fa == fb and fa != fc and len(fa) == 64
+    assert models_fingerprint(tmp_path / "none") is None

@@ -39,6 +39,7 @@ EXPECTED_ERRORS: tuple[tuple[str, str], ...] = (
     ("ntq_jax.training.checkpoint", "CheckpointError"),
     ("ntq_jax.pipeline", "PipelineError"),
     ("ntq_jax.queries", "FreeSpaceTooSmall"),
+    ("ntq_jax.reproduction", "SummaryError"),
 )
 
 #: Path errors and the fix each one calls for.

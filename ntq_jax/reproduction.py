@@ -108,7 +108,7 @@ from ntq_jax.stats import mcnemar_exact
 
 __all__ = ["PAPER", "PAPER_TABLES", "PAPER_K_TRAIN", "PAPER_K_TEST", "PAPER_PADDING",
            "PAPER_DATASETS", "MAPS", "SEED_MAPS", "ALPHA", "HOLDS", "FAILS", "UNRESOLVED",
-           "NOT_RUN", "load_summaries", "check_summary", "check_seed_runs", "verdict", "claims", "seed_variance",
+           "NOT_RUN", "SummaryError", "load_summaries", "check_summary", "check_seed_runs", "verdict", "claims", "seed_variance",
            "seed_variance_diffs", "render", "write", "main"]
 
 DOC_NAME = "REPRODUCTION.md"
@@ -239,18 +239,33 @@ def is_seed_run(summary: dict) -> bool:
     return "seeds" in Path(summary.get("_path", "")).parts
 
 
+class SummaryError(ValueError):
+    """A committed summary that cannot be read (the message names the file and the fix)."""
+
+
 def load_summaries(root) -> list[dict]:
     """Every ``summary.json`` under ``root``: ``<task>/<map>/`` and ``<task>/<map>/seeds/*/``.
 
     Each summary gets ``_path``, its path relative to ``root`` (POSIX). Sorted by map (the
     paper's order, unknown maps after), main run before seed runs, then train seed and path.
     A missing root gives an empty list.
+
+    Raises:
+        SummaryError: a ``summary.json`` that is not valid JSON (or not an object).
     """
     root = Path(root)
     files = list(root.glob("*/*/summary.json")) + list(root.glob("*/*/seeds/*/summary.json"))
     out = []
     for f in files:
-        s = json.loads(f.read_text(encoding="utf-8"))
+        try:
+            s = json.loads(f.read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+            raise SummaryError(f"{f}: not a readable summary ({type(e).__name__}: {e}); restore "
+                               "it from git, or delete it and rerun the map with "
+                               "scripts/reproduce.py") from None
+        if not isinstance(s, dict):
+            raise SummaryError(f"{f}: not a summary (a JSON object is expected); restore it "
+                               "from git, or delete it and rerun the map")
         s["_path"] = f.relative_to(root).as_posix()
         out.append(s)
     return sorted(out, key=lambda s: (_map_key(s.get("env", "")), is_seed_run(s),
@@ -1175,6 +1190,14 @@ def main(argv=None) -> int:
                     help="write nothing; exit 1 if the file on disk is not what render gives")
     a = ap.parse_args(argv)
     path = Path(a.root) / DOC_NAME
+    try:
+        return _main(a, path)
+    except SummaryError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+
+
+def _main(a, path: Path) -> int:
     if a.check:
         current = path.read_text(encoding="utf-8") if path.exists() else None
         if current != render(a.root):

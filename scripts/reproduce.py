@@ -118,6 +118,9 @@ def _main(argv) -> int:
     args = ap.parse_args(argv)
     results = Path(args.results)
     if args.report_only:
+        if args.env or args.train_seeds or args.config:
+            raise UsageError("--report-only regenerates REPRODUCTION.md from every summary in "
+                             "--results; it takes no --config, --env or --train-seeds")
         _report(results)
         return 0
     if args.config is None:

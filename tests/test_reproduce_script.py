@@ -83,3 +83,19 @@ def test_reproduce_usage_errors(args, msg, capsys, tmp_path):
     assert _script().main(args + ["--results", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert msg in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+
+
+def test_report_only_with_a_corrupt_summary_or_map_options_is_one_line(tmp_path, capsys):
+    from ntq_jax import reproduction as R
+    script = _script()
+    bad = tmp_path / "results" / "point" / "point_0" / "summary.json"
+    bad.parent.mkdir(parents=True)
+    bad.write_text('{"env": "point/0", ')
+    assert script.main(["--report-only", "--results", str(tmp_path / "results")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error:") and "summary.json" in err[0]
+    assert R.main([str(tmp_path / "results")]) == 2
+    assert "not a readable summary" in capsys.readouterr().err
+    for extra in (["--env", "point/0"], ["--train-seeds", "1"]):
+        assert script.main(["--report-only", "--results", str(tmp_path / "r2")] + extra) == 2
+        assert "takes no --config, --env or --train-seeds" in capsys.readouterr().err

@@ -51,6 +51,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ntq_jax import artifacts, broadphase, geometry, grid_maps, validation
+from ntq_jax.batching import bucket_size
 from ntq_jax import queries as Q
 from ntq_jax.geometry import World
 from ntq_jax.presets import PRESETS
@@ -203,7 +204,9 @@ class Env:
             k, (head,), (bulk,) = host
             return _batch.is_valid_batch_split(self.robot, self.world, head, bulk, p, k
                                                ).block_until_ready()
-        return is_valid_batch(self.robot, self.world, self._states(states, "states"), p)
+        x = self._states(states, "states")
+        n = x.shape[0]
+        return is_valid_batch(self.robot, self.world, _bucketed(x), p)[:n]
 
     def steer_to(self, a, b, padding: float | None = None, check: str = "discretized") -> Array:
         """``(N, d), (N, d) -> (N,)`` bool: True where the straight connection is collision-free.
@@ -231,7 +234,8 @@ class Env:
         a, b = self._states(a, "a"), self._states(b, "b")
         if a.shape != b.shape:
             raise ValueError(f"a and b must have the same shape, got {a.shape} and {b.shape}")
-        return steer_to_batch(self.robot, self.world, a, b, p, check)
+        n = a.shape[0]
+        return steer_to_batch(self.robot, self.world, _bucketed(a), _bucketed(b), p, check)[:n]
 
     def distance(self, a, b) -> Array:
         """``(N, d), (N, d) -> (N,)``: the robot's cost metric.
@@ -242,7 +246,11 @@ class Env:
         if host is not None:
             k, (ha, hb), (ba, bb) = host
             return _batch.distance_batch_split(self.robot, ha, hb, ba, bb, k).block_until_ready()
-        return distance_batch(self.robot, self._states(a, "a"), self._states(b, "b"))
+        a, b = self._states(a, "a"), self._states(b, "b")
+        if a.shape != b.shape:
+            raise ValueError(f"a and b must have the same shape, got {a.shape} and {b.shape}")
+        n = a.shape[0]
+        return distance_batch(self.robot, _bucketed(a), _bucketed(b))[:n]
 
     def rasterize(self, resolution: float, padding: float | None = None) -> np.ndarray:
         """Occupancy grid ``(H, W)`` bool of the workspace (point robot geometry)."""
@@ -372,6 +380,19 @@ class Env:
             raise EnvError(f"{where}: missing required key 'robot'")
         return Env.from_grid(path, spec["robot"], spec.get("padding", 0.0), name, policy,
                              spec.get("scale"), where=where)
+
+
+#: Batches of the device path are padded to the next power of two of at least this many
+#: rows: a user's varying batch sizes compile a handful of programs, not one per size.
+BUCKET_MIN_ROWS = 64
+
+
+def _bucketed(x: Array) -> Array:
+    """``x`` with its rows padded (zeros) to :func:`ntq_jax.batching.bucket_size`; per-row
+    kernels, so the first rows' answers are those of ``x`` alone."""
+    n = x.shape[0]
+    m = bucket_size(n, BUCKET_MIN_ROWS)
+    return x if m == n else jnp.pad(x, ((0, m - n), (0, 0)))
 
 
 def make_env(name_or_path: str | os.PathLike, *, robot: str | dict | Robot | None = None,

@@ -252,3 +252,23 @@ def test_numpy_input_shape_errors():
         env.steer_to(a, a[1:])
     with pytest.raises(ValueError, match=r"shape \(N, 2\)"):
         env.steer_to(np.zeros((100_000, 3), np.float32), np.zeros((100_000, 3), np.float32))
+
+
+def test_varying_batch_sizes_share_compiled_programs():
+    """Env.steer_to / is_valid / distance pad a batch to a power-of-two bucket: sizes 65..128
+    compile once, and every answer equals the per-row one."""
+    from ntq_jax.robots import batch as B
+    env = nj.make_env("point/3")
+    s = np.asarray(env.sample_states(jax.random.key(7), 260), np.float32)
+    before = (B._steer_to_batch._cache_size(), B.is_valid_batch._cache_size(),
+              B.distance_batch._cache_size())
+    outs = {n: (np.asarray(env.steer_to(s[:n], s[130:130 + n])), np.asarray(env.is_valid(s[:n])),
+                np.asarray(env.distance(s[:n], s[130:130 + n]))) for n in (65, 77, 100, 128)}
+    after = (B._steer_to_batch._cache_size(), B.is_valid_batch._cache_size(),
+             B.distance_batch._cache_size())
+    assert all(a - b <= 1 for a, b in zip(after, before)), (before, after)
+    for n, (st, va, di) in outs.items():
+        assert st.shape == va.shape == di.shape == (n,)
+        np.testing.assert_array_equal(st, outs[128][0][:n])
+        np.testing.assert_array_equal(va, outs[128][1][:n])
+        np.testing.assert_array_equal(di, outs[128][2][:n])

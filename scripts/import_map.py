@@ -22,7 +22,7 @@ import json
 import sys
 from pathlib import Path
 
-from ntq_jax.cli import UsageError, run_cli
+from ntq_jax.cli import UsageError, check_writable, run_cli
 
 
 def main(argv=None) -> int:
@@ -56,6 +56,8 @@ def _main(argv) -> int:
 
     from ntq_jax.envs import Env
 
+    if args.out:
+        check_writable(args.out, "--out")  # a folder or an unwritable place: before the work
     env = Env.from_grid(args.grid, _robot(args.robot), args.padding, args.name, args.unknown,
                         args.scale)
     h, w = env.grid.shape

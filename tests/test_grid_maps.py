@@ -232,6 +232,11 @@ def test_wrapper_json_and_import_script(tmp_path):
                         str(tmp_path / "maps" / "maze.map"), "--robot", "{bad"],
                        capture_output=True, text=True)
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and "--robot is not valid JSON" in r.stderr
+    r = subprocess.run([sys.executable, str(ROOT / "scripts" / "import_map.py"),
+                        str(tmp_path / "maps" / "maze.map"), "--out", str(tmp_path)],
+                       capture_output=True, text=True)
+    assert r.returncode == 2 and r.stderr.count("\n") == 1
+    assert f"--out {tmp_path} is a folder; give a file name" in r.stderr
 
 
 @pytest.mark.parametrize("spec, match", [

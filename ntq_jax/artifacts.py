@@ -18,6 +18,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import shutil
 from pathlib import Path
 from typing import Any, Callable
 
@@ -94,6 +95,23 @@ def save_figure(fig, path: str | os.PathLike, **savefig_kwargs) -> Path:
     """Atomic ``fig.savefig`` (the format comes from ``path``'s suffix)."""
     fmt = Path(path).suffix.lstrip(".") or "png"
     return write_with(path, lambda f: fig.savefig(f, format=fmt, **savefig_kwargs))
+
+
+
+def link_tree(src: str | os.PathLike, dst: str | os.PathLike) -> None:
+    """``dst`` as a copy of ``src`` made of hard links (a plain copy where links fail); files
+    already in ``dst`` are kept."""
+    src, dst = Path(src), Path(dst)
+    for p in src.rglob("*"):
+        q = dst / p.relative_to(src)
+        if p.is_dir():
+            q.mkdir(parents=True, exist_ok=True)
+        elif not q.exists():
+            q.parent.mkdir(parents=True, exist_ok=True)
+            try:
+                os.link(p, q)
+            except OSError:
+                shutil.copy2(p, q)
 
 
 def clean_tmp(folder: str | os.PathLike) -> None:

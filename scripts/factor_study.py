@@ -39,8 +39,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import shutil
 import sys
 import time
 from pathlib import Path
@@ -150,17 +148,6 @@ def ready(cell: Cell) -> str | None:
     return None
 
 
-def _link_tree(src: Path, dst: Path) -> None:
-    for p in src.rglob("*"):
-        q = dst / p.relative_to(src)
-        if p.is_dir():
-            q.mkdir(parents=True, exist_ok=True)
-        elif not q.exists():
-            q.parent.mkdir(parents=True, exist_ok=True)
-            try:
-                os.link(p, q)
-            except OSError:
-                shutil.copy2(p, q)
 
 
 def cell_config(cell: Cell, extra: list[str] = ()):
@@ -238,14 +225,15 @@ def run_cell(cell: Cell, runs: Path, results: Path, progress: bool, extra: list[
         raise UsageError(f"{cell.key}: {why}")
     env = make_env(cell.map)
     run = prepare_run(cfg, run_folder(cell, runs, paper_runs))
+    from ntq_jax import artifacts
     if cell.budget != "ours" or cell.train_seed:  # the same data (and models for a budget)
         base = run_folder(Cell(cell.map, cell.data, "ours"), runs, paper_runs)
         if not (base / "results.json").is_file():
             raise UsageError(f"{cell.key} needs {Cell(cell.map, cell.data, 'ours').key} first")
-        _link_tree(base / "data" / cell.slug, run / "data" / cell.slug)
+        artifacts.link_tree(base / "data" / cell.slug, run / "data" / cell.slug)
         if not cell.train_seed:
-            _link_tree(base / "models" / cell.slug, run / "models" / cell.slug)
-            _link_tree(base / "eval" / cell.slug, run / "eval" / cell.slug)
+            artifacts.link_tree(base / "models" / cell.slug, run / "models" / cell.slug)
+            artifacts.link_tree(base / "eval" / cell.slug, run / "eval" / cell.slug)
     t0 = time.perf_counter()
     print(f"[{cell.key}] run folder {run}", flush=True)
     run_pipeline(cfg, run, progress=progress, figures=False)

@@ -30,8 +30,6 @@ code 2.
 from __future__ import annotations
 
 import argparse
-import os
-import shutil
 import sys
 import time
 from pathlib import Path
@@ -54,18 +52,6 @@ def _seeds(text: str) -> list[int]:
     return seeds
 
 
-def _link_tree(src: Path, dst: Path) -> None:
-    """``dst`` as a copy of ``src`` made of hard links (a plain copy where links fail)."""
-    for p in src.rglob("*"):
-        q = dst / p.relative_to(src)
-        if p.is_dir():
-            q.mkdir(parents=True, exist_ok=True)
-        elif not q.exists():
-            q.parent.mkdir(parents=True, exist_ok=True)
-            try:
-                os.link(p, q)
-            except OSError:
-                shutil.copy2(p, q)
 
 
 def _one(cfg, name: str, env, run: Path, out: Path, *, args, command: str,
@@ -81,8 +67,9 @@ def _one(cfg, name: str, env, run: Path, out: Path, *, args, command: str,
         return
     run = prepare_run(cfg, run)
     if data_from is not None:  # the same data: hard links to the map's datasets
+        from ntq_jax import artifacts
         slug = env_slug(name, env)
-        _link_tree(data_from / "data" / slug, run / "data" / slug)
+        artifacts.link_tree(data_from / "data" / slug, run / "data" / slug)
     print(f"[{name}] run folder: {run}", flush=True)
     t0 = time.perf_counter()
     from ntq_jax.cli import executor_of

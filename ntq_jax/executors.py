@@ -176,8 +176,8 @@ class RayExecutor:
         self.max_retries = int(max_retries)
         self.local_cpus = local_cpus
         self._ray = None
-        ray = _import_ray()  # a missing Ray is an error before any work (Ray starts at the first task)
-        if address is not None and not ray.is_initialized():
+        _import_ray()  # a missing Ray is an error before any work (Ray starts at the first task)
+        if address is not None:
             check_ray_address(address)  # an unreachable cluster is an error now, in seconds
         self._task = None
         self.latencies: list[float] = []    # per task: seconds from submission to its start

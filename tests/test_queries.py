@@ -530,8 +530,9 @@ def test_batch_kernels_compile_once_per_shape():
     rng = np.random.default_rng(0)
     for i in range(4):
         world = _world(i)  # a new map with the same obstacle counts
-        a = jnp.asarray(rng.uniform(0, 10, (1000, 2)), jnp.float32)
-        b = jnp.asarray(rng.uniform(0, 10, (1000, 2)), jnp.float32)
+        # 1024 rows: a bucket size of Env's calls, so they share the direct calls' program
+        a = jnp.asarray(rng.uniform(0, 10, (1024, 2)), jnp.float32)
+        b = jnp.asarray(rng.uniform(0, 10, (1024, 2)), jnp.float32)
         steer_to_batch(robot, world, a, b, 0.3)
         is_valid_batch(robot, world, a, 0.3)
         env = nj.Env("traced", robot, world, 0.3)

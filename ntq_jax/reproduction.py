@@ -1073,6 +1073,31 @@ def _ms(x) -> str:
     return f"{1e3 * x:.2f}" if _num(x) else "-"
 
 
+def _datasets(summaries) -> list[str]:
+    """Per map, each dataset's planned paths, samples and mean states per data path (the
+    summaries that record them)."""
+    main = _main_runs(summaries)
+    rows = [(env, main[env]["datasets"]) for env in MAPS
+            if env in main and isinstance(main[env].get("datasets"), dict)]
+    if not rows:
+        return []
+    names = sorted({n for _, d in rows for n in d}, key=lambda n: (len(n), n))
+    out = ["## Datasets", "",
+           "Per dataset: planned paths used / samples written (includeData, Alg. 4) / mean "
+           "states per data path; D3's samples are D2's paths after pruning.", "",
+           "| Map | data paths | " + " | ".join(names) + " |",
+           "|---|---|" + "---|" * len(names)]
+    for env, d in rows:
+        cfg = (main[env].get("config") or {}).get("planner") or {}
+        mode = next((o.get("data_paths") for o in cfg.get("per_env") or ()
+                     if o.get("env") == env and o.get("data_paths") is not None),
+                    cfg.get("data_paths"))
+        cells = [f"{v['paths']} / {v['samples']} / {v['states_per_path']:.1f}" if v else "-"
+                 for v in (d.get(n) for n in names)]
+        out.append(f"| {env} | {'default' if mode is None else mode} | " + " | ".join(cells) + " |")
+    return out + [""]
+
+
 def _times(summaries) -> list[str]:
     main = _main_runs(summaries)
     out = ["## Time per query (ms)", "",
@@ -1171,7 +1196,8 @@ def _claims_md(summaries) -> list[str]:
 def render(root) -> str:
     """The whole ``REPRODUCTION.md`` of the summaries under ``root`` (deterministic)."""
     summaries = load_summaries(root)
-    lines = (_header(summaries, _root_label(root)) + _coverage(summaries) + _tables(summaries) + _times(summaries)
+    lines = (_header(summaries, _root_label(root)) + _coverage(summaries) + _tables(summaries)
+             + _datasets(summaries) + _times(summaries)
              + _seeds(summaries) + _claims_md(summaries))
     return "\n".join(lines).rstrip("\n") + "\n"
 

@@ -521,3 +521,17 @@ def test_models_fingerprint_hashes_the_weights_not_the_files(tmp_path):
     fa, fb, fc = (models_fingerprint(tmp_path / n) for n in "abc")
     assert fa == fb and fa != fc and len(fa) == 64
     assert models_fingerprint(tmp_path / "none") is None
+
+
+def test_render_shows_each_maps_datasets(tmp_path):
+    s = make_summary("rigid/0")
+    s["datasets"] = {f"D{i}": {"paths": 5000, "samples": 1000 * (i + 1),
+                               "states_per_path": 14.84} for i in range(4)}
+    s["config"]["planner"] = {"data_paths": 0.6}
+    write_summary(tmp_path, s)
+    text = R.render(tmp_path)
+    assert "## Datasets" in text
+    assert "| rigid/0 | 0.6 | 5000 / 1000 / 14.8 | 5000 / 2000 / 14.8 |" in text
+    del s["datasets"]
+    write_summary(tmp_path, s)
+    assert "## Datasets" not in R.render(tmp_path)  # older summaries: no section

@@ -43,8 +43,9 @@ def main(argv=None) -> int:
     t_start = time.perf_counter()
     import jax
 
-    from ntq_jax import config as C
+    from ntq_jax.experiment import config as C
     from ntq_jax import data, make_env
+    from ntq_jax.envs import env_slug
     t_import = time.perf_counter() - t_start
 
     sets = [f"data.k_train={args.k}", f"envs=[{args.env}]"]
@@ -57,7 +58,7 @@ def main(argv=None) -> int:
     cfg = C.load(args.config, sets)
     out = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="bench_data_"))
     env = make_env(args.env)
-    shutil.rmtree(out / data.env_slug(args.env, env), ignore_errors=True)
+    shutil.rmtree(out / env_slug(args.env, env), ignore_errors=True)
     t0 = time.perf_counter()
     s = data.generate_datasets(env, cfg, out, env_name=args.env, progress=args.progress)
     wall = time.perf_counter() - t0

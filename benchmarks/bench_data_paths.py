@@ -56,11 +56,11 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default="results/data_paths")
     args = ap.parse_args(argv)
 
-    from ntq_jax import config as C
+    from ntq_jax.experiment import config as C
     from ntq_jax import make_env
-    from ntq_jax.data.format import env_slug
-    from ntq_jax.data.path_modes import shape_paths
-    from ntq_jax.data.planning import planner_options
+    from ntq_jax.envs import env_slug
+    from ntq_jax.planners.path_modes import shape_paths
+    from ntq_jax.planners.jobs import planner_options
     from ntq_jax.planners import plan
 
     record = Path(args.record)

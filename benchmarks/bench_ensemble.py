@@ -39,11 +39,11 @@ def bench_env(run: Path, env_name: str, repeats: int) -> list[dict]:
     import jax
     import numpy as np
 
-    from ntq_jax import config as C
+    from ntq_jax.experiment import config as C
     from ntq_jax import make_env
     from ntq_jax import neural_planner as NP
-    from ntq_jax.data import env_slug
-    from ntq_jax.evaluate import member_pnets
+    from ntq_jax.envs import env_slug
+    from ntq_jax.experiment.evaluate import member_pnets
     from ntq_jax.training import load_ensemble
 
     env = make_env(env_name)
@@ -96,7 +96,7 @@ def main(argv=None) -> int:
     ap.add_argument("--json", default=None, help="also write the results to this JSON file")
     args = ap.parse_args(argv)
     run = Path(args.run)
-    from ntq_jax import config as C
+    from ntq_jax.experiment import config as C
     envs = args.env or list(C.load(run / "config.yaml", []).envs)
     out = [r for name in envs for r in bench_env(run, name, args.repeats)]
     if args.json:

@@ -4,7 +4,7 @@
     python benchmarks/bench_executor.py                     # rigid/0, 40 queries, 0.5 s, chunk 10
     python benchmarks/bench_executor.py --repeats 5 --json results/bench_executor.json
 
-What is timed: :func:`ntq_jax.data.planning.plan_pool` over the same pool of
+What is timed: :func:`ntq_jax.planners.jobs.plan_pool` over the same pool of
 non-trivial queries (BIT* uses its whole budget on each: the work is fixed),
 chunk files written by the driver exactly as in ``generate_data.py``.
 
@@ -61,7 +61,7 @@ def _queries(env, n, seed):
 
 
 def _run(env, pool, executor, planner, chunk: int, seed: int) -> tuple[float, list[float]]:
-    from ntq_jax.data.planning import plan_pool
+    from ntq_jax.planners.jobs import plan_pool
 
     work = Path(tempfile.mkdtemp(prefix="bench_executor-"))
     try:
@@ -93,7 +93,7 @@ def main(argv=None) -> int:
     import ray
 
     from ntq_jax import make_env
-    from ntq_jax.data.planning import resolve_planner
+    from ntq_jax.planners.jobs import resolve_planner
     from ntq_jax.executors import LocalExecutor, RayExecutor
 
     env = make_env(args.env)

@@ -96,10 +96,10 @@ def bench(env_name: str, *, queries: int, loop_queries: int, run=None, model: in
     import jax
     import numpy as np
 
-    from ntq_jax import config as C
+    from ntq_jax.experiment import config as C
     from ntq_jax import make_env, models
-    from ntq_jax.data import env_slug
-    from ntq_jax.evaluate import member_pnets
+    from ntq_jax.envs import env_slug
+    from ntq_jax.experiment.evaluate import member_pnets
     from ntq_jax.neural_planner import PlannerOptions, plan_batch
 
     env = make_env(env_name)

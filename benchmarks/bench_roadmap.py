@@ -85,7 +85,7 @@ class StageError(Exception):
 # ---------------------------------------------------------------------------
 
 def slug(name: str) -> str:
-    from ntq_jax.data import env_slug
+    from ntq_jax.envs import env_slug
     return env_slug(name)
 
 

@@ -174,7 +174,8 @@ def main(argv=None) -> int:
     from ntq_jax import training as T
 
     T.use_cpu_devices(args.cpu_devices)  # before any JAX operation
-    from ntq_jax.config import ModelConfig, TrainConfig
+    from ntq_jax.models import ModelConfig
+    from ntq_jax.training.config import TrainConfig
 
     hidden = tuple(int(h) for h in args.hidden.split(","))
     model_cfg = ModelConfig(hidden=hidden, dropout=0.5, dropout_layers=args.dropout_layers)

@@ -22,8 +22,8 @@ def compare(a: Path, b: Path, env_name: str, steer: bool = True) -> list[dict]:
     import numpy as np
 
     from ntq_jax import make_env, stats
-    from ntq_jax.data import env_slug
-    from ntq_jax.evaluate import paths_file
+    from ntq_jax.envs import env_slug
+    from ntq_jax.experiment.evaluate import paths_file
 
     slug = env_slug(env_name, make_env(env_name))
     qa, qb = (np.load(r / "eval" / slug / "queries.npz") for r in (a, b))

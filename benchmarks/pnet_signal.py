@@ -14,7 +14,7 @@ import jax
 import jax.numpy as jnp
 
 from ntq_jax import make_env, models
-from ntq_jax.config import ModelConfig
+from ntq_jax.models import ModelConfig
 
 MPNET = (1280, 1024, 896, 768, 512, 384, 256, 256, 128, 64, 32)
 NETS = (("MPNet's released, dropout after 10 layers", MPNET, 10),

@@ -1,8 +1,8 @@
 """Where the host-side planning chunks run: in this process (``local``) or as Ray tasks (``ray``).
 
 An executor is a small strategy injected into the stages that plan in chunks
-(:func:`ntq_jax.data.planning.plan_pool`, the evaluation's reference planning,
-:mod:`ntq_jax.pipeline`'s per-environment data stage). The compute code stays
+(:func:`ntq_jax.planners.jobs.plan_pool`, the evaluation's reference planning,
+:mod:`ntq_jax.experiment.pipeline`'s per-environment data stage). The compute code stays
 free of executor knowledge: a chunk is a pure function of its arguments
 (environment, queries, planner and options, padding, the chunk's seed) that
 returns arrays; the DRIVER writes each chunk's result atomically into the run

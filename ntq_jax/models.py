@@ -55,6 +55,30 @@ import numpy as np
 from flax import nnx
 
 from ntq_jax import prng
+from ntq_jax.errors import check_config as _check
+
+
+@dataclasses.dataclass(frozen=True)
+class ModelConfig:
+    """PNet (MPNet's MLP).
+
+    Attributes:
+        hidden: hidden layer widths.
+        dropout: dropout rate after the first ``dropout_layers`` hidden layers.
+        dropout_layers: how many hidden layers are followed by dropout.
+    """
+
+    hidden: tuple[int, ...] = (256, 256, 128, 64)
+    dropout: float = 0.5
+    dropout_layers: int = 2
+
+    def validate(self, p: str):
+        _check(len(self.hidden) >= 1 and all(h >= 1 for h in self.hidden), f"{p}.hidden",
+               f"must be a non-empty list of positive widths, got {list(self.hidden)}")
+        _check(0.0 <= self.dropout < 1.0, f"{p}.dropout", f"must be in [0, 1), got {self.dropout}")
+        _check(0 <= self.dropout_layers <= len(self.hidden), f"{p}.dropout_layers",
+               f"must be in [0, {len(self.hidden)}], got {self.dropout_layers}")
+
 
 Array = jax.Array
 
@@ -108,7 +132,7 @@ class ModelSpec:
 
         Args:
             env: an :class:`ntq_jax.Env` (its robot's ``config_bounds`` and kind are used).
-            model_cfg: a :class:`ntq_jax.config.ModelConfig`.
+            model_cfg: a :class:`ntq_jax.models.ModelConfig`.
         """
         lo, hi = env.robot.config_bounds(env.world)
         lo = tuple(float(v) for v in np.asarray(lo))

@@ -18,7 +18,7 @@ metric and a :class:`ntq_jax.types.PlanCause` (names in
   geometry, or not finite.
 
 **The ensemble planner.** ``pnet`` may also be a sequence of PNets (e.g.
-:func:`ntq_jax.evaluate.member_pnets` of a trained ensemble): wherever the
+:func:`ntq_jax.experiment.evaluate.member_pnets` of a trained ensemble): wherever the
 planner asks for a next state (every coarse-plan step, every step of a
 bidirectional connection, so also neural replanning) every member predicts
 from the same key, current state and target, in one jitted call, and
@@ -134,7 +134,7 @@ class PlannerOptions:
 
     @staticmethod
     def from_config(ev, steer: bool | None = None) -> "PlannerOptions":
-        """Options from an :class:`ntq_jax.config.EvalConfig` (``steer`` overrides its first entry)."""
+        """Options from an :class:`ntq_jax.experiment.config.EvalConfig` (``steer`` overrides its first entry)."""
         return PlannerOptions(
             n_plan=ev.n_plan, steer=ev.steer[0] if steer is None else bool(steer),
             delta=ev.delta, delta_norm=ev.delta_norm or "robot",
@@ -474,7 +474,7 @@ def plan_members(env, pnets, queries, key: Array, opts: PlannerOptions = Planner
     MemberBlocks`: each jitted call carries ``chunk`` rows of every member and
     each member predicts for its own rows), which only changes how the work is
     batched, not what is computed. This is what a best-of-N planner runs
-    (:func:`ntq_jax.evaluate.best_of` then keeps each query's cheapest success).
+    (:func:`ntq_jax.experiment.evaluate.best_of` then keeps each query's cheapest success).
 
     Args:
         env, queries, opts, chunk, repair_width: as in :func:`plan_batch`
@@ -518,10 +518,10 @@ def plan_cascade(env, pnets, queries, key: Array, opts: PlannerOptions = Planner
     (:data:`ntq_jax.types.CAUSE_RANK`; ties: the earliest attempt). The work
     falls with every solved query, so the cascade costs one member's planning
     plus the fallbacks' on the failures, against ``M`` members' for best-of-M
-    (:func:`ntq_jax.evaluate.best_of`), and reaches the same successes (any
+    (:func:`ntq_jax.experiment.evaluate.best_of`), and reaches the same successes (any
     member's) at the cost of the first member that solves a query instead of
     the cheapest. Order the members best first (e.g. by success on validation
-    queries, as :func:`ntq_jax.evaluate.evaluate_env` does).
+    queries, as :func:`ntq_jax.experiment.evaluate.evaluate_env` does).
 
     Args:
         env, queries, key, opts, chunk, repair_width: as in :func:`plan_batch`.

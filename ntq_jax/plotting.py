@@ -313,7 +313,7 @@ def learning_curve_figure(rows, path: Path, title: str = "") -> Path | None:
     """Success ratio vs training rows (top) and vs K_train (bottom), per dataset, with 95%
     intervals; non-trivial test queries left, uniform right.
 
-    ``rows``: :func:`ntq_jax.curve.curve_rows`' dicts (``size``, ``dataset``, ``rows``,
+    ``rows``: :func:`ntq_jax.experiment.curve.curve_rows`' dicts (``size``, ``dataset``, ``rows``,
     ``kind``, ``success``, ``ci95``). Returns None without rows.
     """
     if not rows:

@@ -36,6 +36,7 @@ import numpy as np
 from ntq_jax import prng
 from ntq_jax.geometry import KERNEL_COMPILER_OPTIONS, World
 from ntq_jax.robots.batch import is_valid_cm, steer_to_cm
+from ntq_jax.stats import wilson_interval
 
 Array = jax.Array
 
@@ -319,17 +320,6 @@ class GammaInterrupted(KeyboardInterrupt):
     def __init__(self, estimate: GammaEstimate | None):
         super().__init__("gamma_nt interrupted")
         self.estimate = estimate
-
-
-def wilson_interval(k: int, n: int, z: float = 1.959963984540054) -> tuple[float, float]:
-    """Wilson score interval for a binomial proportion ``k / n``."""
-    if n <= 0:
-        return (0.0, 1.0)
-    p = k / n
-    denom = 1.0 + z * z / n
-    centre = (p + z * z / (2 * n)) / denom
-    half = z / denom * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n))
-    return (max(0.0, centre - half), min(1.0, centre + half))
 
 
 def _chunk_uniforms(seeds: Array, lane0: Array, size: int, k: int) -> list[Array]:

@@ -1,4 +1,11 @@
-"""Paired comparisons of two planners tested on the same queries.
+"""Statistics of success ratios: one interval, paired and unpaired tests.
+
+* one proportion: :func:`wilson_interval`, the Wilson score interval of ``k / n``
+  (gamma_nt, success ratios);
+* two proportions on different queries: :func:`fisher_exact_p`;
+* a trend over maps: :func:`kendall_tau`.
+
+Paired comparisons of two planners tested on the same queries:
 
 Every model of a run is evaluated on the same test queries (per environment,
 query kind and steerTo variant), so two models are compared query by query:
@@ -17,9 +24,9 @@ query kind and steerTo variant), so two models are compared query by query:
   and :func:`wilcoxon_p`, the two-sided Wilcoxon signed-rank p-value.
 
 :func:`paired_comparison` does all of it from the per-query arrays of two
-models (as saved in the run's paths files, :mod:`ntq_jax.evaluate`).
+models (as saved in the run's paths files, :mod:`ntq_jax.experiment.evaluate`).
 
-Only NumPy and SciPy (``scipy.stats``); no JAX.
+Only NumPy and SciPy (``scipy.stats``, imported on first use); no JAX.
 """
 
 from __future__ import annotations
@@ -28,9 +35,9 @@ import math
 import warnings
 
 import numpy as np
-from scipy import stats as _st
 
-__all__ = ["mcnemar_exact", "paired_success_difference", "paired_cost_difference",
+__all__ = ["wilson_interval", "fisher_exact_p", "kendall_tau", "mcnemar_exact",
+           "paired_success_difference", "paired_cost_difference",
            "wilcoxon_p", "paired_comparison", "N_BOOT", "SEED"]
 
 N_BOOT = 10_000  #: bootstrap resamples of the cost difference
@@ -39,7 +46,40 @@ _MAX_DRAWS = 1 << 22  # resample indices drawn per chunk (memory bound of the bo
 
 
 def _z(confidence: float) -> float:
+    from scipy import stats as _st
     return float(_st.norm.ppf(0.5 + confidence / 2))
+
+
+def wilson_interval(k: int, n: int, z: float = 1.959963984540054) -> tuple[float, float]:
+    """Wilson score interval of a binomial proportion ``k / n`` (95 % at the default ``z``).
+
+    Returns ``(lo, hi)`` clipped to ``[0, 1]``; ``(0.0, 1.0)`` when ``n <= 0``.
+    """
+    if n <= 0:
+        return (0.0, 1.0)
+    p = k / n
+    denom = 1.0 + z * z / n
+    centre = (p + z * z / (2 * n)) / denom
+    half = z / denom * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n))
+    return (max(0.0, centre - half), min(1.0, centre + half))
+
+
+def fisher_exact_p(sa: int, na: int, sb: int, nb: int) -> float:
+    """Two-sided Fisher exact p-value of ``sa / na`` against ``sb / nb`` (independent samples)."""
+    from scipy.stats import fisher_exact
+    return float(fisher_exact([[sa, na - sa], [sb, nb - sb]]).pvalue)
+
+
+def kendall_tau(x, y) -> tuple[float, float, float]:
+    """Kendall's tau of ``x, y`` and its one-sided p-values ``(tau, p(tau < 0), p(tau > 0))``.
+
+    Exact when neither ``x`` nor ``y`` has ties, SciPy's ``auto`` otherwise.
+    """
+    from scipy.stats import kendalltau
+    method = "exact" if len(set(x)) == len(x) and len(set(y)) == len(y) else "auto"
+    lo = kendalltau(x, y, method=method, alternative="less")
+    hi = kendalltau(x, y, method=method, alternative="greater")
+    return float(lo.statistic), float(lo.pvalue), float(hi.pvalue)
 
 
 def mcnemar_exact(b: int, c: int) -> float:
@@ -54,15 +94,8 @@ def mcnemar_exact(b: int, c: int) -> float:
         raise ValueError(f"discordant counts must be >= 0, got b={b}, c={c}")
     if b + c == 0:
         return 1.0
+    from scipy import stats as _st
     return float(_st.binomtest(b, b + c, 0.5).pvalue)
-
-
-def _wilson(k: int, n: int, z: float) -> tuple[float, float]:
-    p = k / n
-    denom = 1.0 + z * z / n
-    centre = (p + z * z / (2 * n)) / denom
-    half = z / denom * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n))
-    return max(0.0, centre - half), min(1.0, centre + half)
 
 
 def paired_success_difference(success_a, success_b, confidence: float = 0.95) -> dict:
@@ -101,8 +134,8 @@ def paired_success_difference(success_a, success_b, confidence: float = 0.95) ->
         return {**out, "diff": float("nan"), "ci": [float("nan"), float("nan")]}
     z = _z(confidence)
     p1, p2 = (a + b) / n, (a + c) / n
-    l1, u1 = _wilson(a + b, n, z)
-    l2, u2 = _wilson(a + c, n, z)
+    l1, u1 = wilson_interval(a + b, n, z)
+    l2, u2 = wilson_interval(a + c, n, z)
     margins = float(a + b) * (c + d) * (a + c) * (b + d)
     num = float(a * d - b * c)
     num = max(num - n / 2, 0.0) if num > 0 else num
@@ -167,6 +200,7 @@ def wilcoxon_p(x, y) -> float:
     try:
         with warnings.catch_warnings():  # scipy's small-sample / ties notes
             warnings.simplefilter("ignore")
+            from scipy import stats as _st
             p = _st.wilcoxon(d).pvalue
     except ValueError:
         return float("nan")
@@ -179,7 +213,7 @@ def paired_comparison(a: dict, b: dict, *, n_boot: int = N_BOOT, seed: int = SEE
 
     Args:
         a, b: per-query arrays of each model (a paths file of
-            :mod:`ntq_jax.evaluate`): ``success`` (bool), ``costs`` and
+            :mod:`ntq_jax.experiment.evaluate`): ``success`` (bool), ``costs`` and
             ``ref_costs`` (the reference planner's cost, NaN/inf/<= 0 when it
             failed); optionally ``ref_status`` (0 = solved) and ``queries``,
             which must then be equal in both.

@@ -15,7 +15,7 @@ import json
 import sys
 from pathlib import Path
 
-from ntq_jax.cli import UsageError, run_cli
+from ntq_jax.experiment.cli import UsageError, run_cli
 
 
 def main(argv=None) -> int:

@@ -26,7 +26,7 @@ Factors, on point/0, point/3, rigid/0, rigid/2 and nlink/4 at the paper's sizes
   padding, where training states lie) and out of band, from the same runs.
 
 A cell is one map, data mode and budget: its run in ``<runs>/<map>/<data>/<budget>/``
-(resumable), its summary (:mod:`ntq_jax.summaries`) and ``paired.json`` (PNet_k
+(resumable), its summary (:mod:`ntq_jax.experiment.summaries`) and ``paired.json`` (PNet_k
 - PNet_0 per query kind, steerTo and band: Newcombe interval, McNemar p) in
 ``<results>/<map>/<data>/<budget>/``. ``--seeds`` cells retrain the same data with
 training seeds 1 and 2 (``.../seeds/train_seed_<k>/``). Commit each cell as it
@@ -44,7 +44,7 @@ import time
 from pathlib import Path
 from typing import NamedTuple
 
-from ntq_jax.cli import UsageError, run_cli
+from ntq_jax.experiment.cli import UsageError, run_cli
 
 MAPS = {"rigid/0": "rigid", "point/0": "point", "nlink/4": "nlink", "rigid/2": "rigid",
         "point/3": "point"}  # in the order --next runs them
@@ -154,7 +154,7 @@ def ready(cell: Cell) -> str | None:
 
 def cell_config(cell: Cell, extra: list[str] = ()):
     """The cell's resolved config and its ``--set`` overrides (``extra`` last)."""
-    from ntq_jax.pipeline import load_config
+    from ntq_jax.experiment.pipeline import load_config
     task = MAPS[cell.map]
     path = f"configs/{task}.yaml"
     base = load_config(path, [f"envs=[{cell.map}]", *extra])
@@ -170,7 +170,7 @@ def paired(run: Path, cell: Cell, env) -> list[dict]:
     """PNet_k - PNet_0 per query kind, steerTo and band, from the run's saved paths."""
     import numpy as np
 
-    from ntq_jax.evaluate import in_band
+    from ntq_jax.experiment.evaluate import in_band
     from ntq_jax.stats import mcnemar_exact, paired_success_difference
 
     res = json.loads((run / "results.json").read_text())
@@ -213,8 +213,8 @@ def run_folder(cell: Cell, runs: Path, paper_runs: Path | None) -> Path:
 def run_cell(cell: Cell, runs: Path, results: Path, progress: bool, extra: list[str] = (),
              paper_runs: Path | None = None, paper_results: Path | None = None) -> None:
     from ntq_jax import make_env
-    from ntq_jax.pipeline import prepare_run, run_pipeline
-    from ntq_jax.summaries import read_summary, write_summary
+    from ntq_jax.experiment.pipeline import prepare_run, run_pipeline
+    from ntq_jax.experiment.summaries import read_summary, write_summary
 
     cfg, sets = cell_config(cell, extra)
     out = results / cell.key
@@ -250,7 +250,7 @@ def run_cell(cell: Cell, runs: Path, results: Path, progress: bool, extra: list[
             dest, rcmd = (dest / "seeds" / f"train_seed_{cell.train_seed}",
                           rcmd + f" --train-seeds {cell.train_seed}")
         write_summary(run, cell.map, env, dest, command=rcmd)
-        from ntq_jax import reproduction
+        from ntq_jax.experiment import reproduction
         print(f"report: {reproduction.write(paper_results)}", flush=True)
     from ntq_jax import artifacts
     artifacts.write_json(out / "paired.json", {"cell": cell._asdict(), "sets": sets,

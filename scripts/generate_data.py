@@ -29,7 +29,7 @@ import sys
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
-from ntq_jax.cli import add_executor_options, executor_of, run_cli
+from ntq_jax.experiment.cli import add_executor_options, executor_of, run_cli
 
 
 def main(argv=None) -> int:
@@ -53,7 +53,7 @@ def _main(argv) -> int:
     add_executor_options(ap)
     args = ap.parse_args(argv)
 
-    from ntq_jax import config as C
+    from ntq_jax.experiment import config as C
     from ntq_jax import artifacts, data, make_env
 
     overrides = list(args.set)
@@ -65,7 +65,7 @@ def _main(argv) -> int:
     if out.exists() and not out.is_dir():
         raise NotADirectoryError(20, "Not a directory (--out must be a folder)", str(out))
     made = {name: make_env(name) for name in envs}  # every env valid before any work
-    from ntq_jax.pipeline import check_planners
+    from ntq_jax.experiment.pipeline import check_planners
     check_planners(cfg, made)
     executor = executor_of(args, cfg)
 

@@ -22,7 +22,7 @@ import json
 import sys
 from pathlib import Path
 
-from ntq_jax.cli import UsageError, check_writable, run_cli
+from ntq_jax.experiment.cli import UsageError, check_writable, run_cli
 
 
 def main(argv=None) -> int:

@@ -7,7 +7,7 @@ Examples::
     python scripts/learning_curve.py --env point/2 --sizes 100,300,600 --out runs/curve_p2
 
 The datasets D0..D3 are generated once, at the largest size; a smaller size
-uses the first K queries of each (a prefix: :mod:`ntq_jax.curve`), so only
+uses the first K queries of each (a prefix: :mod:`ntq_jax.experiment.curve`), so only
 training and evaluation repeat. Every size is evaluated on the same test
 queries (from the run seed and the map). Writes ``<out>/curve.json`` (one row
 per size, dataset and test-query kind: training rows, success with its 95 %
@@ -25,7 +25,7 @@ import sys
 import time
 from pathlib import Path
 
-from ntq_jax.cli import add_run_options, executor_of, run_cli, start_run
+from ntq_jax.experiment.cli import add_run_options, executor_of, run_cli, start_run
 
 
 def main(argv=None) -> int:
@@ -47,9 +47,9 @@ def _main(argv) -> int:
                     "cores); default 1", executor=True)
     args = ap.parse_args(argv)
     start_run(args)  # before any JAX operation
-    from ntq_jax.curve import parse_sizes, run_curve
-    from ntq_jax.data import env_slug, resolve_envs
-    from ntq_jax.pipeline import load_config
+    from ntq_jax.experiment.curve import parse_sizes, run_curve
+    from ntq_jax.envs import env_slug, resolve_envs
+    from ntq_jax.experiment.pipeline import load_config
 
     cfg = load_config(args.config, args.set)
     env_name = args.env or cfg.envs[0]

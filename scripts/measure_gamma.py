@@ -27,7 +27,7 @@ import sys
 import time
 from pathlib import Path
 
-from ntq_jax.cli import UsageError, check_writable, run_cli, seed_arg
+from ntq_jax.experiment.cli import UsageError, check_writable, run_cli, seed_arg
 
 MAX_QUERIES = 10**15  # ~80 days at the fastest measured rate (1.5e8 queries/s, point robot)
 INTERRUPTED = 130     # the shell's exit code for a process ended by SIGINT
@@ -190,7 +190,7 @@ def _run(argv) -> int:
 
 
 def main(argv=None) -> int:
-    """Runs the script through :func:`ntq_jax.cli.run_cli`: an expected error (a bad option, an
+    """Runs the script through :func:`ntq_jax.experiment.cli.run_cli`: an expected error (a bad option, an
     unknown environment or bad map, too little free space, a path that cannot be written) is
     one ``error:`` line on stderr and exit code 2; Ctrl-C exits with code 130 without a
     traceback (during the estimate, after printing the estimate so far)."""

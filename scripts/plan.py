@@ -24,7 +24,7 @@ from pathlib import Path
 
 import ntq_jax as nj
 from ntq_jax import artifacts
-from ntq_jax.cli import UsageError, check_writable, run_cli, seed_arg
+from ntq_jax.experiment.cli import UsageError, check_writable, run_cli, seed_arg
 
 
 class PlanError(UsageError):
@@ -32,9 +32,9 @@ class PlanError(UsageError):
 
 
 def _load(run: Path, env_name: str | None):
-    from ntq_jax import config as C
+    from ntq_jax.experiment import config as C
     from ntq_jax import make_env
-    from ntq_jax.data import env_slug
+    from ntq_jax.envs import env_slug
     cfg_f = run / "config.yaml"
     if not cfg_f.is_file():
         raise PlanError(f"{run} is not a run folder (no config.yaml); pass the folder printed by "
@@ -82,7 +82,7 @@ def plan_one(run, model: int, start, goal, *, env_name=None, steer: bool = True,
     import jax
     import numpy as np
 
-    from ntq_jax.evaluate import member_pnets
+    from ntq_jax.experiment.evaluate import member_pnets
     from ntq_jax.neural_planner import PlannerOptions, plan_batch
     from ntq_jax.training import CheckpointError, load_ensemble
 
@@ -125,7 +125,7 @@ def _draw(env, res, s, g, model, png: Path):
 
 def main(argv=None) -> int:
     """Runs the script; an expected error is one ``error:`` line and exit code 2
-    (:func:`ntq_jax.cli.run_cli`)."""
+    (:func:`ntq_jax.experiment.cli.run_cli`)."""
     return run_cli(lambda: _main(argv))
 
 

@@ -23,7 +23,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ntq_jax.cli import positive_int, run_cli
+from ntq_jax.experiment.cli import positive_int, run_cli
 
 
 def main(argv=None) -> int:
@@ -50,9 +50,9 @@ def _main(argv) -> int:
     args = ap.parse_args(argv)
 
     from ntq_jax import artifacts, make_env
-    from ntq_jax import config as C
+    from ntq_jax.experiment import config as C
     from ntq_jax.data.generate import resolve_run
-    from ntq_jax.data.planning import plan_pool
+    from ntq_jax.planners.jobs import plan_pool
     from ntq_jax.data.pools import sample_pools
 
     overrides = list(args.set)

@@ -7,16 +7,17 @@ Examples::
     python scripts/reproduce.py --config configs/rigid.yaml --env rigid/0
     python scripts/reproduce.py --config configs/nlink.yaml --env nlink/4 --train-seeds 1,2
     python scripts/reproduce.py --report-only                           # REPRODUCTION.md only
+    python scripts/reproduce.py --report-only --check   # exit 1 if REPRODUCTION.md is stale
 
 Every map of the config (or each ``--env``) is its own resumable unit: the
 whole pipeline (data, the four PNets, evaluation on K_test uniform + K_test
 non-trivial queries, report) runs for that map alone in
 ``<runs>/<task>/<map>/`` (rerun the same command after an interruption to
-resume it), then its compact summary (:mod:`ntq_jax.summaries`: results,
+resume it), then its compact summary (:mod:`ntq_jax.experiment.summaries`: results,
 tables, figures, the exact config, package version, dataset and model
 fingerprints, time per stage; no large arrays) is written to
 ``<results>/<task>/<map>/`` and ``<results>/REPRODUCTION.md`` is regenerated
-from every summary there (:mod:`ntq_jax.reproduction`). A map whose summary
+from every summary there (:mod:`ntq_jax.experiment.reproduction`). A map whose summary
 was made from the same config is skipped, so an interrupted reproduction keeps
 every finished map; commit each summary as it lands.
 
@@ -34,7 +35,7 @@ import sys
 import time
 from pathlib import Path
 
-from ntq_jax.cli import UsageError, add_run_options, run_cli, start_run
+from ntq_jax.experiment.cli import UsageError, add_run_options, run_cli, start_run
 
 
 def main(argv=None) -> int:
@@ -57,9 +58,9 @@ def _seeds(text: str) -> list[int]:
 def _one(cfg, name: str, env, run: Path, out: Path, *, args, command: str,
          data_from: Path | None = None) -> None:
     """Runs the pipeline for one map (unless its summary is current) and writes its summary."""
-    from ntq_jax.data import env_slug
-    from ntq_jax.pipeline import prepare_run, run_pipeline
-    from ntq_jax.summaries import read_summary, write_summary
+    from ntq_jax.envs import env_slug
+    from ntq_jax.experiment.pipeline import prepare_run, run_pipeline
+    from ntq_jax.experiment.summaries import read_summary, write_summary
 
     old = read_summary(out)
     if old is not None and old.get("config_hash") == cfg.hash():
@@ -72,7 +73,7 @@ def _one(cfg, name: str, env, run: Path, out: Path, *, args, command: str,
         artifacts.link_tree(data_from / "data" / slug, run / "data" / slug)
     print(f"[{name}] run folder: {run}", flush=True)
     t0 = time.perf_counter()
-    from ntq_jax.cli import executor_of
+    from ntq_jax.experiment.cli import executor_of
     run_pipeline(cfg, run, progress=not args.no_progress, figures=not args.no_figures,
                  executor=executor_of(args, cfg))
     path = write_summary(run, name, env, out, command=command)
@@ -80,11 +81,15 @@ def _one(cfg, name: str, env, run: Path, out: Path, *, args, command: str,
 
 
 def _report(results: Path) -> None:
-    try:
-        from ntq_jax import reproduction
-    except ImportError:  # pragma: no cover - the report module ships with the package
-        return
+    from ntq_jax.experiment import reproduction
     print(f"report: {reproduction.write(results)}", flush=True)
+
+
+def _check(results: Path) -> int:
+    from ntq_jax.experiment import reproduction
+    problem = reproduction.check(results)
+    print(problem or f"{results / reproduction.DOC_NAME} is up to date", flush=True)
+    return 1 if problem else 0
 
 
 def _main(argv) -> int:
@@ -99,6 +104,8 @@ def _main(argv) -> int:
                     help="summary folders and REPRODUCTION.md (default results/paper)")
     ap.add_argument("--report-only", action="store_true",
                     help="only regenerate REPRODUCTION.md from the summaries")
+    ap.add_argument("--check", action="store_true",
+                    help="with --report-only: write nothing, exit 1 if REPRODUCTION.md is stale")
     add_run_options(ap, set_example="eval.k_test=100", figures_help="skip the PNG figures",
                     cpu_devices_help="JAX CPU devices to create (one per core); default 1",
                     executor=True)
@@ -108,15 +115,19 @@ def _main(argv) -> int:
         if args.env or args.train_seeds or args.config:
             raise UsageError("--report-only regenerates REPRODUCTION.md from every summary in "
                              "--results; it takes no --config, --env or --train-seeds")
+        if args.check:
+            return _check(results)
         _report(results)
         return 0
+    if args.check:
+        raise UsageError("--check goes with --report-only")
     if args.config is None:
         raise UsageError("--config is required (configs/point.yaml, configs/rigid.yaml or "
                          "configs/nlink.yaml), unless --report-only")
     seeds = _seeds(args.train_seeds)
     start_run(args)  # before any JAX operation
-    from ntq_jax.data import env_slug, resolve_envs
-    from ntq_jax.pipeline import load_config
+    from ntq_jax.envs import env_slug, resolve_envs
+    from ntq_jax.experiment.pipeline import load_config
 
     base = load_config(args.config, args.set)
     names = args.env or list(base.envs)

@@ -23,7 +23,7 @@ import sys
 import time
 from pathlib import Path
 
-from ntq_jax.cli import UsageError, positive_int, run_cli
+from ntq_jax.experiment.cli import UsageError, positive_int, run_cli
 
 
 def main(argv=None) -> int:
@@ -50,7 +50,7 @@ def _main(argv) -> int:
     ap.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     args = ap.parse_args(argv)
 
-    from ntq_jax.config import load
+    from ntq_jax.experiment.config import load
 
     positive_int("--cpu-devices", args.cpu_devices)
     cfg = load(args.config, args.set)

@@ -21,7 +21,7 @@ cluster (README, "Running on a Ray cluster"). The outputs do not depend on the
 executor.
 
 The run folder (``--out``, default ``<out_dir>/<task>-<config hash>``) is
-described in :mod:`ntq_jax.pipeline`. Rerunning the same command after an
+described in :mod:`ntq_jax.experiment.pipeline`. Rerunning the same command after an
 interruption resumes it (datasets are verified against their checksums first;
 a damaged one is regenerated). A non-empty folder that is not a run of this
 config (another config, or no valid run.json) is refused: pass another
@@ -36,8 +36,8 @@ import argparse
 import sys
 import time
 
-from ntq_jax.cli import add_run_options, executor_of, run_cli, start_run
-from ntq_jax.pipeline import load_config, prepare_run, run_pipeline
+from ntq_jax.experiment.cli import add_run_options, executor_of, run_cli, start_run
+from ntq_jax.experiment.pipeline import load_config, prepare_run, run_pipeline
 
 
 def main(argv=None) -> int:

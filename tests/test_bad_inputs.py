@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 
 import ntq_jax as nj
-from ntq_jax.data import env_slug, resolve_envs
+from ntq_jax.envs import env_slug, resolve_envs
 from ntq_jax.envs import MAX_STATES_PER_MOTION, EnvError
 from ntq_jax.presets import PRESETS
 
@@ -70,7 +70,7 @@ SETS = sum((["--set", s] for s in TINY), [])
 
 
 def _pipeline(out, extra=(), log=lambda s: None, **kw):
-    from ntq_jax.pipeline import load_config, prepare_run, run_pipeline
+    from ntq_jax.experiment.pipeline import load_config, prepare_run, run_pipeline
 
     cfg = load_config(None, list(TINY) + list(extra))
     return run_pipeline(cfg, prepare_run(cfg, out, **kw), progress=False, figures=False, log=log)
@@ -167,7 +167,7 @@ def test_run_bad_out_or_config_is_one_error_and_writes_nothing(tmp_path, capsys,
 
 @pytest.mark.parametrize("damage", ["deleted", "corrupt", "not_a_record"])
 def test_run_folder_without_valid_run_json_is_refused_with_another_config(run_copy, damage):
-    from ntq_jax.pipeline import PipelineError
+    from ntq_jax.experiment.pipeline import PipelineError
 
     f = run_copy / "run.json"
     if damage == "deleted":
@@ -187,7 +187,7 @@ def test_run_folder_without_valid_run_json_is_refused_with_another_config(run_co
 
 
 def test_run_foreign_config_refused_and_overwrite_starts_over(run_copy, capsys):
-    from ntq_jax.pipeline import PipelineError, load_config, prepare_run
+    from ntq_jax.experiment.pipeline import PipelineError, load_config, prepare_run
 
     before = _listing(run_copy)
     with pytest.raises(PipelineError, match="another config"):
@@ -206,7 +206,7 @@ def test_run_foreign_config_refused_and_overwrite_starts_over(run_copy, capsys):
                                   "paths/point_2/analysis/out.txt"])
 def test_overwrite_never_deletes_a_users_file_in_a_subfolder(run_copy, mine):
     """--overwrite checks the whole tree against what a run writes before deleting anything."""
-    from ntq_jax.pipeline import PipelineError, foreign_files, load_config, prepare_run
+    from ntq_jax.experiment.pipeline import PipelineError, foreign_files, load_config, prepare_run
 
     assert foreign_files(run_copy) == []  # every file a run writes is known as one
     (run_copy / mine).parent.mkdir(parents=True, exist_ok=True)
@@ -366,7 +366,7 @@ def test_script_expected_errors_are_one_line(tmp_path, capsys, case):
 
 
 def test_script_unexpected_errors_keep_their_traceback():
-    from ntq_jax.cli import run_cli
+    from ntq_jax.experiment.cli import run_cli
 
     def bug():
         raise KeyError("a bug")
@@ -475,7 +475,7 @@ def test_map_resolution_floor_bounds_the_work_of_steer_to():
     assert free.tolist() == [True, True, True]
     for name in PRESETS:
         nj.make_env(name)
-    from ntq_jax.pipeline import load_config
+    from ntq_jax.experiment.pipeline import load_config
     for f in sorted((ROOT / "configs").glob("*.yaml")):
         resolve_envs(load_config(f, []).envs)
 
@@ -558,7 +558,7 @@ def test_map_slug_is_unique_to_the_content(tmp_path):
 def test_map_same_file_names_run_into_their_own_folders(tmp_path):
     """Silent failure 1: two different maps both named map.json share no folder; each is
     trained on its own data and scored with its own models."""
-    from ntq_jax.pipeline import load_config, prepare_run, run_pipeline
+    from ntq_jax.experiment.pipeline import load_config, prepare_run, run_pipeline
     from ntq_jax.training import load_ensemble
 
     a = _write_map(tmp_path / "maps" / "a" / "map.json", "point/1")
@@ -592,7 +592,7 @@ def test_map_same_file_names_run_into_their_own_folders(tmp_path):
 
 def test_map_duplicate_envs_write_no_data(tmp_path):
     """Two config entries for one folder fail before any dataset or model is written."""
-    from ntq_jax.pipeline import load_config, prepare_run, run_pipeline
+    from ntq_jax.experiment.pipeline import load_config, prepare_run, run_pipeline
 
     a = _write_map(tmp_path / "a" / "map.json", "point/1")
     a2 = _write_map(tmp_path / "b" / "map.json", "point/1")

@@ -5,8 +5,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ntq_jax import config
-from ntq_jax.config import ConfigError
+from ntq_jax.experiment import config
+from ntq_jax.experiment.config import ConfigError
 
 CONFIGS = sorted(Path(__file__).resolve().parents[1].joinpath("configs").glob("*.yaml"))
 
@@ -81,9 +81,9 @@ def test_missing_and_unparsable_files(tmp_path):
 
 
 def test_per_env_planner_and_training_seed():
-    from ntq_jax.evaluate import task_of
+    from ntq_jax.experiment.evaluate import task_of
     from ntq_jax import make_env
-    from ntq_jax.pipeline import load_config
+    from ntq_jax.experiment.pipeline import load_config
 
     cfg = load_config(None, [])  # the embedded default: four point maps and rigid/0
     assert cfg.envs[-1] == "rigid/0"
@@ -110,8 +110,8 @@ def test_smooth_data_reaches_the_data_planner_only():
     """planner.smooth_data: null keeps the hash and the planners' default (shortcut paths);
     false reaches astar/roadmap data generation, never the evaluation reference."""
     from ntq_jax import make_env
-    from ntq_jax.data.planning import planner_options
-    from ntq_jax.pipeline import load_config
+    from ntq_jax.planners.jobs import planner_options
+    from ntq_jax.experiment.pipeline import load_config
     from ntq_jax.planners import plan
 
     cfg = load_config(None, [])

@@ -21,7 +21,7 @@ import pytest
 import scipy.stats
 from shapely.geometry import LineString, Point, box
 
-from ntq_jax import config as C
+from ntq_jax.experiment import config as C
 from ntq_jax import PlanResult, data, make_env, plan
 from ntq_jax.data import DatasetError
 from ntq_jax.envs import Env
@@ -351,7 +351,8 @@ def test_wrong_dtype_raises_dataset_error(copy_d3):
 _CHILD = textwrap.dedent("""
     import json, sys, time
     import numpy as np
-    from ntq_jax import config as C, data, make_env, plan
+    from ntq_jax import data, make_env, plan
+    from ntq_jax.experiment import config as C
 
     def slow_visgraph(env, queries, *, padding, seed=0):
         time.sleep(float(sys.argv[3]))

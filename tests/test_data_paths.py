@@ -8,11 +8,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from shapely.geometry import LineString, box
 
-from ntq_jax import Env, config, make_env
-from ntq_jax.config import ConfigError
+from ntq_jax import Env, make_env
+from ntq_jax.experiment import config
+from ntq_jax.experiment.config import ConfigError
 from ntq_jax.data.include import include_data
-from ntq_jax.data.path_modes import shape_paths
-from ntq_jax.data.planning import planner_options
+from ntq_jax.planners.path_modes import shape_paths
+from ntq_jax.planners.jobs import planner_options
 from ntq_jax.planners import plan
 from ntq_jax.planners.resample import resample_paths
 from ntq_jax.robots.batch import distances
@@ -173,7 +174,7 @@ def test_datasets_rebuild_from_a_record_without_planning(tmp_path, monkeypatch):
     """A record (scripts/record_paths.py) serves data generation: the same datasets as
     planning the pools, with no chunk planned; a record of other queries is refused."""
     from ntq_jax import data
-    from ntq_jax.data import planning
+    from ntq_jax.planners import jobs as planning
 
     sets = ["data.k_train=12", "data.gamma_queries=500", "data.gamma_eval=false"]
     rec = tmp_path / "rec"

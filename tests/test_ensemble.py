@@ -7,7 +7,7 @@
   bidirectional coarse plan.
 * The rule (:func:`ntq_jax.neural_steps.choose`) on hand-made candidates, and the
   ensemble of a useless and a good member planning like the good one.
-* Best-of-N (:func:`ntq_jax.evaluate.best_of`): never costlier than any member's
+* Best-of-N (:func:`ntq_jax.experiment.evaluate.best_of`): never costlier than any member's
   successful path on a query, succeeds iff some member succeeds.
 * The rows and files in a tiny pipeline run (the fixture of tests/test_train_all.py).
 """
@@ -17,9 +17,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from ntq_jax import evaluate as E
+from ntq_jax.experiment import evaluate as E
 from ntq_jax import make_env, models
-from ntq_jax.config import ModelConfig
+from ntq_jax.models import ModelConfig
 from ntq_jax.neural_planner import PlannerOptions, plan_batch
 from ntq_jax.neural_steps import choose
 from ntq_jax.types import PlanCause
@@ -174,8 +174,8 @@ def test_best_of_never_costlier_than_a_member_and_succeeds_iff_one_does():
 
 
 def test_eval_ensemble_option():
-    from ntq_jax.pipeline import load_config
-    from ntq_jax.config import ConfigError
+    from ntq_jax.experiment.pipeline import load_config
+    from ntq_jax.experiment.config import ConfigError
 
     default = load_config(None, [])
     assert default.eval.ensemble is None and default.eval.ensemble_rows == ("ens", "best", "cascade")

@@ -11,10 +11,11 @@ import jax
 import numpy as np
 import pytest
 
-from ntq_jax import Env, artifacts, config, make_env
-from ntq_jax import evaluate as E
-from ntq_jax import report as R
-from ntq_jax.queries import wilson_interval
+from ntq_jax import Env, artifacts, make_env
+from ntq_jax.experiment import config
+from ntq_jax.experiment import evaluate as E
+from ntq_jax.experiment import report as R
+from ntq_jax.stats import wilson_interval
 from ntq_jax.types import QUERY_KINDS, PlanCause
 
 

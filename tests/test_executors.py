@@ -18,9 +18,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ntq_jax import config as C
+from ntq_jax.experiment import config as C
 from ntq_jax import data, make_env
-from ntq_jax.data import planning
+from ntq_jax.planners import jobs as planning
 from ntq_jax.executors import LocalExecutor, RayExecutor, make_executor
 
 REPO = Path(__file__).resolve().parents[1]
@@ -211,7 +211,7 @@ def test_local_run_interrupted_then_resumed_with_ray(ray_session, local_run, tmp
 def test_reference_roadmap_chunks_match_local(ray_session, tmp_path):
     """The evaluation's reference, roadmap on point/2: chunk tasks (first one alone, which
     builds the roadmap) give the single local call's paths and costs."""
-    from ntq_jax.evaluate import reference_plans, test_queries
+    from ntq_jax.experiment.evaluate import reference_plans, test_queries
 
     cfg = C.load(None, ["envs=[point/2]", "planner.name=roadmap", "planner.milestones=200",
                         "planner.grow_rounds=0", "eval.k_test=8", "data.chunk=4"])

@@ -199,8 +199,9 @@ def _paths(run: Path) -> dict:
 
 def _run_all(tmp: Path) -> tuple[dict, dict[str, np.ndarray]]:
     """Runs the golden pipeline and arm data; ``(fingerprints, trained parameters)``."""
-    from ntq_jax import config, data, make_env
-    from ntq_jax.pipeline import load_config, prepare_run, run_pipeline
+    from ntq_jax import data, make_env
+    from ntq_jax.experiment import config
+    from ntq_jax.experiment.pipeline import load_config, prepare_run, run_pipeline
 
     run = tmp / "run"
     cfg = load_config(None, TINY)
@@ -395,9 +396,10 @@ def simulate(tmp: Path) -> dict:
     of one coordinate, its checksum updated so training accepts it), trains again
     and holds that too. Returns both outcomes (JSON-ready).
     """
-    from ntq_jax import config, data, make_env, training
+    from ntq_jax import data, make_env, training
+    from ntq_jax.experiment import config
     from ntq_jax.data.format import npy_sha256
-    from ntq_jax.pipeline import load_config
+    from ntq_jax.experiment.pipeline import load_config
 
     cfg = load_config(None, TINY)
     data.generate_datasets(make_env("point/2"), cfg, tmp / "data", env_name="point/2",

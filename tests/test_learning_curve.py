@@ -1,4 +1,4 @@
-"""The data-efficiency curve (scripts/learning_curve.py, ntq_jax.curve): one tiny curve on point/2.
+"""The data-efficiency curve (scripts/learning_curve.py, ntq_jax.experiment.curve): one tiny curve on point/2.
 
 Checks one curve row per (size, dataset, query kind), that a size's data is a
 prefix of the largest size's and bit for bit what a run with that k_train
@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 
 from ntq_jax import data, make_env
-from ntq_jax.curve import prefix_dataset, run_curve
-from ntq_jax.pipeline import load_config
+from ntq_jax.experiment.curve import prefix_dataset, run_curve
+from ntq_jax.experiment.pipeline import load_config
 
 ROOT = Path(__file__).resolve().parents[1]
 TINY = ["envs=[point/2]", "data.k_train=40", "data.gamma_queries=2000", "data.gamma_eval=false",

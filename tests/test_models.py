@@ -9,7 +9,7 @@ import pytest
 from flax import nnx
 
 from ntq_jax import make_env, models
-from ntq_jax.config import ModelConfig
+from ntq_jax.models import ModelConfig
 
 SMALL = ModelConfig(hidden=(16, 8), dropout=0.5, dropout_layers=1)
 

@@ -233,7 +233,7 @@ def test_without_steer_to_delta_is_in_the_robots_metric():
 def test_without_steer_to_the_papers_goal_test_and_unchecked_paths():
     """delta_norm="l2" is the paper's ||pi_end - x_g||_2 on the raw vector (angles not
     wrapped); nosteer_check=False is its "lines 8 and 9 only" (segments not checked)."""
-    from ntq_jax import config
+    from ntq_jax.experiment import config
     env = _rigid_env()
     q = np.asarray([[[2, 2, 0], [8, 2, -np.pi]]], np.float32)
     l2 = PlannerOptions(n_plan=5, steer=False, delta=0.1, delta_norm="l2")

@@ -13,9 +13,9 @@ import json
 import numpy as np
 import pytest
 
-from ntq_jax import config as C
+from ntq_jax.experiment import config as C
 from ntq_jax import data, make_env
-from ntq_jax.config import ConfigError
+from ntq_jax.experiment.config import ConfigError
 from ntq_jax.data.include import prune_rng
 
 K = 150

@@ -24,6 +24,7 @@ from ntq_jax import queries as Q
 from ntq_jax.geometry import World
 from ntq_jax.robots import PointRobot, RigidBody
 from ntq_jax.robots.batch import is_valid_batch, steer_to_batch
+from ntq_jax.stats import wilson_interval
 
 P_MIN = 1e-3  # significance threshold of every statistical test (fixed seeds: deterministic)
 
@@ -426,7 +427,7 @@ def test_gamma_nt_agrees_with_brute_force_monte_carlo(gamma_ref):
     est = ENV.gamma_nt(jax.random.PRNGKey(41), n)
     assert est.queries == n and 0 <= est.non_trivial <= n and est.candidates >= n
     assert est.gamma == est.non_trivial / n
-    assert est.ci95 == Q.wilson_interval(est.non_trivial, n)
+    assert est.ci95 == wilson_interval(est.non_trivial, n)
     g, sd_g = gamma_ref
     sd = math.sqrt(est.gamma * (1 - est.gamma) / n + sd_g**2)
     assert abs(est.gamma - g) < 4 * sd, (est.gamma, g, sd)
@@ -461,7 +462,7 @@ def test_gamma_nt_counts_exactly_n_queries():
 @pytest.mark.parametrize("k, n", [(0, 1), (1, 1), (0, 10), (3, 10), (10, 10), (1, 1000),
                                   (500, 1000), (311_000, 1_000_000), (7, 10**9)])
 def test_wilson_interval_matches_scipy_and_the_textbook(k, n):
-    lo, hi = Q.wilson_interval(k, n)
+    lo, hi = wilson_interval(k, n)
     ref = stats.binomtest(k, n).proportion_ci(0.95, method="wilson")
     assert lo == pytest.approx(ref.low, rel=1e-9, abs=1e-12)
     assert hi == pytest.approx(ref.high, rel=1e-9, abs=1e-12)

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from ntq_jax import reproduction
+from ntq_jax.experiment import reproduction, summaries
 
 ROOT = Path(__file__).resolve().parents[1]
 TINY = ["data.k_train=40", "data.gamma_queries=2000", "data.gamma_eval=false",
@@ -62,7 +62,7 @@ def test_reproduce_one_map_with_a_training_seed(tmp_path, capsys):
     # the report: regenerated, current, and it says the sizes are not the paper's
     doc = results / "REPRODUCTION.md"
     assert doc.read_text() == reproduction.render(results)
-    assert any("K_train" in p for p in reproduction.check_summary(main))
+    assert any("K_train" in p for p in summaries.check_summary(main))
     # a finished map is skipped on a rerun (nothing is planned or trained again)
     before = (results / "point" / "point_2" / "summary.json").stat().st_mtime_ns
     capsys.readouterr()
@@ -86,7 +86,6 @@ def test_reproduce_usage_errors(args, msg, capsys, tmp_path):
 
 
 def test_report_only_with_a_corrupt_summary_or_map_options_is_one_line(tmp_path, capsys):
-    from ntq_jax import reproduction as R
     script = _script()
     bad = tmp_path / "results" / "point" / "point_0" / "summary.json"
     bad.parent.mkdir(parents=True)
@@ -94,7 +93,7 @@ def test_report_only_with_a_corrupt_summary_or_map_options_is_one_line(tmp_path,
     assert script.main(["--report-only", "--results", str(tmp_path / "results")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("error:") and "summary.json" in err[0]
-    assert R.main([str(tmp_path / "results")]) == 2
+    assert script.main(["--report-only", "--check", "--results", str(tmp_path / "results")]) == 2
     assert "not a readable summary" in capsys.readouterr().err
     for extra in (["--env", "point/0"], ["--train-seeds", "1"]):
         assert script.main(["--report-only", "--results", str(tmp_path / "r2")] + extra) == 2

@@ -1,4 +1,4 @@
-"""REPRODUCTION.md from committed summaries (ntq_jax.reproduction).
+"""REPRODUCTION.md from committed summaries (ntq_jax.experiment.reproduction).
 
 Synthetic summaries (built here, in the shape of a run's results.json rows and
 comparisons) check the document: deterministic, the paper's numbers next to ours,
@@ -15,13 +15,16 @@ from pathlib import Path
 
 import pytest
 
-from ntq_jax import reproduction as R
+from ntq_jax.experiment import claims as CL
+from ntq_jax.experiment import paper as PA
+from ntq_jax.experiment import reproduction as R
+from ntq_jax.experiment import summaries as S
 from ntq_jax.stats import mcnemar_exact
 
 REPO = Path(__file__).resolve().parent.parent
 PAPER_ROOT = REPO / "results" / "paper"
 
-K = R.PAPER_K_TEST
+K = PA.PAPER_K_TEST
 GAMMA = {"point/0": 0.31, "point/1": 0.40, "point/2": 0.41, "point/3": 0.63, "rigid/0": 0.50,
          "rigid/1": 0.66, "rigid/2": 0.56, "rigid/3": 0.69, "nlink/2": 0.22, "nlink/4": 0.37,
          "nlink/6": 0.61}
@@ -54,8 +57,8 @@ def _comp(env, model, baseline, kind, steer, only_a, only_b, both=300, ci=None):
 def _config(env):
     task = env.split("/")[0]
     return {"task": task, "envs": [env], "seed": 0,
-            "data": {"k_train": R.PAPER_K_TRAIN[env], "per_env": [],
-                     "datasets": [dict(d) for d in R.PAPER_DATASETS]},
+            "data": {"k_train": PA.PAPER_K_TRAIN[env], "per_env": [],
+                     "datasets": [dict(d) for d in PA.PAPER_DATASETS]},
             "model": {"hidden": [64, 32]},
             "eval": {"k_test": K, "steer": [True, False] if task == "rigid" else [True]}}
 
@@ -67,13 +70,13 @@ def make_summary(env, successes=None, comparisons=(), train_seed=0, gamma=None):
     task = env.split("/")[0]
     steers = (True, False) if task == "rigid" else (True,)
     rows = [_row(env, m, k, s, successes.get((m, k, s), 400), gamma=gamma)
-            for s in steers for m in R.MEMBERS for k in R.KINDS]
+            for s in steers for m in PA.MEMBERS for k in PA.KINDS]
     rows += [_row(env, m, k, s, n, gamma=gamma) for (m, k, s), n in successes.items()
-             if m not in R.MEMBERS]
+             if m not in PA.MEMBERS]
     return {"schema": 1, "task": task, "env": env, "env_slug": env.replace("/", "_"),
             "seed": 0, "train_seed": train_seed, "package_version": "0.1.0",
             "config_hash": "0123456789abcdef", "config": _config(env),
-            "padding": R.PAPER_PADDING[task], "rows": rows, "comparisons": list(comparisons),
+            "padding": PA.PAPER_PADDING[task], "rows": rows, "comparisons": list(comparisons),
             "fingerprints": {"datasets": {f"D{i}": f"{i}" * 64 for i in range(4)},
                              "models": "f" * 64},
             "timings": {"data": 10.0, "train": 20.0, "eval": 5.5},
@@ -104,19 +107,19 @@ def _find(claims, claim_start, scope_start):
 
 
 def test_paper_tables_transcribed():
-    assert sum(len(envs) for envs in R.PAPER.values()) == 15
-    assert all(set(e["models"]) == set(R.MEMBERS) for t in R.PAPER.values() for e in t.values())
-    assert R.PAPER["I"]["point/0"]["models"]["PNet_0"]["uniform"] == {"success": 0.970,
+    assert sum(len(envs) for envs in PA.PAPER.values()) == 15
+    assert all(set(e["models"]) == set(PA.MEMBERS) for t in PA.PAPER.values() for e in t.values())
+    assert PA.PAPER["I"]["point/0"]["models"]["PNet_0"]["uniform"] == {"success": 0.970,
                                                                        "cost": 1.004}
-    assert R.PAPER["II"]["rigid/1"]["gamma_nt"] == 0.659
-    assert R.PAPER["III"]["rigid/0"]["models"]["PNet_3"]["uniform"]["success"] == 0.228
-    assert R.PAPER["IV"]["nlink/4"]["models"]["PNet_3"]["nontrivial"]["success"] == 0.82
-    assert R.PAPER["IV"]["nlink/6"]["models"]["PNet_3"]["nontrivial"]["cost"] == 0.958
-    for tid, spec in R.PAPER_TABLES.items():
-        assert tuple(R.PAPER[tid]) == spec["envs"]
-    assert R.PAPER_K_TRAIN["nlink/4"] == 4000 and R.PAPER_K_TRAIN["rigid/2"] == 5000
-    assert R.PAPER_PADDING == {"point": 0.8, "rigid": 0.4, "nlink": 0.8}
-    assert tuple(R.PAPER_K_TRAIN) == R.MAPS
+    assert PA.PAPER["II"]["rigid/1"]["gamma_nt"] == 0.659
+    assert PA.PAPER["III"]["rigid/0"]["models"]["PNet_3"]["uniform"]["success"] == 0.228
+    assert PA.PAPER["IV"]["nlink/4"]["models"]["PNet_3"]["nontrivial"]["success"] == 0.82
+    assert PA.PAPER["IV"]["nlink/6"]["models"]["PNet_3"]["nontrivial"]["cost"] == 0.958
+    for tid, spec in PA.PAPER_TABLES.items():
+        assert tuple(PA.PAPER[tid]) == spec["envs"]
+    assert PA.PAPER_K_TRAIN["nlink/4"] == 4000 and PA.PAPER_K_TRAIN["rigid/2"] == 5000
+    assert PA.PAPER_PADDING == {"point": 0.8, "rigid": 0.4, "nlink": 0.8}
+    assert tuple(PA.PAPER_K_TRAIN) == PA.MAPS
 
 
 # ---------------------------------------------------------------------------
@@ -140,7 +143,7 @@ def test_render_is_deterministic_and_puts_the_paper_next_to_ours(tmp_path):
     assert "| PNet_3 | PNet_0 | non-trivial | +0.060 [0.020, 0.100] |" in text
     assert "python scripts/reproduce.py --env point/0" in text
     # the command names the folder as the repository spells it, from results/ on
-    assert f"python -m ntq_jax.reproduction {tmp_path.name} --check" in text
+    assert f"python scripts/reproduce.py --report-only --results {tmp_path.name}" in text
     assert R._root_label(REPO / "results" / "ablations" / "x") == "results/ablations/x"
     assert "roadmap (data: roadmap)" in text
     assert "| point/0 | 10.0 | 20.0 | 5.5 | 35.5 |" in text
@@ -161,7 +164,7 @@ def test_missing_maps_are_listed(tmp_path):
 def test_empty_root_renders(tmp_path):
     text = R.render(tmp_path / "nothing")
     assert "Maps with steerTo: 0 of 11" in text and "not run" in text
-    assert R.load_summaries(tmp_path / "nothing") == []
+    assert S.load_summaries(tmp_path / "nothing") == []
 
 
 def test_load_summaries_order(tmp_path):
@@ -169,7 +172,7 @@ def test_load_summaries_order(tmp_path):
         write_summary(tmp_path, make_summary(env))
     write_summary(tmp_path, make_summary("point/0", train_seed=2), seed_dir=2)
     write_summary(tmp_path, make_summary("point/0", train_seed=1), seed_dir=1)
-    got = [(s["env"], s["train_seed"], R.is_seed_run(s)) for s in R.load_summaries(tmp_path)]
+    got = [(s["env"], s["train_seed"], S.is_seed_run(s)) for s in S.load_summaries(tmp_path)]
     assert got == [("point/0", 0, False), ("point/0", 1, True), ("point/0", 2, True),
                    ("point/1", 0, False), ("rigid/0", 0, False), ("nlink/4", 0, False)]
 
@@ -184,69 +187,69 @@ def test_claim_verdicts_on_paired_comparisons(tmp_path):
     for env, (a, b) in cases.items():
         write_summary(tmp_path, make_summary(env, comparisons=[
             _comp(env, "PNet_3", "PNet_0", "nontrivial", True, a, b)]))
-    cs = R.claims(R.load_summaries(tmp_path))
+    cs = CL.claims(S.load_summaries(tmp_path))
     text = "PNet_3 >= PNet_0 in success on non-trivial"
-    assert _find(cs, text, "point/0")["verdict"] == R.HOLDS
-    assert _find(cs, text, "point/1")["verdict"] == R.FAILS
-    assert _find(cs, text, "point/2")["verdict"] == R.UNRESOLVED
-    assert _find(cs, text, "point/3")["verdict"] == R.NOT_RUN
+    assert _find(cs, text, "point/0")["verdict"] == CL.HOLDS
+    assert _find(cs, text, "point/1")["verdict"] == CL.FAILS
+    assert _find(cs, text, "point/2")["verdict"] == CL.UNRESOLVED
+    assert _find(cs, text, "point/3")["verdict"] == CL.NOT_RUN
     assert "McNemar p" in _find(cs, text, "point/0")["evidence"]
     assert _find(cs, text, "point/0")["paper"] == "0.930 vs 0.894 (+0.036)"
     # pooled over the task: not run until all four maps are there
-    assert _find(cs, text, "point, pooled")["verdict"] == R.NOT_RUN
+    assert _find(cs, text, "point, pooled")["verdict"] == CL.NOT_RUN
 
 
 def test_pooled_claim_sums_the_discordant_pairs(tmp_path):
-    for env, (a, b) in zip(R.PAPER_TABLES["IV"]["envs"], [(20, 10), (15, 10), (15, 10)]):
+    for env, (a, b) in zip(PA.PAPER_TABLES["IV"]["envs"], [(20, 10), (15, 10), (15, 10)]):
         write_summary(tmp_path, make_summary(env, comparisons=[
             _comp(env, "PNet_3", "PNet_0", "nontrivial", True, a, b)]))
-    c = _find(R.claims(R.load_summaries(tmp_path)), "PNet_3 >= PNet_0 in success on non-trivial",
+    c = _find(CL.claims(S.load_summaries(tmp_path)), "PNet_3 >= PNet_0 in success on non-trivial",
               "nlink, pooled")
     assert "discordant 50 / 30 of 1500" in c["evidence"]
-    assert c["verdict"] == R.verdict(20 / 1500, mcnemar_exact(50, 30)) == R.HOLDS
+    assert c["verdict"] == CL.verdict(20 / 1500, mcnemar_exact(50, 30)) == CL.HOLDS
 
 
 def test_verdict_rule():
-    assert R.verdict(0.05, 0.01) == R.HOLDS
-    assert R.verdict(-0.05, 0.01) == R.FAILS
-    assert R.verdict(0.05, 0.2) == R.UNRESOLVED
-    assert R.verdict(-0.05, 0.01, sign=-1) == R.HOLDS
-    assert R.verdict(None, 0.01) == R.NOT_RUN
+    assert CL.verdict(0.05, 0.01) == CL.HOLDS
+    assert CL.verdict(-0.05, 0.01) == CL.FAILS
+    assert CL.verdict(0.05, 0.2) == CL.UNRESOLVED
+    assert CL.verdict(-0.05, 0.01, sign=-1) == CL.HOLDS
+    assert CL.verdict(None, 0.01) == CL.NOT_RUN
 
 
 def test_without_steer_pnet3_worst(tmp_path):
-    low = {("PNet_3", k, False): 150 for k in R.KINDS}
-    low.update({(m, k, False): 300 for m in ("PNet_0", "PNet_1", "PNet_2") for k in R.KINDS})
+    low = {("PNet_3", k, False): 150 for k in PA.KINDS}
+    low.update({(m, k, False): 300 for m in ("PNet_0", "PNet_1", "PNet_2") for k in PA.KINDS})
     write_summary(tmp_path, make_summary("rigid/0", low, [
         _comp("rigid/0", "PNet_3", "PNet_0", "uniform", False, 10, 160)]))
     high = dict(low)
     high[("PNet_3", "uniform", False)] = 400  # above PNet_1 and PNet_2 (Fisher)
     write_summary(tmp_path, make_summary("rigid/1", high))
-    cs = R.claims(R.load_summaries(tmp_path))
+    cs = CL.claims(S.load_summaries(tmp_path))
     c = _find(cs, "without steerTo PNet_3 is the worst", "rigid/0, uniform")
-    assert c["verdict"] == R.HOLDS
+    assert c["verdict"] == CL.HOLDS
     assert "vs PNet_0 -0.300" in c["evidence"] and "McNemar" in c["evidence"]
     assert "vs PNet_1" in c["evidence"] and "Fisher" in c["evidence"]
-    assert _find(cs, "without steerTo PNet_3 is the worst", "rigid/1, uniform")["verdict"] == R.FAILS
-    assert _find(cs, "without steerTo PNet_3 is the worst", "rigid/2, uniform")["verdict"] == R.NOT_RUN
+    assert _find(cs, "without steerTo PNet_3 is the worst", "rigid/1, uniform")["verdict"] == CL.FAILS
+    assert _find(cs, "without steerTo PNet_3 is the worst", "rigid/2, uniform")["verdict"] == CL.NOT_RUN
     # steerTo rows have 400 successes: every member falls without steerTo
-    assert _find(cs, "the success of every model falls", "rigid, PNet_0")["verdict"] == R.NOT_RUN
+    assert _find(cs, "the success of every model falls", "rigid, PNet_0")["verdict"] == CL.NOT_RUN
 
 
 def test_success_falls_with_gamma(tmp_path):
     # four point maps: the higher gamma_nt, the lower the success (both kinds)
-    for env, n in zip(R.PAPER_TABLES["I"]["envs"], (480, 450, 420, 390)):
-        write_summary(tmp_path, make_summary(env, {(m, k, True): n for m in R.MEMBERS
-                                                   for k in R.KINDS}))
+    for env, n in zip(PA.PAPER_TABLES["I"]["envs"], (480, 450, 420, 390)):
+        write_summary(tmp_path, make_summary(env, {(m, k, True): n for m in PA.MEMBERS
+                                                   for k in PA.KINDS}))
     # three arms, success rising with gamma_nt: only 3 maps, too few to resolve
-    for env, n in zip(R.PAPER_TABLES["IV"]["envs"], (300, 350, 400)):
-        write_summary(tmp_path, make_summary(env, {(m, k, True): n for m in R.MEMBERS
-                                                   for k in R.KINDS}))
-    cs = R.claims(R.load_summaries(tmp_path))
+    for env, n in zip(PA.PAPER_TABLES["IV"]["envs"], (300, 350, 400)):
+        write_summary(tmp_path, make_summary(env, {(m, k, True): n for m in PA.MEMBERS
+                                                   for k in PA.KINDS}))
+    cs = CL.claims(S.load_summaries(tmp_path))
     c = _find(cs, "success falls as gamma_nt rises (uniform", "point")
-    assert c["verdict"] == R.HOLDS and "Kendall tau -1.00 over 4 maps" in c["evidence"]
+    assert c["verdict"] == CL.HOLDS and "Kendall tau -1.00 over 4 maps" in c["evidence"]
     c = _find(cs, "success falls as gamma_nt rises (uniform", "nlink")
-    assert c["verdict"] == R.UNRESOLVED + " (too few maps: 3)"
+    assert c["verdict"] == CL.UNRESOLVED + " (too few maps: 3)"
     c = _find(cs, "success falls as gamma_nt rises (non-trivial", "all 11 maps")
     assert "over 7 maps" in c["evidence"] and c["table"] == "I, II, IV"
 
@@ -257,59 +260,59 @@ def test_six_link_25_percent(tmp_path):
                       [_comp("nlink/6", "PNet_3", "PNet_0", "nontrivial", True, 70, 20,
                              ci=[0.05, 0.15])])
     write_summary(tmp_path, ok)
-    c = _find(R.claims(R.load_summaries(tmp_path)), "PNet_3 about 25%", "nlink/6")
-    assert c["verdict"] == R.HOLDS and "+25.0%" in c["evidence"]
+    c = _find(CL.claims(S.load_summaries(tmp_path)), "PNet_3 about 25%", "nlink/6")
+    assert c["verdict"] == CL.HOLDS and "+25.0%" in c["evidence"]
     assert c["paper"] == "0.644 vs 0.512 (+25.8%)"
     small = make_summary("nlink/6", {("PNet_0", "nontrivial", True): 200,
                                      ("PNet_3", "nontrivial", True): 210},
                          [_comp("nlink/6", "PNet_3", "PNet_0", "nontrivial", True, 30, 20,
                                 ci=[-0.02, 0.06])])
     write_summary(tmp_path, small)
-    c = _find(R.claims(R.load_summaries(tmp_path)), "PNet_3 about 25%", "nlink/6")
-    assert c["verdict"] == R.FAILS  # the claimed +0.100 is outside [-0.02, 0.06]
+    c = _find(CL.claims(S.load_summaries(tmp_path)), "PNet_3 about 25%", "nlink/6")
+    assert c["verdict"] == CL.FAILS  # the claimed +0.100 is outside [-0.02, 0.06]
     assert c["evidence"].endswith("(our gain is smaller)")
 
 
 def test_point_over_90_percent(tmp_path):
-    write_summary(tmp_path, make_summary("point/0", {(m, k, True): 490 for m in R.MEMBERS
-                                                     for k in R.KINDS}))
-    write_summary(tmp_path, make_summary("point/1", {(m, k, True): 490 for m in R.MEMBERS
-                                                     for k in R.KINDS}
+    write_summary(tmp_path, make_summary("point/0", {(m, k, True): 490 for m in PA.MEMBERS
+                                                     for k in PA.KINDS}))
+    write_summary(tmp_path, make_summary("point/1", {(m, k, True): 490 for m in PA.MEMBERS
+                                                     for k in PA.KINDS}
                                          | {("PNet_2", "nontrivial", True): 400}))
-    write_summary(tmp_path, make_summary("point/2", {(m, k, True): 460 for m in R.MEMBERS
-                                                     for k in R.KINDS}))
-    cs = R.claims(R.load_summaries(tmp_path))
+    write_summary(tmp_path, make_summary("point/2", {(m, k, True): 460 for m in PA.MEMBERS
+                                                     for k in PA.KINDS}))
+    cs = CL.claims(S.load_summaries(tmp_path))
     text = "every model succeeds on over 90%"
-    assert _find(cs, text, "point/0")["verdict"] == R.HOLDS  # 0.98 - 0.04 > 0.9
-    assert _find(cs, text, "point/1")["verdict"] == R.FAILS  # 0.80 + 0.04 < 0.9
-    assert _find(cs, text, "point/2")["verdict"] == R.UNRESOLVED  # [0.88, 0.96]
+    assert _find(cs, text, "point/0")["verdict"] == CL.HOLDS  # 0.98 - 0.04 > 0.9
+    assert _find(cs, text, "point/1")["verdict"] == CL.FAILS  # 0.80 + 0.04 < 0.9
+    assert _find(cs, text, "point/2")["verdict"] == CL.UNRESOLVED  # [0.88, 0.96]
 
 
 def test_nlink_gain_grows_with_links(tmp_path):
-    for env, (a, b) in zip(R.PAPER_TABLES["IV"]["envs"], [(12, 10), (60, 10), (80, 10)]):
+    for env, (a, b) in zip(PA.PAPER_TABLES["IV"]["envs"], [(12, 10), (60, 10), (80, 10)]):
         write_summary(tmp_path, make_summary(env, comparisons=[
             _comp(env, "PNet_3", "PNet_0", "nontrivial", True, a, b)]))
-    c = _find(R.claims(R.load_summaries(tmp_path)), "PNet_3's gain over PNet_0", "nlink")
-    assert c["verdict"] == R.HOLDS  # gains +0.004, +0.100, +0.140 with intervals +-0.04
+    c = _find(CL.claims(S.load_summaries(tmp_path)), "PNet_3's gain over PNet_0", "nlink")
+    assert c["verdict"] == CL.HOLDS  # gains +0.004, +0.100, +0.140 with intervals +-0.04
     assert "nlink/4 minus nlink/2 +0.096" in c["evidence"]
     write_summary(tmp_path, make_summary("nlink/6", comparisons=[
         _comp("nlink/6", "PNet_3", "PNet_0", "nontrivial", True, 15, 10)]))
-    c = _find(R.claims(R.load_summaries(tmp_path)), "PNet_3's gain over PNet_0", "nlink")
-    assert c["verdict"] == R.UNRESOLVED  # 4 links: larger; 6 links: not resolvable
+    c = _find(CL.claims(S.load_summaries(tmp_path)), "PNet_3's gain over PNet_0", "nlink")
+    assert c["verdict"] == CL.UNRESOLVED  # 4 links: larger; 6 links: not resolvable
 
 
 def test_cost_ratio_lower_for_rigid_and_six_links(tmp_path):
-    for env in R.MAPS:
+    for env in PA.MAPS:
         s = make_summary(env)
         low = env.startswith("rigid") or env == "nlink/6"
         for r in s["rows"]:
-            r["cost_ratio"] = (0.95 if low else 1.03) + R.MAPS.index(env) * 1e-3
+            r["cost_ratio"] = (0.95 if low else 1.03) + PA.MAPS.index(env) * 1e-3
         write_summary(tmp_path, s)
-    c = _find(R.claims(R.load_summaries(tmp_path)), "cost ratio lower", "rigid")
-    assert c["verdict"] == R.HOLDS and "Mann-Whitney one-sided p 0.002" in c["evidence"]
+    c = _find(CL.claims(S.load_summaries(tmp_path)), "cost ratio lower", "rigid")
+    assert c["verdict"] == CL.HOLDS and "Mann-Whitney one-sided p 0.002" in c["evidence"]
     (tmp_path / "point" / "point_3" / "summary.json").unlink()
-    c = _find(R.claims(R.load_summaries(tmp_path)), "cost ratio lower", "rigid")
-    assert c["verdict"] == R.NOT_RUN and c["evidence"] == "10 of 11 maps run"
+    c = _find(CL.claims(S.load_summaries(tmp_path)), "cost ratio lower", "rigid")
+    assert c["verdict"] == CL.NOT_RUN and c["evidence"] == "10 of 11 maps run"
 
 
 # ---------------------------------------------------------------------------
@@ -324,7 +327,7 @@ def test_seed_variance_mean_and_range(tmp_path):
     # a seeds/ copy of the main run's seed counts once
     write_summary(tmp_path, make_summary("nlink/4", {("PNet_3", "nontrivial", True): 1},
                                          train_seed=0), seed_dir=0)
-    summaries = R.load_summaries(tmp_path)
+    summaries = S.load_summaries(tmp_path)
     st = {(x["model"], x["query_kind"]): x for x in R.seed_variance(summaries, "nlink/4")}
     x = st[("PNet_3", "nontrivial")]
     assert x["seeds"] == [0, 1, 2]
@@ -343,7 +346,7 @@ def test_seed_variance_of_paired_differences(tmp_path):
         s = make_summary("rigid/0", train_seed=seed, comparisons=[
             _comp("rigid/0", "PNet_3", "PNet_0", "nontrivial", True, a, b)])
         write_summary(tmp_path, s, seed_dir=None if seed == 0 else seed)
-    (d,) = R.seed_variance_diffs(R.load_summaries(tmp_path), "rigid/0")
+    (d,) = R.seed_variance_diffs(S.load_summaries(tmp_path), "rigid/0")
     assert d["seeds"] == [0, 1, 2] and d["diff_mean"] == pytest.approx(0.04)
     assert (d["diff_min"], d["diff_max"]) == (0.02, 0.06)
     assert d["significant"] == 2  # 40/10 and 30/10; 20/10 has p 0.099
@@ -354,12 +357,12 @@ def test_seed_variance_of_paired_differences(tmp_path):
 def test_check_seed_runs(tmp_path):
     write_summary(tmp_path, make_summary("rigid/0"))
     write_summary(tmp_path, make_summary("rigid/0", train_seed=1), seed_dir=1)
-    assert R.check_seed_runs(R.load_summaries(tmp_path)) == []
+    assert S.check_seed_runs(S.load_summaries(tmp_path)) == []
     other = make_summary("rigid/0", train_seed=3)
     other["fingerprints"]["datasets"]["D1"] = "e" * 64
     write_summary(tmp_path, other, seed_dir=2)
     write_summary(tmp_path, make_summary("point/0", train_seed=1), seed_dir=1)
-    probs = R.check_seed_runs(R.load_summaries(tmp_path))
+    probs = S.check_seed_runs(S.load_summaries(tmp_path))
     assert probs == [
         "point/point_0/seeds/train_seed_1/summary.json: no main run of point/0",
         "rigid/rigid_0/seeds/train_seed_2/summary.json: train_seed 3 but folder train_seed_2",
@@ -374,8 +377,8 @@ def test_check_seed_runs(tmp_path):
 
 
 def test_check_summary_accepts_paper_size_runs():
-    for env in R.MAPS:
-        assert R.check_summary(make_summary(env)) == [], env
+    for env in PA.MAPS:
+        assert S.check_summary(make_summary(env)) == [], env
 
 
 def test_check_summary_flags_sizes_and_fingerprints():
@@ -385,7 +388,7 @@ def test_check_summary_flags_sizes_and_fingerprints():
     s["padding"] = 0.4
     del s["fingerprints"]["datasets"]["D2"]
     s["fingerprints"]["models"] = ""
-    probs = R.check_summary(s)
+    probs = S.check_summary(s)
     assert any("K_train is 600, the paper's is 3000" in p for p in probs)
     assert any("K_test is 200, the paper's is 500" in p for p in probs)
     assert any("padding is 0.4, the paper's is 0.8" in p for p in probs)
@@ -394,7 +397,7 @@ def test_check_summary_flags_sizes_and_fingerprints():
     s = make_summary("rigid/0")
     del s["fingerprints"]
     s["rows"] = [r for r in s["rows"] if r["steer"]]
-    probs = R.check_summary(s)
+    probs = S.check_summary(s)
     assert any("dataset fingerprints missing: D0, D1, D2, D3" in p for p in probs)
     assert any("rows missing: PNet_0 uniform without steerTo" in p for p in probs)
 
@@ -403,16 +406,16 @@ def test_check_summary_per_env_k_train_and_datasets():
     s = make_summary("nlink/2")
     s["config"]["data"]["k_train"] = 5000  # the nlink config's default, overridden per arm
     s["config"]["data"]["per_env"] = [{"env": "nlink/2", "k_train": 3000}]
-    assert R.check_summary(s) == []
+    assert S.check_summary(s) == []
     s["config"]["data"]["per_env"] = [{"env": "nlink/2", "k_train": 4000}]
-    assert R.check_summary(s) == ["K_train is 4000, the paper's is 3000"]
+    assert S.check_summary(s) == ["K_train is 4000, the paper's is 3000"]
     s = make_summary("point/0")
     s["config"]["data"]["datasets"][3]["prune"] = False
-    assert any("datasets are" in p for p in R.check_summary(s))
+    assert any("datasets are" in p for p in S.check_summary(s))
     s = make_summary("point/0")
     s["rows"][0]["k_test"] = 100
-    assert any("rows with k_test [100]" in p for p in R.check_summary(s))
-    assert R.check_summary(dict(make_summary("point/0"), env="point/9")) == [
+    assert any("rows with k_test [100]" in p for p in S.check_summary(s))
+    assert S.check_summary(dict(make_summary("point/0"), env="point/9")) == [
         "env 'point/9' is not one of the paper's maps"]
 
 
@@ -423,18 +426,14 @@ def test_check_summary_per_env_k_train_and_datasets():
 
 def test_write_and_check(tmp_path, capsys):
     write_summary(tmp_path, make_summary("point/0"))
-    assert R.main([str(tmp_path), "--check"]) == 1
-    assert "is missing" in capsys.readouterr().out
-    assert R.main([str(tmp_path)]) == 0
-    path = tmp_path / "REPRODUCTION.md"
-    assert capsys.readouterr().out.strip() == str(path)
+    assert "is missing" in R.check(tmp_path)
+    path = R.write(tmp_path)
+    assert path == tmp_path / "REPRODUCTION.md"
     assert path.read_text() == R.render(tmp_path)
-    assert R.main([str(tmp_path), "--check"]) == 0
-    capsys.readouterr()
+    assert R.check(tmp_path) is None
     write_summary(tmp_path, make_summary("point/1"))  # new data: the document is stale
-    assert R.main([str(tmp_path), "--check"]) == 1
-    out = capsys.readouterr().out
-    assert out.count("\n") == 1 and "out of date" in out
+    problem = R.check(tmp_path)
+    assert "\n" not in problem and "out of date" in problem and "--report-only" in problem
     assert not list(tmp_path.glob(".*tmp*"))
 
 
@@ -456,7 +455,7 @@ COMMITTED = [PAPER_ROOT, REPO / "results" / "ablations" / "shortcut_paths"]
 
 
 def _committed(root):
-    summaries = R.load_summaries(root)
+    summaries = S.load_summaries(root)
     if not summaries:
         pytest.skip(f"no summary committed under {root} yet (scripts/reproduce.py)")
     return summaries
@@ -466,14 +465,14 @@ def _committed(root):
 def test_committed_reproduction_md_is_current(root):
     _committed(root)
     doc = root / R.DOC_NAME
-    assert doc.exists(), f"{root}/REPRODUCTION.md missing: python -m ntq_jax.reproduction"
+    assert doc.exists(), f"{root}/REPRODUCTION.md missing: python scripts/reproduce.py --report-only --results {root}"
     assert doc.read_text(encoding="utf-8") == R.render(root), (
-        f"{root}/REPRODUCTION.md is stale: python -m ntq_jax.reproduction {root}")
+        f"{root}/REPRODUCTION.md is stale: python scripts/reproduce.py --report-only --results {root}")
 
 
 def test_the_shortcut_path_reproduction_is_complete():
     """The earlier reproduction stays whole: all 11 maps and the three seed maps."""
-    summaries = R.load_summaries(COMMITTED[1])
+    summaries = S.load_summaries(COMMITTED[1])
     assert len([s for s in summaries if "seeds" not in str(s["_path"])]) == 11
     assert len([s for s in summaries if "seeds" in str(s["_path"])]) == 6
 
@@ -481,9 +480,9 @@ def test_the_shortcut_path_reproduction_is_complete():
 @pytest.mark.parametrize("root", COMMITTED, ids=lambda p: p.name)
 def test_committed_summaries_are_paper_size(root):
     summaries = _committed(root)
-    bad = {s["_path"]: p for s in summaries if (p := R.check_summary(s))}
+    bad = {s["_path"]: p for s in summaries if (p := S.check_summary(s))}
     assert not bad, bad
-    assert R.check_seed_runs(summaries) == []
+    assert S.check_seed_runs(summaries) == []
 
 
 def test_render_tolerates_missing_values(tmp_path):
@@ -498,7 +497,7 @@ def test_render_tolerates_missing_values(tmp_path):
     assert "| point/3 | - | 12.0 | - | 12.0 |" in text
     assert ("| PNet_1 | 0.800 [0.760, 0.840] | 0.958 | 1.010 | 1.069 | 0.000 [0.000, 0.040] | "
             "0.896 | - | 1.167 |") in text
-    probs = R.check_summary(R.load_summaries(tmp_path)[0])
+    probs = S.check_summary(S.load_summaries(tmp_path)[0])
     assert "dataset fingerprints missing: D3" in probs
     assert "timings of data/train/eval missing" in probs
 
@@ -508,8 +507,8 @@ def test_models_fingerprint_hashes_the_weights_not_the_files(tmp_path):
     other weights do not."""
     import time
     from ntq_jax import make_env, models
-    from ntq_jax.config import ModelConfig
-    from ntq_jax.summaries import models_fingerprint
+    from ntq_jax.models import ModelConfig
+    from ntq_jax.experiment.summaries import models_fingerprint
     from ntq_jax.training import save_ensemble
 
     spec = models.ModelSpec.from_env(make_env("point/2"), ModelConfig(hidden=(8,), dropout_layers=1))

@@ -1,4 +1,4 @@
-"""Paired comparisons (ntq_jax.stats) and their report (ntq_jax.report.comparisons):
+"""Paired comparisons (ntq_jax.stats) and their report (ntq_jax.experiment.report.comparisons):
 McNemar's exact test against scipy and a hand-computed case, the coverage of Newcombe's
 paired interval and of the paired bootstrap in seeded simulations, the bootstrap's
 determinism per seed, the Wilcoxon edge cases, and the comparison table of a small
@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from scipy.stats import binomtest, wilcoxon
 
-from ntq_jax import report as R
+from ntq_jax.experiment import report as R
 from ntq_jax import stats as S
 from ntq_jax.artifacts import save_npz
 
@@ -175,7 +175,7 @@ def _synthetic_run(tmp_path):
             f = f"paths/point_0/{model}_{kind}.npz"
             save_npz(tmp_path / f, queries=queries, success=success, costs=cost, ref_costs=ref,
                      ref_status=np.zeros(K, np.int8))
-            lo_hi = S._wilson(int(success.sum()), K, 1.959963984540054)
+            lo_hi = S.wilson_interval(int(success.sum()), K)
             rows.append({"task": "point", "env": "point/0", "model": model, "query_kind": kind,
                          "steer": True, "k_test": K, "successes": int(success.sum()),
                          "success_ratio": success.mean(), "success_ci95": list(lo_hi),

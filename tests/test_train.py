@@ -20,7 +20,8 @@ import pytest
 
 from ntq_jax import make_env, models
 from ntq_jax import training as T
-from ntq_jax.config import ModelConfig, TrainConfig
+from ntq_jax.models import ModelConfig
+from ntq_jax.training.config import TrainConfig
 from ntq_jax.data import straight_line_rows
 
 MODEL = ModelConfig(hidden=(32, 32), dropout=0.1, dropout_layers=1)

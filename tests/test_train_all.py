@@ -1,4 +1,4 @@
-"""End to end: the pipeline (ntq_jax.pipeline) on a tiny config (data -> train -> evaluate ->
+"""End to end: the pipeline (ntq_jax.experiment.pipeline) on a tiny config (data -> train -> evaluate ->
 report), its resume, the refusal of a foreign run folder (also through scripts/train_all.py:
 one error line, exit code 2), and scripts/plan.py's input errors.
 
@@ -18,7 +18,7 @@ from shapely.geometry import LineString, Point, box as shapely_box
 from shapely.ops import unary_union
 
 from ntq_jax import make_env
-from ntq_jax.pipeline import PipelineError, load_config, prepare_run, run_pipeline
+from ntq_jax.experiment.pipeline import PipelineError, load_config, prepare_run, run_pipeline
 
 ROOT = Path(__file__).resolve().parents[1]
 TINY = ["envs=[point/2]", "data.k_train=40", "data.gamma_queries=2000", "data.gamma_eval=false",

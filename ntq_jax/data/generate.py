@@ -2,7 +2,8 @@
 
 Usage::
 
-    from ntq_jax import config, data, make_env
+    from ntq_jax import data, make_env
+    from ntq_jax.experiment import config
     cfg = config.load("configs/point_small.yaml")
     summary = data.generate_datasets(make_env("point/0"), cfg, "runs/data", env_name="point/0")
     d0, d1, d2, d3 = data.load_datasets("runs/data/point_0")
@@ -24,7 +25,7 @@ recorded in ``meta.json``.
 ``meta.json`` records each dataset's pool ranges (``sharing``).
 
 Resumable: the planning chunks stay in ``<env_dir>/.work/<fingerprint>/``
-(:mod:`ntq_jax.data.planning`) until the datasets are written (``meta.json``
+(:mod:`ntq_jax.planners.jobs`) until the datasets are written (``meta.json``
 last, :mod:`ntq_jax.data.format`); a rerun reuses them. Complete means verified:
 a rerun checks every array against the checksums in its ``meta.json``
 (:func:`ntq_jax.data.format.damaged_datasets`); when all match the output is
@@ -53,16 +54,17 @@ import yaml
 from ntq_jax import artifacts
 from ntq_jax import queries as Q
 from ntq_jax.data.format import (CONFIG_FILE, FORMAT, FORMAT_VERSION, damaged_datasets,
-                                 dataset_names, env_slug, npy_sha256, plot_environment,
-                                 write_dataset)
+                                 dataset_names, npy_sha256, plot_environment, write_dataset)
+from ntq_jax.envs import env_slug
 from ntq_jax.data.include import include_data, prune_probability, prune_rng
-from ntq_jax.data.path_modes import shape_paths
-from ntq_jax.data.planning import (PoolPlan, plan_pool, planner_options, resolve_planner,
+from ntq_jax.planners.path_modes import shape_paths
+from ntq_jax.planners.jobs import (PoolPlan, plan_pool, planner_options, resolve_planner,
                                    seed_from_record)
 from ntq_jax.data.pools import (Keys, Pools, mixing_bits, pool_index, pool_sizes, run_keys,
                                 sample_pools)
 from ntq_jax.progress import open_bar
 from ntq_jax.robots.batch import steer_to_pairs
+from ntq_jax.stats import wilson_interval
 from ntq_jax.types import PlanResult
 from ntq_jax.version import __version__
 
@@ -95,7 +97,7 @@ class RunSpec(NamedTuple):
     keys: Keys
     bits: list[np.ndarray]
     fingerprint: str
-    data_paths: float | str | None = None  # planner.data_paths (ntq_jax.data.path_modes)
+    data_paths: float | str | None = None  # planner.data_paths (ntq_jax.planners.path_modes)
 
     @property
     def n_u(self) -> int:
@@ -224,7 +226,7 @@ def dataset_stats(arrays: dict, idx: np.ndarray, planned: PoolPlan, blocked: np.
         "mean_waypoints": float(lens.mean()) if len(lens) else 0.0,
         "max_waypoints": int(lens.max()) if len(lens) else 0,
         "blocked_fraction": nblk / k,
-        "blocked_fraction_ci95": list(Q.wilson_interval(nblk, k)) if k else [0.0, 1.0],
+        "blocked_fraction_ci95": list(wilson_interval(nblk, k)) if k else [0.0, 1.0],
         "mean_cost": float(planned.result.costs[sel].mean()) if len(sel) else None,
         "gamma_nt": g_data["gamma"], "gamma_nt_eval": g_eval["gamma"],
     }
@@ -337,7 +339,7 @@ def generate_datasets(env, config, out_dir, *, env_name: str | None = None, plan
 
     Args:
         env: the :class:`ntq_jax.Env` (its padding is the data-generation geometry).
-        config: a :class:`ntq_jax.config.Config` (``seed``, ``sampling``, ``data``, ``planner``).
+        config: a :class:`ntq_jax.experiment.config.Config` (``seed``, ``sampling``, ``data``, ``planner``).
         out_dir: the output root.
         env_name: the name listed in ``config.envs`` (for per-env overrides and
             the folder name); default ``env.name``.

@@ -25,7 +25,8 @@ import jax
 import jax.numpy as jnp
 
 from ntq_jax import artifacts, models
-from ntq_jax.config import ModelConfig, TrainConfig
+from ntq_jax.models import ModelConfig
+from ntq_jax.training.config import TrainConfig
 from ntq_jax.training.batches import Schedule
 from ntq_jax.training.step import TrainState
 

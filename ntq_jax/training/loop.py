@@ -47,7 +47,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from ntq_jax import artifacts, data, models
-from ntq_jax.config import ModelConfig, TrainConfig
+from ntq_jax.models import ModelConfig
+from ntq_jax.training.config import TrainConfig
 from ntq_jax.data.format import DatasetError
 from ntq_jax.envs import make_env
 from ntq_jax.progress import Bar, Progress, open_bar
@@ -305,7 +306,7 @@ def train_from_folder(env_dir: str | os.PathLike, cfg, out_dir: str | os.PathLik
 
     Args:
         env_dir: folder holding ``env.json`` and the dataset folders.
-        cfg: the resolved :class:`ntq_jax.config.Config` (model, train, seed).
+        cfg: the resolved :class:`ntq_jax.experiment.config.Config` (model, train, seed).
         out_dir: output folder (checkpoints, curves, ``ensemble/``, ``config.json``).
 
     Returns:

@@ -21,7 +21,7 @@ import jax.numpy as jnp
 import optax
 from flax import nnx
 
-from ntq_jax.config import TrainConfig
+from ntq_jax.training.config import TrainConfig
 
 __all__ = ["TrainState", "make_optimizer", "member_step", "member_val_loss", "make_train_chunk",
            "train_chunk"]

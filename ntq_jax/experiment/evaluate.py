@@ -74,11 +74,11 @@ from jax.tree_util import Partial
 
 from ntq_jax import artifacts, models
 from ntq_jax import neural_planner as NP
-from ntq_jax.data import env_slug, planner_options, resolve_planner
-from ntq_jax.data.planning import plan_pool
+from ntq_jax.envs import env_slug
+from ntq_jax.planners.jobs import plan_pool, planner_options, resolve_planner
 from ntq_jax.planners import plan, visgraph
 from ntq_jax.planners.verify import check_paths
-from ntq_jax.queries import wilson_interval
+from ntq_jax.stats import wilson_interval
 from ntq_jax.robots.batch import distances, valid_states
 from ntq_jax.types import (CAUSE_NAMES, CAUSE_RANK, QUERY_KINDS, TASK_OF_ROBOT, PlanCause,
                            PlanStatus)
@@ -184,7 +184,7 @@ def reference_plans(env, cfg, env_name: str, slug: str, queries: dict, out_dir: 
     ``executor`` (:mod:`ntq_jax.executors`; None or local: one call in this
     process, as always): with Ray the config's planner runs in chunks of
     ``data.chunk`` queries as tasks, resumable in ``<out_dir>/.work/`` (the
-    chunks written by the driver, :func:`ntq_jax.data.planning.plan_pool`).
+    chunks written by the driver, :func:`ntq_jax.planners.jobs.plan_pool`).
     A* (grid, visgraph, roadmap) give the same references either way; BIT*'s
     queries then get their chunks' seeds (it is not reproducible anyway).
     """
@@ -540,7 +540,7 @@ def evaluate_env(env, ensemble, cfg, run_dir, *, env_name: str, data_env_dir=Non
         env: the :class:`ntq_jax.Env`.
         ensemble: an :class:`ntq_jax.models.Ensemble`, or a list of ``pnet``
             callables (one per model; e.g. stand-ins in tests).
-        cfg: the resolved :class:`ntq_jax.config.Config`.
+        cfg: the resolved :class:`ntq_jax.experiment.config.Config`.
         run_dir: the run folder (``eval/`` and ``paths/`` are written there).
         env_name: the name in ``cfg.envs``.
         data_env_dir: the environment's dataset folder (for gamma_nt and the
@@ -550,7 +550,7 @@ def evaluate_env(env, ensemble, cfg, run_dir, *, env_name: str, data_env_dir=Non
         members: which members to evaluate (default all).
         eval_dir: the folder of ``queries.npz``, ``reference.npz`` and ``gamma.json``
             (default ``<run_dir>/eval/<env_slug>``); several runs can share one, e.g.
-            the learning curve's sizes (``ntq_jax.curve``), which then plan on the
+            the learning curve's sizes (``ntq_jax.experiment.curve``), which then plan on the
             same test queries and compute the references once.
         log: progress messages.
         executor: where the reference planner's chunks run (:func:`reference_plans`).

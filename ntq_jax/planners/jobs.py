@@ -23,7 +23,7 @@ from typing import Callable, NamedTuple, Optional
 import numpy as np
 
 from ntq_jax import artifacts
-from ntq_jax.data.path_modes import planner_smooth
+from ntq_jax.planners.path_modes import planner_smooth
 from ntq_jax.planners import plan
 from ntq_jax.planners.verify import finalize
 from ntq_jax.progress import open_bar
@@ -47,7 +47,7 @@ def planner_options(config, env_name: str, name: str | None = None, *,
     verification of its paths. Data generation keeps the planners' default, the
     discretised check (the paper's), at the data padding, and passes the
     ``smooth`` option of ``planner.data_paths`` (when set) to ``astar`` and
-    ``roadmap`` (:func:`ntq_jax.data.path_modes.planner_smooth`).
+    ``roadmap`` (:func:`ntq_jax.planners.path_modes.planner_smooth`).
     """
     pc = config.planner
     name = name or pc.name_for(env_name)

@@ -38,15 +38,16 @@ from typing import Callable
 
 import yaml
 
-from ntq_jax import artifacts, config as C
+from ntq_jax import artifacts
+from ntq_jax.experiment import config as C
 from ntq_jax import data as data_mod
 from ntq_jax import training
-from ntq_jax.data import env_slug
+from ntq_jax.envs import env_slug, resolve_envs
 from ntq_jax.data.format import ARRAY_SPECS
 from ntq_jax.envs import EnvError
 from ntq_jax.planners.options import unsupported_robot
-from ntq_jax.evaluate import evaluate_env, reference_plans, test_queries
-from ntq_jax.report import write_report
+from ntq_jax.experiment.evaluate import evaluate_env, reference_plans, test_queries
+from ntq_jax.experiment.report import write_report
 from ntq_jax.version import __version__
 
 __all__ = ["DEFAULT", "PipelineError", "load_config", "prepare_run", "run_pipeline"]
@@ -184,7 +185,7 @@ def prepare_run(cfg: C.Config, out: str | Path | None, *, overwrite: bool = Fals
         PipelineError: ``out`` is a file or not writable, or a non-empty folder
             that is not a run of this config (the message says how to proceed).
     """
-    check_planners(cfg, data_mod.resolve_envs(cfg.envs))  # before anything is written
+    check_planners(cfg, resolve_envs(cfg.envs))  # before anything is written
     run = run_folder(cfg, out)
     _check_writable(run)
     if run.is_dir() and any(run.iterdir()):
@@ -215,7 +216,7 @@ def check_planners(cfg: C.Config, envs: dict) -> None:
             if o.env in envs:
                 continue
             try:
-                data_mod.resolve_envs([o.env])
+                resolve_envs([o.env])
             except EnvError as e:
                 raise PipelineError(f"{section}.per_env[{i}].env {o.env!r} is not an "
                                     f"environment ({e}); the run's are {', '.join(envs)}") from None
@@ -343,7 +344,7 @@ def run_pipeline(cfg: C.Config, run: Path, *, progress=True, figures: bool = Tru
             plans while this process trains. The outputs are the same.
     """
     rows, timings = [], {}
-    envs = data_mod.resolve_envs(cfg.envs)  # every env built, no two sharing a folder
+    envs = resolve_envs(cfg.envs)  # every env built, no two sharing a folder
     concurrent = executor is not None and executor.name != "local" and len(cfg.envs) > 1
     if concurrent:
         executor.start()  # in the main thread, before the environments' threads

@@ -34,12 +34,12 @@ __all__ = ["UsageError", "EXPECTED_ERRORS", "PATH_ERRORS", "expected_error_types
 #: that was imported, so the lookup never imports anything (``--help`` stays fast).
 EXPECTED_ERRORS: tuple[tuple[str, str], ...] = (
     ("ntq_jax.envs", "EnvError"),
-    ("ntq_jax.config", "ConfigError"),
+    ("ntq_jax.errors", "ConfigError"),
     ("ntq_jax.data.format", "DatasetError"),
     ("ntq_jax.training.checkpoint", "CheckpointError"),
-    ("ntq_jax.pipeline", "PipelineError"),
+    ("ntq_jax.experiment.pipeline", "PipelineError"),
     ("ntq_jax.queries", "FreeSpaceTooSmall"),
-    ("ntq_jax.reproduction", "SummaryError"),
+    ("ntq_jax.experiment.summaries", "SummaryError"),
 )
 
 #: Path errors and the fix each one calls for.

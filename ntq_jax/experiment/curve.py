@@ -56,12 +56,13 @@ from typing import Callable, Sequence
 import numpy as np
 import yaml
 
-from ntq_jax import artifacts, config as C
+from ntq_jax import artifacts
+from ntq_jax.experiment import config as C
 from ntq_jax import data as data_mod
 from ntq_jax import training
 from ntq_jax.errors import UsageError
-from ntq_jax.data import env_slug
-from ntq_jax.evaluate import evaluate_env
+from ntq_jax.envs import env_slug, resolve_envs
+from ntq_jax.experiment.evaluate import evaluate_env
 from ntq_jax.progress import open_bar
 
 __all__ = ["parse_sizes", "size_config", "prefix_dataset", "curve_rows", "run_curve",
@@ -266,7 +267,7 @@ def run_curve(cfg: C.Config, env_name: str, sizes: Sequence[int], out: str | Pat
     if sizes[-1] > cfg.data.k_train_for(env_name):
         raise UsageError(f"size {sizes[-1]} is larger than the config's k_train "
                          f"({cfg.data.k_train_for(env_name)}) for {env_name}")
-    env = data_mod.resolve_envs([env_name])[env_name]
+    env = resolve_envs([env_name])[env_name]
     out = Path(out)
     _open_folder(cfg, env_name, out)
     slug = env_slug(env_name, env)

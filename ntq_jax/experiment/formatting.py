@@ -1,0 +1,51 @@
+"""Number formats of the Markdown reports: fixed decimals, signed differences, intervals, p-values.
+
+Every formatter prints ``-`` for a value that is not a finite number (None,
+NaN, infinity, a string), so a missing cell never raises.
+"""
+
+from __future__ import annotations
+
+import math
+
+__all__ = ["num", "fixed", "interval", "signed", "p_value", "ms", "model_key", "kind_name"]
+
+
+def num(x) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+
+
+def fixed(x, nd: int = 3) -> str:
+    return f"{x:.{nd}f}" if num(x) else "-"
+
+
+def interval(lo_hi, nd: int = 3) -> str:
+    if not lo_hi or not all(num(v) for v in lo_hi):
+        return ""
+    return f" [{lo_hi[0]:.{nd}f}, {lo_hi[1]:.{nd}f}]"
+
+
+def signed(x, nd: int = 3) -> str:
+    return f"{x:+.{nd}f}" if num(x) else "-"
+
+
+def p_value(p) -> str:
+    if not num(p):
+        return "-"
+    return "<0.001" if p < 1e-3 else f"{p:.3f}"
+
+
+def model_key(name: str) -> tuple:
+    """PNet_0..PNet_m by index, then PNet_ens, PNet_best-of-N, PNet_cascade, then by name."""
+    tail = name.split("_", 1)[-1]
+    if tail.isdigit():
+        return (0, int(tail), name)
+    return ({"ens": 1, "cascade": 3}.get(tail, 2 if tail.startswith("best-of-") else 4), 0, name)
+
+
+def kind_name(kind: str) -> str:
+    return {"uniform": "uniform", "nontrivial": "non-trivial"}.get(kind, kind)
+
+
+def ms(x) -> str:
+    return f"{1e3 * x:.2f}" if num(x) else "-"

@@ -31,8 +31,6 @@ import statistics
 import sys
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
 
 def bench_env(run: Path, env_name: str, repeats: int) -> list[dict]:
@@ -43,7 +41,7 @@ def bench_env(run: Path, env_name: str, repeats: int) -> list[dict]:
     from ntq_jax import make_env
     from ntq_jax import neural_planner as NP
     from ntq_jax.envs import env_slug
-    from ntq_jax.experiment.evaluate import member_pnets
+    from ntq_jax.models import member_pnets
     from ntq_jax.training import load_ensemble
 
     env = make_env(env_name)

@@ -30,10 +30,11 @@ import os
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
+
+from common import interleaved
 
 HERE = Path(__file__).resolve().parent
 GOALS = {"compile_seconds": 5.0, "peak_rss_mb": 500.0, "maze_vs_preset_slowdown": 10.0}
@@ -110,19 +111,6 @@ def bench_compile(src: str | None, with_arm: bool, certified: bool = True) -> li
 # ---------------------------------------------------------------------------
 # Throughput, one process
 # ---------------------------------------------------------------------------
-
-def interleaved(cases: dict, reps: int) -> dict:
-    """Median seconds per case (name -> fn), repeats interleaved round-robin."""
-    import jax
-    for fn in cases.values():
-        jax.block_until_ready(fn())
-    times = {k: [] for k in cases}
-    for _ in range(reps):
-        for k, fn in cases.items():
-            t0 = time.perf_counter()
-            jax.block_until_ready(fn())
-            times[k].append(time.perf_counter() - t0)
-    return {k: float(np.median(v)) for k, v in times.items()}
 
 
 def bench_throughput(n_point: int, n_rigid: int, reps: int) -> list[dict]:

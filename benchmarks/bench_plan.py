@@ -99,7 +99,7 @@ def bench(env_name: str, *, queries: int, loop_queries: int, run=None, model: in
     from ntq_jax.experiment import config as C
     from ntq_jax import make_env, models
     from ntq_jax.envs import env_slug
-    from ntq_jax.experiment.evaluate import member_pnets
+    from ntq_jax.models import member_pnets
     from ntq_jax.neural_planner import PlannerOptions, plan_batch
 
     env = make_env(env_name)

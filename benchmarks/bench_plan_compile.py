@@ -41,7 +41,7 @@ import jax, numpy as np
 from ntq_jax import make_env, neural_planner as NP
 from ntq_jax.experiment import config as C
 from ntq_jax.envs import env_slug
-from ntq_jax.experiment.evaluate import member_pnets
+from ntq_jax.models import member_pnets
 from ntq_jax.training import load_ensemble
 run, env_name = Path(sys.argv[1]), sys.argv[2]
 env = make_env(env_name)

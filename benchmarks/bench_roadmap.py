@@ -53,27 +53,25 @@ missing planner (``report`` still runs and shows the roadmap as missing).
 from __future__ import annotations
 
 import argparse
-import datetime
 import hashlib
 import json
-import math
-import os
 import resource
 import subprocess
 import sys
 import time
 from pathlib import Path
 
+from common import machine, loadavg, LoadSampler, children_cpu, finite_or_none, load_json
+from bench_roadmap_report import (MEMORY_GOAL_BYTES, WORKERS, slug,
+                                  stage_report)
+
 ROOT = Path(__file__).resolve().parents[1]
 SEED = 0                      # the query key: jax.random.key(SEED)
 DEFAULT_ENVS = ("rigid/0", "rigid/3", "nlink/4", "nlink/6")
 POOL_ENVS = ("rigid/0", "nlink/6")
-WORKERS = 2
 # the paper's BIT* budget for data generation (seconds per query)
 DATA_BUDGET = {"rigid_body": 3.0, ("nlink", 2): 2.0, ("nlink", 4): 4.0, ("nlink", 6): 6.0}
 POOL_GOAL_S = {"rigid/0": 300.0, "nlink/6": 600.0}
-MEMORY_GOAL_BYTES = 2 * 1024 ** 3
-GOAL_MEDIAN, GOAL_P90 = 1.0, 1.05
 
 
 class StageError(Exception):
@@ -83,11 +81,6 @@ class StageError(Exception):
 # ---------------------------------------------------------------------------
 # helpers
 # ---------------------------------------------------------------------------
-
-def slug(name: str) -> str:
-    from ntq_jax.envs import env_slug
-    return env_slug(name)
-
 
 def data_budget(env) -> float:
     kind = env.robot.kind if hasattr(env.robot, "kind") else type(env.robot).__name__
@@ -117,74 +110,6 @@ def bench_queries(env, n: int):
     return q, kind, query_hash(q)
 
 
-def git_revision() -> dict:
-    import ntq_jax
-    pkg = Path(ntq_jax.__file__).resolve().parent
-
-    def run(*a):
-        try:
-            return subprocess.run(["git", "-C", str(pkg), *a], capture_output=True, text=True,
-                                  timeout=30).stdout.strip()
-        except (OSError, subprocess.SubprocessError):
-            return ""
-    return {"git_revision": run("rev-parse", "--short", "HEAD") or "unknown",
-            "git_dirty": bool(run("status", "--porcelain", "--", ".")),
-            "package_path": str(pkg)}
-
-
-def machine() -> dict:
-    import jax
-    import numpy as np
-    return {"cpu_count": os.cpu_count(), "python": sys.version.split()[0],
-            "jax": jax.__version__, "numpy": np.__version__,
-            "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-            **git_revision()}
-
-
-def loadavg() -> list[float]:
-    return [round(x, 2) for x in os.getloadavg()]
-
-
-class LoadSampler:
-    """Samples the 1-minute load average every ``every`` seconds in a thread (``with`` block)."""
-
-    def __init__(self, every: float = 15.0):
-        import threading
-        self.every, self.samples = every, []
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, daemon=True)
-
-    def _run(self):
-        while True:
-            self.samples.append(os.getloadavg()[0])
-            if self._stop.wait(self.every):
-                return
-
-    def __enter__(self):
-        self._thread.start()
-        return self
-
-    def __exit__(self, *exc):
-        self._stop.set()
-        self._thread.join()
-
-    def summary(self) -> dict:
-        xs = self.samples
-        return {"mean": round(sum(xs) / len(xs), 2), "max": round(max(xs), 2),
-                "n": len(xs), "every_s": self.every} if xs else {}
-
-
-def children_cpu() -> float:
-    """User + system CPU seconds of this process's exited, waited-for children."""
-    r = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return r.ru_utime + r.ru_stime
-
-
-def finite_or_none(x) -> float | None:
-    x = float(x)
-    return round(x, 6) if math.isfinite(x) else None
-
-
 def info_scalars(info: dict) -> dict:
     """The JSON-able scalar entries of a PlanResult's info (times, counts)."""
     import numpy as np
@@ -212,16 +137,6 @@ def result_lists(res) -> dict:
                               for s, c in zip(*np.unique(st, return_counts=True))}}
 
 
-def load_json(path: Path) -> dict | None:
-    try:
-        return json.loads(path.read_text())
-    except FileNotFoundError:
-        return None
-    except (OSError, ValueError) as e:
-        print(f"  {path}: unreadable ({e}); ignored", flush=True)
-        return None
-
-
 def require_roadmap() -> None:
     from ntq_jax.planners import available_planners
     if "roadmap" not in available_planners():
@@ -247,11 +162,6 @@ def roadmap_options(args) -> dict:
         except ValueError:
             opts[k] = v
     return opts
-
-
-def percentile(xs, p):
-    import numpy as np
-    return float(np.percentile(np.asarray(xs, np.float64), p)) if len(xs) else float("nan")
 
 
 # ---------------------------------------------------------------------------
@@ -435,112 +345,6 @@ def stage_child(env, args, out: Path, which: str) -> None:
 # ---------------------------------------------------------------------------
 # report
 # ---------------------------------------------------------------------------
-
-def _yes(b) -> str:
-    return "—" if b is None else ("yes" if b else "**no**")
-
-
-def compare(b: dict | None, r: dict | None) -> dict:
-    """The per-map figures of the summary (None where a side is missing)."""
-    import numpy as np
-    row = {"bitstar": b is not None, "roadmap": r is not None}
-    if b is not None:
-        sb = np.asarray(b["status"]) == 0
-        row.update(succ_b=float(sb.mean()), wall_b=b["wall_per_query"], n=len(sb),
-                   load_b=(b["loadavg_before"], b["loadavg_after"]), fb=b.get("n_fallback", 0),
-                   cpu_b=b.get("workers_cpu_per_budget"))
-    if r is not None:
-        sr = np.asarray(r["status"]) == 0
-        build, query = r.get("build_time"), r.get("query_time")
-        if query is None and build is not None:
-            query = r["wall_time"] - build
-        row.update(succ_r=float(sr.mean()), wall_r=r["wall_per_query"],
-                   build_r=build, query_r=query)
-    if b is not None and r is not None:
-        if b["query_sha256"] != r["query_sha256"]:
-            row["mismatch"] = True
-            return row
-        cb = np.array([np.inf if c is None else c for c in b["cost"]])
-        cr = np.array([np.inf if c is None else c for c in r["cost"]])
-        both = sb & sr & np.isfinite(cb) & np.isfinite(cr) & (cb > 0)
-        ratio = cr[both] / cb[both]
-        row.update(n_both=int(both.sum()), med=percentile(ratio, 50), p90=percentile(ratio, 90),
-                   goal_succ=row["succ_r"] >= row["succ_b"],
-                   goal_med=bool(both.any()) and percentile(ratio, 50) <= GOAL_MEDIAN,
-                   goal_p90=bool(both.any()) and percentile(ratio, 90) <= GOAL_P90)
-    return row
-
-
-def stage_report(envs: list[str], args, out: Path) -> str:
-    from ntq_jax import artifacts
-
-    lines = ["# Roadmap vs BIT* (benchmarks/bench_roadmap.py)", "",
-             "Same non-trivial queries per map (data padding); BIT* at the paper's data budget "
-             f"with {WORKERS} workers. Cost ratio = roadmap / BIT* per query, on queries both "
-             "solved. Goals: success >= BIT*'s; median ratio <= 1.0; p90 <= 1.05.", "",
-             "| map | queries | BIT* budget s | BIT* success | roadmap success | both solved | "
-             "ratio median | ratio p90 | BIT* s/query | roadmap s/query | BIT* load before/after | "
-             "BIT* CPU/budget | "
-             "success >= | median <= 1.0 | p90 <= 1.05 |",
-             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|---|---|---|"]
-    f = lambda x, fmt: "—" if x is None or (isinstance(x, float) and math.isnan(x)) else fmt.format(x)
-    notes = []
-    for name in envs:
-        s = slug(name)
-        b = load_json(out / f"{s}_bitstar.json")
-        r = load_json(out / f"{s}_roadmap.json")
-        row = compare(b, r)
-        if row.get("mismatch"):
-            notes.append(f"* {name}: the roadmap and BIT* files hold different queries "
-                         "(query sha256 differs): not compared; rerun one of them.")
-        if b is None:
-            notes.append(f"* {name}: BIT* result missing (`--stage bitstar`).")
-        if r is None:
-            notes.append(f"* {name}: roadmap result missing (`--stage roadmap`).")
-        if row.get("fb"):
-            notes.append(f"* {name}: {row['fb']} queries are the sampler's trivial fallback (kind 2).")
-        if r is not None and (row.get("build_r") is not None or row.get("query_r") is not None):
-            notes.append(f"* {name}: roadmap build {f(row.get('build_r'), '{:.2f}')} s, "
-                         f"query {f(row.get('query_r'), '{:.2f}')} s; options {r.get('options')}.")
-        budget = b["time_budget"] if b else None
-        load = (f"{row['load_b'][0][0]:.1f} / {row['load_b'][1][0]:.1f}" if b else "—")
-        if b and b.get("loadavg_during"):
-            load += f" (mean {b['loadavg_during']['mean']:.1f})"
-        lines.append(
-            f"| {name} | {row.get('n', r['n_queries'] if r else '—')} | {f(budget, '{:g}')} | "
-            f"{f(row.get('succ_b'), '{:.3f}')} | {f(row.get('succ_r'), '{:.3f}')} | "
-            f"{f(row.get('n_both'), '{}')} | {f(row.get('med'), '{:.4f}')} | "
-            f"{f(row.get('p90'), '{:.4f}')} | {f(row.get('wall_b'), '{:.3f}')} | "
-            f"{f(row.get('wall_r'), '{:.4f}')} | {load} | {f(row.get('cpu_b'), '{:.2f}')} | "
-            f"{_yes(row.get('goal_succ'))} | "
-            f"{_yes(row.get('goal_med'))} | {_yes(row.get('goal_p90'))} |")
-    lines += ["", "BIT* load average: the 1-minute figure of os.getloadavg() before and after "
-              "the map's run (2 cores; mean: sampled every 15 s during it). BIT* CPU/budget: "
-              "CPU seconds its worker processes used / (queries x budget); BIT* stops on wall-clock time, so below ~1 it had less "
-              "than a core per worker (other load) and explored less than on an idle machine."]
-    lines += ["", "## Pools and memory", "",
-              "| map | measurement | queries | plan s | goal s | met | solved | peak RSS GiB |",
-              "|---|---|---:|---:|---:|---|---:|---:|"]
-    for name in envs:
-        for which in ("pool", "memory"):
-            rec = load_json(out / f"{slug(name)}_{which}.json")
-            if rec is None:
-                continue
-            goal = rec.get("goal_seconds") if which == "pool" else None
-            met = (rec["wall_time"] <= goal) if goal else (
-                rec["peak_rss_bytes"] < MEMORY_GOAL_BYTES if which == "memory" else None)
-            lines.append(f"| {name} | {which}"
-                         f"{' (' + str(rec['options'].get('milestones')) + ' milestones)' if which == 'memory' else ''}"
-                         f" | {rec['n_queries']} | {rec['wall_time']:.1f} | {f(goal, '{:g}')} | "
-                         f"{_yes(met)}{' (< 2 GiB)' if which == 'memory' else ''} | {rec['solved']} | "
-                         f"{rec['peak_rss_bytes'] / 2**30:.2f} |")
-    if notes:
-        lines += ["", "Notes:", ""] + notes
-    text = "\n".join(lines) + "\n"
-    print(text, flush=True)
-    artifacts.write_text(out / "summary.md", text)
-    print(f"-> {out / 'summary.md'}", flush=True)
-    return text
 
 
 # ---------------------------------------------------------------------------

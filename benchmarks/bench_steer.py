@@ -50,6 +50,8 @@ from ntq_jax import queries as Q
 from ntq_jax.geometry import KERNEL_COMPILER_OPTIONS
 from ntq_jax.robots.batch import steer_to_cm
 
+from common import interleaved
+
 # The fixed benchmark map: 7 boxes (walls with doors and a block) on 20 x 20.
 MAP = {"name": "bench7", "robot": {"kind": "point"}, "bounds": [[0, 20], [0, 20]],
        "boxes": [[6.5, 4, 0.5, 4], [6.5, 15, 0.5, 5], [13.5, 5, 0.5, 5], [13.5, 16, 0.5, 4],
@@ -65,26 +67,6 @@ GOALS = {"steer_qps": 3e8, "steer_vs_loop": 1e5, "steer_vs_numpy": 100.0, "gamma
 # ---------------------------------------------------------------------------
 # Timing
 # ---------------------------------------------------------------------------
-
-def interleaved(cases: dict, reps: int) -> dict:
-    """Median seconds of each ``fn`` in ``cases`` (name -> fn), repeats interleaved round-robin.
-
-    Also records in ``interleaved.cores[name]`` the mean number of cores used
-    (process CPU time / wall time): on a shared machine a figure measured with
-    ~1 core is not one measured with 2.
-    """
-    for fn in cases.values():  # warm-up: compile, first-touch
-        jax.block_until_ready(fn())
-    times = {k: [] for k in cases}
-    cpu = {k: 0.0 for k in cases}
-    for _ in range(reps):
-        for k, fn in cases.items():
-            c0, t0 = time.process_time(), time.perf_counter()
-            jax.block_until_ready(fn())
-            times[k].append(time.perf_counter() - t0)
-            cpu[k] += time.process_time() - c0
-    interleaved.cores = {k: cpu[k] / sum(times[k]) for k in cases}
-    return {k: float(np.median(v)) for k, v in times.items()}
 
 
 # ---------------------------------------------------------------------------

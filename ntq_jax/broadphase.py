@@ -61,8 +61,8 @@ import numpy as np
 Array = jax.Array
 
 #: Obstacle counts (boxes, discs, or an index cell's candidates) up to which the kernels
-#: unroll their loop at trace time, as before this module existed: every preset (at most
-#: a few dozen obstacles) keeps its compiled code and bit-identical results. Above it, the
+#: unroll their loop at trace time (one fused expression per obstacle; every preset has
+#: at most a few dozen obstacles). Above it, the
 #: kernels loop (:func:`fold`) and ``Env`` gives the world a broad-phase index.
 UNROLL_MAX = 64
 

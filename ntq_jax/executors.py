@@ -10,8 +10,8 @@ folder as it arrives, so the run folder stays the single source of truth and a
 run can be resumed with either executor.
 
 * :class:`LocalExecutor` (``executor: local``, the default): every chunk runs in
-  this process, one after the other, exactly as before this module existed
-  (bit for bit; BIT* still uses its own worker processes, ``planner.workers``).
+  this process, one after the other (BIT* still uses its own worker processes,
+  ``planner.workers``).
 * :class:`RayExecutor` (``executor: ray``): every chunk is a Ray task
   (``num_cpus`` per task, default 1), retried by Ray up to ``max_retries``
   times when its worker process dies (``ray.remote(max_retries=...)``). A

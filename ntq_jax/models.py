@@ -53,6 +53,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from flax import nnx
+from jax.tree_util import Partial
 
 from ntq_jax import prng
 from ntq_jax.errors import check_config as _check
@@ -402,3 +403,26 @@ def predictor(ens: Ensemble, member: int | None = None, *,
         keys = jax.vmap(lambda m: jax.random.fold_in(key, m))(jnp.arange(num))
         return jax.vmap(one, in_axes=(0, 0, None, None))(params, keys, current, goal)
     return fn_all
+
+
+@functools.lru_cache(maxsize=8)
+def _member_apply(graphdef) -> Callable:
+    """One apply function per graphdef, so ensembles of one architecture share a compilation."""
+    def fn(params, m, key, current, goal):
+        return apply_member(graphdef, params, jax.random.fold_in(key, m), current, goal)
+    return fn
+
+
+def member_pnets(ens) -> list[Partial]:
+    """One planner-ready PNet per member: ``Partial(apply, params_m, m)``.
+
+    Same semantics as :func:`ntq_jax.models.predictor` ``(ens, m)`` (dropout on,
+    key ``fold_in(key, m)``), but the members share one apply function, so the
+    neural planner compiles once for the whole ensemble.
+    """
+    try:
+        fn = _member_apply(ens.graphdef)
+    except TypeError:  # unhashable graphdef: no sharing across ensembles
+        fn = _member_apply.__wrapped__(ens.graphdef)
+    return [Partial(fn, unstack_state(ens.params, m), jnp.uint32(m))
+            for m in range(ens.num_members)]

@@ -18,7 +18,7 @@ metric and a :class:`ntq_jax.types.PlanCause` (names in
   geometry, or not finite.
 
 **The ensemble planner.** ``pnet`` may also be a sequence of PNets (e.g.
-:func:`ntq_jax.experiment.evaluate.member_pnets` of a trained ensemble): wherever the
+:func:`ntq_jax.models.member_pnets` of a trained ensemble): wherever the
 planner asks for a next state (every coarse-plan step, every step of a
 bidirectional connection, so also neural replanning) every member predicts
 from the same key, current state and target, in one jitted call, and
@@ -46,7 +46,6 @@ module drives them over chunks of queries. Measured throughput: BENCHMARKS.md,
 from __future__ import annotations
 
 import dataclasses
-import math
 from typing import Callable
 
 import jax
@@ -58,125 +57,11 @@ from ntq_jax.batching import bucket_size, group_chunks, pad_rows, padded_chunks
 from ntq_jax.geometry import World
 from ntq_jax.neural_steps import (CHECK_ROWS, EnsemblePNet, MemberBlocks, Stages, cost_jit,
                                   fold_in, is_key_stack, split2)
-from ntq_jax.robots.certified import MOTION_CHECKS
 from ntq_jax.types import CAUSE_RANK, PlanCause
+from ntq_jax.neural_options import (ALGORITHM_VERSION, DELTA_NORMS, NeuralPlanResult,  # noqa: F401
+                                    PlannerOptions)
 
 Array = jax.Array
-
-DELTA_NORMS = ("robot", "l2")
-ALGORITHM_VERSION = 4  # bump when planning results change (saved evaluations are then redone)
-
-
-@dataclasses.dataclass(frozen=True)
-class PlannerOptions:
-    """Static settings of the neural planner (hashable: part of the compile key).
-
-    Attributes:
-        n_plan: PNet iterations of the coarse plan (``N_plan`` of Alg. 1).
-        steer: use ``steerTo`` (Alg. 1); False is the paper's variant without it.
-        delta: goal tolerance of the variant without steerTo, in the robot's cost metric
-            (``robot.distance``: Euclidean for the point robot and the arm's joints;
-            ``||dp|| + angle_weight * |dtheta|`` on the shortest arc for the rigid body).
-        delta_norm: the goal test's distance without steerTo: ``"robot"`` (the robot's
-            metric, above) or ``"l2"`` (``||pi_end - x_g||_2`` on the raw state
-            vector, angles not wrapped: the paper's text, Sec. V).
-        nosteer_check: without steerTo, a reached path counts as a success only if
-            every segment passes the feasibility check (True); False is the paper's
-            "only executing the lines 8 and 9" (success once the goal test passes).
-        replan_rounds: neural replanning rounds (0 disables replanning).
-        replan_steps: PNet predictions per repaired segment.
-        bidirectional: MPNet's bidirectional coarse plan instead of Alg. 1's forward one.
-        contract: lazy states contraction after the coarse plan and after each repair.
-        plan_padding: clearance of the planner's own steerTo calls.
-        eval_padding: clearance of the feasibility check (0 = the evaluation geometry).
-        eval_check: the motion check of the feasibility check (and so of success and
-            of which segments replanning repairs): ``"certified"`` (every
-            configuration proven clear; :mod:`ntq_jax.robots.certified`) or
-            ``"discretized"`` (states ``resolution`` apart, the paper's check). The
-            planner's own steerTo calls use the discretised check, as in the paper.
-    """
-
-    n_plan: int = 50
-    steer: bool = True
-    delta: float = 1.0
-    delta_norm: str = "robot"
-    nosteer_check: bool = True
-    replan_rounds: int = 5
-    replan_steps: int = 20
-    bidirectional: bool = False
-    contract: bool = True
-    plan_padding: float = 0.0
-    eval_padding: float = 0.0
-    eval_check: str = "certified"
-
-    def __post_init__(self):
-        if self.eval_check not in MOTION_CHECKS:
-            raise ValueError(f"eval_check must be one of {MOTION_CHECKS}, got {self.eval_check!r}")
-        if self.delta_norm not in DELTA_NORMS:
-            raise ValueError(f"delta_norm must be one of {DELTA_NORMS}, got {self.delta_norm!r}")
-        if self.n_plan < 1:
-            raise ValueError(f"n_plan must be >= 1, got {self.n_plan}")
-        if not (self.delta > 0 and math.isfinite(self.delta)):
-            raise ValueError(f"delta must be > 0, got {self.delta}")
-        if self.replan_rounds < 0 or self.replan_steps < 1:
-            raise ValueError("replan_rounds must be >= 0 and replan_steps >= 1, got "
-                             f"{self.replan_rounds}, {self.replan_steps}")
-        for name in ("plan_padding", "eval_padding"):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v >= 0):
-                raise ValueError(f"{name} must be a finite number >= 0, got {v}")
-
-    @property
-    def max_len(self) -> int:
-        """Rows of the path buffer: coarse plan plus what replanning can add."""
-        rounds = self.replan_rounds if self.steer else 0
-        return self.n_plan + 2 + rounds * self.replan_steps
-
-    @staticmethod
-    def from_config(ev, steer: bool | None = None) -> "PlannerOptions":
-        """Options from an :class:`ntq_jax.experiment.config.EvalConfig` (``steer`` overrides its first entry)."""
-        return PlannerOptions(
-            n_plan=ev.n_plan, steer=ev.steer[0] if steer is None else bool(steer),
-            delta=ev.delta, delta_norm=ev.delta_norm or "robot",
-            nosteer_check=True if ev.nosteer_check is None else bool(ev.nosteer_check),
-            replan_rounds=ev.replan_rounds, replan_steps=ev.replan_steps,
-            bidirectional=ev.bidirectional, eval_check=ev.motion_check)
-
-
-@dataclasses.dataclass(frozen=True)
-class NeuralPlanResult:
-    """Per-query results of :func:`plan_batch` (N queries, host NumPy arrays).
-
-    Attributes:
-        paths: ``(N, L, d)`` float32 states, start first; NaN after ``lengths[i]`` rows.
-            Failed queries keep their last (coarse or partly repaired) path for inspection.
-        lengths: ``(N,)`` int32 number of states.
-        success: ``(N,)`` bool: reached the goal and collision-free on the evaluation geometry.
-        costs: ``(N,)`` float64 path cost (the robot's metric); ``inf`` unless success.
-        cause: ``(N,)`` int8 :class:`ntq_jax.types.PlanCause` values.
-        pnet_calls: ``(N,)`` int32 PNet predictions spent on the query (the ensemble
-            planner counts every member's).
-        replans: ``(N,)`` int32 replanning rounds the query went through.
-        seconds: wall time of the batch (compiled calls only); ``compile_seconds``:
-            time spent compiling for this call (0 when the compiled code was reused).
-        member: ``(N,)`` int8, for :func:`plan_cascade` only: the PNet whose path is kept.
-    """
-
-    paths: np.ndarray
-    lengths: np.ndarray
-    success: np.ndarray
-    costs: np.ndarray
-    cause: np.ndarray
-    pnet_calls: np.ndarray
-    replans: np.ndarray
-    seconds: float = 0.0
-    compile_seconds: float = 0.0
-    member: np.ndarray | None = None
-
-    def path(self, i: int) -> np.ndarray:
-        """Query ``i``'s path ``(lengths[i], d)``."""
-        return self.paths[i, : self.lengths[i]]
-
 
 # ---------------------------------------------------------------------------
 # Host side: windows, splices and the per-query state of a batch
@@ -511,8 +396,7 @@ def plan_cascade(env, pnets, queries, key: Array, opts: PlannerOptions = Planner
     Attempt ``j`` is :func:`plan_batch` with ``pnets[order[j]]`` and key
     ``fold_in(key, j)`` on the queries no earlier attempt solved (a smaller batch:
     its first use of a batch size compiles the coarse plan and the neural connection
-    for it, once per process; the check stage has one size. Padding the fallbacks to
-    the first batch's size instead measured 2x slower planning on point/0). A query
+    for it, once per process; the check stage has one size). A query
     succeeds iff one of its attempts succeeds; its path, cost and cause are that
     attempt's. A query no attempt solves keeps the failure closest to a success
     (:data:`ntq_jax.types.CAUSE_RANK`; ties: the earliest attempt). The work

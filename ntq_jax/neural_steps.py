@@ -50,7 +50,7 @@ class EnsemblePNet:
     :class:`jax.tree_util.Partial`); at every step where the planner asks for a
     next state, every member predicts from the same ``(key, current, goal)``
     (each member's own dropout stream comes from its function, e.g.
-    :func:`ntq_jax.experiment.evaluate.member_pnets` folds in the member index, as in the
+    :func:`ntq_jax.models.member_pnets` folds in the member index, as in the
     members' own evaluation) and :func:`choose` picks one of the predictions.
     The members are called in a Python loop inside the jitted step: one
     compiled call predicts for every member and every query of a batch.

@@ -23,7 +23,10 @@ Factors, on point/0, point/3, rigid/0, rigid/2 and nlink/4 at the paper's sizes
   (``||pi_end - x_g||_2`` on the raw state vector), its unchecked paths ("only
   the lines 8 and 9"), and both, against ours (robot metric, paths checked);
 * test band: every test query, in band (both endpoints valid at the data
-  padding, where training states lie) and out of band, from the same runs.
+  padding, where training states lie) and out of band, from the same runs;
+* pruning that keeps each path's last step (beyond the paper): the default data
+  with a fifth dataset ``D4`` (``p_nt`` 1, ``prune: keep_last``), its PNet_4
+  compared with PNet_0 and with PNet_3 (data mode ``<default>+keep_last``).
 
 A cell is one map, data mode and budget: its run in ``<runs>/<map>/<data>/<budget>/``
 (resumable), its summary (:mod:`ntq_jax.experiment.summaries`) and ``paired.json`` (PNet_k
@@ -87,8 +90,17 @@ class Cell(NamedTuple):
         return base + (f"/seeds/train_seed_{self.train_seed}" if self.train_seed else "")
 
 
+KEEP_LAST = "+keep_last"
+#: the paper's four datasets and D4: D2's queries pruned, each path keeping its last step
+KEEP_LAST_DATASETS = ("data.datasets=[{p_nt: 0.0}, {p_nt: 0.5}, {p_nt: 1.0}, "
+                      "{p_nt: 1.0, prune: true}, {name: D4, p_nt: 1.0, prune: keep_last}]")
+
+
 def data_overrides(cell: Cell, cfg) -> list[str]:
     """The ``--set`` overrides of the cell's data paths (``cfg``: the map's task config)."""
+    if cell.data.endswith(KEEP_LAST):
+        base = Cell(cell.map, cell.data[: -len(KEEP_LAST)], cell.budget, cell.train_seed)
+        return data_overrides(base, cfg) + [KEEP_LAST_DATASETS]
     if cell.data == "bitstar":
         return [f"planner.per_env=[{{env: {cell.map}, name: roadmap, data_paths: raw}}]",
                 f"data.per_env=[{{env: {cell.map}, paths_from: {BITSTAR_RECORD}}}]"]
@@ -115,6 +127,7 @@ def cells(seeds: bool = True) -> list[Cell]:
                                                          "nosteer_paper")]
         if seeds:
             out += [Cell(m, default_data(m), "ours", k) for k in (1, 2)]
+    out += [Cell(m, default_data(m) + KEEP_LAST, "ours") for m in MAPS]
     return out
 
 
@@ -133,7 +146,7 @@ def record_rows(record: Path, pool: str) -> int:
 
 def ready(cell: Cell) -> str | None:
     """Why the cell cannot run yet, or None."""
-    if cell.data == "density" and MAPS[cell.map] == "point" and cell.map not in DENSITY:
+    if cell.data.startswith("density") and MAPS[cell.map] == "point" and cell.map not in DENSITY:
         return "no BIT*-like spacing measured for the point robot yet (DENSITY)"
     if cell.data == "bitstar":
         rec = Path(BITSTAR_RECORD)
@@ -170,32 +183,34 @@ def paired(run: Path, cell: Cell, env) -> list[dict]:
     """PNet_k - PNet_0 per query kind, steerTo and band, from the run's saved paths."""
     import numpy as np
 
-    from ntq_jax.experiment.evaluate import in_band
+    from ntq_jax.experiment.metrics import in_band
     from ntq_jax.stats import mcnemar_exact, paired_success_difference
 
     res = json.loads((run / "results.json").read_text())
     qs = np.load(run / "eval" / cell.slug / "queries.npz")
     out = []
     rows = {(r["model"], r["query_kind"], r["steer"]): r for r in res["rows"]}
+    pairs = [(f"PNet_{k}", "PNet_0") for k in (1, 2, 3, 4)] + [("PNet_4", "PNet_3")]
     for (model, kind, steer), r in sorted(rows.items(), key=str):
-        if model not in ("PNet_1", "PNet_2", "PNet_3"):
-            continue
-        base = rows.get(("PNet_0", kind, steer))
-        if base is None:
-            continue
-        a = np.load(run / r["paths_file"])["success"]
-        b = np.load(run / base["paths_file"])["success"]
-        band = in_band(env, qs[kind])
-        for part, mask in (("all", np.ones_like(band)), ("in_band", band), ("out_band", ~band)):
-            row = {"model": model, "baseline": "PNet_0", "query_kind": kind, "steer": steer,
-                   "band": part, "n": int(mask.sum())}
-            if mask.any():
-                d = paired_success_difference(a[mask], b[mask])
-                row.update(success=float(a[mask].mean()), baseline_success=float(b[mask].mean()),
-                           only_a=d["only_a"], only_b=d["only_b"], success_diff=d["diff"],
-                           success_diff_ci95=d["ci"],
-                           mcnemar_p=mcnemar_exact(d["only_a"], d["only_b"]))
-            out.append(row)
+        for baseline in [b for a, b in pairs if a == model]:
+            base = rows.get((baseline, kind, steer))
+            if base is None:
+                continue
+            a = np.load(run / r["paths_file"])["success"]
+            b = np.load(run / base["paths_file"])["success"]
+            band = in_band(env, qs[kind])
+            for part, mask in (("all", np.ones_like(band)), ("in_band", band),
+                               ("out_band", ~band)):
+                row = {"model": model, "baseline": baseline, "query_kind": kind,
+                       "steer": steer, "band": part, "n": int(mask.sum())}
+                if mask.any():
+                    d = paired_success_difference(a[mask], b[mask])
+                    row.update(success=float(a[mask].mean()),
+                               baseline_success=float(b[mask].mean()),
+                               only_a=d["only_a"], only_b=d["only_b"], success_diff=d["diff"],
+                               success_diff_ci95=d["ci"],
+                               mcnemar_p=mcnemar_exact(d["only_a"], d["only_b"]))
+                out.append(row)
     return out
 
 
@@ -264,7 +279,8 @@ def report(results: Path) -> Path:
         "# Factor study: what decides PNet_3 vs PNet_0",
         "",
         "Generated by `python scripts/factor_study.py --report-only` from the cells below",
-        "(`python scripts/factor_study.py --list`). Success difference PNet_k - PNet_0 on the",
+        "(`python scripts/factor_study.py --list`). Success difference PNet_k - PNet_0 (or the",
+        "baseline named in the model column) on the",
         "same test queries (K_test per kind: the task config's), with its 95 % Newcombe interval and",
         "McNemar's exact p; `in`/`out`: test queries with both endpoints valid at the data",
         "padding (in band) or not.",
@@ -277,7 +293,9 @@ def report(results: Path) -> Path:
         c = p["cell"]
         by = {}
         for r in p["paired"]:
-            by.setdefault((r["query_kind"], r["steer"], r["model"]), {})[r["band"]] = r
+            label = r["model"] + ("" if r.get("baseline", "PNet_0") == "PNet_0"
+                                  else f" vs {r['baseline']}")
+            by.setdefault((r["query_kind"], r["steer"], label), {})[r["band"]] = r
         for (kind, steer, model), parts in sorted(by.items(), key=str):
             cellf = []
             for band in ("all", "in_band", "out_band"):

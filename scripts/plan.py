@@ -82,7 +82,7 @@ def plan_one(run, model: int, start, goal, *, env_name=None, steer: bool = True,
     import jax
     import numpy as np
 
-    from ntq_jax.experiment.evaluate import member_pnets
+    from ntq_jax.models import member_pnets
     from ntq_jax.neural_planner import PlannerOptions, plan_batch
     from ntq_jax.training import CheckpointError, load_ensemble
 

@@ -7,7 +7,7 @@
   bidirectional coarse plan.
 * The rule (:func:`ntq_jax.neural_steps.choose`) on hand-made candidates, and the
   ensemble of a useless and a good member planning like the good one.
-* Best-of-N (:func:`ntq_jax.experiment.evaluate.best_of`): never costlier than any member's
+* Best-of-N (:func:`ntq_jax.experiment.metrics.best_of`): never costlier than any member's
   successful path on a query, succeeds iff some member succeeds.
 * The rows and files in a tiny pipeline run (the fixture of tests/test_train_all.py).
 """
@@ -17,7 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from ntq_jax.experiment import evaluate as E
+from ntq_jax.experiment import metrics as M
 from ntq_jax import make_env, models
 from ntq_jax.models import ModelConfig
 from ntq_jax.neural_planner import PlannerOptions, plan_batch
@@ -58,7 +58,7 @@ def test_identical_members_equal_the_single_member_stand_in(opts):
 
 
 def test_identical_members_equal_the_single_member_pnet():
-    """Real PNets (random weights, dropout on) through evaluate.member_pnets.
+    """Real PNets (random weights, dropout on) through models.member_pnets.
 
     A member's dropout key is ``fold_in(step key, m)`` (``member_pnets``, as in
     its own evaluation), so "identical members" means the same parameters *and*
@@ -73,13 +73,13 @@ def test_identical_members_equal_the_single_member_pnet():
     for dropout in (0.5, 0.0):
         spec = models.ModelSpec.from_env(env, ModelConfig(hidden=(32, 32), dropout=dropout))
         ens = models.init_ensemble(spec, 0, 4)
-        p1 = E.member_pnets(ens)[1]
+        p1 = models.member_pnets(ens)[1]
         one = plan_batch(env, p1, q, jax.random.key(7), opts)
         _assert_same(one, plan_batch(env, [p1] * 4, q, jax.random.key(7), opts), 4)
         if dropout == 0.0:  # four members with one member's parameters
             same = models.Ensemble(ens.graphdef, models.stack_states(
                 [models.unstack_state(ens.params, 1)] * 4), ens.spec)
-            _assert_same(one, plan_batch(env, E.member_pnets(same), q, jax.random.key(7), opts),
+            _assert_same(one, plan_batch(env, models.member_pnets(same), q, jax.random.key(7), opts),
                          4)
 
 
@@ -146,7 +146,7 @@ def test_best_of_never_costlier_than_a_member_and_succeeds_iff_one_does():
         members.append(_saved(success, costs, cause, paths, np.full(k, j + 1)))
         members[-1]["lengths"] = np.full(k, length, np.int32)
     cause2 = np.array([members[j]["cause"][2] for j in range(m)])
-    best = E.best_of(members)
+    best = M.best_of(members)
     succ = np.stack([z["success"] for z in members])
     cost = np.stack([np.where(z["success"], z["costs"], np.inf) for z in members])
     np.testing.assert_array_equal(best["success"], succ.any(axis=0))
@@ -170,7 +170,7 @@ def test_best_of_never_costlier_than_a_member_and_succeeds_iff_one_does():
     np.testing.assert_array_equal(best["pnet_calls"], np.full(k, 1 + 2 + 3 + 4))
     assert best["seconds"] == pytest.approx(6.0) and best["compile_seconds"] == pytest.approx(2.0)
     with pytest.raises(ValueError):
-        E.best_of([])
+        M.best_of([])
 
 
 def test_eval_ensemble_option():
@@ -224,7 +224,7 @@ def test_plan_members_equals_each_member_alone(real):
         q = np.asarray(env.sample_queries(jax.random.key(5), 40, 1.0, padding=0.0)[0],
                        np.float32)
         spec = models.ModelSpec.from_env(env, ModelConfig(hidden=(32, 32), dropout=0.5))
-        nets = E.member_pnets(models.init_ensemble(spec, 0, 3))
+        nets = models.member_pnets(models.init_ensemble(spec, 0, 3))
     else:
         env = make("wall")
         q = np.asarray([[[2, 5], [8, 5]], [[1, 1], [9, 6]], [[4, 9], [6, 1]],

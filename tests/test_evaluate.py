@@ -14,6 +14,7 @@ import pytest
 from ntq_jax import Env, artifacts, make_env
 from ntq_jax.experiment import config
 from ntq_jax.experiment import evaluate as E
+from ntq_jax.experiment import metrics as M
 from ntq_jax.experiment import report as R
 from ntq_jax.stats import wilson_interval
 from ntq_jax.types import QUERY_KINDS, PlanCause
@@ -27,7 +28,7 @@ def test_metrics_by_hand():
     ref = np.array([1.0, 2.0, np.inf, 1.0, 1.0])
     status = np.array([0, 0, 2, 0, 0], np.int8)  # the reference timed out on query 2
     opt = np.array([1.0, 1.5, 4.0, 1.0, 1.0])
-    m = E.metrics(success, costs, cause, ref, status, opt)
+    m = M.metrics(success, costs, cause, ref, status, opt)
     assert m["successes"] == 3 and m["success_ratio"] == pytest.approx(0.6)
     assert m["success_ci95"] == pytest.approx(list(wilson_interval(3, 5)))
     assert m["cost_ratio"] == pytest.approx((2.0 + 1.5) / 2)  # only queries both solved
@@ -110,7 +111,7 @@ def _row(env, model, kind, steer, s, k=50, cost=1.05):
             "member": int(model[-1]), "query_kind": kind, "steer": steer, "gamma_nt": 0.4,
             "gamma_nt_ci95": [0.39, 0.41], "reference_planner": "astar",
             "seconds_per_query": 1e-3, "compile_seconds": 2.0, "reference_seconds_per_query": 1e-2,
-            "paths_file": "x", **E.metrics(np.arange(k) < s, np.full(k, cost), np.zeros(k, np.int8),
+            "paths_file": "x", **M.metrics(np.arange(k) < s, np.full(k, cost), np.zeros(k, np.int8),
                                            np.ones(k), np.zeros(k, np.int8), np.ones(k))}
 
 
@@ -141,7 +142,7 @@ def test_report_shows_in_band_and_out_of_band_success(tmp_path):
     band = np.arange(50) < 30
     for r in rows:
         r["band_padding"] = 0.8
-        r.update(E.band_metrics(np.arange(50) < 40, band))  # 30/30 in band, 10/20 out
+        r.update(M.band_metrics(np.arange(50) < 40, band))  # 30/30 in band, 10/20 out
     rows[-1] = {k: v for k, v in rows[-1].items() if "band" not in k}  # a row from before
     R.write_report(tmp_path, rows, figures=False)
     md = (tmp_path / "tables.md").read_text()
@@ -186,15 +187,15 @@ def test_recheck_paths_checks_collisions_start_and_goal(tmp_path):
     success = np.array([True, True, True, True, False])
     f = E.paths_file(tmp_path, "box", 0, "uniform", True)
     artifacts.save_npz(f, queries=q, paths=paths, lengths=lengths, success=success)
-    assert E.recheck_paths(env, f).tolist() == [True, False, False, False, True]
+    assert M.recheck_paths(env, f).tolist() == [True, False, False, False, True]
     # without steerTo a success stops within delta of the goal, which it does not reach
     g = E.paths_file(tmp_path, "box", 0, "uniform", False)
     paths[2, :2] = [[1, 1], [8.5, 1]]              # 0.5 from the goal
     artifacts.save_npz(g, queries=q, paths=paths, lengths=lengths, success=success)
-    assert E.recheck_paths(env, g, delta=1.0).tolist() == [True, False, True, False, True]
-    assert E.recheck_paths(env, g, delta=0.4).tolist() == [True, False, False, False, True]
+    assert M.recheck_paths(env, g, delta=1.0).tolist() == [True, False, True, False, True]
+    assert M.recheck_paths(env, g, delta=0.4).tolist() == [True, False, False, False, True]
     with pytest.raises(ValueError, match="delta"):
-        E.recheck_paths(env, g)
+        M.recheck_paths(env, g)
     # a start already within delta: the one-state path passes if its state is valid
     one = np.full((2, 3, 2), np.nan, np.float32)
     one[:, 0] = [[1, 1], [4.5, 5]]                 # free; inside the box
@@ -202,8 +203,8 @@ def test_recheck_paths_checks_collisions_start_and_goal(tmp_path):
     h = E.paths_file(tmp_path, "box", 1, "uniform", False)
     artifacts.save_npz(h, queries=q1, paths=one, lengths=np.ones(2, np.int32),
                        success=np.ones(2, bool))
-    assert E.recheck_paths(env, h, delta=1.0).tolist() == [True, False]
-    assert E.recheck_paths(env, h, delta=0.4).tolist() == [False, False]
+    assert M.recheck_paths(env, h, delta=1.0).tolist() == [True, False]
+    assert M.recheck_paths(env, h, delta=0.4).tolist() == [False, False]
 
 
 def test_recheck_without_steer_to_uses_the_robots_metric(tmp_path):
@@ -220,21 +221,21 @@ def test_recheck_without_steer_to_uses_the_robots_metric(tmp_path):
     f = E.paths_file(tmp_path, "open", 0, "uniform", False)
     artifacts.save_npz(f, queries=q, paths=paths, lengths=np.full(3, 2, np.int32),
                        success=np.ones(3, bool))
-    assert E.recheck_paths(env, f, delta=0.78).tolist() == [True, True, True]
-    assert E.recheck_paths(env, f, delta=0.6).tolist() == [True, False, True]
-    assert E.recheck_paths(env, f, delta=0.1).tolist() == [True, False, False]
+    assert M.recheck_paths(env, f, delta=0.78).tolist() == [True, True, True]
+    assert M.recheck_paths(env, f, delta=0.6).tolist() == [True, False, True]
+    assert M.recheck_paths(env, f, delta=0.1).tolist() == [True, False, False]
 
 
 def test_band_metrics_by_hand():
     success = np.array([True, True, False, True, False, True])
     band = np.array([True, False, False, True, True, True])
-    m = E.band_metrics(success, band)
+    m = M.band_metrics(success, band)
     assert (m["n_in_band"], m["n_out_band"]) == (4, 2)
     assert (m["successes_in_band"], m["successes_out_band"]) == (3, 1)
     assert m["success_in_band"] == pytest.approx(0.75) and m["success_out_band"] == 0.5
     assert m["success_in_band_ci95"] == pytest.approx(list(wilson_interval(3, 4)))
     assert m["success_out_band_ci95"] == pytest.approx(list(wilson_interval(1, 2)))
-    empty = E.band_metrics(success, np.ones(6, bool))
+    empty = M.band_metrics(success, np.ones(6, bool))
     assert empty["n_out_band"] == 0 and np.isnan(empty["success_out_band"])
     assert empty["success_in_band"] == pytest.approx(4 / 6)
 
@@ -245,14 +246,14 @@ def test_in_band_partitions_the_test_queries(tmp_path, cfg):
     assert env.padding > 0
     q = E.test_queries(env, cfg, "point_1", tmp_path)
     for kind in QUERY_KINDS:
-        band = E.in_band(env, q[kind])
+        band = M.in_band(env, q[kind])
         assert band.shape == (len(q[kind]),) and band.dtype == bool
         ok = np.asarray(env.is_valid(q[kind].reshape(-1, 2))).reshape(-1, 2)  # env padding
         np.testing.assert_array_equal(band, ok.all(axis=1))
         success = np.arange(len(band)) % 3 != 0
-        m = E.band_metrics(success, band)
+        m = M.band_metrics(success, band)
         assert m["n_in_band"] + m["n_out_band"] == len(band)
         assert m["successes_in_band"] + m["successes_out_band"] == success.sum()
     # the non-trivial queries hug the obstacles: some have an endpoint in the band
-    assert not E.in_band(env, q["nontrivial"]).all()
-    assert E.in_band(env, q["uniform"]).any()
+    assert not M.in_band(env, q["nontrivial"]).all()
+    assert M.in_band(env, q["uniform"]).any()

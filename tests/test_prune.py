@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from ntq_jax.experiment import config as C
-from ntq_jax import data, make_env
+from ntq_jax import Env, data, make_env
 from ntq_jax.experiment.config import ConfigError
 from ntq_jax.data.include import prune_rng
 
@@ -23,7 +23,8 @@ ARRAYS = ("inputs", "targets", "path_index", "paths", "path_lengths", "queries",
           "solved")
 SPECS = [{"p_nt": 1.0}, {"p_nt": 1.0, "prune": True}, {"p_nt": 1.0, "prune": 0.0},
          {"p_nt": 1.0, "prune": 1}, {"p_nt": 1.0, "prune": 0.5},
-         {"name": "D5", "p_nt": 1.0, "prune": "gamma"}]
+         {"name": "D5", "p_nt": 1.0, "prune": "gamma"},
+         {"name": "D6", "p_nt": 1.0, "prune": "keep_last"}]
 
 
 def _config(chunk=64, seed=0):
@@ -107,6 +108,37 @@ def test_gamma_uses_the_maps_gamma_at_the_data_padding(run):
     assert abs(frac - (1 - g)) < 4 * np.sqrt(g * (1 - g) / n_free)
 
 
+def test_keep_last_is_pruning_plus_each_paths_step_into_the_goal(run):
+    """D6 (prune: keep_last) keeps exactly D2's samples that are blocked or the last of their
+    path, in D2's order; everything but the samples is D2's."""
+    env, ds = run
+    full, part = ds[0], ds[6]
+    pidx = np.asarray(full.path_index)
+    last = np.r_[pidx[1:] != pidx[:-1], True]  # samples are in path order: a path's last row
+    want = ~_free(env, full) | last
+    for name in ("inputs", "targets", "path_index"):
+        assert np.array_equal(np.asarray(getattr(part, name)), np.asarray(getattr(full, name))[want])
+    assert np.array_equal(np.asarray(part.paths), np.asarray(full.paths), equal_nan=True)
+    assert last.sum() == len(np.unique(pidx)) and (last & _free(env, full)).sum() > 0
+    # D3 (prune: true) is D6 without the free last steps
+    d3 = np.asarray(ds[1].inputs)
+    assert len(d3) == len(part.inputs) - int((last & _free(env, full)).sum())
+    assert part.meta["prune"] == "keep_last" and part.meta["p_prune"] == 1.0
+
+
+def test_keep_last_on_a_hand_made_path():
+    """A path of 4 waypoints on an empty map: every waypoint sees the goal, so pruning keeps
+    nothing and keep_last keeps the one step into the goal."""
+    env = Env.from_json({"name": "empty", "robot": {"kind": "point"}, "bounds": [[0, 10], [0, 10]],
+                         "boxes": [], "discs": [], "padding": 0.0})
+    path = np.array([[[1, 1], [2, 2], [3, 3], [4, 4]]], np.float32)
+    i0, t0, _ = data.include_data(env, path, [4], prune=True)
+    i1, t1, p1 = data.include_data(env, path, [4], prune=True, keep_last=True)
+    i2, _, _ = data.include_data(env, path, [4], prune=False, keep_last=True)
+    assert len(i0) == 0 and len(i2) == 3  # without pruning keep_last changes nothing
+    assert i1.tolist() == [[3, 3, 4, 4]] and t1.tolist() == [[4, 4]] and p1.tolist() == [0]
+
+
 def test_the_draws_depend_on_seed_env_and_name_only():
     u = prune_rng(0, "point_2", "D4").random(1000)
     assert np.array_equal(u, prune_rng(0, "point_2", "D4").random(1000))
@@ -135,6 +167,7 @@ def test_include_data_needs_rng_for_a_probability():
 
 @pytest.mark.parametrize("value, msg", [
     ("1.5", "must be in [0, 1]"), ("-0.2", "must be in [0, 1]"), ("gama", "'gamma'"),
+    ("keep_first", "'keep_last'"),
     ("null", "got null"), ("[0.5]", "expected bool or float or str"),
 ])
 def test_bad_prune_values_name_the_key(value, msg):

@@ -174,6 +174,8 @@ def estimate_gammas(env, key: jax.Array, data_config, padding: float, work: Path
 
 def resolve_prune(spec, g_data: dict, env_name: str, name: str) -> float:
     """The drop probability of a free sample for ``spec.prune`` (``gamma``: ``g_data``'s estimate)."""
+    if spec.prune == "keep_last":  # Alg. 4's pruning; include_data keeps the last steps
+        return 1.0
     if isinstance(spec.prune, str):  # "gamma" (validated by the config)
         g = g_data.get("gamma")
         if g is None:
@@ -186,11 +188,11 @@ def resolve_prune(spec, g_data: dict, env_name: str, name: str) -> float:
 
 
 def dataset_arrays(env, pools: Pools, planned: PlanResult, idx: np.ndarray, prune: bool | float,
-                   prune_padding: float, rng: np.random.Generator | None = None
-                   ) -> dict[str, np.ndarray]:
+                   prune_padding: float, rng: np.random.Generator | None = None,
+                   keep_last: bool = False) -> dict[str, np.ndarray]:
     """The arrays of the dataset made of pool rows ``idx`` (:data:`ARRAY_SPECS`).
 
-    ``prune``: ``include_data``'s flag or drop probability (``rng`` its draws).
+    ``prune``, ``rng``, ``keep_last``: :func:`ntq_jax.data.include.include_data`'s.
     """
     solved = planned.solved[idx]
     sel = idx[solved]
@@ -199,7 +201,7 @@ def dataset_arrays(env, pools: Pools, planned: PlanResult, idx: np.ndarray, prun
     paths = (np.ascontiguousarray(planned.paths[sel, :lmax]) if len(sel)
              else np.zeros((0, 0, env.dim), np.float32))
     inputs, targets, pidx = include_data(env, paths, lens, prune=prune, padding=prune_padding,
-                                         rng=rng)
+                                         rng=rng, keep_last=keep_last)
     return {"inputs": inputs, "targets": targets, "path_index": pidx,
             "paths": paths.astype(np.float32), "path_lengths": lens,
             "queries": pools.queries[idx].astype(np.float32),
@@ -329,6 +331,44 @@ def _timed(timings: dict, stage: str):
 # The orchestrator
 # ---------------------------------------------------------------------------
 
+def _write_datasets(env, config, run, pools, planned, blocked, gammas, bad: dict,
+                    timings: dict, progress) -> tuple[dict[str, dict], list[str]]:
+    """includeData (Alg. 4) for every dataset of ``run``, each written with its metadata.
+
+    A dataset is rewritten only when it is damaged (``bad``) or its arrays changed.
+    Returns ``(statistics per dataset, names of the datasets written now)``.
+    """
+    g_data, g_eval = gammas
+    common = common_meta(env, config, run, g_data, g_eval)
+    summary: dict[str, dict] = {}
+    rewritten: list[str] = []
+    with open_bar(progress, desc=f"{run.slug}: includeData + write", total=len(run.specs),
+                  unit="dataset") as bar:
+        for j, (name, spec) in enumerate(zip(run.names, run.specs)):
+            with _timed(timings, "include"):
+                idx = pool_index(run.bits[j], pools.n_u)
+                p_prune = resolve_prune(spec, g_data, run.env_name, name)
+                # bool prune: exactly Alg. 4's flag (the paper's datasets, as before)
+                prune = spec.prune if isinstance(spec.prune, bool) else p_prune
+                arrays = dataset_arrays(env, pools, planned.result, idx, prune,
+                                        run.prune_padding,
+                                        rng=prune_rng(config.seed, run.slug, name),
+                                        keep_last=spec.prune == "keep_last")
+            with _timed(timings, "write"):
+                stats = dataset_stats(arrays, idx, planned, blocked, p_prune > 0, g_data, g_eval)
+                warns = dataset_warnings(run.env_name, name, stats, p_prune > 0,
+                                         config.sampling.n_max)
+                if name in bad or not _unchanged(run.env_dir / name, arrays):
+                    write_dataset(run.env_dir / name, arrays, dict(
+                        common, name=name, p_nt=spec.p_nt, prune=spec.prune,
+                        p_prune=p_prune, stats=stats,
+                        sharing=sharing(run, j), warnings=warns))
+                    rewritten.append(name)
+            summary[name] = stats
+            bar.update(1)
+    return summary, rewritten
+
+
 def generate_datasets(env, config, out_dir, *, env_name: str | None = None, planner=None,
                       progress=True, figure: bool = True, executor=None) -> dict:
     """Generates D0..D3 (``config.data.datasets``) for one environment (Alg. 2 + 4).
@@ -404,32 +444,8 @@ def generate_datasets(env, config, out_dir, *, env_name: str | None = None, plan
             bar.update(1)
 
     # 4. includeData per dataset, written with its metadata (meta.json last)
-    common = common_meta(env, config, run, g_data, g_eval)
-    summary: dict[str, dict] = {}
-    rewritten: list[str] = []
-    with open_bar(progress, desc=f"{run.slug}: includeData + write", total=len(run.specs),
-                  unit="dataset") as bar:
-        for j, (name, spec) in enumerate(zip(run.names, run.specs)):
-            with _timed(timings, "include"):
-                idx = pool_index(run.bits[j], pools.n_u)
-                p_prune = resolve_prune(spec, g_data, run.env_name, name)
-                # bool prune: exactly Alg. 4's flag (the paper's datasets, as before)
-                prune = spec.prune if isinstance(spec.prune, bool) else p_prune
-                arrays = dataset_arrays(env, pools, planned.result, idx, prune,
-                                        run.prune_padding,
-                                        rng=prune_rng(config.seed, run.slug, name))
-            with _timed(timings, "write"):
-                stats = dataset_stats(arrays, idx, planned, blocked, p_prune > 0, g_data, g_eval)
-                warns = dataset_warnings(run.env_name, name, stats, p_prune > 0,
-                                         config.sampling.n_max)
-                if name in bad or not _unchanged(run.env_dir / name, arrays):
-                    write_dataset(run.env_dir / name, arrays, dict(
-                        common, name=name, p_nt=spec.p_nt, prune=spec.prune,
-                        p_prune=p_prune, stats=stats,
-                        sharing=sharing(run, j), warnings=warns))
-                    rewritten.append(name)
-            summary[name] = stats
-            bar.update(1)
+    summary, rewritten = _write_datasets(env, config, run, pools, planned, blocked,
+                                         (g_data, g_eval), bad, timings, progress)
 
     # 5. the figure; the datasets are complete: drop every work folder
     if figure:

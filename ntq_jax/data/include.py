@@ -17,6 +17,12 @@ drops every free sample (= Alg. 4's pruning, bit for bit), and the datasets of
 a run draw ``u`` from :func:`prune_rng` (seed, environment, dataset name),
 so the choice does not depend on chunking, and a prefix of the paths gets a
 prefix of the draws.
+
+Keeping the last step (``keep_last``, beyond the paper): pruning as above, but
+each path keeps its last sample ``((pi_{L-2}, pi_end), pi_end)``, the step into
+the goal, whether or not it is free. On a path whose only goal-seeing waypoint
+is ``pi_{L-2}`` (a shortcut path), pruning would otherwise remove exactly that
+step from every path of the dataset.
 """
 
 from __future__ import annotations
@@ -54,7 +60,7 @@ def prune_rng(seed: int, env_slug: str, dataset: str) -> np.random.Generator:
 
 
 def include_data(env, paths, lengths, *, prune: bool | float, padding: float | None = None,
-                 rng: np.random.Generator | None = None):
+                 rng: np.random.Generator | None = None, keep_last: bool = False):
     """Alg. 4 over every segment of every path at once.
 
     Sample ``((pi_i, pi_end), pi_{i+1})`` for ``i = 0..L_p-2`` of each path ``p``
@@ -71,6 +77,8 @@ def include_data(env, paths, lengths, *, prune: bool | float, padding: float | N
             (``0`` = ``False``, ``1`` = ``True``, bit for bit).
         padding: geometry of the pruning ``steer_to`` (default: the environment's).
         rng: the generator of the draws; required when ``0 < prune < 1``.
+        keep_last: with pruning, keep each path's last sample (the step into the
+            goal) even when it is free.
 
     Returns:
         ``(inputs (N, 2d) float32, targets (N, d) float32, path_index (N,) int32)``.
@@ -96,6 +104,8 @@ def include_data(env, paths, lengths, *, prune: bool | float, padding: float | N
         keep = ~steer_to_pairs(env.robot, env.world, cur, goal, env.resolve_padding(padding))
         if p_drop < 1.0:
             keep |= rng.random(len(keep)) >= p_drop
+        if keep_last:
+            keep |= i_idx == lengths[p_idx] - 2
         cur, nxt, goal, p_idx = cur[keep], nxt[keep], goal[keep], p_idx[keep]
     inputs = np.concatenate([cur, goal], axis=1).astype(np.float32).reshape(-1, 2 * d)
     return inputs, nxt.astype(np.float32).reshape(-1, d), p_idx.astype(np.int32)

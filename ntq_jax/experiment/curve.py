@@ -1,4 +1,4 @@
-"""Data-efficiency curve: each dataset trained at several K_train on one map (issue 14, item 4).
+"""Data-efficiency curve: each dataset trained at several K_train on one map.
 
 ``scripts/learning_curve.py`` is the command line over :func:`run_curve`.
 

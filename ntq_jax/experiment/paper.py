@@ -20,7 +20,7 @@ MEMBERS = ("PNet_0", "PNet_1", "PNet_2", "PNet_3")
 #: The 11 maps of the paper, in its order (Tables I, II/III and IV).
 MAPS = ("point/0", "point/1", "point/2", "point/3", "rigid/0", "rigid/1", "rigid/2", "rigid/3",
         "nlink/2", "nlink/4", "nlink/6")
-#: Maps run with three training seeds on the same data (issue 16, seed variance).
+#: Maps run with three training seeds on the same data (the spread over training seeds).
 SEED_MAPS = ("rigid/0", "nlink/4", "point/0")
 
 #: Queries per dataset (K_train), Section V of the paper:

@@ -18,8 +18,8 @@ def robot_from_json(spec: dict, where: str = "robot") -> Robot:
 
     Raises:
         ValueError: unknown kind or parameter (naming the accepted ones), or a bad
-        parameter value (naming the parameter and the expected form; e.g.
-        ``link_lengths`` must be a list of numbers, never a string).
+            parameter value (naming the parameter and the expected form; e.g.
+            ``link_lengths`` must be a list of numbers, never a string).
     """
     if not isinstance(spec, dict) or "kind" not in spec:
         raise ValueError(f"{where} must be an object with a 'kind' in {sorted(_KINDS)}, got "

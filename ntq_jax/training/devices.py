@@ -25,8 +25,7 @@ def use_cpu_devices(count: int | None = None) -> int:
 
     On a CPU, :func:`ntq_jax.training.train_ensemble` then shards the member axis
     over these devices (:func:`member_mesh`): each device runs its members on its
-    own core instead of every small matmul being split over all cores (measured
-    in BENCHMARKS.md). Results differ from a one-device run at float level, hence
+    own core instead of every small matmul being split over all cores. Results differ from a one-device run at float level, hence
     the scripts' default of one device. Other computations keep running on
     device 0 with all cores.
 

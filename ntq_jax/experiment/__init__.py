@@ -1,0 +1,17 @@
+"""The experiment layer: the paper's experiment as an application built on the core.
+
+* :mod:`~ntq_jax.experiment.config` (+ :mod:`~ntq_jax.experiment.sections`): typed,
+  frozen YAML configs with overrides;
+* :mod:`~ntq_jax.experiment.pipeline`: data -> training -> evaluation -> report, resumable;
+* :mod:`~ntq_jax.experiment.evaluate` (+ :mod:`~ntq_jax.experiment.metrics`): the
+  neural planner on test queries, success and cost ratios;
+* :mod:`~ntq_jax.experiment.report` (+ :mod:`~ntq_jax.experiment.formatting`): tables
+  and figures of a run;
+* :mod:`~ntq_jax.experiment.summaries`, :mod:`~ntq_jax.experiment.reproduction`
+  (+ :mod:`~ntq_jax.experiment.paper`, :mod:`~ntq_jax.experiment.claims`): committed
+  per-map summaries and ``REPRODUCTION.md``;
+* :mod:`~ntq_jax.experiment.curve`: the data-efficiency curve;
+* :mod:`~ntq_jax.experiment.cli`: the scripts' shared options and one-line errors.
+
+The core (every other module of :mod:`ntq_jax`) never imports this layer.
+"""

@@ -1,0 +1,36 @@
+"""scripts/factor_study.py: its cells and their configs (no cell is run here)."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _script():
+    spec = importlib.util.spec_from_file_location("factor_study", ROOT / "scripts" / "factor_study.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_every_cell_has_a_config_that_varies_one_factor(monkeypatch):
+    monkeypatch.chdir(ROOT)  # the cells read configs/<task>.yaml
+    fs = _script()
+    cells = fs.cells()
+    assert len({c.key for c in cells}) == len(cells)
+    for c in cells:
+        cfg, sets = fs.cell_config(c)
+        assert list(cfg.envs) == [c.map]
+        base, _ = fs.cell_config(fs.Cell(c.map, fs.default_data(c.map), "ours"))
+        if c.data.endswith(fs.KEEP_LAST):
+            ds = cfg.data.datasets
+            assert [d.prune for d in ds] == [False, False, False, True, "keep_last"]
+            assert [d.p_nt for d in ds] == [0.0, 0.5, 1.0, 1.0, 1.0]
+            # the same data paths, planner and training as the default cell: only D4 is added
+            assert cfg.planner == base.planner and cfg.train == base.train
+        if c.train_seed:
+            assert cfg.train.seed == c.train_seed and cfg.data == base.data
+        if c.budget != "ours":
+            assert cfg.data == base.data and cfg.eval != base.eval

@@ -138,3 +138,19 @@ def test_smooth_data_reaches_the_data_planner_only():
     assert both.sum() >= 10
     assert np.all(rough.lengths[both] >= smooth.lengths[both])
     assert np.mean(rough.lengths[both]) > 3 * np.mean(smooth.lengths[both])
+
+
+def test_the_embedded_default_is_one_yaml_shipped_with_the_package():
+    """``train_all.py`` without --config reads ``ntq_jax/experiment/default.yaml`` (package
+    data, so a non-editable install has it); its keys are checked like any config file's."""
+    import importlib.resources
+    import tomllib
+    from pathlib import Path
+
+    from ntq_jax.experiment import pipeline
+    res = importlib.resources.files("ntq_jax.experiment") / "default.yaml"
+    assert res.is_file() and pipeline.DEFAULT["envs"][-1] == "rigid/0"
+    pyproject = tomllib.loads((Path(__file__).resolve().parent.parent / "pyproject.toml").read_text())
+    assert "default.yaml" in pyproject["tool"]["setuptools"]["package-data"]["ntq_jax.experiment"]
+    cfg = pipeline.load_config(None, [])
+    assert cfg.planner.name_for("rigid/0") == "roadmap" and cfg.data.k_train == 600

@@ -27,6 +27,7 @@ before the config and every environment are validated.
 
 from __future__ import annotations
 
+import importlib.resources
 import json
 import os
 import re
@@ -52,23 +53,12 @@ from ntq_jax.version import __version__
 
 __all__ = ["DEFAULT", "PipelineError", "load_config", "prepare_run", "run_pipeline"]
 
-#: The embedded default: the four point-robot maps and one rigid-body map at reduced sizes
-#: (a few minutes on a CPU). The rigid body's data and reference come from the roadmap
-#: planner (grid A* is for the point robot); its table shows PNet_3 against PNet_0 on
-#: non-trivial queries, where the paper's gains are clearest, with the paired p-value.
-DEFAULT = {
-    "task": "point",
-    "envs": ["point/0", "point/1", "point/2", "point/3", "rigid/0"],
-    "seed": 0,
-    "data": {"k_train": 600, "gamma_queries": 200_000},
-    # rigid/0's data paths: the roadmap's shortcut paths resampled to at most 0.6 apart,
-    # BIT*'s density (configs/rigid.yaml says why)
-    "planner": {"name": "astar", "resolution": 0.1,
-                "per_env": [{"env": "rigid/0", "name": "roadmap", "data_paths": 0.6}]},
-    "model": {"hidden": [256, 256, 128, 64]},
-    "train": {"epochs": 40, "batch_size": 100},
-    "eval": {"k_test": 200, "n_plan": 50, "steer": [True]},
-}
+#: The embedded default (``default.yaml``, shipped with the package): the four point-robot
+#: maps and one rigid-body map at reduced sizes (a few minutes on a CPU). The rigid body's
+#: data and reference come from the roadmap planner; its table shows PNet_3 against PNet_0
+#: on non-trivial queries, where the paper's gains are clearest, with the paired p-value.
+DEFAULT = yaml.safe_load(
+    (importlib.resources.files("ntq_jax.experiment") / "default.yaml").read_text("utf-8"))
 
 
 #: What a run folder may hold (``--overwrite`` deletes only folders made of these).

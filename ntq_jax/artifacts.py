@@ -25,7 +25,7 @@ from typing import Any, Callable
 import numpy as np
 
 __all__ = ["tmp_name", "replace", "write_with", "write_bytes", "write_text", "write_json",
-           "save_npy", "save_npz", "save_figure", "clean_tmp", "sha256", "json_default",
+           "save_npy", "save_npz", "save_figure", "write_folder", "clean_tmp", "sha256", "json_default",
            "fingerprint", "array_digest", "load_npz", "compute_or_load", "enable_compile_cache"]
 
 
@@ -63,6 +63,24 @@ def write_with(path: str | os.PathLike, write: Callable[[Any], None]) -> Path:
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+    return path
+
+
+def write_folder(path: str | os.PathLike, fill: Callable[[Path], None]) -> Path:
+    """Atomically writes the folder ``path``: ``fill(tmp)`` fills a hidden sibling folder,
+    which then replaces ``path`` (an older ``path`` is removed first). ``path`` is
+    complete or absent, never half written; an interrupted fill leaves only the hidden
+    folder, which the next write of ``path`` removes."""
+    import shutil
+    path = Path(path).absolute()
+    tmp = path.with_name(f".{path.name}.tmp-folder")
+    if tmp.exists():
+        shutil.rmtree(tmp)
+    tmp.mkdir(parents=True)
+    fill(tmp)
+    if path.exists():
+        shutil.rmtree(path)
+    replace(tmp, path)
     return path
 
 
@@ -115,11 +133,15 @@ def link_tree(src: str | os.PathLike, dst: str | os.PathLike) -> None:
 
 
 def clean_tmp(folder: str | os.PathLike) -> None:
-    """Removes the temporary files interrupted writes left in ``folder``."""
+    """Removes the temporary files and folders interrupted writes left in ``folder``."""
+    import shutil
     folder = Path(folder)
     if folder.is_dir():
         for p in folder.glob(".*.tmp-*"):
-            p.unlink(missing_ok=True)
+            if p.is_dir() and not p.is_symlink():
+                shutil.rmtree(p, ignore_errors=True)
+            else:
+                p.unlink(missing_ok=True)
 
 
 def sha256(path: str | os.PathLike) -> str:

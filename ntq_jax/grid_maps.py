@@ -41,7 +41,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from ntq_jax import validation
+from ntq_jax import artifacts, validation
 
 UNKNOWN_POLICIES = ("occupied", "free")
 MOVINGAI_PASSABLE = ".GS"
@@ -400,9 +400,8 @@ def write_movingai(path, occupied: np.ndarray) -> Path:
     occ = np.asarray(occupied, bool)
     h, w = occ.shape
     rows = ["".join("@" if v else "." for v in row) for row in occ[::-1]]
-    path = Path(path)
-    path.write_text(f"type octile\nheight {h}\nwidth {w}\nmap\n" + "\n".join(rows) + "\n")
-    return path
+    return artifacts.write_text(path, f"type octile\nheight {h}\nwidth {w}\nmap\n"
+                                + "\n".join(rows) + "\n")
 
 
 def maze_grid(size: int = 256, corridor: int = 1, seed: int = 0) -> np.ndarray:

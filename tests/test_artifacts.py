@@ -39,3 +39,32 @@ def test_clean_tmp_removes_leftovers_only(tmp_path):
     (tmp_path / "x.npy").write_bytes(b"keep")
     artifacts.clean_tmp(tmp_path)
     assert [p.name for p in tmp_path.iterdir()] == ["x.npy"]
+
+
+def test_write_folder_is_complete_or_absent(tmp_path):
+    """A folder written with write_folder appears whole; a fill that fails leaves the old
+    folder (or none) and a hidden temporary folder that clean_tmp removes."""
+    from ntq_jax import artifacts
+
+    def fill(d):
+        (d / "a.txt").write_text("1")
+        (d / "sub").mkdir()
+        (d / "sub" / "b.txt").write_text("2")
+
+    out = artifacts.write_folder(tmp_path / "ens", fill)
+    assert (out / "sub" / "b.txt").read_text() == "2"
+
+    def broken(d):
+        (d / "a.txt").write_text("half")
+        raise RuntimeError("interrupted")
+
+    import pytest
+    with pytest.raises(RuntimeError):
+        artifacts.write_folder(tmp_path / "ens", broken)
+    assert (tmp_path / "ens" / "a.txt").read_text() == "1"  # the complete folder is untouched
+    leftovers = [p for p in tmp_path.iterdir() if p.name.startswith(".")]
+    assert len(leftovers) == 1 and leftovers[0].is_dir()
+    artifacts.clean_tmp(tmp_path)
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
+    artifacts.write_folder(tmp_path / "ens", fill)  # a rewrite replaces the old folder whole
+    assert sorted(p.name for p in (tmp_path / "ens").iterdir()) == ["a.txt", "sub"]

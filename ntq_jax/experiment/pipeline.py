@@ -77,7 +77,7 @@ RUN_FILES = re.compile("|".join(f"(?:{p})" for p in (
     r"models/[^/]+/(config\.json|curves\.png|history\.csv|history\.jsonl)",
     r"models/[^/]+/(checkpoints|ensemble)/.+",
     r"paths/[^/]+/[A-Za-z0-9_.+-]+\.npz",
-    r"(.+/)?\.[^/]+\.tmp-[^/]+",  # an interrupted atomic write
+    r"(.+/)?\.[^/]+\.tmp-[^/]+(/.+)?",  # an interrupted atomic write (file or folder)
 )))
 _NEW_OUT = "pass a new --out"
 

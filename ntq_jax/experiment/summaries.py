@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import shutil
 import time
 from pathlib import Path
 
@@ -146,10 +145,7 @@ def write_summary(run: Path, env_name: str, env, out_dir: Path, *, command: str 
         (run / "figures").glob(f"*_{slug}.png"))
     for f in figs:
         if f.is_file():
-            (out_dir / "figures").mkdir(exist_ok=True)
-            tmp = out_dir / "figures" / f".{f.name}.tmp"
-            shutil.copyfile(f, tmp)
-            tmp.replace(out_dir / "figures" / f.name)
+            artifacts.write_bytes(out_dir / "figures" / f.name, f.read_bytes())
     path = out_dir / "summary.json"
     artifacts.write_json(path, summary, indent=1, default=str)
     return path

@@ -16,7 +16,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
-import shutil
 import time
 from pathlib import Path
 from typing import Any, Sequence
@@ -196,25 +195,21 @@ class Checkpoints:
 def save_ensemble(ens: models.Ensemble, path: str | os.PathLike, extra: dict | None = None):
     """Writes an ensemble for planning: ``ensemble.json`` (spec) and ``params/`` (orbax).
 
-    Written into ``<path>.tmp`` and renamed, so ``path`` is complete or absent.
+    Written atomically (:func:`ntq_jax.artifacts.write_folder`): ``path`` is complete or absent.
     """
     import orbax.checkpoint as ocp
 
-    path = Path(path).absolute()
-    tmp = path.with_name(path.name + ".tmp")
-    if tmp.exists():
-        shutil.rmtree(tmp)
-    tmp.mkdir(parents=True)
     params = jax.device_get(ens.params)
-    with ocp.StandardCheckpointer() as ckpt:
-        ckpt.save(tmp / "params", _flat(params))
-        ckpt.wait_until_finished()
     info = {"format": FORMAT_VERSION, "spec": ens.spec.to_json(), "num_members": ens.num_members,
             **(extra or {})}
-    artifacts.write_json(tmp / "ensemble.json", info)
-    if path.exists():
-        shutil.rmtree(path)
-    os.replace(tmp, path)
+
+    def fill(tmp: Path) -> None:
+        with ocp.StandardCheckpointer() as ckpt:
+            ckpt.save(tmp / "params", _flat(params))
+            ckpt.wait_until_finished()
+        artifacts.write_json(tmp / "ensemble.json", info)
+
+    return artifacts.write_folder(path, fill)
 
 
 def load_ensemble(path: str | os.PathLike) -> models.Ensemble:

@@ -207,3 +207,35 @@ def test_datasets_rebuild_from_a_record_without_planning(tmp_path, monkeypatch):
         data.generate_datasets(make_env("point/1"), config.load(
             "configs/point_small.yaml", sets + [f"data.per_env=[{{env: point/1, paths_from: '{rec}'}}]"]),
             tmp_path / "p1", env_name="point/1", progress=False, figure=False)
+
+
+def test_the_committed_bitstar_record_reverifies():
+    """An independent check of the committed BIT* chunks of rigid/0 (results/data_paths/bitstar):
+    every solved path starts at its query's start and ends at its goal, is NaN after its
+    length, has every segment free by the environment's steerTo at the data padding, and
+    costs the sum of its segments in the robot's metric; the status is a PlanStatus."""
+    import json
+    import re
+
+    from ntq_jax import PlanStatus
+    from pathlib import Path
+    rec = Path(__file__).resolve().parent.parent / "results" / "data_paths" / "bitstar" / "rigid_0"
+    meta = json.loads((rec / "record.json").read_text())
+    env = make_env(meta["env"])
+    files = sorted(f for pool in ("N", "U") for f in (rec / pool).glob("plan_*.npz"))
+    assert files, "no committed chunk"
+    for f in files[:: max(1, len(files) // 4)]:  # a few chunks, spread over the record
+        lo, hi = map(int, re.fullmatch(r"plan_(\d+)_(\d+)\.npz", f.name).groups())
+        z = np.load(f)
+        q, paths, n, st = z["queries"], z["paths"], z["lengths"], z["status"]
+        assert len(q) == hi - lo and paths.shape[:2][0] == len(q)
+        assert set(np.unique(st)) <= {int(s) for s in PlanStatus}
+        ok = np.flatnonzero(st == PlanStatus.SOLVED)
+        assert len(ok) > 0.9 * len(q)
+        for i in ok:
+            p = paths[i, : n[i]].astype(np.float32)
+            assert n[i] >= 2 and np.isnan(paths[i, n[i]:]).all()
+            assert np.allclose(p[0], q[i, 0], atol=1e-4) and np.allclose(p[-1], q[i, 1], atol=1e-4)
+            assert np.asarray(env.steer_to(p[:-1], p[1:], padding=meta["padding"])).all(), (f, i)
+            cost = float(np.asarray(env.distance(p[:-1], p[1:]), np.float64).sum())
+            assert abs(cost - float(z["costs"][i])) <= 1e-3 * max(1.0, cost), (f, i)

@@ -16,6 +16,7 @@ reused only when the fingerprint matches (:func:`load_npz`,
 from __future__ import annotations
 
 import hashlib
+import io
 import json
 import os
 import shutil
@@ -26,7 +27,8 @@ import numpy as np
 
 __all__ = ["tmp_name", "replace", "write_with", "write_bytes", "write_text", "write_json",
            "save_npy", "save_npz", "save_figure", "write_folder", "clean_tmp", "sha256", "json_default",
-           "fingerprint", "array_digest", "load_npz", "compute_or_load", "enable_compile_cache"]
+           "sha256_json", "fingerprint", "npy_sha256", "array_digest", "tree_digest", "load_npz",
+           "compute_or_load", "enable_compile_cache"]
 
 
 def tmp_name(path: Path) -> Path:
@@ -144,6 +146,10 @@ def clean_tmp(folder: str | os.PathLike) -> None:
                 p.unlink(missing_ok=True)
 
 
+# ---------------------------------------------------------------------------
+# Hashing: every digest the package records is made here
+# ---------------------------------------------------------------------------
+
 def sha256(path: str | os.PathLike) -> str:
     """Hex sha256 of a file's bytes."""
     h = hashlib.sha256()
@@ -164,15 +170,30 @@ def json_default(o):
     raise TypeError(f"not JSON serialisable: {type(o).__name__}")
 
 
+def sha256_json(obj: Any, default: Callable[[Any], Any] = str) -> str:
+    """Hex sha256 of ``obj`` as canonical JSON (``json.dumps`` with sorted keys).
+
+    Equal content gives equal digests whatever the dicts' insertion order;
+    ``default`` turns what JSON cannot hold into something it can.
+    """
+    return hashlib.sha256(json.dumps(obj, sort_keys=True, default=default).encode()).hexdigest()
+
+
 def fingerprint(*parts, default: Callable[[Any], Any] = str) -> str:
-    """A 16-hex-digit sha256 of ``parts`` as canonical JSON (sorted keys).
+    """The first 16 hex digits of :func:`sha256_json` of ``parts``.
 
     ``default`` turns what JSON cannot hold into something it can (``str`` by
     default; :func:`json_default` for NumPy values). One call, one part: a dict.
     """
     obj = parts[0] if len(parts) == 1 else list(parts)
-    blob = json.dumps(obj, sort_keys=True, default=default).encode()
-    return hashlib.sha256(blob).hexdigest()[:16]
+    return sha256_json(obj, default)[:16]
+
+
+def npy_sha256(arr: np.ndarray) -> str:
+    """Hex sha256 of ``arr``'s ``.npy`` bytes as :func:`save_npy` writes them (C order)."""
+    buf = io.BytesIO()
+    np.save(buf, np.ascontiguousarray(arr), allow_pickle=False)
+    return hashlib.sha256(buf.getbuffer()).hexdigest()
 
 
 def array_digest(*arrays: np.ndarray) -> str:
@@ -181,6 +202,22 @@ def array_digest(*arrays: np.ndarray) -> str:
     for a in arrays:
         h.update(np.ascontiguousarray(a).tobytes())
     return h.hexdigest()[:16]
+
+
+def tree_digest(tree: Any) -> str:
+    """Hex sha256 over a pytree's leaves: each leaf's key path, dtype, shape and bytes.
+
+    The digest of the values, not of any file holding them: two checkpoints of
+    equal weights written at different times have equal digests.
+    """
+    import jax
+
+    h = hashlib.sha256()
+    for path, leaf in jax.tree_util.tree_leaves_with_path(tree):
+        a = np.ascontiguousarray(np.asarray(leaf))
+        h.update(f"{jax.tree_util.keystr(path)} {a.dtype.str} {a.shape}".encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
 
 
 def load_npz(path: str | os.PathLike, fingerprint: str | None = None) -> dict | None:

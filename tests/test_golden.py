@@ -398,7 +398,7 @@ def simulate(tmp: Path) -> dict:
     """
     from ntq_jax import data, make_env, training
     from ntq_jax.experiment import config
-    from ntq_jax.data.format import npy_sha256
+    from ntq_jax.artifacts import npy_sha256
     from ntq_jax.experiment.pipeline import load_config
 
     cfg = load_config(None, TINY)

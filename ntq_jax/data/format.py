@@ -24,8 +24,6 @@ folder's ``config.yaml``, written by the generator, makes it exact).
 
 from __future__ import annotations
 
-import hashlib
-import io
 import json
 import re
 import shlex
@@ -38,7 +36,7 @@ from ntq_jax import artifacts, plotting
 from ntq_jax.envs import Env
 
 __all__ = ["FORMAT", "FORMAT_VERSION", "ARRAY_SPECS", "Dataset", "DatasetError",
-           "dataset_names", "meta_bytes", "npy_sha256", "regenerate_hint",
+           "dataset_names", "meta_bytes", "recorded_checksums", "regenerate_hint",
            "dataset_problem", "damaged_datasets", "is_complete", "write_dataset", "load_dataset",
            "load_datasets", "plot_environment"]
 
@@ -104,13 +102,6 @@ def meta_bytes(obj) -> bytes:
     """``meta.json``'s bytes: sorted keys, indent 1, NumPy values as JSON numbers."""
     return (json.dumps(obj, indent=1, sort_keys=True, default=artifacts.json_default)
             + "\n").encode()
-
-
-def npy_sha256(arr: np.ndarray) -> str:
-    """The sha256 of ``arr``'s ``.npy`` bytes as :func:`write_dataset` writes them."""
-    buf = io.BytesIO()
-    np.save(buf, np.ascontiguousarray(arr), allow_pickle=False)
-    return hashlib.sha256(buf.getbuffer()).hexdigest()
 
 
 def _env_name_of(env_dir: Path) -> str | None:
@@ -227,6 +218,19 @@ def damaged_datasets(env_dir, names: list[str], fingerprint: str | None = None,
 def is_complete(env_dir: Path, names: list[str], fingerprint: str, checksum: bool = True) -> bool:
     """Every dataset of ``names`` is written with this ``fingerprint`` and verified intact."""
     return not damaged_datasets(env_dir, names, fingerprint, checksum)
+
+
+def recorded_checksums(env_dir, names: list[str]) -> dict[str, dict[str, str] | None]:
+    """Per dataset name, ``{array: sha256}`` as its ``meta.json`` records them; None for a
+    dataset whose ``meta.json`` is absent or unreadable. Reads no array."""
+    out: dict[str, dict[str, str] | None] = {}
+    for nm in names:
+        try:
+            arrays = json.loads((Path(env_dir) / nm / "meta.json").read_text())["arrays"]
+            out[nm] = {a: v["sha256"] for a, v in arrays.items()}
+        except (OSError, ValueError, KeyError, TypeError, AttributeError):
+            out[nm] = None
+    return out
 
 
 def write_dataset(folder: Path, arrays: dict[str, np.ndarray], meta: dict) -> None:

@@ -54,7 +54,7 @@ import yaml
 from ntq_jax import artifacts
 from ntq_jax import queries as Q
 from ntq_jax.data.format import (CONFIG_FILE, FORMAT, FORMAT_VERSION, damaged_datasets,
-                                 dataset_names, npy_sha256, plot_environment, write_dataset)
+                                 dataset_names, plot_environment, write_dataset)
 from ntq_jax.envs import env_slug
 from ntq_jax.data.include import include_data, prune_probability, prune_rng
 from ntq_jax.planners.path_modes import shape_paths
@@ -304,7 +304,7 @@ def _unchanged(folder: Path, arrays: dict[str, np.ndarray]) -> bool:
     """``folder``'s ``meta.json`` records exactly these arrays (sha256 of their ``.npy`` bytes)."""
     try:
         recorded = json.loads((folder / "meta.json").read_text())["arrays"]
-        return all(recorded[name]["sha256"] == npy_sha256(a) for name, a in arrays.items())
+        return all(recorded[name]["sha256"] == artifacts.npy_sha256(a) for name, a in arrays.items())
     except (OSError, ValueError, KeyError, TypeError):
         return False
 

@@ -39,7 +39,6 @@ the environment's own padding, the data-generation geometry of the paper;
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import json
 import math
 import os
@@ -151,7 +150,7 @@ class Env:
         content = {"robot": self.robot.to_json(), "padding": float(self.padding),
                    **{k: np.asarray(getattr(self.world, k), np.float64).tolist()
                       for k in ("bounds", "boxes", "discs")}}
-        return hashlib.sha256(json.dumps(content, sort_keys=True).encode()).hexdigest()
+        return artifacts.sha256_json(content)
 
     # -- geometry -----------------------------------------------------------
     @property

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
-import hashlib
 import json
 import math
 import types
@@ -27,6 +26,7 @@ from typing import Optional
 
 import yaml
 
+from ntq_jax import artifacts
 from ntq_jax.errors import ConfigError, check_config as _check
 from ntq_jax.models import ModelConfig
 from ntq_jax.training.config import TrainConfig
@@ -104,8 +104,7 @@ class Config:
     def hash(self) -> str:
         """A short stable hash of the resolved config (for metadata and resume checks)."""
         plain = {k: v for k, v in self.to_dict().items() if k not in self.RUNTIME_KEYS}
-        blob = json.dumps(plain, sort_keys=True).encode()
-        return hashlib.sha256(blob).hexdigest()[:16]
+        return artifacts.fingerprint(plain)
 
 
 # ---------------------------------------------------------------------------

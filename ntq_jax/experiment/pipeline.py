@@ -44,7 +44,7 @@ from ntq_jax.experiment import config as C
 from ntq_jax import data as data_mod
 from ntq_jax import training
 from ntq_jax.envs import env_slug, resolve_envs
-from ntq_jax.data.format import ARRAY_SPECS
+from ntq_jax.data.format import ARRAY_SPECS, recorded_checksums
 from ntq_jax.envs import EnvError
 from ntq_jax.planners.options import unsupported_robot
 from ntq_jax.experiment.evaluate import evaluate_env, reference_plans, test_queries
@@ -221,14 +221,7 @@ def check_planners(cfg: C.Config, envs: dict) -> None:
 
 def data_digest(data_dir: Path, names: list[str]) -> str:
     """A digest of the datasets' recorded checksums (what a trained ensemble was trained on)."""
-    sums = {}
-    for nm in names:
-        try:
-            sums[nm] = {a: v.get("sha256") for a, v in
-                        json.loads((data_dir / nm / "meta.json").read_text())["arrays"].items()}
-        except (OSError, ValueError, KeyError, AttributeError):
-            sums[nm] = None
-    return artifacts.fingerprint(sums)
+    return artifacts.fingerprint(recorded_checksums(data_dir, names))
 
 
 def _mark(run: Path, stage: str, **fields) -> None:

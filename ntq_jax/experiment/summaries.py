@@ -24,12 +24,12 @@ and what proves where they came from, for one environment of a finished run
 
 from __future__ import annotations
 
-import hashlib
 import json
 import time
 from pathlib import Path
 
 from ntq_jax import artifacts
+from ntq_jax.data.format import recorded_checksums
 from ntq_jax.data import dataset_names
 from ntq_jax.envs import env_slug
 from ntq_jax.experiment.paper import (KINDS, MAPS, MEMBERS, PAPER_DATASETS, PAPER_K_TEST,
@@ -44,14 +44,8 @@ __all__ = ["SCHEMA", "dataset_fingerprints", "dataset_sizes", "models_fingerprin
 
 def dataset_fingerprints(data_env_dir: Path, names: list[str]) -> dict[str, str | None]:
     """Per dataset, a digest of the sha256 checksums its ``meta.json`` records (None if absent)."""
-    out = {}
-    for nm in names:
-        try:
-            meta = json.loads((Path(data_env_dir) / nm / "meta.json").read_text())
-            out[nm] = artifacts.fingerprint({a: v["sha256"] for a, v in meta["arrays"].items()})
-        except (OSError, ValueError, KeyError, TypeError):
-            out[nm] = None
-    return out
+    sums = recorded_checksums(data_env_dir, names)
+    return {nm: None if s is None else artifacts.fingerprint(s) for nm, s in sums.items()}
 
 
 def dataset_sizes(data_env_dir: Path, names: list[str]) -> dict[str, dict | None]:
@@ -72,8 +66,6 @@ def models_fingerprint(model_dir: Path) -> str | None:
     """sha256 over the trained ensemble's weights (every parameter array's key path, dtype,
     shape and bytes), None if there is no readable ensemble. The weights, not the files:
     Orbax's files hold timestamps, so equal weights saved twice would differ."""
-    import jax
-    import numpy as np
 
     from ntq_jax.training import CheckpointError, load_ensemble
     if not (Path(model_dir) / "ensemble").is_dir():
@@ -82,12 +74,7 @@ def models_fingerprint(model_dir: Path) -> str | None:
         ens = load_ensemble(model_dir)
     except (CheckpointError, OSError, ValueError):
         return None
-    h = hashlib.sha256()
-    for path, leaf in jax.tree_util.tree_leaves_with_path(ens.params):
-        a = np.ascontiguousarray(np.asarray(leaf))
-        h.update(f"{jax.tree_util.keystr(path)} {a.dtype.str} {a.shape}".encode())
-        h.update(a.tobytes())
-    return h.hexdigest()
+    return artifacts.tree_digest(ens.params)
 
 
 def _stage_seconds(run: Path, slug: str) -> dict[str, float | None]:

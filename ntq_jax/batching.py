@@ -12,6 +12,8 @@ from typing import Callable, Iterator, Sequence
 
 import numpy as np
 
+from ntq_jax.validation import check_count
+
 __all__ = ["bucket_size", "pad_rows", "padded_chunks", "group_chunks", "map_chunks"]
 
 
@@ -41,8 +43,7 @@ def padded_chunks(arrays: Sequence[np.ndarray], chunk: int, fill=0
     ``chunk`` rows with ``fill``; ``mask`` ``(chunk,)``
     is True on the ``m`` real rows.
     """
-    if chunk < 1:
-        raise ValueError(f"chunk must be >= 1, got {chunk}")
+    chunk = check_count("chunk", chunk, 1)
     n = np.asarray(arrays[0]).shape[0]
     for lo in range(0, n, chunk):
         m = min(chunk, n - lo)
@@ -62,8 +63,7 @@ def group_chunks(groups: Sequence[np.ndarray], width: int
     group this is :func:`padded_chunks` of that group. The chunks run until the
     longest group is exhausted (a shorter group's block is then all padding).
     """
-    if width < 1:
-        raise ValueError(f"width must be >= 1, got {width}")
+    width = check_count("width", width, 1)
     n = max((len(g) for g in groups), default=0)
     for lo in range(0, n, width):
         parts = [np.asarray(g)[lo:lo + width] for g in groups]

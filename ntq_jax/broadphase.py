@@ -58,6 +58,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ntq_jax.validation import check_padding, check_positive
+
 Array = jax.Array
 
 #: Obstacle counts (boxes, discs, or an index cell's candidates) up to which the kernels
@@ -221,12 +223,10 @@ def build_index(bounds, boxes, reach: float, cell: float | None = None) -> Obsta
     """
     b = np.asarray(bounds, np.float64)
     bx = np.asarray(boxes, np.float64).reshape(-1, 4)
-    if not (math.isfinite(reach) and reach >= 0):
-        raise ValueError(f"reach must be a finite number >= 0, got {reach!r}")
+    reach = check_padding(reach, "reach")
     if cell is None:
         cell = choose_cell(b, len(bx), min_cell=reach)
-    if not cell > 0:
-        raise ValueError(f"cell must be > 0, got {cell!r}")
+    cell = check_positive("cell", cell)
     x0, y0 = float(b[0, 0]), float(b[1, 0])
     nx = max(1, math.ceil((b[0, 1] - x0) / cell))
     ny = max(1, math.ceil((b[1, 1] - y0) / cell))

@@ -53,6 +53,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.tree_util import Partial
 
+from ntq_jax.validation import check_count
 from ntq_jax.batching import bucket_size, group_chunks, pad_rows, padded_chunks
 from ntq_jax.geometry import World
 from ntq_jax.neural_steps import (CHECK_ROWS, EnsemblePNet, MemberBlocks, Stages, cost_jit,
@@ -462,8 +463,7 @@ def _check_inputs(env, queries, opts: PlannerOptions, chunk: int) -> np.ndarray:
         raise ValueError(f"queries must have shape (K, 2, {env.dim}), got {q.shape}")
     if opts.bidirectional and not opts.steer:
         raise ValueError("the bidirectional planner needs steerTo (steer=True)")
-    if chunk < 1:
-        raise ValueError(f"chunk must be >= 1, got {chunk}")
+    check_count("chunk", chunk, 1)
     return q
 
 

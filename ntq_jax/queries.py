@@ -24,8 +24,6 @@ from __future__ import annotations
 
 import functools
 import math
-import numbers
-import operator
 import time
 from typing import Callable, NamedTuple
 
@@ -34,6 +32,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ntq_jax import prng
+from ntq_jax.validation import check_count, check_padding, check_probability
 from ntq_jax.geometry import KERNEL_COMPILER_OPTIONS, World
 from ntq_jax.robots.batch import is_valid_cm, steer_to_cm
 from ntq_jax.stats import wilson_interval
@@ -51,51 +50,6 @@ MAX_CHUNK = 1 << 26  # gamma_nt: candidate pairs per compiled chunk (~8 bytes ea
 
 class FreeSpaceTooSmall(ValueError):
     """Raised when rejection sampling finds (almost) no valid state."""
-
-
-# ---------------------------------------------------------------------------
-# Argument checks (shared by every public function of this module)
-# ---------------------------------------------------------------------------
-
-def check_count(name: str, value, minimum: int = 0, maximum: int | None = None) -> int:
-    """``value`` as a Python int in ``[minimum, maximum]``; TypeError / ValueError naming ``name``.
-
-    Accepts Python and NumPy integers (and integer scalar arrays); refuses
-    bools, floats (even whole ones: ``2.0`` is most likely a computed value
-    that should have been rounded deliberately) and everything else.
-    """
-    if isinstance(value, (bool, np.bool_)):
-        raise TypeError(f"{name} must be an int >= {minimum}, got the bool {value!r}")
-    try:
-        v = operator.index(value)
-    except TypeError:
-        raise TypeError(f"{name} must be an int >= {minimum}, got {value!r} "
-                        f"({type(value).__name__})") from None
-    if v < minimum:
-        raise ValueError(f"{name} must be an int >= {minimum}, got {v}")
-    if maximum is not None and v > maximum:
-        raise ValueError(f"{name} must be an int in [{minimum}, {maximum:,}], got {v:,}")
-    return int(v)
-
-
-def check_probability(name: str, value) -> float:
-    """``value`` as a float in ``[0, 1]``; TypeError / ValueError naming ``name``."""
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
-        raise TypeError(f"{name} must be a number in [0, 1], got {value!r} "
-                        f"({type(value).__name__})")
-    if not 0.0 <= value <= 1.0:  # also refuses NaN
-        raise ValueError(f"{name} must be a number in [0, 1], got {value!r}")
-    return float(value)
-
-
-def check_padding(padding) -> float:
-    """``padding`` as a finite float >= 0 (already resolved: never None here)."""
-    if isinstance(padding, (bool, np.bool_)) or not isinstance(padding, numbers.Real):
-        raise TypeError(f"padding must be a finite number >= 0, got {padding!r} "
-                        f"({type(padding).__name__})")
-    if not (math.isfinite(padding) and padding >= 0):
-        raise ValueError(f"padding must be a finite number >= 0, got {padding!r}")
-    return float(padding)
 
 
 # ---------------------------------------------------------------------------

@@ -1,4 +1,4 @@
-"""Strict reading of the numbers of a map file: exact row widths, numeric entries.
+"""Strict reading of user-given numbers: the rows of a map file, counts, probabilities, paddings.
 
 Every check here is a pure function that returns the value it checked (as a
 Python float, a tuple of floats or a float64 array) or raises ``ValueError``
@@ -9,17 +9,25 @@ A *number* is an int or float (Python or NumPy), never a bool and never a
 string: JSON ``true`` is not 1, and ``"22"`` is not a list of two numbers.
 Callers (:meth:`ntq_jax.envs.Env.from_json`, :meth:`ntq_jax.geometry.World.create`,
 the robots' ``__post_init__``) turn the ``ValueError`` into their own error type.
+
+The ``check_*`` functions are the argument checks of the library's public
+functions (chunk sizes, query counts, probabilities, paddings, resolutions):
+each returns the value as a Python ``int``/``float`` or raises ``TypeError``
+(wrong kind: a bool, a string, a float where a count is due) or ``ValueError``
+(out of range), with one line naming the argument and the accepted range.
 """
 
 from __future__ import annotations
 
 import math
 import numbers
+import operator
 from typing import Any
 
 import numpy as np
 
-__all__ = ["is_number", "number", "number_list", "number_rows", "short_repr"]
+__all__ = ["is_number", "number", "number_list", "number_rows", "short_repr",
+           "check_count", "check_probability", "check_real", "check_padding", "check_positive"]
 
 
 def short_repr(value: Any, limit: int = 60) -> str:
@@ -141,3 +149,66 @@ def number_rows(value: Any, key: str, width: int, form: str) -> np.ndarray:
                              f"finite number; expected {form}")
         rows.append([float(v) for v in row])
     return np.asarray(rows, np.float64).reshape(-1, width)
+
+
+# ---------------------------------------------------------------------------
+# Arguments of the library's functions: counts, probabilities, paddings
+# ---------------------------------------------------------------------------
+
+def check_count(name: str, value, minimum: int = 0, maximum: int | None = None) -> int:
+    """``value`` as a Python int in ``[minimum, maximum]``; TypeError / ValueError naming ``name``.
+
+    Accepts Python and NumPy integers (and integer scalar arrays); refuses
+    bools, floats (even whole ones: ``2.0`` is most likely a computed value
+    that should have been rounded deliberately) and everything else.
+    """
+    if isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name} must be an int >= {minimum}, got the bool {value!r}")
+    try:
+        v = operator.index(value)
+    except TypeError:
+        raise TypeError(f"{name} must be an int >= {minimum}, got {value!r} "
+                        f"({type(value).__name__})") from None
+    if v < minimum:
+        raise ValueError(f"{name} must be an int >= {minimum}, got {v}")
+    if maximum is not None and v > maximum:
+        raise ValueError(f"{name} must be an int in [{minimum}, {maximum:,}], got {v:,}")
+    return int(v)
+
+
+def check_probability(name: str, value) -> float:
+    """``value`` as a float in ``[0, 1]``; TypeError / ValueError naming ``name``."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+        raise TypeError(f"{name} must be a number in [0, 1], got {value!r} "
+                        f"({type(value).__name__})")
+    if not 0.0 <= value <= 1.0:  # also refuses NaN
+        raise ValueError(f"{name} must be a number in [0, 1], got {value!r}")
+    return float(value)
+
+
+def check_real(name: str, value, *, minimum: float = 0.0, inclusive: bool = False,
+               maximum: float | None = None) -> float:
+    """``value`` as a finite float ``> minimum`` (``>=`` when ``inclusive``) and ``<= maximum``;
+    TypeError (not a real number, or a bool) / ValueError (NaN, infinite, out of range)
+    naming ``name`` and the range."""
+    bound = f"{'>=' if inclusive else '>'} {minimum:g}"
+    if maximum is not None:
+        bound += f" and <= {maximum:g}"
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+        raise TypeError(f"{name} must be a finite number {bound}, got {value!r} "
+                        f"({type(value).__name__})")
+    v = float(value)
+    ok = math.isfinite(v) and (v >= minimum if inclusive else v > minimum)
+    if not ok or (maximum is not None and v > maximum):
+        raise ValueError(f"{name} must be a finite number {bound}, got {value!r}")
+    return v
+
+
+def check_padding(padding, name: str = "padding") -> float:
+    """``padding`` (or any distance named ``name``) as a finite float >= 0; never None here."""
+    return check_real(name, padding, inclusive=True)
+
+
+def check_positive(name: str, value) -> float:
+    """``value`` as a finite float > 0 (a resolution, a cell size, a spacing)."""
+    return check_real(name, value)

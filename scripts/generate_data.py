@@ -29,7 +29,7 @@ import sys
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
-from ntq_jax.experiment.cli import add_executor_options, executor_of, run_cli
+from ntq_jax.experiment.cli import add_run_options, executor_of, run_cli, start_run
 
 
 def main(argv=None) -> int:
@@ -40,18 +40,15 @@ def main(argv=None) -> int:
 def _main(argv) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--config", default=None, help="YAML config (default: built-in defaults)")
+    add_run_options(ap, set_example="data.k_train=100", figures_help="skip the PNG figures",
+                    cpu_devices_help="JAX CPU devices to create (default 1)", executor=True)
     ap.add_argument("--env", action="append", default=None,
                     help="environment(s) to generate (default: every one in the config's envs)")
     ap.add_argument("--out", default=None, help="output root (default: <out_dir>/data)")
-    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                    help="config override, e.g. --set data.k_train=100 (repeatable)")
     ap.add_argument("--planner", default=None,
                     help="planner name overriding planner.name (astar, visgraph, bitstar, roadmap)")
-    ap.add_argument("--no-progress", action="store_true", help="no progress bars")
-    ap.add_argument("--no-figure", action="store_true", help="skip the PNG figures")
-    add_executor_options(ap)
     args = ap.parse_args(argv)
+    start_run(args)
 
     from ntq_jax.experiment import config as C
     from ntq_jax import artifacts, data, make_env
@@ -71,7 +68,7 @@ def _main(argv) -> int:
 
     def one(name):
         return data.generate_datasets(made[name], cfg, out, env_name=name,
-                                      progress=not args.no_progress, figure=not args.no_figure,
+                                      progress=not args.no_progress, figure=not args.no_figures,
                                       executor=executor)
 
     if executor.name == "local" or len(made) == 1:

@@ -23,7 +23,7 @@ import sys
 import time
 from pathlib import Path
 
-from ntq_jax.experiment.cli import UsageError, positive_int, run_cli
+from ntq_jax.experiment.cli import UsageError, add_run_options, run_cli, start_run
 
 
 def main(argv=None) -> int:
@@ -36,23 +36,19 @@ def _main(argv) -> int:
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--data", type=Path, required=True,
                     help="environment data folder (env.json + D0..D3)")
-    ap.add_argument("--config", type=Path, default=None,
-                    help="YAML config (model and train sections are used; default: built-ins)")
-    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                    help="override a config value, e.g. --set train.epochs=5 (repeatable)")
+    add_run_options(ap, set_example="train.epochs=5", figures_help=None,
+                    config_help="YAML config (its model and train sections are used; "
+                                "default: the embedded default)",
+                    cpu_devices_help="JAX CPU devices to create (one per core): the members "
+                                     "train on separate cores; results then differ from a "
+                                     "one-device run at float level. Default 1")
     ap.add_argument("--out", type=Path, default=None, help="output folder (default: DATA/pnets)")
     ap.add_argument("--no-shard", action="store_true",
                     help="never shard the member axis over devices")
-    ap.add_argument("--cpu-devices", type=int, default=1,
-                    help="JAX CPU devices to create (one per core): the members train on "
-                         "separate cores (speed: BENCHMARKS.md); results then differ from a "
-                         "one-device run at float level. Default 1")
-    ap.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     args = ap.parse_args(argv)
 
     from ntq_jax.experiment.config import load
 
-    positive_int("--cpu-devices", args.cpu_devices)
     cfg = load(args.config, args.set)
     if not (args.data / "env.json").is_file():
         raise UsageError(f"--data {args.data}: no env.json there; pass an environment folder "
@@ -63,7 +59,7 @@ def _main(argv) -> int:
 
     from ntq_jax import training as T
 
-    T.use_cpu_devices(args.cpu_devices)  # before any JAX operation
+    start_run(args)  # --cpu-devices before any JAX operation
     print(f"training {cfg.model.hidden} PNets on {args.data} -> {out} "
           f"({len(jax.devices())} {jax.default_backend()} device(s))", file=sys.stderr)
     t0 = time.perf_counter()

@@ -442,7 +442,7 @@ def test_cli_generates_and_rejects_a_bad_key(tmp_path):
     rc = generate_data.main(["--env", "point/0", "--out", str(tmp_path / "out"), "--no-progress",
                              "--planner", "visgraph", "--set", "data.k_train=20",
                              "--set", "data.gamma_queries=5000", "--set", "data.gamma_eval=false",
-                             "--no-figure"])
+                             "--no-figure", "--no-compile-cache"])
     assert rc == 0
     ds = data.load_datasets(tmp_path / "out" / "point_0")
     assert [len(d.queries) for d in ds] == [20] * 4

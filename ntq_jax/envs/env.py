@@ -40,7 +40,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import math
 import os
 from pathlib import Path
 from typing import Any
@@ -159,10 +158,7 @@ class Env:
 
     def resolve_padding(self, padding: float | None) -> float:
         """``padding`` as a number: None is the environment's own (data-generation) padding."""
-        p = self.padding if padding is None else float(padding)
-        if not (math.isfinite(p) and p >= 0):
-            raise ValueError(f"padding must be a finite number >= 0, got {padding!r}")
-        return p
+        return self.padding if padding is None else validation.check_padding(padding)
 
     def _states(self, x, what: str) -> Array:
         if not (isinstance(x, jax.Array) and x.dtype == jnp.float32):

@@ -111,19 +111,21 @@ def check_writable(path: str | os.PathLike, flag: str) -> None:
                          f"({e.strerror})") from None
 
 
-def add_run_options(ap, *, set_example: str, figures_help: str, cpu_devices_help: str,
-                    executor: bool = False) -> None:
-    """The options of the scripts that run pipeline stages: ``--config``, ``--set``,
-    ``--no-progress``, ``--no-compile-cache``, ``--no-figures``, ``--cpu-devices``
-    (applied by :func:`start_run`) and, with ``executor``, ``--executor`` and
-    ``--ray-address`` (:func:`executor_of`)."""
-    ap.add_argument("--config", default=None, help="YAML config (default: the embedded default)")
+def add_run_options(ap, *, set_example: str, figures_help: str | None, cpu_devices_help: str,
+                    executor: bool = False, config_help: str | None = None) -> None:
+    """The options of every script that runs pipeline stages: ``--config``, ``--set``,
+    ``--no-progress``, ``--no-compile-cache``, ``--cpu-devices`` (applied by
+    :func:`start_run`), ``--no-figures`` unless ``figures_help`` is None and, with
+    ``executor``, ``--executor`` and ``--ray-address`` (:func:`executor_of`)."""
+    ap.add_argument("--config", default=None,
+                    help=config_help or "YAML config (default: the embedded default)")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help=f"config override, e.g. --set {set_example} (repeatable)")
     ap.add_argument("--no-progress", action="store_true", help="no progress bars")
     ap.add_argument("--no-compile-cache", action="store_true",
                     help="do not use JAX's persistent compilation cache")
-    ap.add_argument("--no-figures", action="store_true", help=figures_help)
+    if figures_help is not None:
+        ap.add_argument("--no-figures", action="store_true", help=figures_help)
     ap.add_argument("--cpu-devices", type=int, default=1, help=cpu_devices_help)
     if executor:
         add_executor_options(ap)

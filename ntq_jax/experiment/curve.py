@@ -48,7 +48,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import math
 import time
 from pathlib import Path
 from typing import Callable, Sequence
@@ -63,6 +62,7 @@ from ntq_jax import training
 from ntq_jax.errors import UsageError
 from ntq_jax.envs import env_slug, resolve_envs
 from ntq_jax.experiment.evaluate import evaluate_env
+from ntq_jax.experiment.formatting import fixed
 from ntq_jax.progress import open_bar
 
 __all__ = ["parse_sizes", "size_config", "prefix_dataset", "curve_rows", "run_curve",
@@ -147,10 +147,6 @@ def curve_rows(size: int, names: Sequence[str], prefixes: Sequence[dict],
     return out
 
 
-def _fmt(x, nd=3) -> str:
-    return "-" if x is None or (isinstance(x, float) and not math.isfinite(x)) else f"{x:.{nd}f}"
-
-
 def write_table(rows: Sequence[dict], path: Path, title: str) -> Path:
     """``curve.md``: per size and dataset, the rows and both kinds' success and cost ratio."""
     lines = [f"# {title}", "",
@@ -169,8 +165,8 @@ def write_table(rows: Sequence[dict], path: Path, title: str) -> Path:
             if r is None:
                 parts += ["-", "-"]
             else:
-                parts += [f"{_fmt(r['success'])} [{_fmt(r['ci95'][0])}, {_fmt(r['ci95'][1])}]",
-                          _fmt(r["cost_ratio"])]
+                parts += [f"{fixed(r['success'])} [{fixed(r['ci95'][0])}, {fixed(r['ci95'][1])}]",
+                          fixed(r["cost_ratio"])]
         lines.append("| " + " | ".join(parts) + " |")
     return artifacts.write_text(path, "\n".join(lines) + "\n")
 

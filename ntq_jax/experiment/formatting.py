@@ -7,12 +7,14 @@ NaN, infinity, a string), so a missing cell never raises.
 from __future__ import annotations
 
 import math
+import numbers
 
-__all__ = ["num", "fixed", "interval", "signed", "p_value", "ms", "model_key", "kind_name"]
+__all__ = ["num", "fixed", "interval", "estimate", "signed", "p_value", "ms", "model_key", "kind_name"]
 
 
 def num(x) -> bool:
-    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+    """True for a finite real number (Python or NumPy scalar), False for a bool and the rest."""
+    return isinstance(x, numbers.Real) and not isinstance(x, bool) and math.isfinite(x)
 
 
 def fixed(x, nd: int = 3) -> str:
@@ -23,6 +25,11 @@ def interval(lo_hi, nd: int = 3) -> str:
     if not lo_hi or not all(num(v) for v in lo_hi):
         return ""
     return f" [{lo_hi[0]:.{nd}f}, {lo_hi[1]:.{nd}f}]"
+
+
+def estimate(x, lo_hi, nd: int = 3) -> str:
+    """``x`` with its interval: ``0.512 [0.480, 0.544]``; ``x`` alone when the interval is missing."""
+    return fixed(x, nd) + interval(lo_hi, nd)
 
 
 def signed(x, nd: int = 3) -> str:

@@ -40,6 +40,7 @@ from pathlib import Path
 
 from ntq_jax import artifacts, plotting, stats
 from ntq_jax.envs import env_slug
+from ntq_jax.experiment.formatting import estimate, fixed, p_value
 from ntq_jax.presets import PAPER_GAMMA
 from ntq_jax.types import QUERY_KINDS
 
@@ -73,10 +74,6 @@ DEFAULT_PAIRS: tuple[tuple[str, str], ...] = (("PNet_1", "PNet_0"), ("PNet_2", "
 _MEMBER = re.compile(r"PNet_(\d+)")
 
 
-def _f(x, nd=3) -> str:
-    return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{x:.{nd}f}"
-
-
 def _groups(rows):
     """``{(task, steer): {env: {(model, kind): row}}}`` in first-seen order."""
     out: dict = {}
@@ -106,13 +103,13 @@ def _gamma_heading(env, block) -> tuple[str, str]:
     r = next(iter(block.values()))
     g = r.get("gamma_nt")
     paper = PAPER_GAMMA.get(env)
-    md = f"Environment {env}, gamma_nt = {_f(g)}"
+    md = f"Environment {env}, gamma_nt = {fixed(g)}"
     if r.get("gamma_nt_ci95"):
         lo, hi = r["gamma_nt_ci95"]
         md += f" [{lo:.3f}, {hi:.3f}]"
     if paper is not None:
         md += f" (paper {paper:.3f})"
-    tex = f"Environment {env.replace('_', '-')}, $\\gamma_\\mathrm{{nt}}={_f(g)}$"
+    tex = f"Environment {env.replace('_', '-')}, $\\gamma_\\mathrm{{nt}}={fixed(g)}$"
     return md, tex
 
 
@@ -127,7 +124,7 @@ def _cells(block, model, cell) -> list[str]:
 
 def _md_cells(r) -> list[str]:
     lo, hi = r["success_ci95"]
-    return [f"{_f(r['success_ratio'])} [{lo:.3f}, {hi:.3f}]", _f(r["cost_ratio"])]
+    return [f"{fixed(r['success_ratio'])} [{lo:.3f}, {hi:.3f}]", fixed(r["cost_ratio"])]
 
 
 def _band_cells(r) -> list[str]:
@@ -137,7 +134,7 @@ def _band_cells(r) -> list[str]:
     out = [f"{r['n_in_band']} / {r['n_in_band'] + r['n_out_band']}"]
     for part in ("in_band", "out_band"):
         lo, hi = r[f"success_{part}_ci95"]
-        out.append(f"{_f(r[f'success_{part}'])} [{lo:.3f}, {hi:.3f}]"
+        out.append(f"{fixed(r[f'success_{part}'])} [{lo:.3f}, {hi:.3f}]"
                    if r[f"n_{part}"] else "-")
     return out
 
@@ -237,16 +234,6 @@ def comparisons(run_dir, rows, pairs=DEFAULT_PAIRS, *, n_boot: int = stats.N_BOO
     return out
 
 
-def _p(p) -> str:
-    return "-" if p is None or (isinstance(p, float) and math.isnan(p)) else (
-        "<0.001" if p < 1e-3 else f"{p:.3f}")
-
-
-def _ci(x, lo_hi, nd=3) -> str:
-    lo, hi = lo_hi
-    return _f(x, nd) + ("" if lo is None or hi is None else f" [{lo:.{nd}f}, {hi:.{nd}f}]")
-
-
 def _comparison_md(comps) -> list[str]:
     """The paired-comparison table of one environment block (empty if no comparison)."""
     if not comps:
@@ -263,9 +250,9 @@ def _comparison_md(comps) -> list[str]:
         vs = c["baseline"] + (f" ({c['baseline_rule']})" if c.get("baseline_rule") else "")
         out.append(f"| {c['model']} | {vs} | {c['query_kind']} | "
                    f"{c['both']} / {c['only_a']} / {c['only_b']} / {c['neither']} | "
-                   f"{_ci(c['success_diff'], c['success_diff_ci95'])} | {_p(c['mcnemar_p'])} | "
-                   f"{c['cost_n']} | {_ci(c['cost_ratio_diff'], c['cost_ratio_diff_ci95'])} | "
-                   f"{_p(c['wilcoxon_p'])} |")
+                   f"{estimate(c['success_diff'], c['success_diff_ci95'])} | {p_value(c['mcnemar_p'])} | "
+                   f"{c['cost_n']} | {estimate(c['cost_ratio_diff'], c['cost_ratio_diff_ci95'])} | "
+                   f"{p_value(c['wilcoxon_p'])} |")
     return out + [""]
 
 
@@ -290,7 +277,7 @@ def tables_md(rows, comparisons: list[dict] | None = None) -> str:
             # extras: optimum ratio, timings, failures, in-band / out-of-band success
             band = any_row.get("band_padding")
             out += [(f"Detail. In band: test queries with both endpoints valid at the "
-                     f"environment's data padding ({_f(band, 2)}); out of band: the others."), "",
+                     f"environment's data padding ({fixed(band, 2)}); out of band: the others."), "",
                     "| Model | kind | cost ratio to optimum | ms / query | compile s | no path | "
                     "infeasible | invalid | reference failed | in band | success in band | "
                     "success out of band |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
@@ -300,7 +287,7 @@ def tables_md(rows, comparisons: list[dict] | None = None) -> str:
                     if r is None:
                         continue
                     fl = r["failures"]
-                    out.append(f"| {m} | {kind} | {_f(r.get('cost_ratio_opt'))} | "
+                    out.append(f"| {m} | {kind} | {fixed(r.get('cost_ratio_opt'))} | "
                                f"{r['seconds_per_query'] * 1e3:.2f} | {r['compile_seconds']:.1f} | "
                                f"{fl.get('no_path', 0)} | {fl.get('infeasible', 0)} | "
                                f"{fl.get('invalid_query', 0)} | {r['reference_failed']} | "
@@ -320,13 +307,8 @@ def _tex_model(m: str) -> str:
     return f"$\\mathsf{{PNet}}_{idx}$"
 
 
-def _tex_ci(x, lo_hi) -> str:
-    lo, hi = lo_hi
-    return _f(x) + ("" if lo is None or hi is None else f" [{lo:.3f}, {hi:.3f}]")
-
-
 def _tex_p(p) -> str:
-    return _p(p).replace("<", "$<$")
+    return p_value(p).replace("<", "$<$")
 
 
 def _comparison_tex(title: str, comps) -> list[str]:
@@ -345,9 +327,9 @@ def _comparison_tex(title: str, comps) -> list[str]:
         vs = _tex_model(c["baseline"]) + (" (best)" if c.get("baseline_rule") else "")
         kind = "non-trivial" if c["query_kind"] == "nontrivial" else c["query_kind"]
         out.append(f"\t\t{c['env']} & {_tex_model(c['model'])} & {vs} & {kind} & "
-                   f"{_tex_ci(c['success_diff'], c['success_diff_ci95'])} & "
+                   f"{estimate(c['success_diff'], c['success_diff_ci95'])} & "
                    f"{_tex_p(c['mcnemar_p'])} & "
-                   f"{_tex_ci(c['cost_ratio_diff'], c['cost_ratio_diff_ci95'])} & "
+                   f"{estimate(c['cost_ratio_diff'], c['cost_ratio_diff_ci95'])} & "
                    f"{_tex_p(c['wilcoxon_p'])} \\\\")
     return out + ["\t\t\\bottomrule", "\t\\end{tabular}", "\\end{table}", ""]
 
@@ -371,7 +353,7 @@ def tables_tex(rows, comparisons: list[dict] | None = None) -> str:
                     "\t\t& {success ratio} & {cost ratio} & {success ratio} & {cost ratio} \\\\",
                     "\t\t\\midrule"]
             for m in _models(block):
-                cells = _cells(block, m, lambda r: [_f(r["success_ratio"]), _f(r["cost_ratio"])])
+                cells = _cells(block, m, lambda r: [fixed(r["success_ratio"]), fixed(r["cost_ratio"])])
                 out.append(f"\t\t{_tex_model(m)} & " + " & ".join(cells) + " \\\\")
             out += ["\t\t\\bottomrule", "\t\\end{tabular}"]
         out += ["\\end{table}", ""]

@@ -9,6 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 
 
+from ntq_jax.validation import check_positive
 from ntq_jax.geometry.world import KERNEL_COMPILER_OPTIONS, World
 from ntq_jax.geometry.shapes import point_free
 
@@ -27,8 +28,7 @@ def rasterize(world: World, resolution: float, padding: float = 0.0) -> np.ndarr
     ``W = round((xmax - xmin) / resolution)``; cell ``(i, j)`` has centre
     ``(xmin + (j + 0.5) * resolution, ymin + (i + 0.5) * resolution)``.
     """
-    if not resolution > 0:
-        raise ValueError(f"resolution must be > 0, got {resolution}")
+    resolution = check_positive("resolution", resolution)
     b = np.asarray(world.bounds, dtype=np.float64)
     w = int(round((b[0, 1] - b[0, 0]) / resolution))
     h = int(round((b[1, 1] - b[1, 0]) / resolution))

@@ -63,7 +63,7 @@ from ntq_jax.planners import astar, ompl_bridge, roadmap, visgraph
 from ntq_jax.planners.astar import config_grid
 from ntq_jax.planners.options import check_option_names
 from ntq_jax.planners.verify import check_paths, finalize, valid_queries
-from ntq_jax.queries import check_count
+from ntq_jax.validation import check_count
 from ntq_jax.types import STATUS_NAMES, PlannerFn, PlanResult, PlanStatus
 
 _REGISTRY: dict[str, PlannerFn] = {}

@@ -10,14 +10,12 @@ planner does not know (a misspelt keyword), listing the ones it does.
 from __future__ import annotations
 
 import inspect
-import math
-import numbers
 from collections.abc import Callable, Iterable
 from typing import Any
 
 import numpy as np
 
-from ntq_jax.queries import check_count
+from ntq_jax.validation import check_count, check_real
 from ntq_jax.robots.certified import MOTION_CHECKS
 
 __all__ = [
@@ -44,17 +42,8 @@ def float_option(planner: str, name: str, value: Any, *, minimum: float = 0.0,
     """``value`` as a finite float ``> minimum`` (``>=`` when ``inclusive``), ``<= maximum``."""
     if value is None and none_ok:
         return None
-    bound = f"{'>=' if inclusive else '>'} {minimum:g}"
-    if maximum is not None:
-        bound += f" and <= {maximum:g}"
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
-        raise TypeError(f"{planner}: {name} must be a finite number {bound}, got {value!r} "
-                        f"({type(value).__name__})")
-    v = float(value)
-    ok = math.isfinite(v) and (v >= minimum if inclusive else v > minimum)
-    if not ok or (maximum is not None and v > maximum):
-        raise ValueError(f"{planner}: {name} must be a finite number {bound}, got {value!r}")
-    return v
+    return check_real(f"{planner}: {name}", value, minimum=minimum, inclusive=inclusive,
+                      maximum=maximum)
 
 
 def bool_option(planner: str, name: str, value: Any) -> bool:

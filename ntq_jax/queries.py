@@ -309,18 +309,25 @@ def _lane_outcomes(robot, world: World, seeds: Array, lane0: Array, size: int, p
 COUNT_ROWS = 64  # lanes are counted as (COUNT_ROWS, size / COUNT_ROWS) so XLA splits them over cores
 
 
-def count_outcomes(both: Array, blocked: Array) -> tuple[Array, Array]:
-    """``(sum(both), sum(blocked))`` as int32, in ONE pass over the lanes.
+def count_rows(both: Array, blocked: Array) -> tuple[Array, Array]:
+    """Per-row ``(sum(both), sum(blocked))``, each ``(rows,)`` int32, in ONE pass over the lanes.
 
-    A variadic reduction lets XLA fuse the per-lane work into the reduction loop
-    (two separate ``jnp.sum`` calls recompute or materialise every lane); the
-    row split gives the loop an outer dimension that XLA runs on all CPU cores.
+    The lanes are split into ``rows = gcd(N, COUNT_ROWS)`` runs of consecutive
+    lanes. A variadic reduction lets XLA fuse the per-lane work into the
+    reduction loop (two separate ``jnp.sum`` calls recompute or materialise
+    every lane); the row split gives the loop an outer dimension that XLA runs
+    on all CPU cores.
     """
     rows = math.gcd(both.shape[0], COUNT_ROWS)
     v = both.astype(jnp.int32).reshape(rows, -1)
     b = blocked.astype(jnp.int32).reshape(rows, -1)
     zero = jnp.int32(0)
-    v, b = jax.lax.reduce((v, b), (zero, zero), lambda x, y: (x[0] + y[0], x[1] + y[1]), (1,))
+    return jax.lax.reduce((v, b), (zero, zero), lambda x, y: (x[0] + y[0], x[1] + y[1]), (1,))
+
+
+def count_outcomes(both: Array, blocked: Array) -> tuple[Array, Array]:
+    """``(sum(both), sum(blocked))`` as int32, in ONE pass over the lanes (see :func:`count_rows`)."""
+    v, b = count_rows(both, blocked)
     return jnp.sum(v), jnp.sum(b)
 
 
@@ -330,12 +337,29 @@ _gamma_jit = functools.partial(jax.jit, static_argnames=("robot", "padding", "si
 
 @_gamma_jit
 def _gamma_chunk_counts(robot, world, seeds, padding: float, size: int):
-    return count_outcomes(*_lane_outcomes(robot, world, seeds, jnp.uint32(0), size, padding))
+    return count_rows(*_lane_outcomes(robot, world, seeds, jnp.uint32(0), size, padding))
 
 
 @_gamma_jit
-def _gamma_chunk_lanes(robot, world, seeds, padding: float, size: int):
-    return _lane_outcomes(robot, world, seeds, jnp.uint32(0), size, padding)
+def _gamma_chunk_lanes(robot, world, seeds, lane0, padding: float, size: int):
+    return _lane_outcomes(robot, world, seeds, lane0, size, padding)
+
+
+def _chunk_prefix(robot, world: World, seeds: Array, padding: float, chunk: int,
+                  rows_valid: np.ndarray, rows_blocked: np.ndarray, need: int) -> tuple[int, int]:
+    """``(blocked, candidates)`` of a chunk's lanes up to its ``need``-th valid one.
+
+    From the chunk's per-row counts: the rows before the one holding that lane
+    are summed, and only that row's lanes are generated and checked again.
+    """
+    row = chunk // len(rows_valid)
+    cum = np.cumsum(rows_valid)
+    r = int(np.searchsorted(cum, need))  # the first row whose running count reaches need
+    before = int(cum[r - 1]) if r else 0
+    both, blk = _gamma_chunk_lanes(robot, world, seeds, jnp.uint32(r * row), padding, row)
+    both, blk = np.asarray(both), np.asarray(blk)
+    last = int(np.flatnonzero(both)[need - before - 1])
+    return int(rows_blocked[:r].sum()) + int(blk[: last + 1].sum()), r * row + last + 1
 
 
 def default_chunk(robot) -> int:
@@ -349,8 +373,10 @@ def gamma_nt(robot, world: World, key: Array, n: int, padding: float, chunk: int
     Each chunk of ``chunk`` candidate pairs is generated, checked and counted in
     one compiled call (its uniforms come from :mod:`ntq_jax.prng`, seeded per
     chunk from ``key``), so memory does not grow with ``n``. The last chunk
-    counts only the valid queries needed to reach exactly ``n``. Two chunks are
-    kept in flight so dispatch overlaps compute.
+    counts only the valid queries needed to reach exactly ``n`` (its lanes up to
+    the ``n``-th valid query). The next chunk is queued while one is counted, so
+    dispatch overlaps compute, except when the chunk being counted is expected
+    to be the last.
 
     Args:
         n: uniform valid queries to examine, an int >= 1.
@@ -377,24 +403,27 @@ def gamma_nt(robot, world: World, key: Array, n: int, padding: float, chunk: int
         return prng.stream_seeds(key, i)
 
     counts = (0, 0, 0)  # valid queries, blocked, raw candidates: one tuple, updated at once
-    i = 0
+    i, nxt = 0, None
     try:
         pending = _gamma_chunk_counts(robot, world, seeds(0), padding, chunk)
         while True:
-            nxt = _gamma_chunk_counts(robot, world, seeds(i + 1), padding, chunk)
-            v, b = (int(x) for x in pending)
             queries, blocked, cands = counts
+            # the next chunk is queued before this one is read, unless this one likely ends it
+            expect = chunk * queries / cands if cands else chunk
+            nxt = (_gamma_chunk_counts(robot, world, seeds(i + 1), padding, chunk)
+                   if queries + expect < n else None)
+            v_rows, b_rows = (np.asarray(x) for x in pending)
+            v = int(v_rows.sum())
             if queries + v >= n:
-                both, blk = _gamma_chunk_lanes(robot, world, seeds(i), padding, chunk)
-                both, blk = np.asarray(both), np.asarray(blk)
-                need = n - queries
-                last = int(np.flatnonzero(both)[need - 1])
-                counts = (n, blocked + int(blk[: last + 1].sum()), cands + last + 1)
+                blk, used = _chunk_prefix(robot, world, seeds(i), padding, chunk, v_rows, b_rows,
+                                          n - queries)
+                counts = (n, blocked + blk, cands + used)
                 break
-            counts = (queries + v, blocked + b, cands + chunk)
+            counts = (queries + v, blocked + int(b_rows.sum()), cands + chunk)
             if progress is not None:
                 progress(counts[0])
-            pending = nxt
+            pending = (nxt if nxt is not None
+                       else _gamma_chunk_counts(robot, world, seeds(i + 1), padding, chunk))
             i += 1
             if i > 64 and counts[0] == 0:
                 raise FreeSpaceTooSmall(f"no valid query among {counts[2]} candidates "

@@ -15,8 +15,7 @@ arrays (:data:`ARRAY_SPECS`) and ``meta.json``:
 of every array. It is written last (and removed first on a rewrite), so a folder
 without it is incomplete. A dataset is complete only when verified
 (:func:`dataset_problem`): every array's ``.npy`` header and file size match
-its entry and its sha256 matches (about 10 ms for the paper's point-robot
-D0..D3, 3000 paths each, 2 MB). :func:`load_dataset` refuses incomplete,
+its entry and its sha256 matches (one read of each file). :func:`load_dataset` refuses incomplete,
 corrupt or inconsistent folders with a :class:`DatasetError` naming the file and
 the command that regenerates it (:func:`regenerate_hint`: the environment
 folder's ``config.yaml``, written by the generator, makes it exact).
@@ -181,8 +180,7 @@ def dataset_problem(folder, fingerprint: str | None = None, checksum: bool = Tru
 
     Checks that ``meta.json`` parses (and has ``fingerprint``, when given) and
     that every array's ``.npy`` header (dtype, shape) and file size match it;
-    with ``checksum`` also every array's sha256 (cheap: about 10 ms for the
-    paper's point-robot D0..D3).
+    with ``checksum`` also every array's sha256 (one read of each file).
     """
     folder = Path(folder)
     mpath = folder / "meta.json"

@@ -20,13 +20,14 @@ import io
 import json
 import os
 import shutil
+import tempfile
 from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
 
 __all__ = ["tmp_name", "replace", "write_with", "write_bytes", "write_text", "write_json",
-           "save_npy", "save_npz", "save_figure", "write_folder", "clean_tmp", "sha256", "json_default",
+           "save_npy", "save_npz", "save_figure", "write_folder", "clean_tmp", "unwritable_reason", "sha256", "json_default",
            "sha256_json", "fingerprint", "npy_sha256", "array_digest", "tree_digest", "load_npz",
            "compute_or_load", "enable_compile_cache"]
 
@@ -144,6 +145,26 @@ def clean_tmp(folder: str | os.PathLike) -> None:
                 shutil.rmtree(p, ignore_errors=True)
             else:
                 p.unlink(missing_ok=True)
+
+
+def unwritable_reason(folder: str | os.PathLike) -> str | None:
+    """Why files cannot be written in ``folder`` (created on write if absent), or None if they can.
+
+    Creates and removes a probe file in ``folder``'s nearest existing ancestor,
+    so a read-only file system or folder is found even when running as root.
+    """
+    probe = Path(folder)
+    while not probe.exists() and probe.parent != probe:
+        probe = probe.parent
+    if not probe.is_dir():
+        return f"{probe} is a file, not a folder"
+    try:
+        fd, name = tempfile.mkstemp(dir=probe, prefix=".write-test-")
+        os.close(fd)
+        os.unlink(name)
+    except OSError as e:
+        return f"creating a file in {probe} failed ({e.strerror})"
+    return None
 
 
 # ---------------------------------------------------------------------------

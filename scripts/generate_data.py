@@ -29,7 +29,8 @@ import sys
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
-from ntq_jax.experiment.cli import add_run_options, executor_of, run_cli, start_run
+from ntq_jax.experiment.cli import (add_run_options, check_writable_folder, executor_of, run_cli,
+                                    start_run)
 
 
 def main(argv=None) -> int:
@@ -59,8 +60,7 @@ def _main(argv) -> int:
     cfg = C.load(args.config, overrides)
     envs = args.env or list(cfg.envs)
     out = Path(args.out) if args.out else Path(cfg.out_dir) / "data"
-    if out.exists() and not out.is_dir():
-        raise NotADirectoryError(20, "Not a directory (--out must be a folder)", str(out))
+    check_writable_folder(out, "--out")  # before any work
     made = {name: make_env(name) for name in envs}  # every env valid before any work
     from ntq_jax.experiment.pipeline import check_planners
     check_planners(cfg, made)

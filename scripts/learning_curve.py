@@ -25,7 +25,8 @@ import sys
 import time
 from pathlib import Path
 
-from ntq_jax.experiment.cli import add_run_options, executor_of, run_cli, start_run
+from ntq_jax.experiment.cli import (add_run_options, check_writable_folder, executor_of, run_cli,
+                                    start_run)
 
 
 def main(argv=None) -> int:
@@ -57,6 +58,7 @@ def _main(argv) -> int:
     sizes = parse_sizes(args.sizes, cfg.data.k_train_for(env_name))
     out = Path(args.out) if args.out else (Path(cfg.out_dir) /
                                            f"curve-{env_slug(env_name, env)}-{cfg.hash()[:8]}")
+    check_writable_folder(out, "--out")  # before any work
     print(f"curve folder: {out}", flush=True)
     t0 = time.perf_counter()
     files = run_curve(cfg, env_name, sizes, out, progress=not args.no_progress,

@@ -35,7 +35,8 @@ import sys
 import time
 from pathlib import Path
 
-from ntq_jax.experiment.cli import UsageError, add_run_options, run_cli, start_run
+from ntq_jax.experiment.cli import (UsageError, add_run_options, check_writable_folder, run_cli,
+                                    start_run)
 
 
 def main(argv=None) -> int:
@@ -117,6 +118,7 @@ def _main(argv) -> int:
                              "--results; it takes no --config, --env or --train-seeds")
         if args.check:
             return _check(results)
+        check_writable_folder(results, "--results")
         _report(results)
         return 0
     if args.check:
@@ -125,6 +127,8 @@ def _main(argv) -> int:
         raise UsageError("--config is required (configs/point.yaml, configs/rigid.yaml or "
                          "configs/nlink.yaml), unless --report-only")
     seeds = _seeds(args.train_seeds)
+    check_writable_folder(results, "--results")
+    check_writable_folder(args.runs, "--runs")
     start_run(args)  # before any JAX operation
     from ntq_jax.envs import env_slug, resolve_envs
     from ntq_jax.experiment.pipeline import load_config

@@ -937,3 +937,26 @@ def test_states_must_be_real_numbers(bad):
         with pytest.raises(TypeError, match="real numbers"):
             call()
     assert bool(env.is_valid(np.array([[1, 1]], np.int64))[0])  # integers are numbers
+
+
+@pytest.mark.parametrize("script,argv", [
+    ("generate_data", ["--env", "point/0", "--no-progress", "--no-compile-cache", "--out", "{out}"]),
+    ("learning_curve", ["--sizes", "5", "--no-progress", "--no-compile-cache", "--out", "{out}"]),
+    ("reproduce", ["--report-only", "--results", "{out}"]),
+    ("reproduce", ["--config", "configs/point.yaml", "--results", "{out}"]),
+    ("reproduce", ["--config", "configs/point.yaml", "--runs", "{out}"]),
+])
+def test_scripts_refuse_an_unwritable_output_folder_first(tmp_path, capsys, script, argv):
+    mod = _script(script)
+    (tmp_path / "a_file").write_text("x")
+    before = _files(tmp_path)
+    targets = [(tmp_path / "a_file" / "sub", "is a file, not a folder"),
+               (tmp_path / "a_file", "is a file, not a folder")]
+    if Path("/proc").is_dir():  # a read-only file system: refused even for root
+        targets.append((Path("/proc/ntq_jax_out"), "creating a file in /proc failed"))
+    for target, message in targets:
+        rc = mod.main([a.format(out=target) for a in argv])
+        err = capsys.readouterr().err.strip().splitlines()
+        assert rc == 2 and len(err) == 1, err
+        assert err[0].startswith("error: --") and message in err[0] and "writable" in err[0]
+    assert _files(tmp_path) == before

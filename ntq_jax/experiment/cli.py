@@ -18,14 +18,13 @@ from __future__ import annotations
 import logging
 import os
 import sys
-import tempfile
 from pathlib import Path
 from typing import Callable, Iterable
 
 from ntq_jax.errors import UsageError  # re-exported: the scripts import it from here
 
 __all__ = ["UsageError", "EXPECTED_ERRORS", "PATH_ERRORS", "expected_error_types", "error_line",
-           "positive_int", "seed_arg", "check_writable", "add_run_options", "add_executor_options",
+           "positive_int", "seed_arg", "check_writable", "check_writable_folder", "add_run_options", "add_executor_options",
            "executor_of", "start_run", "run_cli"]
 
 
@@ -89,26 +88,25 @@ def seed_arg(text: str) -> int:
 
 def check_writable(path: str | os.PathLike, flag: str) -> None:
     """A :class:`UsageError` unless a file can be written at ``path`` (its folder is created on
-    write), so a script can refuse an output path before doing its work.
-
-    Creates and removes a probe file in the nearest existing folder, so a
-    read-only file system or folder is found even when running as root.
-    """
+    write), so a script can refuse an output path before doing its work."""
+    from ntq_jax.artifacts import unwritable_reason
     path = Path(path)
     if path.is_dir():
         raise UsageError(f"{flag} {path} is a folder; give a file name")
-    folder = path.parent
-    while not folder.exists():
-        folder = folder.parent
-    if not folder.is_dir():
-        raise UsageError(f"{flag} {path} cannot be written: {folder} is a file, not a folder")
-    try:
-        fd, probe = tempfile.mkstemp(dir=folder, prefix=".write-test-")
-        os.close(fd)
-        os.unlink(probe)
-    except OSError as e:
-        raise UsageError(f"{flag} {path} cannot be written: creating a file in {folder} failed "
-                         f"({e.strerror})") from None
+    why = unwritable_reason(path.parent)
+    if why:
+        raise UsageError(f"{flag} {path} cannot be written: {why}")
+
+
+def check_writable_folder(path: str | os.PathLike, flag: str) -> None:
+    """A :class:`UsageError` unless ``path`` is (or can be created as) a folder files can be
+    written in, so a script can refuse an output folder before doing its work."""
+    from ntq_jax.artifacts import unwritable_reason
+    path = Path(path)
+    why = (f"{path} is a file, not a folder" if path.exists() and not path.is_dir()
+           else unwritable_reason(path))
+    if why:
+        raise UsageError(f"{flag} {path} cannot be written: {why}; give a writable folder")
 
 
 def add_run_options(ap, *, set_example: str, figures_help: str | None, cpu_devices_help: str,

@@ -143,15 +143,9 @@ def foreign_files(run: Path) -> list[str]:
 
 def _check_writable(run: Path) -> None:
     """Raises a :class:`PipelineError` when ``run`` cannot be created or written."""
-    probe = run
-    while not probe.exists():
-        if probe.parent == probe:
-            break
-        probe = probe.parent
-    if not probe.is_dir():
-        raise PipelineError(f"{run}: {probe} is a file, not a folder; {_NEW_OUT}")
-    if not os.access(probe, os.W_OK | os.X_OK):
-        raise PipelineError(f"{run}: {probe} is not writable; {_NEW_OUT} in a writable place")
+    why = artifacts.unwritable_reason(run)
+    if why:
+        raise PipelineError(f"{run}: {why}; {_NEW_OUT} in a writable place")
 
 
 def prepare_run(cfg: C.Config, out: str | Path | None, *, overwrite: bool = False) -> Path:

@@ -150,20 +150,26 @@ def clean_tmp(folder: str | os.PathLike) -> None:
 def unwritable_reason(folder: str | os.PathLike) -> str | None:
     """Why files cannot be written in ``folder`` (created on write if absent), or None if they can.
 
-    Creates and removes a probe file in ``folder``'s nearest existing ancestor,
-    so a read-only file system or folder is found even when running as root.
+    Creates and removes a probe file in ``folder``'s nearest existing ancestor
+    (restoring that folder's times), so a read-only file system or folder is
+    found even when running as root.
     """
     probe = Path(folder)
     while not probe.exists() and probe.parent != probe:
         probe = probe.parent
     if not probe.is_dir():
         return f"{probe} is a file, not a folder"
+    st = probe.stat()
     try:
         fd, name = tempfile.mkstemp(dir=probe, prefix=".write-test-")
         os.close(fd)
         os.unlink(name)
     except OSError as e:
         return f"creating a file in {probe} failed ({e.strerror})"
+    try:  # the probe leaves no trace, not even in the folder's times
+        os.utime(probe, ns=(st.st_atime_ns, st.st_mtime_ns))
+    except OSError:
+        pass
     return None
 
 

@@ -962,3 +962,19 @@ def test_scripts_refuse_an_unwritable_output_folder_first(tmp_path, capsys, scri
         assert rc == 2 and len(err) == 1, err
         assert err[0].startswith("error: --") and message in err[0] and "writable" in err[0]
     assert _files(tmp_path) == before
+
+
+def test_grid_astar_on_a_one_cell_grid_map_names_the_map_not_the_resolution(tmp_path):
+    from ntq_jax import make_env
+    from ntq_jax.planners import plan
+
+    (tmp_path / "one.pgm").write_text("P2\n1 1\n255\n255\n")
+    (tmp_path / "one.yaml").write_text("image: one.pgm\nresolution: 1.0\norigin: [0, 0, 0]\n"
+                                       "negate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n")
+    env = make_env(tmp_path / "one.yaml")
+    q = np.array([[[0.2, 0.2], [0.8, 0.8]]], np.float32)
+    for opts in ({}, {"resolution": 0.5}):  # the advice must not be one that fails again
+        with pytest.raises(ValueError, match=r"1 x 1-cell grid.*resolution option does not apply"
+                                             r".*roadmap or visgraph"):
+            plan(env, q, "astar", padding=0.0, **opts)
+    assert plan(env, q, "roadmap", padding=0.0).lengths[0] >= 2  # the advice works

@@ -428,6 +428,12 @@ def plan_astar(env, queries, *, padding: float, seed: int = 0, resolution: float
     _check_astar_options(astar_options)
     own = map_grid(env)
     if own is not None:
+        h, w = own.occupied.shape
+        if min(h, w) < 2:
+            raise ValueError(f"astar: {env.name} was imported from a {w} x {h}-cell grid; grid A* "
+                             "plans on a grid map's own cells (the resolution option does not "
+                             "apply) and needs at least 2 x 2: import the map at a finer "
+                             "resolution, or use the roadmap or visgraph planner")
         resolution = own.resolution
     q = np.asarray(queries, np.float32)
     t0 = time.perf_counter()

@@ -30,6 +30,15 @@ the bottom, column ``j`` from the left) is the closed square
 ``[x0 + j r, x0 + (j + 1) r] x [y0 + i r, y0 + (i + 1) r]``: the same
 convention as :func:`ntq_jax.geometry.rasterize`, so rasterising the imported
 world at the grid's own resolution gives the grid back.
+
+Coordinates: a world holds its bounds and boxes in float32 world coordinates.
+:func:`grid_world` refuses (:class:`GridMapError`) a grid whose extent float32
+cannot hold (an infinite or zero-width map, e.g. ``resolution: 1e300``) or
+whose cell edges float32 would move by more than :data:`MAX_EDGE_ERROR` of a
+cell, as a geo-referenced origin far from 0 does (``origin: [500000, 4000000,
+0]`` at 5 cm cells: float32's spacing there is 3 cm). Such a map is planned
+in its own frame: set its origin to ``[0, 0, 0]`` and add the origin to the
+planned paths.
 """
 
 from __future__ import annotations
@@ -44,6 +53,8 @@ import yaml
 from ntq_jax import artifacts, validation
 
 UNKNOWN_POLICIES = ("occupied", "free")
+#: the largest move of a cell edge by float32 rounding that an import accepts, in cells
+MAX_EDGE_ERROR = 0.01
 MOVINGAI_PASSABLE = ".GS"
 
 
@@ -124,9 +135,44 @@ def cover_boxes(grid: OccupancyGrid) -> np.ndarray:
 
 
 def grid_world(grid: OccupancyGrid):
-    """The grid as a :class:`ntq_jax.geometry.World`: its extent and the boxes of its cover."""
+    """The grid as a :class:`ntq_jax.geometry.World`: its extent and the boxes of its cover.
+
+    Raises:
+        GridMapError: float32 cannot hold the grid's geometry (:func:`check_float32`).
+    """
     from ntq_jax.geometry import World
-    return World.create(grid.bounds, cover_boxes(grid))
+    boxes = cover_boxes(grid)
+    check_float32(grid, boxes)
+    return World.create(grid.bounds, boxes)
+
+
+def _edges(bounds: np.ndarray, boxes: np.ndarray) -> np.ndarray:
+    c, h = boxes[:, :2], boxes[:, 2:]
+    return np.concatenate([bounds.reshape(-1), (c - h).reshape(-1), (c + h).reshape(-1)])
+
+
+def check_float32(grid: OccupancyGrid, boxes: np.ndarray | None = None) -> None:
+    """GridMapError unless float32 holds the grid's extent (finite, non-empty) and puts
+    every box edge within :data:`MAX_EDGE_ERROR` cells of its exact position."""
+    where = grid.source or "grid map"
+    b = np.asarray(grid.bounds, np.float64)
+    boxes = cover_boxes(grid) if boxes is None else boxes
+    h, w = grid.occupied.shape
+    with np.errstate(over="ignore", invalid="ignore"):
+        b32, x32 = b.astype(np.float32), boxes.astype(np.float32)
+    if not (np.all(np.isfinite(b)) and np.all(np.isfinite(b32)) and np.all(b32[:, 1] > b32[:, 0])):
+        raise GridMapError(f"{where}: its extent ({w} x {h} cells of {grid.resolution:g} from "
+                           f"({grid.origin[0]:g}, {grid.origin[1]:g})) is {b.tolist()}, which "
+                           "float32 world coordinates cannot hold; use a resolution (or scale) "
+                           "giving a finite map of non-zero width")
+    exact = _edges(b, boxes)
+    err = float(np.max(np.abs(_edges(b32.astype(np.float64), x32.astype(np.float64)) - exact),
+                       initial=0.0)) / grid.resolution
+    if not err <= MAX_EDGE_ERROR:
+        raise GridMapError(f"{where}: float32 world coordinates move its cell edges by up to "
+                           f"{err:.2g} cells (origin ({grid.origin[0]:g}, {grid.origin[1]:g}), "
+                           f"resolution {grid.resolution:g}); plan in the map's own frame: set "
+                           "its origin to [0, 0, 0] and add the origin to the planned paths")
 
 
 # ---------------------------------------------------------------------------

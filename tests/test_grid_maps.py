@@ -132,6 +132,46 @@ def test_ros_map_negate_and_world(tmp_path):
     assert env.padding == 0.05 and env.grid is not None
 
 
+def _ros_yaml(path, image, resolution, origin):
+    path.write_text(f"image: {image}\nresolution: {resolution}\norigin: {origin}\nnegate: 0\n"
+                    "occupied_thresh: 0.65\nfree_thresh: 0.196\n")
+    return path
+
+
+@pytest.mark.parametrize("resolution, origin, match", [
+    ("1.0e+300", "[0.0, 0.0, 0.0]", r"float32 world coordinates cannot hold"),  # inf bounds
+    ("1.0e-300", "[0.0, 0.0, 0.0]", r"float32 world coordinates cannot hold"),  # zero width
+    ("1.0e+38", "[0.0, 0.0, 0.0]", r"float32 world coordinates cannot hold"),  # 4e38 > max
+    ("0.05", "[500000.0, 4000000.0, 0.0]", r"move its cell edges by up to .* cells.*origin to "
+                                          r"\[0, 0, 0\]"),  # UTM: float32 spacing 3 cm > cells/100
+])
+def test_map_geometry_float32_cannot_hold_is_refused(tmp_path, resolution, origin, match):
+    _pgm_p5(tmp_path / "m.pgm", PIXELS)
+    y = _ros_yaml(tmp_path / "m.yaml", "m.pgm", resolution, origin)
+    with pytest.raises(EnvError, match=match):
+        nj.make_env(y)
+    out = tmp_path / "env.json"
+    proc = subprocess.run([sys.executable, str(ROOT / "scripts" / "import_map.py"), str(y),
+                           "--out", str(out)], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 2 and proc.stderr.startswith("error: ") and not out.exists()
+    assert "Traceback" not in proc.stderr
+
+
+@pytest.mark.parametrize("origin", [(-51.2, -51.2), (0.0, 0.0), (1000.0, -2000.0)])
+def test_map_geometry_float32_keeps_cell_edges_within_a_hundredth_of_a_cell(tmp_path, origin):
+    """Accepted maps: every world box edge within MAX_EDGE_ERROR cells of the exact (float64)
+    edge, and rasterising the world at the grid's cells gives the grid back."""
+    _pgm_p5(tmp_path / "m.pgm", PIXELS)
+    y = _ros_yaml(tmp_path / "m.yaml", "m.pgm", 0.05, f"[{origin[0]}, {origin[1]}, 0.0]")
+    env = nj.make_env(y)
+    g = grid_maps.read_ros_map(y)
+    exact = grid_maps.cover_boxes(g)
+    got = np.asarray(env.world.boxes, np.float64)[: len(exact)]
+    edges = lambda b: np.concatenate([b[:, :2] - b[:, 2:], b[:, :2] + b[:, 2:]])  # noqa: E731
+    assert np.max(np.abs(edges(got) - edges(exact))) <= grid_maps.MAX_EDGE_ERROR * 0.05
+    assert np.array_equal(env.rasterize(0.05, padding=0.0), g.occupied)
+
+
 @pytest.mark.parametrize("extra, match", [
     ("resolution: 0\n", None),  # duplicate key: yaml keeps the last -> resolution 0
     ("mode: scale\n", "mode 'scale' is not supported"),

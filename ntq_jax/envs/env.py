@@ -307,8 +307,11 @@ class Env:
             except (TypeError, ValueError) as e:
                 raise EnvError(str(e)) from None
         try:
-            padding = validation.number(padding, "padding", minimum=0)
             world = grid_maps.grid_world(grid)
+        except grid_maps.GridMapError as e:
+            raise EnvError(str(e)) from None
+        try:
+            padding = validation.number(padding, "padding", minimum=0)
             check_resolution(robot, world)
         except (TypeError, ValueError) as e:
             raise EnvError(f"{where}: {e}") from None

@@ -29,6 +29,10 @@ from ntq_jax.types import QUERY_KINDS, PlanStatus
 __all__ = ["draw_map", "draw_arm", "dataset_figure", "curves_figure", "success_figure",
            "examples_figure", "queries_figure", "query_figure", "learning_curve_figure"]
 
+#: maps with more boxes are drawn as one image of at most IMAGE_PIXELS a side, not one patch
+#: per box (which grows with the box count in time and memory)
+IMAGE_MAP_BOXES = 2000
+IMAGE_PIXELS = 1600
 KIND_TITLE = {"uniform": "Uniform Query", "nontrivial": "Non-trivial Query"}
 
 
@@ -57,7 +61,9 @@ def draw_map(ax, spec: dict, padded: bool = False, joint_space: bool | None = No
     """Draws the environment JSON ``spec`` on ``ax``.
 
     Obstacles are dark; with ``padded``, their padding (``spec["padding"]``) is
-    drawn light around them. ``joint_space`` (default: for an arm) sets up the
+    drawn light around them. A map of more than :data:`IMAGE_MAP_BOXES` boxes
+    is drawn as one image (:data:`IMAGE_PIXELS` a side; padding with square
+    corners), so drawing time and memory do not grow with the box count. ``joint_space`` (default: for an arm) sets up the
     ``[-pi, pi]^2`` axes of joints 1 and 2 instead (no obstacles there).
     """
     if joint_space is None:
@@ -68,7 +74,11 @@ def draw_map(ax, spec: dict, padded: bool = False, joint_space: bool | None = No
     from matplotlib.patches import Circle, FancyBboxPatch, Rectangle
 
     pad = float(spec.get("padding", 0.0))
-    for cx, cy, hw, hh in spec.get("boxes", []):
+    boxes = np.asarray(spec.get("boxes", []), np.float64).reshape(-1, 4)
+    if len(boxes) > IMAGE_MAP_BOXES:
+        _draw_boxes_image(ax, boxes, spec["bounds"], pad if padded else 0.0)
+        boxes = boxes[:0]
+    for cx, cy, hw, hh in boxes:
         if padded and pad > 0:
             ax.add_patch(FancyBboxPatch((cx - hw, cy - hh), 2 * hw, 2 * hh,
                                         boxstyle=f"round,pad={pad}", fc="0.85", ec="none"))
@@ -81,6 +91,25 @@ def draw_map(ax, spec: dict, padded: bool = False, joint_space: bool | None = No
     ax.set_xlim(x0, x1)
     ax.set_ylim(y0, y1)
     ax.set_aspect("equal")
+
+
+def _draw_boxes_image(ax, boxes: np.ndarray, bounds, pad: float):
+    """``boxes`` as one image of at most :data:`IMAGE_PIXELS` a side: a pixel is dark where its square
+    meets a box, light where it meets a box grown by ``pad`` (square corners) and only that."""
+    (x0, x1), (y0, y1) = (map(float, b) for b in bounds)
+    scale = IMAGE_PIXELS / max(x1 - x0, y1 - y0)
+    w, h = max(1, math.ceil((x1 - x0) * scale)), max(1, math.ceil((y1 - y0) * scale))
+    img = np.ones((h, w), np.float32)
+    for grow, shade in ((pad, 0.85), (0.0, 0.35)):
+        if grow <= 0 and shade == 0.85:
+            continue
+        lo = np.floor((boxes[:, :2] - boxes[:, 2:] - grow - (x0, y0)) * scale).astype(np.int64)
+        hi = np.ceil((boxes[:, :2] + boxes[:, 2:] + grow - (x0, y0)) * scale).astype(np.int64)
+        lo, hi = np.clip(lo, 0, (w, h)), np.clip(hi, 0, (w, h))
+        for (c0, r0), (c1, r1) in zip(lo.tolist(), hi.tolist()):
+            img[r0:max(r1, r0 + 1), c0:max(c1, c0 + 1)] = shade
+    ax.imshow(img, cmap="gray", vmin=0.0, vmax=1.0, origin="lower", extent=(x0, x1, y0, y1),
+              interpolation="nearest")
 
 
 def draw_arm(ax, env, path: np.ndarray):

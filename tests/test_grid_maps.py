@@ -462,3 +462,38 @@ def _plain(tmp_path):
     p = tmp_path / "plain.map"
     p.write_bytes(MOVINGAI.encode())
     return p
+
+
+def test_large_maps_are_drawn_as_one_image_matching_the_boxes(monkeypatch):
+    """Above IMAGE_MAP_BOXES boxes draw_map draws one image (no patch per box): every pixel
+    whose square lies inside a box is dark, every pixel farther than the padding light."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from ntq_jax import plotting
+
+    occ = grid_maps.maze_grid(40, 1, 0)
+    g = grid_maps.OccupancyGrid(occ, 1.0)
+    boxes = grid_maps.cover_boxes(g)
+    spec = {"robot": {"kind": "point"}, "bounds": g.bounds, "boxes": boxes.tolist(),
+            "padding": 0.1}
+    monkeypatch.setattr(plotting, "IMAGE_MAP_BOXES", len(boxes) - 1)
+    monkeypatch.setattr(plotting, "IMAGE_PIXELS", 400)
+    fig, ax = plt.subplots()
+    plotting.draw_map(ax, spec, padded=True)
+    assert len(ax.images) == 1 and len(ax.patches) == 0
+    img = ax.images[0].get_array()
+    n = img.shape[0]
+    px = (np.arange(n) + 0.5) * (40 / n)  # pixel centres (square map, one scale)
+    cy, cx = np.meshgrid(px, px, indexing="ij")
+    inside = occ[np.floor(cy).astype(int), np.floor(cx).astype(int)]
+    # Chebyshev distance from each pixel centre to the nearest occupied cell (the padding is
+    # drawn with square corners)
+    far = np.ones_like(inside)
+    for r, c in zip(*np.nonzero(occ)):
+        dx = np.maximum(np.abs(cx - (c + 0.5)) - 0.5, 0)
+        dy = np.maximum(np.abs(cy - (r + 0.5)) - 0.5, 0)
+        far &= np.maximum(dx, dy) > 0.1 + 2 * 40 / n
+    assert np.all(img[inside] == np.float32(0.35))
+    assert np.all(img[far] == 1.0) and far.any()
+    plt.close(fig)

@@ -1,0 +1,331 @@
+"""Point-to-point shortest paths on a roadmap: A* per query, compiled with numba.
+
+A query is a start and a goal that are not roadmap nodes: the start has
+outgoing edges to some milestones, the goal incoming edges from some
+milestones, and the start may have a direct edge to the goal. Each query is
+searched on the roadmap plus its own two ends only, so its answer does not
+depend on the other queries of the batch.
+
+The heuristic of a node is the robot's cost metric from its state to the goal
+(:func:`heuristic_metric`), times ``1 - HEURISTIC_SLACK``. Edge costs are that
+metric (computed in float32), so the heuristic is a lower bound of every path
+cost up to the float32 rounding of the edge costs, which the slack covers. A
+node whose cost improves after its expansion is expanded again, so the search
+stays exact for a merely admissible heuristic. The search stops when no open
+node can lead to a cheaper goal.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numba
+import numpy as np
+from numba import njit, prange
+
+__all__ = ["HeuristicMetric", "heuristic_metric", "QueryEdges", "shortest_paths",
+           "HEURISTIC_SLACK", "MIN_EDGE_COST"]
+
+HEURISTIC_SLACK = 1e-5  # relative: covers the float32 rounding of the edge costs
+MIN_EDGE_COST = 1e-12  # edge costs are raised to this (coincident states keep an edge)
+QUERY_CHUNK = 16  # queries per parallel work item (each item allocates its work arrays)
+PATH_CAP = 256  # milestones per path in the first pass; longer paths get a second pass
+
+
+class HeuristicMetric(NamedTuple):
+    """A cost metric on states: the sum over coordinate groups of the Euclidean
+    norm of ``weights * diff``, with ``diff`` wrapped to ``[-pi, pi)`` on
+    ``periodic`` coordinates.
+
+    ``weights (d,)`` float64 (all zero: the heuristic is 0, plain Dijkstra);
+    ``periodic (d,)`` bool; ``groups (d,)`` int64, non-decreasing (each group is a
+    run of consecutive coordinates).
+    """
+
+    weights: np.ndarray
+    periodic: np.ndarray
+    groups: np.ndarray
+
+
+def heuristic_metric(robot) -> HeuristicMetric:
+    """The robot's cost metric as a :class:`HeuristicMetric`.
+
+    Point robot and n-link arm: the Euclidean distance of the states. Rigid
+    body: ``||dxy|| + angle_weight * |wrapped dtheta|``. Any other robot: the
+    zero metric (admissible for every robot; the search is then Dijkstra).
+    """
+    from ntq_jax.robots.nlink import NLinkArm
+    from ntq_jax.robots.point import PointRobot
+    from ntq_jax.robots.rigid_body import RigidBody
+
+    d = int(robot.dim)
+    if isinstance(robot, (PointRobot, NLinkArm)):
+        return HeuristicMetric(np.ones(d), np.zeros(d, bool), np.zeros(d, np.int64))
+    if isinstance(robot, RigidBody):
+        return HeuristicMetric(np.array([1.0, 1.0, float(robot.angle_weight)]),
+                               np.array([False, False, True]), np.array([0, 0, 1], np.int64))
+    return HeuristicMetric(np.zeros(d), np.zeros(d, bool), np.zeros(d, np.int64))
+
+
+class QueryEdges(NamedTuple):
+    """The edges of ``Q`` queries' ends, grouped per query (CSR-like).
+
+    Query ``i``'s start reaches milestone ``start_node[j]`` at cost ``start_cost[j]``
+    for ``j`` in ``start_ptr[i]:start_ptr[i+1]``; milestone ``goal_node[j]`` reaches
+    its goal at ``goal_cost[j]`` for ``j`` in ``goal_ptr[i]:goal_ptr[i+1]``;
+    ``direct (Q,)`` is the cost of the straight start -> goal edge (inf: none).
+    Pointers int64 ``(Q + 1,)``, nodes int32, costs float64.
+    """
+
+    start_ptr: np.ndarray
+    start_node: np.ndarray
+    start_cost: np.ndarray
+    goal_ptr: np.ndarray
+    goal_node: np.ndarray
+    goal_cost: np.ndarray
+    direct: np.ndarray
+
+    @classmethod
+    def from_rows(cls, nq: int, s_row, s_node, s_cost, g_row, g_node, g_cost, d_row, d_cost
+                  ) -> "QueryEdges":
+        """From per-edge query rows (any order); ``d_row``: the queries with a direct edge."""
+        def group(rows, node, cost):
+            order = np.argsort(rows, kind="stable")
+            ptr = np.zeros(nq + 1, np.int64)
+            np.cumsum(np.bincount(rows, minlength=nq), out=ptr[1:])
+            return (ptr, np.asarray(node)[order].astype(np.int32),
+                    np.asarray(cost, np.float64)[order])
+        direct = np.full(nq, np.inf)
+        direct[np.asarray(d_row, np.int64)] = d_cost
+        return cls(*group(np.asarray(s_row, np.int64), s_node, s_cost),
+                   *group(np.asarray(g_row, np.int64), g_node, g_cost), direct)
+
+
+# ---------------------------------------------------------------------------
+# compiled kernels
+# ---------------------------------------------------------------------------
+
+@njit(cache=True, inline="always")
+def _h(states, v, goal, w, per, grp):
+    """Metric from ``states[v]`` to ``goal`` (group norms summed; see HeuristicMetric)."""
+    total = 0.0
+    acc = 0.0
+    cur = grp[0]
+    for c in range(goal.shape[0]):
+        if grp[c] != cur:
+            total += np.sqrt(acc)
+            acc = 0.0
+            cur = grp[c]
+        x = goal[c] - states[v, c]
+        if per[c]:
+            x = x - 2.0 * np.pi * np.floor((x + np.pi) / (2.0 * np.pi))
+        x *= w[c]
+        acc += x * x
+    return (total + np.sqrt(acc)) * (1.0 - HEURISTIC_SLACK)
+
+
+@njit(cache=True, inline="always")
+def _sift_up(keys, nodes, pos, i):
+    """Restores the min-heap order above slot ``i``."""
+    k, v = keys[i], nodes[i]
+    while i > 0:
+        p = (i - 1) >> 1
+        if keys[p] <= k:
+            break
+        keys[i], nodes[i] = keys[p], nodes[p]
+        pos[nodes[i]] = i
+        i = p
+    keys[i], nodes[i] = k, v
+    pos[v] = i
+
+
+@njit(cache=True, inline="always")
+def _pop(keys, nodes, pos, size):
+    """Removes the heap's minimum; returns its node (the heap has ``size - 1`` entries after)."""
+    top = nodes[0]
+    pos[top] = -1
+    size -= 1
+    if size == 0:
+        return top
+    k, v = keys[size], nodes[size]
+    i = 0
+    while True:
+        c = 2 * i + 1
+        if c >= size:
+            break
+        if c + 1 < size and keys[c + 1] < keys[c]:
+            c += 1
+        if keys[c] >= k:
+            break
+        keys[i], nodes[i] = keys[c], nodes[c]
+        pos[nodes[i]] = i
+        i = c
+    keys[i], nodes[i] = k, v
+    pos[v] = i
+    return top
+
+
+@njit(cache=True)
+def _relax(u, v, cost, g, h, pred, pos, keys, nodes, size, touched, nt, states, goal_state,
+           w, per, grp, goal_id):
+    """Lowers ``g[v]`` through ``u`` if cheaper; returns ``(heap size, touched count)``."""
+    ng = g[u] + cost
+    if ng >= g[v]:
+        return size, nt
+    if np.isnan(h[v]):
+        touched[nt] = v
+        nt += 1
+        h[v] = 0.0 if v == goal_id else _h(states, v, goal_state, w, per, grp)
+    g[v] = ng
+    pred[v] = u
+    if v == goal_id:
+        return size, nt
+    i = pos[v]
+    if i < 0:
+        i = size
+        size += 1
+    keys[i] = ng + h[v]
+    nodes[i] = v
+    _sift_up(keys, nodes, pos, i)
+    return size, nt
+
+
+@njit(cache=True)
+def _one_query(qi, indptr, indices, costs, states, goal_state, w, per, grp, qe, work, out_row):
+    """A* for query ``qi``; writes its milestones (start side first) into ``out_row``
+    when they fit. Returns ``(cost, milestones on the path)``; cost inf: no path.
+    ``work`` arrays are left reset (g inf, h NaN, pos -1, goal_w inf)."""
+    s_ptr, s_node, s_cost, g_ptr, g_node, g_cost, direct = qe
+    g, h, pred, pos, keys, nodes, touched, goal_w = work
+    n = indptr.shape[0] - 1
+    start, goal = n, n + 1
+    for j in range(g_ptr[qi], g_ptr[qi + 1]):
+        goal_w[g_node[j]] = min(goal_w[g_node[j]], g_cost[j])
+    g[start], h[start], touched[0], nt = 0.0, 0.0, start, 1
+    size, nt = _relax(start, goal, direct[qi], g, h, pred, pos, keys, nodes, 0, touched, nt,
+                      states, goal_state, w, per, grp, goal)
+    for j in range(s_ptr[qi], s_ptr[qi + 1]):
+        size, nt = _relax(start, s_node[j], s_cost[j], g, h, pred, pos, keys, nodes, size,
+                          touched, nt, states, goal_state, w, per, grp, goal)
+    while size > 0 and keys[0] < g[goal]:
+        u = _pop(keys, nodes, pos, size)
+        size -= 1
+        if goal_w[u] < np.inf:
+            size, nt = _relax(u, goal, goal_w[u], g, h, pred, pos, keys, nodes, size, touched,
+                              nt, states, goal_state, w, per, grp, goal)
+        for j in range(indptr[u], indptr[u + 1]):
+            size, nt = _relax(u, indices[j], costs[j], g, h, pred, pos, keys, nodes, size,
+                              touched, nt, states, goal_state, w, per, grp, goal)
+    best, hops = g[goal], 0
+    if best < np.inf:
+        v = pred[goal]
+        while v != start:
+            hops += 1
+            v = pred[v]
+        if hops <= out_row.shape[0]:
+            v, i = pred[goal], hops - 1
+            while v != start:
+                out_row[i] = v
+                i -= 1
+                v = pred[v]
+    for j in range(g_ptr[qi], g_ptr[qi + 1]):
+        goal_w[g_node[j]] = np.inf
+    for j in range(nt):
+        v = touched[j]
+        g[v], h[v], pred[v], pos[v] = np.inf, np.nan, -1, -1
+    return best, hops
+
+
+@njit(cache=True)
+def _new_work(n):
+    """Reset work arrays for a graph of ``n`` milestones (plus start ``n`` and goal ``n + 1``)."""
+    m = n + 2
+    return (np.full(m, np.inf), np.full(m, np.nan), np.full(m, -1, np.int32),
+            np.full(m, -1, np.int32), np.empty(m, np.float64), np.empty(m, np.int32),
+            np.empty(m, np.int32), np.full(m, np.inf))
+
+
+@njit(cache=True, parallel=True)
+def _search_all(indptr, indices, costs, states, goals, w, per, grp, qe, rows, cap):
+    """:func:`_one_query` for every query of ``rows``, ``QUERY_CHUNK`` at a time in
+    parallel. Returns ``(cost (R,), hops (R,), paths (R, cap) int32)``."""
+    nr = rows.shape[0]
+    best = np.full(nr, np.inf)
+    hops = np.zeros(nr, np.int64)
+    paths = np.full((nr, cap), -1, np.int32)
+    n_chunks = (nr + QUERY_CHUNK - 1) // QUERY_CHUNK
+    for c in prange(n_chunks):
+        work = _new_work(indptr.shape[0] - 1)
+        for r in range(c * QUERY_CHUNK, min(nr, (c + 1) * QUERY_CHUNK)):
+            qi = rows[r]
+            best[r], hops[r] = _one_query(qi, indptr, indices, costs, states, goals[qi], w,
+                                          per, grp, qe, work, paths[r])
+    return best, hops, paths
+
+
+# ---------------------------------------------------------------------------
+# API
+# ---------------------------------------------------------------------------
+
+def roadmap_csr(n: int, edges: np.ndarray, costs: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The undirected roadmap as CSR ``(indptr (n+1,) int64, indices int32, costs float64)``:
+    each edge ``(i, j)`` in both directions, costs raised to ``MIN_EDGE_COST``."""
+    e = np.asarray(edges, np.int64).reshape(-1, 2)
+    src = np.concatenate([e[:, 0], e[:, 1]])
+    dst = np.concatenate([e[:, 1], e[:, 0]])
+    c = np.maximum(np.tile(np.asarray(costs, np.float64), 2), MIN_EDGE_COST)
+    order = np.argsort(src, kind="stable")
+    indptr = np.zeros(n + 1, np.int64)
+    np.cumsum(np.bincount(src, minlength=n), out=indptr[1:])
+    return indptr, dst[order].astype(np.int32), c[order]
+
+
+def shortest_paths(csr: tuple[np.ndarray, np.ndarray, np.ndarray], states: np.ndarray,
+                   goals: np.ndarray, edges: QueryEdges, metric: HeuristicMetric,
+                   threads: int = 1) -> tuple[np.ndarray, list[np.ndarray | None]]:
+    """Shortest start -> goal path of every query.
+
+    Args:
+        csr: the roadmap from :func:`roadmap_csr` (``n`` milestones); its costs
+            must be at least ``metric`` between the edge's states.
+        states: ``(n, d)`` the milestones' states.
+        goals: ``(Q, d)`` the queries' goal states.
+        edges: the queries' start, goal and direct edges (:class:`QueryEdges`);
+            their costs must be at least ``metric`` between their states.
+        metric: the heuristic's metric (:func:`heuristic_metric`).
+        threads: numba threads (capped at numba's thread count); the answers do
+            not depend on it.
+
+    Returns:
+        ``cost (Q,)`` float64 (inf: the goal is unreachable) and per query the
+        milestone indices of its path from the start side (int32; empty for the
+        direct edge; None when unreachable). The cost is the minimum over all
+        paths (edge costs raised to ``MIN_EDGE_COST``), to within the relative
+        slack of the heuristic; among paths of equal cost any one may be returned.
+    """
+    indptr, indices, costs = csr
+    st = np.ascontiguousarray(states, np.float64)
+    gs = np.ascontiguousarray(goals, np.float64)
+    if np.any(np.diff(np.asarray(metric.groups)) < 0):
+        raise ValueError(f"metric groups must be non-decreasing, got {metric.groups}")
+    qe = tuple(np.ascontiguousarray(np.maximum(a, MIN_EDGE_COST), np.float64)
+               if f.endswith("cost") or f == "direct" else np.ascontiguousarray(a)
+               for f, a in zip(QueryEdges._fields, edges))
+    args = (indptr, indices, costs, st, gs, np.asarray(metric.weights, np.float64),
+            np.asarray(metric.periodic, np.bool_), np.asarray(metric.groups, np.int64), qe)
+    old = numba.get_num_threads()
+    numba.set_num_threads(max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS)))
+    try:
+        rows = np.arange(len(gs), dtype=np.int64)
+        best, hops, paths = _search_all(*args, rows, PATH_CAP)
+        long = np.flatnonzero(hops > PATH_CAP)
+        if len(long):
+            b2, h2, p2 = _search_all(*args, long, int(hops[long].max()))
+    finally:
+        numba.set_num_threads(old)
+    out: list[np.ndarray | None] = [None if not np.isfinite(b) else p[:k].copy()
+                                    for b, k, p in zip(best, hops, paths)]
+    for j, i in enumerate(long):
+        out[i] = p2[j, :h2[j]].copy()
+    return best, out

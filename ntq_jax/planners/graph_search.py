@@ -165,101 +165,107 @@ def _pop(keys, nodes, pos, size):
     return top
 
 
-@njit(cache=True)
-def _relax(u, v, cost, g, h, pred, pos, keys, nodes, size, touched, nt, states, goal_state,
-           w, per, grp, goal_id):
-    """Lowers ``g[v]`` through ``u`` if cheaper; returns ``(heap size, touched count)``."""
-    ng = g[u] + cost
-    if ng >= g[v]:
-        return size, nt
-    if np.isnan(h[v]):
-        touched[nt] = v
-        nt += 1
-        h[v] = 0.0 if v == goal_id else _h(states, v, goal_state, w, per, grp)
-    g[v] = ng
-    pred[v] = u
-    if v == goal_id:
-        return size, nt
+@njit(cache=True, inline="always")
+def _push(keys, nodes, pos, size, v, key):
+    """Inserts ``v`` with ``key``, or lowers its key if it is in the heap; returns the size."""
     i = pos[v]
     if i < 0:
         i = size
         size += 1
-    keys[i] = ng + h[v]
+    keys[i] = key
     nodes[i] = v
     _sift_up(keys, nodes, pos, i)
-    return size, nt
+    return size
 
 
 @njit(cache=True)
-def _one_query(qi, indptr, indices, costs, states, goal_state, w, per, grp, qe, work, out_row):
-    """A* for query ``qi``; writes its milestones (start side first) into ``out_row``
-    when they fit. Returns ``(cost, milestones on the path)``; cost inf: no path.
-    ``work`` arrays are left reset (g inf, h NaN, pos -1, goal_w inf)."""
-    s_ptr, s_node, s_cost, g_ptr, g_node, g_cost, direct = qe
-    g, h, pred, pos, keys, nodes, touched, goal_w = work
-    n = indptr.shape[0] - 1
-    start, goal = n, n + 1
+def _one_query(qi, indptr, indices, costs, states, goal_state, w, per, grp, s_ptr, s_node,
+               s_cost, g_ptr, g_node, g_cost, direct, g, h, pred, pos, stamp, keys, nodes,
+               goal_w, out_row):
+    """A* for query ``qi`` on milestones ``0..n-1`` (start: ``n``, goal: scalars).
+
+    ``stamp[v] == qi`` marks the nodes this query has seen (their ``g``, ``h``,
+    ``pred`` are this query's); ``pos`` (-1 outside the heap) and ``goal_w``
+    (inf) are left as found. Writes the path's milestones (start side first) into
+    ``out_row`` when they fit. Returns ``(cost, milestones on the path)``; cost
+    inf: no path.
+    """
+    start = indptr.shape[0] - 1
     for j in range(g_ptr[qi], g_ptr[qi + 1]):
         goal_w[g_node[j]] = min(goal_w[g_node[j]], g_cost[j])
-    g[start], h[start], touched[0], nt = 0.0, 0.0, start, 1
-    size, nt = _relax(start, goal, direct[qi], g, h, pred, pos, keys, nodes, 0, touched, nt,
-                      states, goal_state, w, per, grp, goal)
+    best = direct[qi]
+    best_pred = start
+    size = 0
     for j in range(s_ptr[qi], s_ptr[qi + 1]):
-        size, nt = _relax(start, s_node[j], s_cost[j], g, h, pred, pos, keys, nodes, size,
-                          touched, nt, states, goal_state, w, per, grp, goal)
-    while size > 0 and keys[0] < g[goal]:
+        v = s_node[j]
+        if stamp[v] != qi:
+            stamp[v], g[v] = qi, np.inf
+            h[v] = _h(states, v, goal_state, w, per, grp)
+        if s_cost[j] < g[v]:
+            g[v], pred[v] = s_cost[j], start
+            size = _push(keys, nodes, pos, size, v, s_cost[j] + h[v])
+    while size > 0 and keys[0] < best:
         u = _pop(keys, nodes, pos, size)
         size -= 1
-        if goal_w[u] < np.inf:
-            size, nt = _relax(u, goal, goal_w[u], g, h, pred, pos, keys, nodes, size, touched,
-                              nt, states, goal_state, w, per, grp, goal)
+        gu = g[u]
+        if gu + goal_w[u] < best:
+            best, best_pred = gu + goal_w[u], u
         for j in range(indptr[u], indptr[u + 1]):
-            size, nt = _relax(u, indices[j], costs[j], g, h, pred, pos, keys, nodes, size,
-                              touched, nt, states, goal_state, w, per, grp, goal)
-    best, hops = g[goal], 0
-    if best < np.inf:
-        v = pred[goal]
-        while v != start:
-            hops += 1
-            v = pred[v]
-        if hops <= out_row.shape[0]:
-            v, i = pred[goal], hops - 1
-            while v != start:
-                out_row[i] = v
-                i -= 1
-                v = pred[v]
+            v = indices[j]
+            if stamp[v] != qi:
+                stamp[v], g[v] = qi, np.inf
+                h[v] = _h(states, v, goal_state, w, per, grp)
+            ng = gu + costs[j]
+            if ng < g[v]:
+                g[v], pred[v] = ng, u
+                size = _push(keys, nodes, pos, size, v, ng + h[v])
+    for i in range(size):
+        pos[nodes[i]] = -1
     for j in range(g_ptr[qi], g_ptr[qi + 1]):
         goal_w[g_node[j]] = np.inf
-    for j in range(nt):
-        v = touched[j]
-        g[v], h[v], pred[v], pos[v] = np.inf, np.nan, -1, -1
-    return best, hops
+    return best, _write_path(pred, best_pred, start, best < np.inf, out_row)
 
 
 @njit(cache=True)
-def _new_work(n):
-    """Reset work arrays for a graph of ``n`` milestones (plus start ``n`` and goal ``n + 1``)."""
-    m = n + 2
-    return (np.full(m, np.inf), np.full(m, np.nan), np.full(m, -1, np.int32),
-            np.full(m, -1, np.int32), np.empty(m, np.float64), np.empty(m, np.int32),
-            np.empty(m, np.int32), np.full(m, np.inf))
+def _write_path(pred, last, start, found, out_row):
+    """Follows ``pred`` from milestone ``last`` back to ``start``; writes the milestones
+    in path order into ``out_row`` when they fit. Returns their count (0 if not found)."""
+    if not found:
+        return 0
+    hops = 0
+    v = last
+    while v != start:
+        hops += 1
+        v = pred[v]
+    if hops <= out_row.shape[0]:
+        v, i = last, hops - 1
+        while v != start:
+            out_row[i] = v
+            i -= 1
+            v = pred[v]
+    return hops
 
 
 @njit(cache=True, parallel=True)
 def _search_all(indptr, indices, costs, states, goals, w, per, grp, qe, rows, cap):
     """:func:`_one_query` for every query of ``rows``, ``QUERY_CHUNK`` at a time in
     parallel. Returns ``(cost (R,), hops (R,), paths (R, cap) int32)``."""
-    nr = rows.shape[0]
+    s_ptr, s_node, s_cost, g_ptr, g_node, g_cost, direct = qe
+    n, nr = indptr.shape[0] - 1, rows.shape[0]
     best = np.full(nr, np.inf)
     hops = np.zeros(nr, np.int64)
     paths = np.full((nr, cap), -1, np.int32)
     n_chunks = (nr + QUERY_CHUNK - 1) // QUERY_CHUNK
     for c in prange(n_chunks):
-        work = _new_work(indptr.shape[0] - 1)
+        g, h, pred = np.empty(n), np.empty(n), np.empty(n, np.int32)
+        pos, stamp = np.full(n, -1, np.int32), np.full(n, -1, np.int64)
+        keys, nodes, goal_w = np.empty(n), np.empty(n, np.int32), np.full(n, np.inf)
         for r in range(c * QUERY_CHUNK, min(nr, (c + 1) * QUERY_CHUNK)):
             qi = rows[r]
-            best[r], hops[r] = _one_query(qi, indptr, indices, costs, states, goals[qi], w,
-                                          per, grp, qe, work, paths[r])
+            best[r], hops[r] = _one_query(
+                qi, indptr, indices, costs, states, goals[qi], w, per, grp, s_ptr, s_node,
+                s_cost, g_ptr, g_node, g_cost, direct, g, h, pred, pos, stamp, keys, nodes,
+                goal_w, paths[r])
     return best, hops, paths
 
 
@@ -271,14 +277,14 @@ def roadmap_csr(n: int, edges: np.ndarray, costs: np.ndarray
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The undirected roadmap as CSR ``(indptr (n+1,) int64, indices int32, costs float64)``:
     each edge ``(i, j)`` in both directions, costs raised to ``MIN_EDGE_COST``."""
+    from scipy.sparse import coo_matrix
+
     e = np.asarray(edges, np.int64).reshape(-1, 2)
     src = np.concatenate([e[:, 0], e[:, 1]])
     dst = np.concatenate([e[:, 1], e[:, 0]])
     c = np.maximum(np.tile(np.asarray(costs, np.float64), 2), MIN_EDGE_COST)
-    order = np.argsort(src, kind="stable")
-    indptr = np.zeros(n + 1, np.int64)
-    np.cumsum(np.bincount(src, minlength=n), out=indptr[1:])
-    return indptr, dst[order].astype(np.int32), c[order]
+    m = coo_matrix((c, (src, dst)), shape=(n, n)).tocsr()  # pairs are unique: nothing summed
+    return m.indptr.astype(np.int64), m.indices.astype(np.int32), m.data.astype(np.float64)
 
 
 def shortest_paths(csr: tuple[np.ndarray, np.ndarray, np.ndarray], states: np.ndarray,

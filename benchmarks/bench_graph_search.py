@@ -96,8 +96,8 @@ def bench_map(name: str, args) -> None:
     metric = G.heuristic_metric(env.robot)
 
     def astar():
-        csr = G.roadmap_csr(n, rm.edges, rm.costs)
-        return G.shortest_paths(csr, rm.milestones, q[:, 1], qe, metric, threads=args.threads)
+        graph = G.search_graph(n, rm.edges, rm.costs, rm.milestones)
+        return G.shortest_paths(graph, q[:, 1], qe, metric, threads=args.threads)
 
     old, new = dijkstra_search(n, rm, qe, args.threads), astar()
     med = interleaved({"dijkstra": lambda: dijkstra_search(n, rm, qe, args.threads),

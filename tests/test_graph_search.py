@@ -54,7 +54,8 @@ def _path_cost(seq, i, csr, qe: G.QueryEdges) -> float:
 
 def _check(n, edges, costs, states, goals, qe, metric, threads=2):
     csr = G.roadmap_csr(n, edges, costs)
-    got, seqs = G.shortest_paths(csr, states, goals, qe, metric, threads=threads)
+    graph = G.search_graph(n, edges, costs, states)
+    got, seqs = G.shortest_paths(graph, goals, qe, metric, threads=threads)
     ref = _reference(n, edges, costs, qe)
     np.testing.assert_array_equal(np.isfinite(got), np.isfinite(ref))
     ok = np.isfinite(ref)

@@ -23,7 +23,8 @@ import numba
 import numpy as np
 from numba import njit, prange
 
-__all__ = ["HeuristicMetric", "heuristic_metric", "QueryEdges", "shortest_paths",
+__all__ = ["HeuristicMetric", "heuristic_metric", "QueryEdges", "SearchGraph", "search_graph",
+           "roadmap_csr", "shortest_paths",
            "HEURISTIC_SLACK", "MIN_EDGE_COST"]
 
 HEURISTIC_SLACK = 1e-5  # relative: covers the float32 rounding of the edge costs
@@ -287,17 +288,48 @@ def roadmap_csr(n: int, edges: np.ndarray, costs: np.ndarray
     return m.indptr.astype(np.int64), m.indices.astype(np.int32), m.data.astype(np.float64)
 
 
-def shortest_paths(csr: tuple[np.ndarray, np.ndarray, np.ndarray], states: np.ndarray,
-                   goals: np.ndarray, edges: QueryEdges, metric: HeuristicMetric,
-                   threads: int = 1) -> tuple[np.ndarray, list[np.ndarray | None]]:
+class SearchGraph(NamedTuple):
+    """The roadmap as the search reads it: CSR ``indptr (n+1,) int64``,
+    ``indices`` int32, ``costs`` float64 (each edge in both directions, raised to
+    ``MIN_EDGE_COST``) and ``states (n, d)`` float64, over the milestones relabelled
+    by ``order (n,)`` int64 (new label -> milestone; reverse Cuthill-McKee, so that
+    neighbours lie close in memory)."""
+
+    indptr: np.ndarray
+    indices: np.ndarray
+    costs: np.ndarray
+    states: np.ndarray
+    order: np.ndarray
+
+
+def search_graph(n: int, edges: np.ndarray, costs: np.ndarray, states: np.ndarray
+                 ) -> SearchGraph:
+    """The :class:`SearchGraph` of ``n`` milestones at ``states (n, d)`` joined by
+    ``edges (E, 2)`` (unique unordered pairs) of ``costs (E,)``."""
+    from scipy.sparse import csr_matrix
+    from scipy.sparse.csgraph import reverse_cuthill_mckee
+
+    indptr, indices, c = roadmap_csr(n, edges, costs)
+    order = reverse_cuthill_mckee(csr_matrix((c, indices, indptr), shape=(n, n)),
+                                  symmetric_mode=True).astype(np.int64)
+    rank = np.empty(n, np.int64)
+    rank[order] = np.arange(n)
+    e = rank[np.asarray(edges, np.int64).reshape(-1, 2)]
+    st = np.ascontiguousarray(np.asarray(states, np.float64)[order])
+    return SearchGraph(*roadmap_csr(n, e, costs), st, order)
+
+
+def shortest_paths(graph: SearchGraph, goals: np.ndarray, edges: QueryEdges,
+                   metric: HeuristicMetric, threads: int = 1
+                   ) -> tuple[np.ndarray, list[np.ndarray | None]]:
     """Shortest start -> goal path of every query.
 
     Args:
-        csr: the roadmap from :func:`roadmap_csr` (``n`` milestones); its costs
-            must be at least ``metric`` between the edge's states.
-        states: ``(n, d)`` the milestones' states.
+        graph: the roadmap (:func:`search_graph`); its costs must be at least
+            ``metric`` between the edge's states.
         goals: ``(Q, d)`` the queries' goal states.
-        edges: the queries' start, goal and direct edges (:class:`QueryEdges`);
+        edges: the queries' start, goal and direct edges (:class:`QueryEdges`,
+            milestones by their index in the roadmap, not in ``graph.order``);
             their costs must be at least ``metric`` between their states.
         metric: the heuristic's metric (:func:`heuristic_metric`).
         threads: numba threads (capped at numba's thread count); the answers do
@@ -305,13 +337,15 @@ def shortest_paths(csr: tuple[np.ndarray, np.ndarray, np.ndarray], states: np.nd
 
     Returns:
         ``cost (Q,)`` float64 (inf: the goal is unreachable) and per query the
-        milestone indices of its path from the start side (int32; empty for the
+        milestone indices of its path from the start side (int64; empty for the
         direct edge; None when unreachable). The cost is the minimum over all
         paths (edge costs raised to ``MIN_EDGE_COST``), to within the relative
         slack of the heuristic; among paths of equal cost any one may be returned.
     """
-    indptr, indices, costs = csr
-    st = np.ascontiguousarray(states, np.float64)
+    indptr, indices, costs, st, order = graph
+    rank = np.empty(len(order), np.int32)
+    rank[order] = np.arange(len(order), dtype=np.int32)
+    edges = edges._replace(start_node=rank[edges.start_node], goal_node=rank[edges.goal_node])
     gs = np.ascontiguousarray(goals, np.float64)
     if np.any(np.diff(np.asarray(metric.groups)) < 0):
         raise ValueError(f"metric groups must be non-decreasing, got {metric.groups}")
@@ -330,8 +364,8 @@ def shortest_paths(csr: tuple[np.ndarray, np.ndarray, np.ndarray], states: np.nd
             b2, h2, p2 = _search_all(*args, long, int(hops[long].max()))
     finally:
         numba.set_num_threads(old)
-    out: list[np.ndarray | None] = [None if not np.isfinite(b) else p[:k].copy()
+    out: list[np.ndarray | None] = [None if not np.isfinite(b) else order[p[:k]]
                                     for b, k, p in zip(best, hops, paths)]
     for j, i in enumerate(long):
-        out[i] = p2[j, :h2[j]].copy()
+        out[i] = order[p2[j, :h2[j]]]
     return best, out

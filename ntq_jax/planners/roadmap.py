@@ -44,7 +44,7 @@ from scipy.spatial import cKDTree
 from ntq_jax import artifacts
 from ntq_jax.geometry import World
 from ntq_jax.planners.env_cache import EnvCache
-from ntq_jax.planners.graph_search import (QueryEdges, heuristic_metric, roadmap_csr,
+from ntq_jax.planners.graph_search import (QueryEdges, heuristic_metric, search_graph,
                                            shortest_paths)
 from ntq_jax.planners.options import bool_option, int_option, motion_check_option
 from ntq_jax.planners.smoothing import shortcut_paths
@@ -202,9 +202,8 @@ def _search(robot, world, rm: Roadmap, q: np.ndarray, k: int, padding: float, th
     """Per query, the states of its shortest roadmap path (start ... goal), or None
     (see :func:`ntq_jax.planners.graph_search.shortest_paths`)."""
     qe = _query_edges(robot, world, rm, q, k, padding, check)
-    csr = roadmap_csr(len(rm.milestones), rm.edges, rm.costs)
-    _, seqs = shortest_paths(csr, rm.milestones, q[:, 1], qe, heuristic_metric(robot),
-                             threads=threads)
+    graph = search_graph(len(rm.milestones), rm.edges, rm.costs, rm.milestones)
+    _, seqs = shortest_paths(graph, q[:, 1], qe, heuristic_metric(robot), threads=threads)
     return [None if s is None else np.concatenate([q[i, :1], rm.milestones[s], q[i, 1:]])
             for i, s in enumerate(seqs)]
 

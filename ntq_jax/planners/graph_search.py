@@ -12,7 +12,10 @@ metric (computed in float32), so the heuristic is a lower bound of every path
 cost up to the float32 rounding of the edge costs, which the slack covers. A
 node whose cost improves after its expansion is expanded again, so the search
 stays exact for a merely admissible heuristic. The search stops when no open
-node can lead to a cheaper goal.
+node can lead to a cheaper goal. The roadmap is searched in reverse Cuthill-McKee
+order (:class:`SearchGraph`); among paths of equal cost (to float64 rounding)
+the labelling decides which one is returned, so it may differ from another
+search's choice.
 """
 
 from __future__ import annotations

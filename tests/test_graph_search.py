@@ -167,6 +167,7 @@ def test_roadmap_search_cost_equals_dijkstra(name):
     got, _ = _check(len(rm.milestones), rm.edges, rm.costs, rm.milestones, q[:, 1], qe,
                     G.heuristic_metric(env.robot))
     assert np.isfinite(got).mean() > 0.8
+    assert R._graph_for(rm) is R._graph_for(rm)  # built once per roadmap
     paths = R._search(env.robot, env.world, rm, q, R.prm_star_k(1500, env.dim), padding, 2,
                       "discretized")
     for i, p in enumerate(paths):

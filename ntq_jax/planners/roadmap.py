@@ -197,13 +197,29 @@ def _query_edges(robot, world, rm: Roadmap, q: np.ndarray, k: int, padding: floa
     return QueryEdges.from_rows(len(q), s_row, s_m, s_c, g_row, g_m, g_c, d_row, d_c)
 
 
+_GRAPHS: list = []  # (roadmap edges, SearchGraph) of the last GRAPHS_KEPT roadmaps searched
+GRAPHS_KEPT = 4
+
+
+def _graph_for(rm: Roadmap):
+    """The roadmap's :class:`~ntq_jax.planners.graph_search.SearchGraph`, built once per
+    roadmap object (identified by its ``edges`` array, which the entry keeps alive)."""
+    for edges, graph in _GRAPHS:
+        if edges is rm.edges:
+            return graph
+    graph = search_graph(len(rm.milestones), rm.edges, rm.costs, rm.milestones)
+    _GRAPHS.append((rm.edges, graph))
+    del _GRAPHS[:-GRAPHS_KEPT]
+    return graph
+
+
 def _search(robot, world, rm: Roadmap, q: np.ndarray, k: int, padding: float, threads: int,
             check: str) -> list[np.ndarray | None]:
     """Per query, the states of its shortest roadmap path (start ... goal), or None
     (see :func:`ntq_jax.planners.graph_search.shortest_paths`)."""
     qe = _query_edges(robot, world, rm, q, k, padding, check)
-    graph = search_graph(len(rm.milestones), rm.edges, rm.costs, rm.milestones)
-    _, seqs = shortest_paths(graph, q[:, 1], qe, heuristic_metric(robot), threads=threads)
+    _, seqs = shortest_paths(_graph_for(rm), q[:, 1], qe, heuristic_metric(robot),
+                             threads=threads)
     return [None if s is None else np.concatenate([q[i, :1], rm.milestones[s], q[i, 1:]])
             for i, s in enumerate(seqs)]
 

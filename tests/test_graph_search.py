@@ -176,3 +176,17 @@ def test_roadmap_search_cost_equals_dijkstra(name):
             assert np.array_equal(p[0], q[i, 0]) and np.array_equal(p[-1], q[i, 1])
             cost = np.asarray(distances(env.robot, p[:-1], p[1:]), np.float64)
             assert np.maximum(cost, G.MIN_EDGE_COST).sum() == pytest.approx(got[i], rel=1e-6)
+
+
+def test_paths_longer_than_the_first_pass_cap():
+    m = METRICS["euclid"]
+    n = G.PATH_CAP + 40
+    states = np.stack([np.arange(n, dtype=np.float64), np.zeros(n)], 1)
+    edges = np.stack([np.arange(n - 1), np.arange(1, n)], 1)  # a chain
+    goals = np.array([[n, 0.0], [3.5, 0.0]])
+    qe = G.QueryEdges.from_rows(2, np.array([0, 1]), np.array([0, 0]), np.ones(2),
+                                np.array([0, 1]), np.array([n - 1, 3]), np.array([1.0, 0.5]),
+                                np.zeros(0, np.int64), np.zeros(0))
+    got, seqs = _check(n, edges, np.ones(n - 1), states, goals, qe, m)
+    assert seqs[0].tolist() == list(range(n)) and got[0] == n + 1
+    assert seqs[1].tolist() == [0, 1, 2, 3] and got[1] == 4.5

@@ -48,8 +48,9 @@ Planners
 ``"roadmap"`` (any robot; many queries in one environment)
     :func:`ntq_jax.planners.roadmap.plan_roadmap`: a PRM* roadmap built once per
     environment and settings (cached in memory, and on disk with ``cache_dir``),
-    Dijkstra per query, shortcutting. Options: ``milestones`` (default 20,000),
-    ``k`` (default PRM*'s rule), ``grow_rounds``, ``roadmap_seed``, ``cache_dir``.
+    A* per query (the robot's metric to the goal as heuristic), shortcutting.
+    Options: ``milestones`` (default 20,000), ``k`` (default PRM*'s rule),
+    ``grow_rounds``, ``roadmap_seed``, ``cache_dir``.
 
 Register your own with :func:`register_planner`. Measurements: BENCHMARKS.md
 ("Classical planners").

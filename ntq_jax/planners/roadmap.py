@@ -19,8 +19,8 @@ Frazzoli 2011):
    start to its goal when the straight connection is free. Starts only have
    outgoing and goals only incoming edges, so every query is solved on the
    roadmap alone, independently of the other queries of the batch (and of the
-   chunking). Dijkstra (``scipy.sparse.csgraph``) from batches of starts; the
-   node sequence is shortcut (:mod:`ntq_jax.planners.smoothing`) and verified
+   chunking). A* per query (:mod:`ntq_jax.planners.graph_search`, the robot's
+   metric to the goal as heuristic, queries in parallel); the node sequence is shortcut (:mod:`ntq_jax.planners.smoothing`) and verified
    (:mod:`ntq_jax.planners.verify`).
 3. **Growth**: a query whose ends are not connected is retried on a roadmap
    with twice the milestones (another sample), at most ``grow_rounds`` times,
@@ -34,19 +34,18 @@ from __future__ import annotations
 import math
 import os
 import time
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import NamedTuple
 
 import jax
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
 from ntq_jax import artifacts
 from ntq_jax.geometry import World
 from ntq_jax.planners.env_cache import EnvCache
+from ntq_jax.planners.graph_search import (QueryEdges, heuristic_metric, search_graph,
+                                           shortest_paths)
 from ntq_jax.planners.options import bool_option, int_option, motion_check_option
 from ntq_jax.planners.smoothing import shortcut_paths
 from ntq_jax.planners.verify import finalize, valid_queries
@@ -59,7 +58,6 @@ __all__ = ["Roadmap", "MetricIndex", "prm_star_k", "build_roadmap", "roadmap_for
 
 ALGORITHM_VERSION = 1  # bump when a roadmap built from the same settings changes
 DEFAULT_MILESTONES = 20_000
-SEARCH_CHUNK = 128  # Dijkstra sources per call: (chunk, nodes) distance and predecessor rows
 
 
 class Roadmap(NamedTuple):
@@ -185,53 +183,45 @@ def _attach(robot, world, index: MetricIndex, points: np.ndarray, k: int, paddin
     return rows[free], idx.reshape(-1)[free], cost
 
 
-def _node_paths(pred: np.ndarray, src: np.ndarray, dst: np.ndarray) -> list[np.ndarray]:
-    """Node sequences ``src -> dst`` per row from Dijkstra's predecessor rows."""
-    rows = np.arange(len(src))
-    cur = dst.copy()
-    trail = [cur.copy()]
-    active = cur != src
-    while active.any():
-        cur = np.where(active, pred[rows, cur], cur)
-        trail.append(cur.copy())
-        active &= cur != src
-    trail = np.stack(trail, 1)  # (rows, hops + 1), dst first, repeated src at the end
-    return [t[: int(np.argmax(t == s)) + 1][::-1] for t, s in zip(trail, src)]
-
-
-def _search(robot, world, rm: Roadmap, q: np.ndarray, k: int, padding: float, threads: int,
-            check: str) -> list[np.ndarray | None]:
-    """Per query, the states of its shortest roadmap path (start ... goal), or None."""
-    n, nq = len(rm.milestones), len(q)
+def _query_edges(robot, world, rm: Roadmap, q: np.ndarray, k: int, padding: float,
+                 check: str) -> QueryEdges:
+    """The checked edges of the queries' ends: each start to the nearest ``k``
+    milestones it reaches, the nearest ``k`` milestones that reach its goal to the
+    goal, and the start to its goal when that connection is free."""
     index = MetricIndex(robot, world, rm.milestones)
     s_row, s_m, s_c = _attach(robot, world, index, q[:, 0], k, padding, True, check)
     g_row, g_m, g_c = _attach(robot, world, index, q[:, 1], k, padding, False, check)
     direct = steer_to_pairs(robot, world, q[:, 0], q[:, 1], padding, check=check)
     d_row = np.flatnonzero(direct)
     d_c = distances(robot, q[d_row, 0], q[d_row, 1]).astype(np.float64)
-    start, goal = n + np.arange(nq), n + nq + np.arange(nq)  # node ids
-    e0, e1 = rm.edges[:, 0].astype(np.int64), rm.edges[:, 1].astype(np.int64)
-    src = np.concatenate([e0, e1, start[s_row], g_m, start[d_row]])
-    dst = np.concatenate([e1, e0, s_m, goal[g_row], goal[d_row]])
-    w = np.concatenate([rm.costs, rm.costs, s_c, g_c, d_c])
-    w = np.maximum(w, 1e-12)  # csgraph drops explicit zeros (coincident states)
-    graph = coo_matrix((w, (src, dst)), shape=(n + 2 * nq,) * 2).tocsr()
-    nodes = np.concatenate([rm.milestones, q[:, 0], q[:, 1]])
+    return QueryEdges.from_rows(len(q), s_row, s_m, s_c, g_row, g_m, g_c, d_row, d_c)
 
-    def solve(rows: np.ndarray) -> list[tuple[int, np.ndarray]]:
-        dist, pred = dijkstra(graph, directed=True, indices=start[rows],
-                              return_predecessors=True)
-        reached = np.isfinite(dist[np.arange(len(rows)), goal[rows]])
-        hit = rows[reached]
-        return list(zip(hit, _node_paths(pred[reached], start[hit], goal[hit])))
 
-    out: list[np.ndarray | None] = [None] * nq
-    chunks = [np.arange(lo, min(nq, lo + SEARCH_CHUNK)) for lo in range(0, nq, SEARCH_CHUNK)]
-    with ThreadPoolExecutor(max(1, min(threads, len(chunks)))) as pool:  # Dijkstra frees the GIL
-        for found in pool.map(solve, chunks):
-            for i, seq in found:
-                out[i] = nodes[seq]
-    return out
+_GRAPHS: list = []  # (roadmap edges, SearchGraph) of the last GRAPHS_KEPT roadmaps searched
+GRAPHS_KEPT = 4
+
+
+def _graph_for(rm: Roadmap):
+    """The roadmap's :class:`~ntq_jax.planners.graph_search.SearchGraph`, built once per
+    roadmap object (identified by its ``edges`` array, which the entry keeps alive)."""
+    for edges, graph in _GRAPHS:
+        if edges is rm.edges:
+            return graph
+    graph = search_graph(len(rm.milestones), rm.edges, rm.costs, rm.milestones)
+    _GRAPHS.append((rm.edges, graph))
+    del _GRAPHS[:-GRAPHS_KEPT]
+    return graph
+
+
+def _search(robot, world, rm: Roadmap, q: np.ndarray, k: int, padding: float, threads: int,
+            check: str) -> list[np.ndarray | None]:
+    """Per query, the states of its shortest roadmap path (start ... goal), or None
+    (see :func:`ntq_jax.planners.graph_search.shortest_paths`)."""
+    qe = _query_edges(robot, world, rm, q, k, padding, check)
+    _, seqs = shortest_paths(_graph_for(rm), q[:, 1], qe, heuristic_metric(robot),
+                             threads=threads)
+    return [None if s is None else np.concatenate([q[i, :1], rm.milestones[s], q[i, 1:]])
+            for i, s in enumerate(seqs)]
 
 
 def _pack(paths: list[np.ndarray | None], d: int) -> tuple[np.ndarray, np.ndarray]:
@@ -265,7 +255,7 @@ def plan_roadmap(env, queries, *, padding: float | None = None, seed: int = 0,
         smooth: shortcut the roadmap paths; ``smooth_chunk``: paths per call.
         cache_dir: a folder to keep built roadmaps in (reused when the map, robot,
             padding and settings match).
-        threads: Dijkstra threads (None: the CPU count); the result does not depend on it.
+        threads: search threads (None: the CPU count); the result does not depend on it.
         check: the motion check of the edges, the shortcuts and the final
             verification, ``"discretized"`` (the paper's) or ``"certified"`` (see
             :func:`ntq_jax.robots.batch.motion_check`).

@@ -93,6 +93,18 @@ def _check(results: Path) -> int:
     return 1 if problem else 0
 
 
+def _report_only(args, results: Path) -> int:
+    """``--report-only [--check]``: REPRODUCTION.md from the summaries under ``results``."""
+    if args.env or args.train_seeds or args.config:
+        raise UsageError("--report-only regenerates REPRODUCTION.md from every summary in "
+                         "--results; it takes no --config, --env or --train-seeds")
+    if args.check:
+        return _check(results)
+    check_writable_folder(results, "--results")
+    _report(results)
+    return 0
+
+
 def _main(argv) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -113,14 +125,7 @@ def _main(argv) -> int:
     args = ap.parse_args(argv)
     results = Path(args.results)
     if args.report_only:
-        if args.env or args.train_seeds or args.config:
-            raise UsageError("--report-only regenerates REPRODUCTION.md from every summary in "
-                             "--results; it takes no --config, --env or --train-seeds")
-        if args.check:
-            return _check(results)
-        check_writable_folder(results, "--results")
-        _report(results)
-        return 0
+        return _report_only(args, results)
     if args.check:
         raise UsageError("--check goes with --report-only")
     if args.config is None:

@@ -16,9 +16,10 @@ chunks ``i % W == w`` (one of W processes, e.g. one per core).
 
 At the end it prints and writes ``<out>/scale_<shard>.json``: the chunks planned
 now and skipped, per-stage seconds per query (all planned chunks, and without the
-first one, which pays compilation and the roadmap build), the peak RSS of the
+median over every complete chunk file of the run: robust to the chunks that paid
+compilation or a roadmap build), the peak RSS of the
 process, and a projection of 10^6 queries on 2 cores, 16 cores and a Ray cluster
-from the steady per-query time of this process (labelled a projection: it
+from the median chunk's time per query (labelled a projection: it
 assumes the chunks run independently in parallel, one process per core).
 """
 
@@ -57,7 +58,7 @@ def _projection(steady_s_per_query: float, n: int = 1_000_000) -> dict:
     """Wall seconds of ``n`` queries at one process per core (a projection)."""
     one = steady_s_per_query * n
     return {"label": "projection (chunks independent, one process per core, "
-                     "steady per-query time of this run; not measured)",
+                     "median per-query time of the chunk files; not measured)",
             "1e6_on_1_core_s": one, "1e6_on_2_cores_s": one / 2, "1e6_on_16_cores_s": one / 16,
             f"1e6_on_ray_{RAY_NODES}x{RAY_CORES}_cores_s":
                 one / (RAY_NODES * RAY_CORES) * (1 + RAY_OVERHEAD)}
@@ -80,11 +81,8 @@ def main(argv=None) -> int:
                         check=args.check, options=options, max_chunks=args.max_chunks,
                         shard=(w, n_w), progress=not args.no_progress)
     wall = time.perf_counter() - t0
-    first = _first_chunk_seconds(out, rep.planned[:1])
-    steady_q = rep.queries - (min(args.chunk, rep.queries) if rep.planned else 0)
     per_q = {s: rep.seconds[s] / max(rep.queries, 1) for s in STAGES}
-    steady = {s: (rep.seconds[s] - first.get(s, 0.0)) / steady_q if steady_q else None
-              for s in STAGES}
+    steady = _median_chunk(out, range(w, -(-args.queries // args.chunk), n_w), STAGES)
     summary = {
         "env": args.env, "queries": args.queries, "chunk": args.chunk, "check": args.check,
         "milestones": args.milestones, "shard": args.shard, "planned_chunks": len(rep.planned),
@@ -92,23 +90,31 @@ def main(argv=None) -> int:
         "solved": rep.solved, "wall_s": wall, "cpu_s": time.process_time(),
         "affinity": len(os.sched_getaffinity(0)), "load_avg": os.getloadavg(),
         "peak_rss_gib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20,
-        "s_per_query": per_q, "steady_s_per_query": steady}
-    if steady_q:
+        "s_per_query": per_q, "median_chunk_s_per_query": steady}
+    if steady:
         summary["projection"] = _projection(sum(steady.values()))
     artifacts.write_json(out / f"scale_{w}of{n_w}.json", summary)
     print(json.dumps(summary, indent=1))
     return 0
 
 
-def _first_chunk_seconds(out: Path, first: list) -> dict:
-    """Per-stage seconds of the first chunk planned now (it pays compilation and the build)."""
+def _median_chunk(out: Path, indices, stages) -> dict:
+    """Per stage, the median over the complete chunk files of seconds per query (robust to
+    the chunks that paid compilation or a roadmap build); {} without chunk files."""
     import numpy as np
     from ntq_jax.data.stream import chunk_path
 
-    if not first:
+    rows = []
+    for i in indices:
+        try:
+            with np.load(chunk_path(out, i)) as z:
+                rows.append(np.asarray(z["timings"], np.float64) / len(z["status"]))
+        except (OSError, KeyError, ValueError):
+            continue
+    if not rows:
         return {}
-    with np.load(chunk_path(out, first[0])) as z:
-        return {str(s): float(t) for s, t in zip(z["stages"], z["timings"])}
+    med = np.median(np.stack(rows), axis=0)
+    return dict(zip(stages, map(float, med)))
 
 
 if __name__ == "__main__":

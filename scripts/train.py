@@ -46,6 +46,7 @@ def _main(argv) -> int:
     ap.add_argument("--no-shard", action="store_true",
                     help="never shard the member axis over devices")
     args = ap.parse_args(argv)
+    start_run(args)  # --cpu-devices checked and applied before any JAX operation
 
     from ntq_jax.experiment.config import load
 
@@ -59,7 +60,6 @@ def _main(argv) -> int:
 
     from ntq_jax import training as T
 
-    start_run(args)  # --cpu-devices before any JAX operation
     print(f"training {cfg.model.hidden} PNets on {args.data} -> {out} "
           f"({len(jax.devices())} {jax.default_backend()} device(s))", file=sys.stderr)
     t0 = time.perf_counter()

@@ -27,7 +27,8 @@ from typing import Any, Callable
 import numpy as np
 
 __all__ = ["tmp_name", "replace", "write_with", "write_bytes", "write_text", "write_json",
-           "save_npy", "save_npz", "save_figure", "write_folder", "clean_tmp", "unwritable_reason", "sha256", "json_default",
+           "save_npy", "save_npz", "save_figure", "write_folder", "clean_tmp", "unwritable_reason",
+           "FolderInUse", "lock_folder", "unlock_folder", "LOCK_NAME", "sha256", "json_default",
            "sha256_json", "fingerprint", "npy_sha256", "array_digest", "tree_digest", "load_npz",
            "compute_or_load", "enable_compile_cache"]
 
@@ -171,6 +172,76 @@ def unwritable_reason(folder: str | os.PathLike) -> str | None:
     except OSError:
         pass
     return None
+
+
+# ---------------------------------------------------------------------------
+# Folder locks: one writer per run folder
+# ---------------------------------------------------------------------------
+
+#: The lock file a locked folder holds (its content names the holder).
+LOCK_NAME = ".lock"
+_HELD: dict[str, list] = {}  # resolved folder -> [lock file descriptor, holder noted]
+
+
+class FolderInUse(RuntimeError):
+    """Another process holds the folder's lock (the message names its pid, host and start)."""
+
+
+def lock_folder(folder: str | os.PathLike, note: bool = True) -> Path:
+    """Takes the exclusive lock of ``folder`` (which must exist) for this process's lifetime.
+
+    The lock is an advisory ``flock`` on ``<folder>/.lock``, released by the kernel
+    when the process ends (a killed run leaves no stale lock). With ``note`` the
+    file records the holder's pid, host and start time, which another process's
+    :class:`FolderInUse` message names; without it an existing lock file is not
+    modified (a caller that may still refuse the folder writes nothing). Taking
+    a lock this process already holds returns at once (adding the note if asked).
+
+    Returns:
+        The lock file's path.
+
+    Raises:
+        FolderInUse: another process holds the lock.
+    """
+    import fcntl
+
+    folder = Path(folder)
+    key = str(folder.resolve())
+    path = folder / LOCK_NAME
+    held = _HELD.get(key)
+    if held is not None:
+        try:  # still the same file (the folder may have been deleted and made again)
+            same = os.fstat(held[0]).st_ino == path.stat().st_ino
+        except OSError:
+            same = False
+        if not same:
+            unlock_folder(folder)
+            held = None
+    if held is None:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            who = os.pread(fd, 4096, 0).decode("utf-8", "replace").strip() or "another process"
+            os.close(fd)
+            raise FolderInUse(f"{folder} is in use by {who}") from None
+        held = _HELD[key] = [fd, False]
+    if note and not held[1]:
+        import socket
+        import time
+        info = (f"pid {os.getpid()} on {socket.gethostname()} since "
+                f"{time.strftime('%Y-%m-%d %H:%M:%S')}").encode()
+        os.ftruncate(held[0], 0)
+        os.pwrite(held[0], info, 0)
+        held[1] = True
+    return path
+
+
+def unlock_folder(folder: str | os.PathLike) -> None:
+    """Releases this process's lock of ``folder`` (no-op when it holds none)."""
+    held = _HELD.pop(str(Path(folder).resolve()), None)
+    if held is not None:
+        os.close(held[0])
 
 
 # ---------------------------------------------------------------------------

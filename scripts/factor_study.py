@@ -5,6 +5,7 @@ Examples::
 
     python scripts/factor_study.py --list               # every cell and whether it is done
     python scripts/factor_study.py --next               # run the first pending cell
+                                                        # (one worker per core: each claims its own)
     python scripts/factor_study.py --cell rigid_0/density/ours
     python scripts/factor_study.py --report-only        # results/factors/README.md only
 
@@ -163,6 +164,17 @@ def ready(cell: Cell) -> str | None:
     return None
 
 
+def claim(cell: Cell, runs: Path) -> bool:
+    """Claims ``cell`` for this process (False: another ``--next`` worker runs it), so that
+    one worker per core can run ``--next`` side by side."""
+    from ntq_jax import artifacts
+    folder = runs / ".claims" / cell.key.replace("/", "__")
+    folder.mkdir(parents=True, exist_ok=True)
+    try:
+        artifacts.lock_folder(folder)
+    except artifacts.FolderInUse:
+        return False
+    return True
 
 
 def cell_config(cell: Cell, extra: list[str] = ()):
@@ -358,11 +370,13 @@ def _main(argv) -> int:
         base_done = lambda c: c.budget == "ours" and not c.train_seed or done(  # noqa: E731
             Cell(c.map, c.data, "ours"))
         todo = [c for c in all_cells.values() if not done(c) and ready(c) is None
-                and base_done(c)][:1]
+                and base_done(c) and claim(c, runs)][:1]
         if not todo:
             print("nothing to run")
             return 0
     for c in todo:
+        if not claim(c, runs):
+            raise UsageError(f"--cell {c.key}: another factor_study.py process is running it")
         paper = args.paper_runs != "none"
         run_cell(c, runs, results, not args.no_progress, args.set,
                  Path(args.paper_runs) if paper else None,

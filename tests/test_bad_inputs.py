@@ -197,7 +197,7 @@ def test_run_foreign_config_refused_and_overwrite_starts_over(run_copy, capsys):
     assert _listing(run_copy) == before
     cfg = load_config(None, TINY + ["model.hidden=[16,16]"])
     run = prepare_run(cfg, run_copy, overwrite=True)
-    assert sorted(p.name for p in run.iterdir()) == ["config.yaml", "run.json"]
+    assert sorted(p.name for p in run.iterdir()) == [".lock", "config.yaml", "run.json"]
     info = json.loads((run / "run.json").read_text())
     assert info == {"config_hash": cfg.hash(), "stages": {}}
     assert "- 16" in (run / "config.yaml").read_text()

@@ -34,3 +34,26 @@ def test_every_cell_has_a_config_that_varies_one_factor(monkeypatch):
             assert cfg.train.seed == c.train_seed and cfg.data == base.data
         if c.budget != "ours":
             assert cfg.data == base.data and cfg.eval != base.eval
+
+
+def test_next_workers_claim_distinct_cells(tmp_path):
+    """Two ``--next`` workers never run the same cell: a claimed cell is skipped by the other."""
+    import subprocess
+    import sys
+
+    fs = _script()
+    cell = fs.cells()[0]
+    code = ("import importlib.util,sys; from pathlib import Path\n"
+            f"spec = importlib.util.spec_from_file_location('fs', {str(ROOT / 'scripts/factor_study.py')!r})\n"
+            "fs = importlib.util.module_from_spec(spec); spec.loader.exec_module(fs)\n"
+            f"print(fs.claim(fs.cells()[0], Path({str(tmp_path)!r})), flush=True); sys.stdin.read()")
+    p = subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE,
+                         stdout=subprocess.PIPE, text=True, cwd=ROOT)
+    try:
+        assert p.stdout.readline().strip() == "True"
+        assert not fs.claim(cell, tmp_path)  # held by the other worker
+        assert fs.claim(fs.cells()[1], tmp_path)
+    finally:
+        p.stdin.close()
+        p.wait()
+    assert fs.claim(cell, tmp_path)  # released when the worker ended

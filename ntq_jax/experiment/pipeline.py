@@ -67,7 +67,7 @@ RUN_ENTRIES = frozenset({"config.yaml", "run.json", "data", "models", "eval", "p
 #: Every file a run writes, as a pattern of its path in the run folder (``<env>``: one
 #: folder name): what ``--overwrite`` may delete. Anything else stops it.
 RUN_FILES = re.compile("|".join(f"(?:{p})" for p in (
-    r"(config\.yaml|run\.json|results\.json|results\.csv|tables\.md|tables\.tex)",
+    r"(config\.yaml|run\.json|results\.json|results\.csv|tables\.md|tables\.tex|\.lock)",
     r"figures/[^/]+\.png",
     r"data/[^/]+/(env\.json|config\.yaml|figure\.png)",
     rf"data/[^/]+/D\d+/(({'|'.join(ARRAY_SPECS)})\.npy|meta\.json)",
@@ -148,6 +148,14 @@ def _check_writable(run: Path) -> None:
         raise PipelineError(f"{run}: {why}; {_NEW_OUT} in a writable place")
 
 
+def _lock(run: Path, note: bool = True) -> None:
+    """Takes ``run``'s lock for this process (:func:`ntq_jax.artifacts.lock_folder`)."""
+    try:
+        artifacts.lock_folder(run, note)
+    except artifacts.FolderInUse as e:
+        raise PipelineError(f"{e}; wait for that run to finish, or {_NEW_OUT}") from None
+
+
 def prepare_run(cfg: C.Config, out: str | Path | None, *, overwrite: bool = False) -> Path:
     """Creates (or reopens) the run folder after validating every environment of ``cfg``.
 
@@ -167,19 +175,33 @@ def prepare_run(cfg: C.Config, out: str | Path | None, *, overwrite: bool = Fals
             would share a folder.
         PipelineError: an environment's planner cannot plan for its robot.
         PipelineError: ``out`` is a file or not writable, or a non-empty folder
-            that is not a run of this config (the message says how to proceed).
+            that is not a run of this config, or another process is using it
+            (the message names its pid; the lock is held until this process
+            ends, see :func:`ntq_jax.artifacts.lock_folder`).
     """
     check_planners(cfg, resolve_envs(cfg.envs))  # before anything is written
     run = run_folder(cfg, out)
     _check_writable(run)
-    if run.is_dir() and any(run.iterdir()):
-        info, why = read_run_info(run)
-        if info is None:
-            _refuse_or_clear(run, f"not empty and not a run folder: {why}", overwrite)
-        elif info["config_hash"] != cfg.hash():
-            _refuse_or_clear(run, f"holds a run with another config (hash {info['config_hash']}, "
-                                  f"this one {cfg.hash()})", overwrite)
+    lock = run / artifacts.LOCK_NAME
+    made_lock = False
+    if (run / "run.json").is_file():  # a run's folder: no one may use or delete it under us
+        made_lock = not lock.exists()
+        _lock(run, note=False)
+    try:
+        if run.is_dir() and any(p.name != artifacts.LOCK_NAME for p in run.iterdir()):
+            info, why = read_run_info(run)
+            if info is None:
+                _refuse_or_clear(run, f"not empty and not a run folder: {why}", overwrite)
+            elif info["config_hash"] != cfg.hash():
+                _refuse_or_clear(run, f"holds a run with another config (hash "
+                                      f"{info['config_hash']}, this one {cfg.hash()})", overwrite)
+    except PipelineError:
+        if made_lock:  # nothing is written when the folder is refused
+            artifacts.unlock_folder(run)
+            lock.unlink(missing_ok=True)
+        raise
     run.mkdir(parents=True, exist_ok=True)
+    _lock(run)
     info, _ = read_run_info(run)
     if info is None:
         artifacts.write_json(run / "run.json", {"config_hash": cfg.hash(), "stages": {}})

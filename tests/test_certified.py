@@ -801,3 +801,32 @@ def test_point_robot_certified_equals_discretised(name):
         assert (cert == disc).all()
         assert 0.1 < cert.mean() < 0.9
         assert not cert[:8].any()
+
+
+def test_certified_steer_to_compiles_once_for_every_batch_size():
+    """Env.steer_to(check="certified") runs in chunks of CERTIFIED_CHUNK rows: a user's
+    varying batch sizes share one compiled program, and the answers are the kernel's."""
+    from ntq_jax.envs.env import CERTIFIED_CHUNK
+    from ntq_jax.robots.batch import _steer_to_batch as kernel
+
+    env = Env.from_json({"name": "thin-arm-2", "bounds": [[-10, 10], [-10, 10]],
+                         "robot": {"kind": "nlink", "link_lengths": [3.0, 3.0],
+                                   "resolution": 1.0},
+                         "boxes": [[4.0, 0.0, 0.5, 0.05]], "padding": 0.0})
+    rng = np.random.default_rng(3)
+    n = 2 * CERTIFIED_CHUNK + 5
+    a, b = (f32(rng.uniform(-np.pi, np.pi, (n, 2))) for _ in range(2))
+    want = np.asarray(steer_to_pairs(env.robot, env.world, a, b, 0.0, chunk=256,
+                                     check="certified"), bool)
+    assert 0.05 < want.mean() < 0.95
+    sizes = [1, 3, 700, CERTIFIED_CHUNK, CERTIFIED_CHUNK + 1, n]
+    env.steer_to(a[:2], b[:2], check="certified")  # compiled here, once
+    before = kernel._cache_size()
+    for m in sizes:
+        got = env.steer_to(a[:m], b[:m], check="certified")
+        assert got.shape == (m,) and got.dtype == bool
+        assert (np.asarray(got) == want[:m]).all(), m
+    got = env.steer_to(a[:5].tolist(), b[:5].tolist(), check="certified")  # lists too
+    assert (np.asarray(got) == want[:5]).all()
+    assert env.steer_to(a[:0], b[:0], check="certified").shape == (0,)
+    assert kernel._cache_size() == before

@@ -978,3 +978,33 @@ def test_grid_astar_on_a_one_cell_grid_map_names_the_map_not_the_resolution(tmp_
                                              r".*roadmap or visgraph"):
             plan(env, q, "astar", padding=0.0, **opts)
     assert plan(env, q, "roadmap", padding=0.0).lengths[0] >= 2  # the advice works
+
+
+def test_a_full_disk_during_train_all_is_one_line_and_the_run_resumes(run_copy, capsys,
+                                                                       monkeypatch):
+    """ENOSPC while writing (also wrapped by a library, as Orbax does) is one line naming the
+    file and the fix; nothing half-written is left, and the same command then finishes."""
+    from ntq_jax import artifacts
+
+    real = artifacts.replace
+    calls = {"n": 0}
+    (run_copy / "results.json").unlink()
+
+    def full(tmp, dst):
+        if Path(dst).name == "results.json":
+            calls["n"] += 1
+            os.unlink(tmp)
+            err = OSError(28, "No space left on device", str(dst))
+            raise RuntimeError("a library's wrapper of the write") from err
+        return real(tmp, dst)
+
+    monkeypatch.setattr(artifacts, "replace", full)
+    argv = SETS + ["--out", str(run_copy), "--no-progress", "--no-figures", "--no-compile-cache"]
+    assert _script("train_all").main(argv) == 2
+    line = _one_error_line(capsys.readouterr().err)
+    assert calls["n"] == 1 and "results.json: no space left on device" in line, line
+    assert "free some space and run the same command again" in line, line
+    assert not list(run_copy.rglob(".*.tmp-*")) and not (run_copy / "results.json").exists()
+    monkeypatch.setattr(artifacts, "replace", real)
+    assert _script("train_all").main(argv) == 0
+    assert (run_copy / "results.json").is_file()

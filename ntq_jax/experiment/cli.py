@@ -15,6 +15,7 @@ keeps its traceback.
 
 from __future__ import annotations
 
+import errno
 import logging
 import os
 import sys
@@ -51,6 +52,23 @@ PATH_ERRORS: dict[type[OSError], str] = {
     FileExistsError: "a folder is needed there but a file of that name exists; choose another "
                      "path or remove the file",
 }
+
+
+#: ``errno`` of a full or read-only disk: expected wherever they arise (also wrapped by a
+#: library, e.g. Orbax), printed as one line advising to free space and resume.
+DISK_ERRNOS = {errno.ENOSPC: "free some space", errno.EDQUOT: "free some space (disk quota)",
+               errno.EROFS: "choose a writable location"}
+
+
+def disk_error(err: BaseException) -> OSError | None:
+    """The full-disk or read-only-disk :class:`OSError` behind ``err`` (its cause chain), or None."""
+    seen = set()
+    while err is not None and id(err) not in seen:
+        seen.add(id(err))
+        if isinstance(err, OSError) and err.errno in DISK_ERRNOS:
+            return err
+        err = err.__cause__ or err.__context__
+    return None
 
 
 def expected_error_types(extra: Iterable[type[BaseException]] = ()
@@ -164,6 +182,12 @@ def error_line(err: BaseException) -> str:
     A path error without a message of ours (``[Errno 13] Permission denied:
     'x'``) becomes ``<path>: <reason>; <fix>``.
     """
+    disk = disk_error(err)
+    if disk is not None:
+        where = f"{disk.filename}: " if disk.filename is not None else ""
+        reason = (disk.strerror or os.strerror(disk.errno)).lower()
+        return (f"error: {where}{reason}; {DISK_ERRNOS[disk.errno]} and run the same command "
+                "again (a run resumes from its last finished step)")
     fix = next((f for cls, f in PATH_ERRORS.items() if type(err) is cls), None)
     if fix is not None and isinstance(err, OSError) and err.strerror:
         where = f"{err.filename}: " if err.filename is not None else ""
@@ -206,7 +230,7 @@ def run_cli(main: Callable[[], int], extra: Iterable[type[BaseException]] = ()) 
         print("interrupted", file=sys.stderr)
         return 130
     except Exception as e:  # noqa: BLE001 (re-raised unless expected)
-        if not isinstance(e, expected_error_types(extra)):
+        if not isinstance(e, expected_error_types(extra)) and disk_error(e) is None:
             raise
         _quiet_asyncio_after_error()
         print(error_line(e), file=sys.stderr, flush=True)

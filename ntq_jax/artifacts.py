@@ -28,7 +28,7 @@ import numpy as np
 
 __all__ = ["tmp_name", "replace", "write_with", "write_bytes", "write_text", "write_json",
            "save_npy", "save_npz", "save_figure", "write_folder", "clean_tmp", "unwritable_reason",
-           "FolderInUse", "lock_folder", "unlock_folder", "LOCK_NAME", "sha256", "json_default",
+           "FolderInUse", "lock_folder", "unlock_folder", "holds_lock", "LOCK_NAME", "sha256", "json_default",
            "sha256_json", "fingerprint", "npy_sha256", "array_digest", "tree_digest", "load_npz",
            "compute_or_load", "enable_compile_cache"]
 
@@ -235,6 +235,11 @@ def lock_folder(folder: str | os.PathLike, note: bool = True) -> Path:
         os.pwrite(held[0], info, 0)
         held[1] = True
     return path
+
+
+def holds_lock(folder: str | os.PathLike) -> bool:
+    """Whether this process holds ``folder``'s lock (:func:`lock_folder`)."""
+    return str(Path(folder).resolve()) in _HELD
 
 
 def unlock_folder(folder: str | os.PathLike) -> None:

@@ -176,16 +176,17 @@ def prepare_run(cfg: C.Config, out: str | Path | None, *, overwrite: bool = Fals
         PipelineError: an environment's planner cannot plan for its robot.
         PipelineError: ``out`` is a file or not writable, or a non-empty folder
             that is not a run of this config, or another process is using it
-            (the message names its pid; the lock is held until this process
-            ends, see :func:`ntq_jax.artifacts.lock_folder`).
+            (the message names its pid). The folder's lock is then held by this
+            process until :func:`run_pipeline` returns or the process ends
+            (:func:`ntq_jax.artifacts.lock_folder`).
     """
     check_planners(cfg, resolve_envs(cfg.envs))  # before anything is written
     run = run_folder(cfg, out)
     _check_writable(run)
     lock = run / artifacts.LOCK_NAME
-    made_lock = False
+    made_lock = took_lock = False
     if (run / "run.json").is_file():  # a run's folder: no one may use or delete it under us
-        made_lock = not lock.exists()
+        made_lock, took_lock = not lock.exists(), not artifacts.holds_lock(run)
         _lock(run, note=False)
     try:
         if run.is_dir() and any(p.name != artifacts.LOCK_NAME for p in run.iterdir()):
@@ -196,8 +197,9 @@ def prepare_run(cfg: C.Config, out: str | Path | None, *, overwrite: bool = Fals
                 _refuse_or_clear(run, f"holds a run with another config (hash "
                                       f"{info['config_hash']}, this one {cfg.hash()})", overwrite)
     except PipelineError:
-        if made_lock:  # nothing is written when the folder is refused
+        if took_lock:  # a refused folder is left as it was: unlocked, and without a new file
             artifacts.unlock_folder(run)
+        if made_lock:
             lock.unlink(missing_ok=True)
         raise
     run.mkdir(parents=True, exist_ok=True)
@@ -341,7 +343,20 @@ def run_pipeline(cfg: C.Config, run: Path, *, progress=True, figures: bool = Tru
             submitting its chunks as tasks, and the environments are trained and
             evaluated in the config's order as their data arrive: the cluster
             plans while this process trains. The outputs are the same.
+
+    The run folder's lock (taken by :func:`prepare_run`, or here) is held while
+    it runs and released when it returns or raises.
     """
+    _lock(run)
+    try:
+        return _run_stages(cfg, run, progress=progress, figures=figures, log=log,
+                           executor=executor)
+    finally:
+        artifacts.unlock_folder(run)
+
+
+def _run_stages(cfg: C.Config, run: Path, *, progress, figures: bool, log, executor) -> dict:
+    """:func:`run_pipeline`'s stages, the folder locked."""
     rows, timings = [], {}
     envs = resolve_envs(cfg.envs)  # every env built, no two sharing a folder
     concurrent = executor is not None and executor.name != "local" and len(cfg.envs) > 1

@@ -362,8 +362,20 @@ def _chunk_prefix(robot, world: World, seeds: Array, padding: float, chunk: int,
     return int(rows_blocked[:r].sum()) + int(blk[: last + 1].sum()), r * row + last + 1
 
 
-def default_chunk(robot) -> int:
-    return 1 << 22 if robot.kind == "point" else 1 << 15
+#: Candidate pairs per chunk of :func:`gamma_nt` for the point robot on a world with a
+#: broad-phase index (more than ``broadphase.UNROLL_MAX`` boxes): its work queue keeps about
+#: half a kilobyte per pair, so 2**18 pairs hold the working memory near 150 MB whatever the
+#: map's size (the fused kernel of the presets keeps 2**22).
+INDEXED_POINT_CHUNK = 1 << 18
+
+
+def default_chunk(robot, world: World | None = None) -> int:
+    """Candidate pairs per compiled chunk of :func:`gamma_nt`: 2**22 for the point robot
+    (:data:`INDEXED_POINT_CHUNK` on an indexed ``world``), 2**15 for the others. Memory
+    is that of one chunk, whatever the number of queries."""
+    if robot.kind != "point":
+        return 1 << 15
+    return INDEXED_POINT_CHUNK if getattr(world, "index", None) is not None else 1 << 22
 
 
 def gamma_nt(robot, world: World, key: Array, n: int, padding: float, chunk: int | None = None,
@@ -394,7 +406,8 @@ def gamma_nt(robot, world: World, key: Array, n: int, padding: float, chunk: int
     """
     n = check_count("n", n, 1)
     padding = check_padding(padding)
-    chunk = default_chunk(robot) if chunk is None else check_count("chunk", chunk, 1, MAX_CHUNK)
+    chunk = (default_chunk(robot, world) if chunk is None
+             else check_count("chunk", chunk, 1, MAX_CHUNK))
     if progress is not None and not callable(progress):
         raise TypeError(f"progress must be callable or None, got {type(progress).__name__}")
     t0 = time.perf_counter()

@@ -2,8 +2,9 @@
 """Measure gamma_nt (the non-trivial fraction of uniform queries) of an environment.
 
 Streams N uniform queries in fixed-size chunks (memory stays flat for 1e9 and
-beyond), shows progress, and prints the estimate, its 95% Wilson interval,
-elapsed seconds and throughput.
+beyond: it is that of one chunk, printed with the time estimate), shows
+progress, and prints the estimate, its 95% Wilson interval, elapsed seconds,
+throughput and peak memory.
 
     python scripts/measure_gamma.py --env point/3 --queries 100000000
     python scripts/measure_gamma.py --env my_map.json --queries 1e6 --padding 0.8 --json out.json
@@ -114,11 +115,19 @@ class _Eta:
         self.reported = True
         rate = (done - d0) / (now - t0)
         eta = (self.total - done) / rate
-        msg = f"{self.total:,} queries at {rate:,.0f} queries/s: about {_duration(eta)} left"
+        msg = (f"{self.total:,} queries at {rate:,.0f} queries/s: about {_duration(eta)} left; "
+               f"memory {_peak_gib():.2f} GiB, flat from here (fixed-size chunks)")
         if eta > self.max_hours * 3600:
             raise ScriptError(f"{msg}, more than --max-hours {self.max_hours:g}: ask for fewer "
                               "--queries, or raise --max-hours")
         self.bar.write(msg, file=sys.stderr)
+
+
+def _peak_gib() -> float:
+    """This process's peak resident memory in GiB (Linux and macOS units)."""
+    import resource
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return peak / (2**30 if sys.platform == "darwin" else 2**20)
 
 
 def _report(env, padding: float, est, file=None) -> None:
@@ -127,7 +136,8 @@ def _report(env, padding: float, est, file=None) -> None:
           f"non-trivial {est.non_trivial:,}", file=file)
     print(f"gamma_nt = {est.gamma:.6f}  95% CI [{lo:.6f}, {hi:.6f}]", file=file)
     print(f"{est.seconds:.2f} s  {est.queries_per_second:,.0f} queries/s  "
-          f"({est.candidates_per_second:,.0f} raw candidates/s)", file=file)
+          f"({est.candidates_per_second:,.0f} raw candidates/s)  peak memory "
+          f"{_peak_gib():.2f} GiB", file=file)
 
 
 def _run(argv) -> int:
@@ -141,7 +151,9 @@ def _run(argv) -> int:
                     help="clearance of the geometry (default 0: the evaluation geometry)")
     ap.add_argument("--seed", type=seed_arg, default=0, help="PRNG seed, 0 .. 2**32-1")
     ap.add_argument("--chunk", type=_chunk, default=None,
-                    help="candidate queries per compiled chunk (default: 4M point, 32k others)")
+                    help="candidate queries per compiled chunk (default: 4M point, 256k point on a "
+                    "map of more than 64 boxes, 32k others); memory grows with it, not with "
+                    "--queries")
     ap.add_argument("--max-hours", type=_hours, default=24.0,
                     help="stop at once if the time estimate exceeds this (default 24; inf: no limit)")
     ap.add_argument("--json", type=Path, default=None, help="also write the result as JSON")

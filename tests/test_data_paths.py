@@ -84,8 +84,12 @@ def test_modes_on_a_tiny_map():
     np.testing.assert_allclose(res.costs, cut.costs, rtol=1e-5)
     for b in range(3):
         pr, pc = res.path(b), cut.path(b)
+        if len(pc) == 2:  # a direct connection (query 2 here) stays its two ends
+            np.testing.assert_array_equal(pr, pc)
+            continue
         assert (distances(env.robot, pr[:-1], pr[1:]) <= 0.5 * (1 + 1e-5)).all()
         assert all((pr == v).all(1).any() for v in pc)  # the corners are kept
+    assert cut.lengths[2] == 2 and (cut.lengths[:2] > 2).all()
     # a planner without its own smoothing (here: the raw grid path as a "custom" planner)
     # is shortcut by shape_paths: the result equals the planner's own shortcut's cost
     sc, info = shape_paths(env, raw, "shortcut", "custom", env.padding)
@@ -239,3 +243,23 @@ def test_the_committed_bitstar_record_reverifies():
             assert np.asarray(env.steer_to(p[:-1], p[1:], padding=meta["padding"])).all(), (f, i)
             cost = float(np.asarray(env.distance(p[:-1], p[1:]), np.float64).sum())
             assert abs(cost - float(z["costs"][i])) <= 1e-3 * max(1.0, cost), (f, i)
+
+
+def test_a_direct_connection_stays_its_two_ends_when_resampled():
+    """BIT* returns a trivial query's path as its two ends (every trivial query of the rigid/0
+    record); a spacing mode keeps it so (one includeData sample) and resamples the others."""
+    env = Env.from_json(WALLS)
+    q = np.array([[[1, 1], [1, 9]], [[1, 1], [9, 9]], [[9, 1], [9, 8]]], np.float32)
+    trivial = np.asarray(env.steer_to(q[:, 0], q[:, 1], padding=env.padding))
+    assert trivial.tolist() == [True, False, True]
+    _, cut = _plan_modes(env, q, "astar", resolution=0.25)
+    assert cut.lengths.tolist()[0] == 2 and cut.lengths[2] == 2 and cut.lengths[1] > 2
+    res, info = shape_paths(env, cut, 0.5, "astar", env.padding)
+    assert res.lengths[0] == 2 and res.lengths[2] == 2  # 8 and 7 apart: not resampled
+    np.testing.assert_array_equal(res.path(0), q[0])
+    assert res.lengths[1] > cut.lengths[1] and info["resample_kept"] == 0
+    pr = res.path(1)
+    assert (distances(env.robot, pr[:-1], pr[1:]) <= 0.5 * (1 + 1e-5)).all()
+    samples = include_data(env, res.paths[[0]], res.lengths[[0]], prune=False,
+                           padding=env.padding)
+    assert len(samples[2]) == 1  # one sample: start -> goal

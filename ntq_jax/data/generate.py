@@ -134,6 +134,9 @@ def resolve_run(env, config, out_dir, env_name: str | None, planner) -> RunSpec:
         "gamma_queries": dc.gamma_queries, "gamma_eval": dc.gamma_eval,
         # only when set: the fingerprints of runs with the planners' default paths stay
         **({} if mode is None else {"data_paths": mode}),
+        # a spacing's paths keep a direct connection as its two ends (path_modes)
+        **({"direct": "ends"} if isinstance(mode, (int, float)) and not isinstance(mode, bool)
+           else {}),
         **({} if dc.paths_from_for(env_name) is None
            else {"paths_from": str(dc.paths_from_for(env_name))}),
     }, default=artifacts.json_default)

@@ -18,7 +18,9 @@ a number ``s > 0``
     The shortcut path resampled so that consecutive waypoints are at most ``s``
     apart in the robot's metric (:mod:`ntq_jax.planners.resample`): the
     shortcut's corners and cost with a BIT*-like density; pruning drops the
-    steps of the final straight run into the goal.
+    steps of the final straight run into the goal. A direct connection (a
+    shortcut of 2 waypoints: the query is trivial at the data padding) is kept
+    as its two ends, as BIT* returns it: one sample, the step into the goal.
 ``None``
     The planner's default: shortcut for ``astar`` and ``roadmap``, raw for
     ``bitstar`` and ``visgraph`` (and a user's planner callable).
@@ -83,7 +85,8 @@ def shape_paths(env, result: PlanResult, mode, planner: str, padding: float,
                                     check=check)
         paths, lengths, costs, info["shortcut_kept"] = _merge(
             paths, lengths, costs, rows, sp, sl, ok, env, padding, check)
-    if mode != "shortcut":
+    rows = rows[lengths[rows] > 2]  # a direct connection stays its two ends (BIT*'s)
+    if mode != "shortcut" and len(rows):
         rp, rl = resample_paths(env.robot, paths[rows], lengths[rows], float(mode))
         paths, lengths, costs, info["resample_kept"] = _merge(
             paths, lengths, costs, rows, rp, rl, np.ones(len(rows), bool), env, padding, check)

@@ -62,7 +62,7 @@ DEFAULT = yaml.safe_load(
 
 
 #: What a run folder may hold (``--overwrite`` deletes only folders made of these).
-RUN_ENTRIES = frozenset({"config.yaml", "run.json", "data", "models", "eval", "paths",
+RUN_ENTRIES = frozenset({".lock", "config.yaml", "run.json", "data", "models", "eval", "paths",
                          "results.json", "results.csv", "tables.md", "tables.tex", "figures"})
 #: Every file a run writes, as a pattern of its path in the run folder (``<env>``: one
 #: folder name): what ``--overwrite`` may delete. Anything else stops it.

@@ -1,4 +1,51 @@
+import fcntl
+import json
 import os
+import shutil
+from pathlib import Path
+from types import SimpleNamespace
+
+import pytest
 
 # Tests run on the CPU; keep XLA from grabbing every core's worth of threads twice.
 os.environ.setdefault("JAX_PLATFORMS", "cpu")
+
+
+#: The tiny point/2 pipeline run several files check (test_golden, test_train_all,
+#: test_bad_inputs): data -> four PNets -> evaluation -> report, figures included.
+TINY_RUN = ["envs=[point/2]", "data.k_train=40", "data.gamma_queries=2000", "data.gamma_eval=false",
+            "train.epochs=2", "model.hidden=[32,32]", "eval.k_test=16", "eval.n_plan=20",
+            "eval.replan_rounds=2", "eval.replan_steps=6", "eval.gamma_queries=2000"]
+
+
+def _produce_tiny_run(out: Path) -> dict:
+    from ntq_jax.experiment.pipeline import load_config, prepare_run, run_pipeline
+
+    cfg = load_config(None, TINY_RUN)
+    written = run_pipeline(cfg, prepare_run(cfg, out), progress=False, log=lambda _: None)
+    return {k: str(Path(v).relative_to(out)) for k, v in written.items()}
+
+
+@pytest.fixture(scope="session")
+def tiny_run(tmp_path_factory):
+    """One finished run of :data:`TINY_RUN` (``run_pipeline(cfg, prepare_run(cfg, out),
+    progress=False)``): ``.path`` its folder, ``.written`` the files run_pipeline returned,
+    ``.config`` the ``--set`` list (a test asserts it is the config it means).
+
+    Taken once per test session: under xdist the first worker that needs it runs the
+    pipeline (the others wait on a lock and read its folder). READ ONLY: a test that
+    changes a run works on a copy (``shutil.copytree``).
+    """
+    if os.environ.get("PYTEST_XDIST_WORKER") is None:
+        root = tmp_path_factory.mktemp("tiny_run")
+    else:  # the folder all workers of this session share
+        root = tmp_path_factory.getbasetemp().parent / "tiny_run"
+        root.mkdir(exist_ok=True)
+    run, done = root / "run", root / "written.json"
+    with open(root / "lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not done.is_file():
+            shutil.rmtree(run, ignore_errors=True)  # a worker's failed attempt
+            done.write_text(json.dumps(_produce_tiny_run(run)))
+    written = {k: run / v for k, v in json.loads(done.read_text()).items()}
+    return SimpleNamespace(path=run, written=written, config=list(TINY_RUN))

@@ -77,11 +77,11 @@ def _pipeline(out, extra=(), log=lambda s: None, **kw):
 
 
 @pytest.fixture(scope="module")
-def finished_run(tmp_path_factory):
-    """A finished tiny pipeline run (point/2); tests work on copies of it."""
-    out = tmp_path_factory.mktemp("finished") / "run"
-    _pipeline(out)
-    return out
+def finished_run(tiny_run):
+    """A finished tiny pipeline run (point/2; the session's, conftest.py, figures included):
+    read only, tests work on copies of it."""
+    assert tiny_run.config == TINY
+    return tiny_run.path
 
 
 @pytest.fixture

@@ -2,7 +2,8 @@
 steer_to that uses it: the bitmap is exact on imported grids and never marks a cell that is not
 inside a box; the indexed steer_to (bitmap first pass, flag queue, queue tail) gives exactly the
 answers of the unindexed exact kernel, on random grid maps and adversarial segments (along cell
-edges, through cell corners, endpoints on cell boundaries), at padding 0 and above."""
+edges, through cell corners, endpoints on cell boundaries), at padding 0 and above. The
+benchmark maze and arbitrary boxes are in test_blocked_bitmap_steer.py."""
 
 import dataclasses
 
@@ -181,70 +182,6 @@ def test_indexed_steer_equals_exact_on_random_grids(seed, density, setting, pad_
     world = _padded(world, pad + 0.5 * cell, cell)
     assert world.index.blocked is not None
     a, b = _segments(rng, 2000, res, origin)
-    got = np.asarray(_indexed(a, b, world, pad))
-    ref = np.asarray(_exact(a, b, dataclasses.replace(world, index=None), pad))
-    np.testing.assert_array_equal(got, ref)
-
-
-@pytest.mark.parametrize("pad", [0.0, 0.2])
-def test_maze_steer_equals_exact(tmp_path, pad):
-    """The 256 x 256 benchmark maze through Env (the bitmap path, queue tail included): random
-    pairs, short pairs and grid-vertex pairs against the unindexed exact kernel."""
-    path = grid_maps.write_movingai(tmp_path / "maze.map", grid_maps.maze_grid(64, seed=4))
-    env = nj.make_env(path, padding=0.2)
-    assert env.world.index is not None and env.world.index.blocked is not None
-    rng = np.random.default_rng(1)
-    n = 6000
-    a = rng.uniform(0, 64, (n, 2))
-    b = np.where(rng.random((n, 1)) < 0.5, a + rng.normal(0, 1.5, a.shape), rng.uniform(0, 64, (n, 2)))
-    v = rng.integers(0, 65, (n // 2, 2)).astype(np.float64)
-    a = np.concatenate([a, v]).astype(np.float32)
-    b = np.concatenate([b, v + rng.integers(-3, 4, v.shape)]).astype(np.float32)
-    # non-finite and out-of-bounds ends: blocked, unchecked
-    a[:4] = [[np.nan, 3.0], [np.inf, 5.0], [-1.0, 5.5], [30.5, 70.0]]
-    got = np.asarray(env.steer_to(a, b, padding=pad))
-    ref = np.asarray(_exact(jnp.asarray(a.T), jnp.asarray(b.T),
-                            dataclasses.replace(env.world, index=None), pad))
-    np.testing.assert_array_equal(got, ref)
-    assert 0 < got.sum() < len(got)
-    # a mask (as the planners pass it): the masked-out motions are blocked, the others unchanged
-    mask = jnp.asarray(rng.random(len(a)) < 0.7)
-    masked = jax.jit(lambda a, b, w, m: PointRobot().steer_to_batch(a, b, w, pad, m))(
-        jnp.asarray(a.T), jnp.asarray(b.T), env.world, mask)
-    np.testing.assert_array_equal(np.asarray(masked), ref & np.asarray(mask))
-
-
-@given(seed=st.integers(0, 10 ** 6), cell=st.sampled_from([0.5, 1.0]), pad=st.sampled_from([0.0, 0.1, 0.3]))
-@settings(max_examples=10, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-def test_indexed_steer_equals_exact_on_random_boxes(seed, cell, pad):
-    """Arbitrary (overlapping, unaligned) boxes: the bitmap is only conservative there;
-    segments uniform, short, and from box corners and edges."""
-    rng = np.random.default_rng(seed)
-    n = 100
-    # centres in [2, 18], half sizes in [0.3, 2] with one of exactly 0.3: the bitmap's cell and
-    # margin, hence the compiled program, depend only on the index cell
-    boxes = np.c_[rng.uniform(2, 18, (n, 2)), rng.uniform(0.3, 2.0, (n, 2))].astype(np.float32)
-    boxes[0, 2:] = 0.3
-    world = World.create([[0, 20], [0, 20]], boxes)
-    index = broadphase.build_index(world.bounds, world.boxes, pad + 0.5 * cell, cell)
-    k = index.capacity
-    if k > 2 * MAX_K or index.blocked is None:
-        return
-    sentinel = jnp.asarray(broadphase.SENTINEL_BOX, jnp.float32)
-    table = jnp.concatenate([index.boxes, jnp.broadcast_to(sentinel, (index.boxes.shape[0], 2 * MAX_K - k, 4))],
-                            axis=1)
-    world = dataclasses.replace(world, index=dataclasses.replace(index, boxes=table))
-    assert world.index.blocked is not None
-    m = 3000
-    a = rng.uniform(0, 20, (m, 2))
-    b = np.where(rng.random((m, 1)) < 0.5, a + rng.normal(0, 1.5, a.shape), rng.uniform(0, 20, (m, 2)))
-    # box corners and points on box edges as endpoints
-    j = rng.integers(0, n, m // 3)
-    corner = boxes[j, :2] + boxes[j, 2:] * rng.choice([-1.0, 1.0], (m // 3, 2))
-    a[: m // 3] = corner
-    edge = boxes[j, :2] + boxes[j, 2:] * np.c_[rng.uniform(-1, 1, m // 3), rng.choice([-1.0, 1.0], m // 3)]
-    b[m // 3: 2 * (m // 3)] = edge
-    a, b = (jnp.asarray(np.clip(v, 0, 20).T, jnp.float32) for v in (a, b))
     got = np.asarray(_indexed(a, b, world, pad))
     ref = np.asarray(_exact(a, b, dataclasses.replace(world, index=None), pad))
     np.testing.assert_array_equal(got, ref)

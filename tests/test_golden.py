@@ -197,15 +197,21 @@ def _paths(run: Path) -> dict:
     return out
 
 
-def _run_all(tmp: Path) -> tuple[dict, dict[str, np.ndarray]]:
-    """Runs the golden pipeline and arm data; ``(fingerprints, trained parameters)``."""
+def _run_all(tmp: Path, run: Path | None = None) -> tuple[dict, dict[str, np.ndarray]]:
+    """Runs the golden pipeline and arm data; ``(fingerprints, trained parameters)``.
+
+    ``run``: a finished run of the golden pipeline (``run_pipeline(cfg, prepare_run(cfg,
+    out), progress=False)`` of :data:`TINY`, the test suite's shared one) instead of
+    running it here.
+    """
     from ntq_jax import data, make_env
     from ntq_jax.experiment import config
     from ntq_jax.experiment.pipeline import load_config, prepare_run, run_pipeline
 
-    run = tmp / "run"
-    cfg = load_config(None, TINY)
-    run_pipeline(cfg, prepare_run(cfg, run), progress=False, log=lambda _: None)
+    if run is None:
+        run = tmp / "run"
+        cfg = load_config(None, TINY)
+        run_pipeline(cfg, prepare_run(cfg, run), progress=False, log=lambda _: None)
     cfg = config.load(None, ARM)
     data.generate_datasets(make_env("nlink/2"), cfg, tmp / "arm", env_name="nlink/2",
                            progress=False, figure=False)
@@ -324,8 +330,11 @@ def _load_reference() -> dict[str, np.ndarray] | None:
 # Tests
 # ---------------------------------------------------------------------------
 
-def test_outputs_match_golden(tmp_path):
-    got, params = _run_all(tmp_path)
+def test_outputs_match_golden(tmp_path, tiny_run):
+    """The suite's tiny run (conftest.py: the pipeline of TINY, shared with other files) and
+    the arm data generated here, against the records."""
+    assert tiny_run.config == TINY
+    got, params = _run_all(tmp_path, tiny_run.path)
     fp = numerics_fingerprint()
     failures, take = compare(got, params, json.loads(GOLDEN.read_text()), _load_reference(),
                              load_local(), fp)

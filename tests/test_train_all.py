@@ -8,6 +8,7 @@ boxes), independently of the planner's flag and of the package's kernels.
 
 import importlib.util
 import json
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -40,10 +41,13 @@ def _pipeline(out, extra=(), log=print):
 
 
 @pytest.fixture(scope="module")
-def run(tmp_path_factory):
-    out = tmp_path_factory.mktemp("run")
-    written = _pipeline(out)
-    assert written["tables.md"] == out / "tables.md"
+def run(tiny_run, tmp_path_factory):
+    """A copy of the session's finished tiny run (conftest.py: ``_pipeline`` of TINY, shared
+    with test_golden and test_bad_inputs); the tests here rerun and reuse their copy."""
+    assert tiny_run.config == TINY
+    assert tiny_run.written["tables.md"] == tiny_run.path / "tables.md"
+    out = tmp_path_factory.mktemp("run") / "run"
+    shutil.copytree(tiny_run.path, out)
     return out
 
 

@@ -297,6 +297,9 @@ def report(results: Path) -> Path:
         "McNemar's exact p; `in`/`out`: test queries with both endpoints valid at the data",
         "padding (in band) or not.",
         "",
+        "The rigid/0 `density` cells made before a trivial query's data path kept its two",
+        "ends (as BIT* returns it) are in `results/ablations/density_trivial_resampled/`.",
+        "",
         "| map | data paths | budgets | seed | kind | steerTo | model | all | in band | out of band |",
         "|---|---|---|---:|---|---|---|---|---|---|",
     ]

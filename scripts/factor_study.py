@@ -177,6 +177,17 @@ def claim(cell: Cell, runs: Path) -> bool:
     return True
 
 
+def next_cell(all_cells: list[Cell], results: Path, runs: Path) -> list[Cell]:
+    """The first pending, ready cell whose base cell is done, claimed for this process
+    (``[]`` if none is free). Only that one cell is claimed: a claim is held until the
+    process exits, so claiming more would starve the other workers."""
+    done = lambda c: (results / c.key / "paired.json").is_file()  # noqa: E731
+    base_done = lambda c: c.budget == "ours" and not c.train_seed or done(  # noqa: E731
+        Cell(c.map, c.data, "ours"))
+    todo = (c for c in all_cells if not done(c) and ready(c) is None and base_done(c))
+    return next(([c] for c in todo if claim(c, runs)), [])
+
+
 def cell_config(cell: Cell, extra: list[str] = ()):
     """The cell's resolved config and its ``--set`` overrides (``extra`` last)."""
     from ntq_jax.experiment.pipeline import load_config
@@ -369,11 +380,7 @@ def _main(argv) -> int:
     if unknown:
         raise UsageError(f"--cell {unknown[0]}: not a cell (see --list)")
     if args.next:
-        done = lambda c: (results / c.key / "paired.json").is_file()  # noqa: E731
-        base_done = lambda c: c.budget == "ours" and not c.train_seed or done(  # noqa: E731
-            Cell(c.map, c.data, "ours"))
-        todo = [c for c in all_cells.values() if not done(c) and ready(c) is None
-                and base_done(c) and claim(c, runs)][:1]
+        todo = next_cell(list(all_cells.values()), results, runs)
         if not todo:
             print("nothing to run")
             return 0

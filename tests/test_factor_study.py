@@ -57,3 +57,16 @@ def test_next_workers_claim_distinct_cells(tmp_path):
         p.stdin.close()
         p.wait()
     assert fs.claim(cell, tmp_path)  # released when the worker ended
+
+
+def test_next_claims_only_the_cell_it_runs(tmp_path, monkeypatch):
+    """``--next`` claims one cell, not every pending one (claims last until the process exits,
+    so claiming all would leave the other workers nothing to run)."""
+    fs = _script()
+    claimed = []
+    real = fs.claim
+    monkeypatch.setattr(fs, "ready", lambda c: None)
+    monkeypatch.setattr(fs, "claim", lambda c, runs: claimed.append(c) or real(c, runs))
+    cells = fs.cells()
+    first = fs.next_cell(cells, tmp_path / "results", tmp_path / "runs")
+    assert first == [cells[0]] and claimed == [cells[0]]

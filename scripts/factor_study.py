@@ -392,6 +392,9 @@ def _main(argv) -> int:
                  Path(args.paper_runs) if paper else None,
                  Path(args.paper_results) if paper else None)
         print(f"report: {report(results)}", flush=True)
+        if paper and (Path(args.paper_results) / "REPRODUCTION.md").is_file():
+            from ntq_jax.experiment import reproduction  # its factor section reads results
+            print(f"report: {reproduction.write(Path(args.paper_results))}", flush=True)
     return 0
 
 

@@ -100,6 +100,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from ntq_jax import artifacts
+from ntq_jax.experiment import factor_table
 from ntq_jax.experiment.claims import ALPHA, FAILS, HOLDS, NOT_RUN, UNRESOLVED, claims
 from ntq_jax.experiment.formatting import (fixed, interval, kind_name, model_key, ms, num,
                                            p_value, signed)
@@ -420,10 +421,17 @@ def _claims_md(summaries) -> list[str]:
     return out + [""]
 
 
-def render(root) -> str:
-    """The whole ``REPRODUCTION.md`` of the summaries under ``root`` (deterministic)."""
+def render(root, factors=None) -> str:
+    """The whole ``REPRODUCTION.md`` of the summaries under ``root`` (deterministic).
+
+    ``factors``: the factor study's folder for the section "What decides PNet_3 vs
+    PNet_0" (:mod:`ntq_jax.experiment.factor_table`); None = ``<root>/../factors``
+    (the section is left out when it holds no cell).
+    """
     summaries = load_summaries(root)
+    factors = Path(root).parent / "factors" if factors is None else Path(factors)
     lines = (_header(summaries, _root_label(root)) + _coverage(summaries) + _tables(summaries)
+             + factor_table.section(factors, _root_label(factors))
              + _datasets(summaries) + _times(summaries)
              + _seeds(summaries) + _claims_md(summaries))
     return "\n".join(lines).rstrip("\n") + "\n"

@@ -1,0 +1,64 @@
+"""The factor study's section of REPRODUCTION.md (ntq_jax.experiment.factor_table)."""
+
+from __future__ import annotations
+
+import json
+
+from ntq_jax.experiment import factor_table as F
+from ntq_jax.experiment import reproduction as R
+
+
+def _row(model, kind, steer, band, diff, p, base=0.5, n=100):
+    return {"model": model, "baseline": "PNet_0", "query_kind": kind, "steer": steer, "band": band,
+            "n": n, "success": base + diff, "baseline_success": base, "success_diff": diff,
+            "success_diff_ci95": [diff - 0.05, diff + 0.05], "mcnemar_p": p}
+
+
+def _cell(root, map_, data, budget, seed, nt_diff, nt_p):
+    rows = [_row("PNet_3", "nontrivial", True, b, nt_diff, nt_p) for b in F.BANDS]
+    rows += [_row("PNet_3", "nontrivial", False, "all", -0.01, 0.9, base=0.06),
+             _row("PNet_3", "uniform", True, "all", 0.002, 0.95),
+             _row("PNet_2", "nontrivial", True, "all", 0.3, 1e-6)]  # not PNet_3: not shown
+    folder = root / map_.replace("/", "_") / data / budget
+    if seed:
+        folder = folder / "seeds" / f"train_seed_{seed}"
+    folder.mkdir(parents=True)
+    cell = {"map": map_, "data": data, "budget": budget, "train_seed": seed}
+    (folder / "paired.json").write_text(json.dumps({"cell": cell, "sets": [], "paired": rows}))
+
+
+def test_sign_of_needs_significance():
+    assert F.sign_of(_row("PNet_3", "nontrivial", True, "all", -0.1, 0.001)) == "-"
+    assert F.sign_of(_row("PNet_3", "nontrivial", True, "all", +0.1, 0.01)) == "+"
+    assert F.sign_of(_row("PNet_3", "nontrivial", True, "all", -0.1, 0.05)) == "0"
+    assert F.sign_of(None) == "?"
+
+
+def test_section_lists_each_cell_and_the_verdicts_per_factor(tmp_path):
+    assert F.section(tmp_path) == []  # no cell: no section
+    _cell(tmp_path, "rigid/0", "shortcut", "ours", 0, -0.114, 2e-5)
+    _cell(tmp_path, "rigid/0", "bitstar", "ours", 0, +0.080, 0.002)
+    _cell(tmp_path, "rigid/0", "bitstar", "ours", 1, +0.020, 0.4)
+    lines = F.section(tmp_path)
+    text = "\n".join(lines)
+    assert lines[0] == "## What decides PNet_3 vs PNet_0"
+    rows = [ln for ln in lines if ln.startswith("| rigid/0")]
+    # sorted by map, data paths, budgets, seed; PNet_0 with / without steerTo
+    assert [r.split(" | ")[1:4] for r in rows] == [["bitstar", "ours", "0"], ["bitstar", "ours", "1"],
+                                                  ["shortcut", "ours", "0"]]
+    assert "| 0.500 / 0.060 | -0.114 [-0.164, -0.064] p=<0.001 |" in rows[2]
+    assert "- data paths = `bitstar`: rigid/0 +, rigid/0 seed 1 0" in text
+    assert "- data paths = `shortcut`: rigid/0 -" in text
+    assert "- test band = `in_band`: + 1, - 1, 0 1 cells" in text
+    (tmp_path / F.CONCLUSION).write_text("The data paths decide it.\n")
+    assert F.section(tmp_path)[-2] == "The data paths decide it."
+
+
+def test_render_includes_the_sibling_factor_study(tmp_path):
+    paper = tmp_path / "results" / "paper"
+    paper.mkdir(parents=True)
+    assert "What decides" not in R.render(paper)
+    _cell(tmp_path / "results" / "factors", "point/0", "raw", "ours", 0, 0.0, 1.0)
+    doc = R.render(paper)
+    assert "## What decides PNet_3 vs PNet_0" in doc and "`results/factors/`" in doc
+    assert "What decides" not in R.render(paper, factors=tmp_path / "elsewhere")

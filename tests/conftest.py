@@ -11,6 +11,26 @@ import pytest
 os.environ.setdefault("JAX_PLATFORMS", "cpu")
 
 
+def pytest_configure(config):
+    """One JAX persistent compilation cache per test session, in a fresh temporary folder:
+    the suite never reads or writes the user's cache (``~/.cache/ntq_jax/jax``, which the
+    scripts' ``main`` turns on), so it runs alike on a developer's machine and a fresh
+    clone; within the session the xdist workers and the subprocesses the tests start
+    (they inherit the environment) share what one of them compiled."""
+    if os.environ.get("PYTEST_XDIST_WORKER") is None:  # the controller (or a run without xdist)
+        import tempfile
+
+        folder = tempfile.mkdtemp(prefix="ntq_jax_test_jit_")
+        os.environ["JAX_COMPILATION_CACHE_DIR"] = folder
+        config._ntq_jit_cache = folder
+
+
+def pytest_unconfigure(config):
+    folder = getattr(config, "_ntq_jit_cache", None)
+    if folder:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
 #: The tiny point/2 pipeline run several files check (test_golden, test_train_all,
 #: test_bad_inputs): data -> four PNets -> evaluation -> report, figures included.
 TINY_RUN = ["envs=[point/2]", "data.k_train=40", "data.gamma_queries=2000", "data.gamma_eval=false",

@@ -517,7 +517,7 @@ def test_clearance_positive_iff_valid(name):
 # 3. Zero false frees (dense shapely check)
 # ---------------------------------------------------------------------------
 
-N_MOTIONS = 256  # motions per call (one compiled shape per robot, map and padding)
+N_MOTIONS = 256  # motions per example
 N_UNIFORM = 48  # of them, uniform valid pairs (truncated to a bounded length)
 NEAR_CLEARANCE = 0.25  # starts "near obstacles": 0 < clearance < this
 DENSE = 100  # the dense check's step: the robot's resolution / DENSE
@@ -637,8 +637,8 @@ def dense_check(env: Env, a, b, pad: float, delta: float):
 
 
 def certified(env: Env, a, b, pad: float):
-    return np.asarray(steer_to_pairs(env.robot, env.world, a, b, pad, chunk=N_MOTIONS,
-                                     check="certified"), bool)
+    # the default chunk (CERTIFIED_CHUNK): the program Env.steer_to and the pipeline compile
+    return np.asarray(steer_to_pairs(env.robot, env.world, a, b, pad, check="certified"), bool)
 
 
 @pytest.mark.parametrize("name, pad_mode", PROP3_CASES)
@@ -805,9 +805,10 @@ def test_point_robot_certified_equals_discretised(name):
 
 def test_certified_steer_to_compiles_once_for_every_batch_size():
     """Env.steer_to(check="certified") runs in chunks of CERTIFIED_CHUNK rows: a user's
-    varying batch sizes share one compiled program, and the answers are the kernel's."""
-    from ntq_jax.envs.env import CERTIFIED_CHUNK
-    from ntq_jax.robots.batch import _steer_to_batch as kernel
+    varying batch sizes share one compiled program with steer_to_pairs, and the answers
+    do not depend on the chunk."""
+    from ntq_jax.robots.batch import CERTIFIED_CHUNK
+    from ntq_jax.robots.batch import _steer_masked as kernel
 
     env = Env.from_json({"name": "thin-arm-2", "bounds": [[-10, 10], [-10, 10]],
                          "robot": {"kind": "nlink", "link_lengths": [3.0, 3.0],
@@ -820,7 +821,8 @@ def test_certified_steer_to_compiles_once_for_every_batch_size():
                                      check="certified"), bool)
     assert 0.05 < want.mean() < 0.95
     sizes = [1, 3, 700, CERTIFIED_CHUNK, CERTIFIED_CHUNK + 1, n]
-    env.steer_to(a[:2], b[:2], check="certified")  # compiled here, once
+    assert (np.asarray(steer_to_pairs(env.robot, env.world, a, b, 0.0, check="certified"))
+            == want).all()  # the default chunk: compiled here, once
     before = kernel._cache_size()
     for m in sizes:
         got = env.steer_to(a[:m], b[:m], check="certified")

@@ -49,7 +49,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ntq_jax import artifacts, broadphase, geometry, grid_maps, validation
-from ntq_jax.batching import bucket_size, map_chunks
+from ntq_jax.batching import bucket_size
 from ntq_jax import queries as Q
 from ntq_jax.geometry import World
 from ntq_jax.presets import PRESETS
@@ -68,10 +68,6 @@ _GRID_JSON_KEYS = {"name", "grid", "robot", "padding", "unknown", "scale"}
 #: (:func:`check_resolution`). With 10^5, one motion takes milliseconds; the presets
 #: check at most a few hundred states per motion.
 MAX_STATES_PER_MOTION = 100_000
-#: Rows per call of the certified ``steer_to`` of the rigid body and the arms: every batch
-#: is padded to, or split into, chunks of this size, so their costly compilation happens
-#: once per (robot, map, padding) whatever the batch sizes.
-CERTIFIED_CHUNK = 1024
 
 
 class EnvError(ValueError):
@@ -214,8 +210,10 @@ class Env:
         the robot's ``resolution`` apart, exact for the point robot) or
         ``"certified"`` (True only when every configuration of the motion is
         proven clear; see :mod:`ntq_jax.robots.certified`). The certified
-        check runs in padded chunks of :data:`CERTIFIED_CHUNK` rows, so every
-        batch size shares one compiled shape.
+        check runs in padded chunks of
+        :data:`ntq_jax.robots.batch.CERTIFIED_CHUNK` rows (the program
+        :func:`ntq_jax.robots.batch.steer_to_pairs` uses too), so every batch
+        size shares one compiled shape.
 
         ``a`` and ``b`` may be JAX arrays, NumPy arrays or nested lists; the
         answer is a JAX array in every case. Large float32 C-contiguous NumPy
@@ -241,13 +239,12 @@ class Env:
         return steer_to_batch(self.robot, self.world, _bucketed(a), _bucketed(b), p, check)[:n]
 
     def _certified(self, a, b, padding: float) -> Array:
-        """:meth:`steer_to` with ``check="certified"`` in chunks of :data:`CERTIFIED_CHUNK`."""
+        """:meth:`steer_to` with ``check="certified"``, through :func:`ntq_jax.robots.batch.steer_to_pairs`."""
         a, b = self._states(a, "a"), self._states(b, "b")
         if a.shape != b.shape:
             raise ValueError(f"a and b must have the same shape, got {a.shape} and {b.shape}")
-        run = lambda x, y: steer_to_batch(self.robot, self.world, x, y, padding,  # noqa: E731
-                                          "certified")
-        return jnp.asarray(map_chunks(run, np.asarray(a), np.asarray(b), chunk=CERTIFIED_CHUNK))
+        return jnp.asarray(_batch.steer_to_pairs(self.robot, self.world, np.asarray(a),
+                                                 np.asarray(b), padding, check="certified"))
 
     def distance(self, a, b) -> Array:
         """``(N, d), (N, d) -> (N,)``: the robot's cost metric.

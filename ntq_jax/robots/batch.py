@@ -89,7 +89,12 @@ def steer_to_cm(robot, world: World, a_cm: Array, b_cm: Array, padding: float,
     return motion_check(robot, check)(a_cm, b_cm, world, padding, mask)
 
 
-STEER_CHUNK = 8192  # pairs per compiled call of steer_to_pairs
+STEER_CHUNK = 8192  # pairs per compiled call of steer_to_pairs (discretised check)
+#: Pairs per compiled call of the certified check (:func:`steer_to_pairs` and
+#: ``Env.steer_to(check="certified")`` alike): its program is large and costly to
+#: compile, so every caller shares this one shape per (robot, map, padding); a call
+#: checks a thousand motions, so the chunk's dispatch is a negligible share of it.
+CERTIFIED_CHUNK = 1024
 CHECK_CHUNK = 2048  # states per compiled call of valid_states / distances
 
 
@@ -100,13 +105,19 @@ def _steer_masked(robot, world: World, a: Array, b: Array, mask: Array, padding:
 
 
 def steer_to_pairs(robot, world: World, a, b, padding: float,
-                   chunk: int = STEER_CHUNK, check: str = "discretized") -> np.ndarray:
+                   chunk: int | None = None, check: str = "discretized") -> np.ndarray:
     """``steer_to`` over any number of ``(N, d)`` pairs in fixed-size compiled chunks.
+
+    ``chunk``: pairs per compiled call; None = :data:`CERTIFIED_CHUNK` for the
+    certified check, :data:`STEER_CHUNK` for the discretised one. The answers do
+    not depend on it.
 
     Returns ``(N,)`` bool (host), True where the straight connection is
     collision-free by the motion check ``check`` (see :func:`motion_check`).
     """
     motion_check(robot, check)  # an unknown check fails here, before any work
+    if chunk is None:
+        chunk = CERTIFIED_CHUNK if check == "certified" else STEER_CHUNK
     a = np.asarray(a, np.float32).reshape(-1, robot.dim)
     b = np.asarray(b, np.float32).reshape(-1, robot.dim)
     return map_chunks(lambda x, y, m: _steer_masked(robot, world, x, y, m, padding, check), a, b,

@@ -16,12 +16,15 @@ def pytest_configure(config):
     the suite never reads or writes the user's cache (``~/.cache/ntq_jax/jax``, which the
     scripts' ``main`` turns on), so it runs alike on a developer's machine and a fresh
     clone; within the session the xdist workers and the subprocesses the tests start
-    (they inherit the environment) share what one of them compiled."""
+    (they inherit the environment) share what one of them compiled, down to the
+    smallest program."""
     if os.environ.get("PYTEST_XDIST_WORKER") is None:  # the controller (or a run without xdist)
         import tempfile
 
         folder = tempfile.mkdtemp(prefix="ntq_jax_test_jit_")
         os.environ["JAX_COMPILATION_CACHE_DIR"] = folder
+        # every program, however quick to compile: the workers and subprocesses share them
+        os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0"
         config._ntq_jit_cache = folder
 
 

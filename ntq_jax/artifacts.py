@@ -354,7 +354,8 @@ def enable_compile_cache() -> None:
     """Turns on JAX's persistent compilation cache.
 
     The folder is ``$JAX_COMPILATION_CACHE_DIR`` or ``~/.cache/ntq_jax/jax``; only
-    compilations over 2 s are stored. A rerun, a resumed run or
+    compilations over ``$JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS`` (default 2 s)
+    are stored. A rerun, a resumed run or
     ``scripts/plan.py`` then reuse the compiled planners and training steps
     instead of compiling them again. The cache is an optimisation only: if it
     cannot be enabled, nothing changes.
@@ -365,6 +366,7 @@ def enable_compile_cache() -> None:
                           str(Path.home() / ".cache" / "ntq_jax" / "jax"))
     try:
         jax.config.update("jax_compilation_cache_dir", path)
-        jax.config.update("jax_persistent_cache_min_compile_time_secs", 2.0)
+        jax.config.update("jax_persistent_cache_min_compile_time_secs",
+                          float(os.environ.get("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", 2.0)))
     except Exception:  # noqa: BLE001 - the cache is an optimisation only
         pass

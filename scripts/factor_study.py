@@ -37,7 +37,9 @@ A cell is one map, data mode and budget: its run in ``<runs>/<map>/<data>/<budge
 training seeds 1 and 2 (``.../seeds/train_seed_<k>/``). Commit each cell as it
 finishes; ``README.md`` is regenerated from every finished cell. The cells of a
 task's default data paths with its budgets are ``scripts/reproduce.py``'s runs
-(``--paper-runs``): either script resumes the other's.
+(``--paper-runs``): either script resumes the other's. The paper's six other maps
+(:data:`PAPER_ONLY`) get their default cell only, so one queue of ``--next`` workers
+also re-runs Tables I-IV on all eleven maps.
 """
 
 from __future__ import annotations
@@ -52,7 +54,10 @@ from typing import NamedTuple
 from ntq_jax.experiment.cli import UsageError, run_cli
 
 MAPS = {"rigid/0": "rigid", "point/0": "point", "nlink/4": "nlink", "rigid/2": "rigid",
-        "point/3": "point"}  # in the order --next runs them
+        "point/3": "point"}  # the factor maps, in the order --next runs them
+#: The paper's other maps: only their default cell (the task's reproduction of the map,
+#: Tables I-IV), queued after the factor maps' cells and before the cells beyond the paper
+PAPER_ONLY = ("rigid/1", "rigid/3", "nlink/6", "nlink/2", "point/1", "point/2")
 #: evaluation variants on the same trained PNets (a cell's ``budget``): MPNet's budgets, and
 #: the paper's variant without steerTo (Table III): its goal test ||pi_end - x_g||_2 <= delta
 #: on the raw state vector, and "only the lines 8 and 9" (the path's segments not checked)
@@ -75,7 +80,12 @@ DENSITY: dict[str, float] = {"point/0": 0.34, "point/3": 0.34}
 
 def default_data(map_name: str) -> str:
     """The data mode of the task's config: the cells the headline reads (three seeds)."""
-    return "shortcut" if MAPS[map_name] == "point" else "density"
+    return "shortcut" if task_of(map_name) == "point" else "density"
+
+
+def task_of(map_name: str) -> str:
+    """The task (``configs/<task>.yaml``) of a preset map: ``rigid/2`` -> ``rigid``."""
+    return map_name.split("/")[0]
 
 
 class Cell(NamedTuple):
@@ -118,19 +128,22 @@ def data_overrides(cell: Cell, cfg) -> list[str]:
 
 
 def cells(seeds: bool = True) -> list[Cell]:
-    """Every cell, in the order ``--next`` runs them: per map, each data mode with the
-    config's budgets, then MPNet's budgets on the default data, then the default's
-    training seeds 1 and 2 (one factor varied at a time around the task's default)."""
+    """Every cell, in the order ``--next`` runs them: per factor map, each data mode with
+    the config's budgets, then MPNet's budgets on the default data, then the default's
+    training seeds 1 and 2 (one factor varied at a time around the task's default); then
+    the default cell of each of the paper's other maps (:data:`PAPER_ONLY`); then the
+    pruning beyond the paper (``+keep_last``) on the factor maps."""
     out = []
     for m in MAPS:
         modes = ("density", "shortcut", "raw") + (("bitstar",) if m == "rigid/0" else ())
         out += [Cell(m, data, "ours") for data in modes]
         out.append(Cell(m, default_data(m), "mpnet"))
-        if MAPS[m] == "rigid":  # Table III: the rigid body without steerTo
+        if task_of(m) == "rigid":  # Table III: the rigid body without steerTo
             out += [Cell(m, default_data(m), v) for v in ("nosteer_l2", "nosteer_unchecked",
                                                          "nosteer_paper", "nosteer_discretized")]
         if seeds:
             out += [Cell(m, default_data(m), "ours", k) for k in (1, 2)]
+    out += [Cell(m, default_data(m), "ours") for m in PAPER_ONLY]
     out += [Cell(m, default_data(m) + KEEP_LAST, "ours") for m in MAPS]
     return out
 
@@ -150,7 +163,7 @@ def record_rows(record: Path, pool: str) -> int:
 
 def ready(cell: Cell) -> str | None:
     """Why the cell cannot run yet, or None."""
-    if cell.data.startswith("density") and MAPS[cell.map] == "point" and cell.map not in DENSITY:
+    if cell.data.startswith("density") and task_of(cell.map) == "point" and cell.map not in DENSITY:
         return "no BIT*-like spacing measured for the point robot yet (DENSITY)"
     if cell.data == "bitstar":
         rec = Path(BITSTAR_RECORD)
@@ -194,7 +207,7 @@ def next_cell(all_cells: list[Cell], results: Path, runs: Path) -> list[Cell]:
 def cell_config(cell: Cell, extra: list[str] = ()):
     """The cell's resolved config and its ``--set`` overrides (``extra`` last)."""
     from ntq_jax.experiment.pipeline import load_config
-    task = MAPS[cell.map]
+    task = task_of(cell.map)
     path = f"configs/{task}.yaml"
     base = load_config(path, [f"envs=[{cell.map}]", *extra])
     sets = [f"envs=[{cell.map}]", *data_overrides(cell, base)]
@@ -248,7 +261,7 @@ def run_folder(cell: Cell, runs: Path, paper_runs: Path | None) -> Path:
     if paper_runs is None or cell.data != default_data(cell.map) or cell.budget != "ours":
         return runs / cell.key
     name = cell.slug + (f"-train_seed_{cell.train_seed}" if cell.train_seed else "")
-    return paper_runs / MAPS[cell.map] / name
+    return paper_runs / task_of(cell.map) / name
 
 
 def run_cell(cell: Cell, runs: Path, results: Path, progress: bool, extra: list[str] = (),
@@ -284,7 +297,7 @@ def run_cell(cell: Cell, runs: Path, results: Path, progress: bool, extra: list[
     write_summary(run, cell.map, env, out, command=cmd)
     if paper_results is not None and run == run_folder(cell, runs, paper_runs) != runs / cell.key:
         # a default cell is also the task's reproduction of this map (Tables I-IV)
-        task = MAPS[cell.map]
+        task = task_of(cell.map)
         dest = paper_results / task / cell.slug
         rcmd = f"python scripts/reproduce.py --config configs/{task}.yaml --env {cell.map}"
         if cell.train_seed:

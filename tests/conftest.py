@@ -16,16 +16,56 @@ def pytest_configure(config):
     the suite never reads or writes the user's cache (``~/.cache/ntq_jax/jax``, which the
     scripts' ``main`` turns on), so it runs alike on a developer's machine and a fresh
     clone; within the session the xdist workers and the subprocesses the tests start
-    (they inherit the environment) share what one of them compiled."""
+    (they inherit the environment) share what one of them compiled, down to the
+    smallest program."""
     if os.environ.get("PYTEST_XDIST_WORKER") is None:  # the controller (or a run without xdist)
         import tempfile
 
         folder = tempfile.mkdtemp(prefix="ntq_jax_test_jit_")
         os.environ["JAX_COMPILATION_CACHE_DIR"] = folder
+        # every program, however quick to compile: the workers and subprocesses share them
+        os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0"
         config._ntq_jit_cache = folder
 
 
+_PROFILE = os.environ.get("NTQ_TEST_PROFILE")  # a folder: per-test compile times (see below)
+_current = {"test": None}
+_profile: dict = {}
+
+
+if _PROFILE:
+    import time
+
+    import jax.monitoring
+
+    def _on_duration(event, duration, **_):
+        if _current["test"] is not None and event.startswith("/jax/"):
+            row = _profile.setdefault(_current["test"], {})
+            key = event.rsplit("/", 1)[-1]
+            row[key] = row.get(key, 0.0) + duration
+            if key == "backend_compile_duration":
+                row["compiles"] = row.get("compiles", 0) + 1
+
+    jax.monitoring.register_event_duration_secs_listener(_on_duration)
+
+    @pytest.hookimpl(hookwrapper=True)
+    def pytest_runtest_protocol(item, nextitem):
+        """With ``NTQ_TEST_PROFILE=<folder>``: each test's wall time and JAX compile
+        times (trace, lowering, XLA backend; setup and teardown included) go to
+        ``<folder>/<worker>.json`` for finding what the suite spends its time on."""
+        _current["test"] = item.nodeid
+        start = time.perf_counter()
+        yield
+        _profile.setdefault(item.nodeid, {})["wall"] = time.perf_counter() - start
+        _current["test"] = None
+
+
 def pytest_unconfigure(config):
+    if _PROFILE and _profile:
+        out = Path(_PROFILE)
+        out.mkdir(parents=True, exist_ok=True)
+        worker = os.environ.get("PYTEST_XDIST_WORKER", "main")
+        (out / f"{worker}.json").write_text(json.dumps(_profile, indent=1))
     folder = getattr(config, "_ntq_jit_cache", None)
     if folder:
         shutil.rmtree(folder, ignore_errors=True)

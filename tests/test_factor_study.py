@@ -20,6 +20,10 @@ def test_every_cell_has_a_config_that_varies_one_factor(monkeypatch):
     fs = _script()
     cells = fs.cells()
     assert len({c.key for c in cells}) == len(cells)
+    from ntq_jax.experiment.paper import MAPS as PAPER_MAPS
+    # every map of Tables I-IV is re-run by the queue (its default cell)
+    assert {c.map for c in cells if c.data == fs.default_data(c.map) and c.budget == "ours"
+            and not c.train_seed} == set(PAPER_MAPS)
     for c in cells:
         cfg, sets = fs.cell_config(c)
         assert list(cfg.envs) == [c.map]

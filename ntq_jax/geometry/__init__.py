@@ -43,8 +43,8 @@ elementwise compares, which wider vectors speed up (BENCHMARKS.md).
 
 
 from ntq_jax.geometry.world import (KERNEL_COMPILER_OPTIONS, World, as_sequence_of_floats)
-from ntq_jax.geometry.shapes import (sincos, in_bounds, point_hits_box, point_hits_disc, point_free, segment_hits_box, segment_hits_disc, segment_free, segment_cover_steps, segment_hits_near, segment_free_indexed, rect_corners, rect_hits_box, rect_hits_disc, rect_free)
-from ntq_jax.geometry.clearance import (segment_box_dist2, segment_disc_dist, rect_box_dist2, rect_disc_dist, wall_clearance, segment_clearance, rect_clearance)
+from ntq_jax.geometry.shapes import (sincos, in_bounds, point_hits_box, point_hits_disc, point_free, segment_hits_box, segment_hits_disc, segment_free, segment_cover_steps, segment_hits_near, segment_free_indexed, RectPose, rect_pose, rect_corners, rect_hits_box, rect_hits_disc, pose_hits_box, pose_hits_disc, rect_free)
+from ntq_jax.geometry.clearance import (segment_box_dist2, segment_disc_dist, rect_box_dist2, rect_disc_dist, pose_box_dist2, pose_disc_dist, wall_clearance, segment_clearance, rect_clearance)
 from ntq_jax.geometry.raster import (rasterize, cell_centers, point_to_cell)
 
-__all__ = ["KERNEL_COMPILER_OPTIONS", "World", "as_sequence_of_floats", "sincos", "in_bounds", "point_hits_box", "point_hits_disc", "point_free", "segment_hits_box", "segment_hits_disc", "segment_free", "segment_cover_steps", "segment_hits_near", "segment_free_indexed", "rect_corners", "rect_hits_box", "rect_hits_disc", "rect_free", "segment_box_dist2", "segment_disc_dist", "rect_box_dist2", "rect_disc_dist", "wall_clearance", "segment_clearance", "rect_clearance", "rasterize", "cell_centers", "point_to_cell"]
+__all__ = ["KERNEL_COMPILER_OPTIONS", "World", "as_sequence_of_floats", "sincos", "in_bounds", "point_hits_box", "point_hits_disc", "point_free", "segment_hits_box", "segment_hits_disc", "segment_free", "segment_cover_steps", "segment_hits_near", "segment_free_indexed", "RectPose", "rect_pose", "rect_corners", "rect_hits_box", "rect_hits_disc", "pose_hits_box", "pose_hits_disc", "rect_free", "segment_box_dist2", "segment_disc_dist", "rect_box_dist2", "rect_disc_dist", "pose_box_dist2", "pose_disc_dist", "wall_clearance", "segment_clearance", "rect_clearance", "rasterize", "cell_centers", "point_to_cell"]

@@ -10,9 +10,9 @@ import jax.numpy as jnp
 from ntq_jax import broadphase
 from ntq_jax.broadphase import fold
 
-from ntq_jax.geometry.shapes import (_SENTINEL_DISC, _point_box_dist2, _point_obb_dist2,
-                                     rect_corners, rect_hits_box, segment_cover_steps,
-                                     segment_hits_box, sincos)
+from ntq_jax.geometry.shapes import (_SENTINEL_DISC, RectPose, _point_box_dist2, _point_obb_dist2,
+                                     pose_hits_box, rect_pose, segment_cover_steps,
+                                     segment_hits_box)
 from ntq_jax.geometry.world import World
 
 Array = jax.Array
@@ -69,22 +69,30 @@ def rect_box_dist2(x, y, theta, half_l: float, half_w: float, box: Array) -> Arr
     Disjoint convex polygons: the minimum over the rectangle's corners to the
     box and the box's corners to the rectangle.
     """
+    return pose_box_dist2(rect_pose(x, y, theta, half_l, half_w), box)
+
+
+def pose_box_dist2(pose: RectPose, box: Array) -> Array:
+    """:func:`rect_box_dist2` for a rectangle given by :func:`~ntq_jax.geometry.rect_pose`."""
+    x, y, s, c, half_l, half_w = pose.x, pose.y, pose.s, pose.c, pose.half_l, pose.half_w
     cx, cy, hw, hh = box[0], box[1], box[2], box[3]
-    s, c = sincos(theta)
-    xs, ys = rect_corners(x, y, theta, half_l, half_w)
-    d2 = _point_box_dist2(xs[0], ys[0], box)
-    for px, py in zip(xs[1:], ys[1:]):
+    d2 = _point_box_dist2(pose.xs[0], pose.ys[0], box)
+    for px, py in zip(pose.xs[1:], pose.ys[1:]):
         d2 = jnp.minimum(d2, _point_box_dist2(px, py, box))
     for sx in (-1.0, 1.0):
         for sy in (-1.0, 1.0):
             d2 = jnp.minimum(d2, _point_obb_dist2(cx + sx * hw, cy + sy * hh, x, y, c, s, half_l, half_w))
-    return jnp.where(rect_hits_box(x, y, theta, half_l, half_w, box, 0.0), 0.0, d2)
+    return jnp.where(pose_hits_box(pose, box, 0.0), 0.0, d2)
 
 
 def rect_disc_dist(x, y, theta, half_l: float, half_w: float, disc: Array) -> Array:
     """Distance between the oriented rectangle and the closed disc (0 when they meet)."""
-    s, c = sincos(theta)
-    d2 = _point_obb_dist2(disc[0], disc[1], x, y, c, s, half_l, half_w)
+    return pose_disc_dist(rect_pose(x, y, theta, half_l, half_w), disc)
+
+
+def pose_disc_dist(pose: RectPose, disc: Array) -> Array:
+    """:func:`rect_disc_dist` for a rectangle given by :func:`~ntq_jax.geometry.rect_pose`."""
+    d2 = _point_obb_dist2(disc[0], disc[1], pose.x, pose.y, pose.c, pose.s, pose.half_l, pose.half_w)
     return jnp.maximum(jnp.sqrt(d2) - disc[2], 0.0)
 
 
@@ -151,27 +159,28 @@ def rect_clearance(pose: Array, half_l: float, half_w: float, world: World,
     (> ``padding``), at least the cap otherwise (:mod:`ntq_jax.broadphase`).
     """
     x, y, th = pose[0], pose[1], pose[2]
+    rect = rect_pose(x, y, th, half_l, half_w)
     c = jnp.float32(jnp.inf)
     nb = world.boxes.shape[0]
     rho = math.hypot(half_l, half_w)
     if nb and broadphase.index_covers(world, padding, rho, strict=True):
         cap = jnp.float32(world.index.reach - rho)
         d2 = broadphase.fold_candidates(world.index.candidates(x, y),
-                                        lambda box: rect_box_dist2(x, y, th, half_l, half_w, box),
+                                        lambda box: pose_box_dist2(rect, box),
                                         cap * cap, jnp.minimum, cheap=False)
         c = jnp.sqrt(d2)
     elif nb > broadphase.UNROLL_MAX:
-        d2 = fold(world.boxes, lambda box: rect_box_dist2(x, y, th, half_l, half_w, box),
+        d2 = fold(world.boxes, lambda box: pose_box_dist2(rect, box),
                   jnp.float32(jnp.inf), jnp.minimum, broadphase.SENTINEL_BOX)
         c = jnp.sqrt(d2)
     elif nb:
-        d2 = rect_box_dist2(x, y, th, half_l, half_w, world.boxes[0])
+        d2 = pose_box_dist2(rect, world.boxes[0])
         for i in range(1, world.boxes.shape[0]):
-            d2 = jnp.minimum(d2, rect_box_dist2(x, y, th, half_l, half_w, world.boxes[i]))
+            d2 = jnp.minimum(d2, pose_box_dist2(rect, world.boxes[i]))
         c = jnp.sqrt(d2)
     if world.discs.shape[0] > broadphase.UNROLL_MAX:
-        return fold(world.discs, lambda disc: rect_disc_dist(x, y, th, half_l, half_w, disc), c,
+        return fold(world.discs, lambda disc: pose_disc_dist(rect, disc), c,
                     jnp.minimum, _SENTINEL_DISC)
     for i in range(world.discs.shape[0]):
-        c = jnp.minimum(c, rect_disc_dist(x, y, th, half_l, half_w, world.discs[i]))
+        c = jnp.minimum(c, pose_disc_dist(rect, world.discs[i]))
     return c

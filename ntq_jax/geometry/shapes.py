@@ -6,6 +6,7 @@ distance to it is ``<= padding`` (see :mod:`ntq_jax.geometry`)."""
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -247,14 +248,40 @@ def segment_free_indexed(x0, y0, x1, y1, world: World, padding: float, free: Arr
 # Oriented rectangle kernels (rigid body footprint)
 # ---------------------------------------------------------------------------
 
-def rect_corners(x, y, theta, half_l: float, half_w: float):
-    """The 4 corners of the oriented rectangle, as two tuples of x and y scalars."""
+class RectPose(NamedTuple):
+    """An oriented rectangle placed at a pose: what every rectangle kernel needs of it,
+    computed once per pose (:func:`rect_pose`) and shared by the tests against every
+    obstacle (so ``sincos`` is traced and evaluated once, not once per obstacle)."""
+
+    x: Array
+    y: Array
+    s: Array  # sin theta
+    c: Array  # cos theta
+    xs: tuple  # the 4 corners' x, in the order of :func:`rect_corners`
+    ys: tuple
+    half_l: float
+    half_w: float
+
+
+def rect_pose(x, y, theta, half_l: float, half_w: float) -> RectPose:
+    """The rectangle of half extents ``(half_l, half_w)`` at ``(x, y, theta)``."""
     s, c = sincos(theta)
+    xs, ys = _corners(x, y, s, c, half_l, half_w)
+    return RectPose(x, y, s, c, tuple(xs), tuple(ys), half_l, half_w)
+
+
+def _corners(x, y, s, c, half_l, half_w):
     xs, ys = [], []
     for sl, sw in ((1.0, 1.0), (-1.0, 1.0), (-1.0, -1.0), (1.0, -1.0)):
         xs.append(x + sl * half_l * c - sw * half_w * s)
         ys.append(y + sl * half_l * s + sw * half_w * c)
     return xs, ys
+
+
+def rect_corners(x, y, theta, half_l: float, half_w: float):
+    """The 4 corners of the oriented rectangle, as two tuples of x and y scalars."""
+    s, c = sincos(theta)
+    return _corners(x, y, s, c, half_l, half_w)
 
 
 def _point_obb_dist2(px, py, x, y, c, s, half_l, half_w):
@@ -275,8 +302,13 @@ def rect_hits_box(x, y, theta, half_l: float, half_w: float, box: Array, padding
     polygons is attained vertex-to-polygon, so also test the rectangle's corners
     against the box and the box's corners against the rectangle.
     """
+    return pose_hits_box(rect_pose(x, y, theta, half_l, half_w), box, padding)
+
+
+def pose_hits_box(pose: RectPose, box: Array, padding: float) -> Array:
+    """:func:`rect_hits_box` for a rectangle given by :func:`rect_pose`."""
+    x, y, s, c, half_l, half_w = pose.x, pose.y, pose.s, pose.c, pose.half_l, pose.half_w
     cx, cy, hw, hh = box[0], box[1], box[2], box[3]
-    s, c = sincos(theta)
     ac, as_ = jnp.abs(c), jnp.abs(s)
     tx, ty = cx - x, cy - y
     # Projections of the rectangle's half extents on the world axes and vice versa.
@@ -288,8 +320,7 @@ def rect_hits_box(x, y, theta, half_l: float, half_w: float, box: Array, padding
         return sat
     p2 = padding * padding
     hit = sat
-    xs, ys = rect_corners(x, y, theta, half_l, half_w)
-    for px, py in zip(xs, ys):
+    for px, py in zip(pose.xs, pose.ys):
         hit = hit | (_point_box_dist2(px, py, box) <= p2)
     for sx in (-1.0, 1.0):
         for sy in (-1.0, 1.0):
@@ -299,19 +330,24 @@ def rect_hits_box(x, y, theta, half_l: float, half_w: float, box: Array, padding
 
 def rect_hits_disc(x, y, theta, half_l: float, half_w: float, disc: Array, padding: float) -> Array:
     """Exact test: distance between the oriented rectangle and the disc ``<= padding``."""
+    return pose_hits_disc(rect_pose(x, y, theta, half_l, half_w), disc, padding)
+
+
+def pose_hits_disc(pose: RectPose, disc: Array, padding: float) -> Array:
+    """:func:`rect_hits_disc` for a rectangle given by :func:`rect_pose`."""
     r = disc[2] + padding
-    s, c = sincos(theta)
-    return _point_obb_dist2(disc[0], disc[1], x, y, c, s, half_l, half_w) <= r * r
+    return _point_obb_dist2(disc[0], disc[1], pose.x, pose.y, pose.c, pose.s,
+                            pose.half_l, pose.half_w) <= r * r
 
 
 def rect_free(pose: Array, half_l: float, half_w: float, world: World, padding: float) -> Array:
     """True when the rectangle at ``pose = (x, y, theta)`` is inside the workspace and clear."""
     x, y, th = pose[0], pose[1], pose[2]
     free = jnp.isfinite(x + y + th)
-    xs, ys = rect_corners(x, y, th, half_l, half_w)
-    for px, py in zip(xs, ys):
+    rect = rect_pose(x, y, th, half_l, half_w)
+    for px, py in zip(rect.xs, rect.ys):
         free = free & in_bounds(px, py, world.bounds)
     free = _fold_boxes(world, x, y, padding, math.hypot(half_l, half_w),
-                       lambda box: rect_hits_box(x, y, th, half_l, half_w, box, padding), free)
-    return fold(world.discs, lambda disc: rect_hits_disc(x, y, th, half_l, half_w, disc, padding),
+                       lambda box: pose_hits_box(rect, box, padding), free)
+    return fold(world.discs, lambda disc: pose_hits_disc(rect, disc, padding),
                 free, _and_not, _SENTINEL_DISC)

@@ -112,21 +112,22 @@ def certified_steer_to_batch(robot, a: Array, b: Array, world: World, padding: f
     d, num = a.shape
     if num == 0:
         return jnp.zeros((0,), bool)
-    clear = jax.vmap(robot.part_clearances, in_axes=(1, None, None), out_axes=1)
-    ca, cb = clear(a, world, padding), clear(b, world, padding)  # (m, N)
+    part_clearances = jax.jit(robot.part_clearances, static_argnums=2)  # traced once, used 3 times
+    clear = jax.vmap(part_clearances, in_axes=(1, None, None), out_axes=1)
+    ca, cb = jnp.split(clear(jnp.concatenate([a, b], axis=1), world, padding), 2, axis=1)  # (m, N)
     dist = jax.vmap(robot.part_sweep_bounds, in_axes=(1, 1), out_axes=1)(a, b)  # (m, N)
     ok = jnp.all(ca > 0, axis=0) & jnp.all(cb > 0, axis=0) & jnp.all(jnp.isfinite(dist), axis=0)
     if mask is not None:
         ok = ok & mask
     easy = ok & jnp.all(ca + cb > dist + margin, axis=0)
     hard = ok & ~easy
-    sweep = _Sweep(robot, a, b, world, padding, cb, dist, points, margin)
+    sweep = _Sweep(robot, part_clearances, a, b, world, padding, cb, dist, points, margin)
     g0 = jnp.full((num,), growth, a.dtype)
     free, left, lo, clo, g = sweep.run(hard, jnp.zeros((num,), a.dtype), ca, g0, True,
                                        min(lanes, num), phase_steps)
     tail_steps = (max_evals - phase_steps * points) // tail_points
     if tail_steps > 0:
-        tail = _Sweep(robot, a, b, world, padding, cb, dist, tail_points, margin)
+        tail = _Sweep(robot, part_clearances, a, b, world, padding, cb, dist, tail_points, margin)
         free2, left, _, _, _ = tail.run(left, lo, clo, g, False, min(tail_lanes, num), tail_steps)
         free = free | free2
     return easy | free
@@ -138,13 +139,13 @@ class _Sweep:
     Per-part arrays are ``(m, ...)``: clearances ``cb`` and bounds ``dist`` ``(m, N)``.
     """
 
-    def __init__(self, robot, a, b, world, padding, cb, dist, points, margin):
+    def __init__(self, robot, part_clearances, a, b, world, padding, cb, dist, points, margin):
         self.a, self.b, self.world, self.padding = a, b, world, padding
         self.cb, self.dist, self.points, self.margin = cb, dist, points, margin
         self.interpolate = jax.vmap(jax.vmap(robot.interpolate, in_axes=(None, None, 0), out_axes=1),
                                     in_axes=(1, 1, 1), out_axes=2)
         # (d, points, lanes) -> (points, m, lanes)
-        self.clear = jax.vmap(jax.vmap(robot.part_clearances, in_axes=(1, None, None), out_axes=1),
+        self.clear = jax.vmap(jax.vmap(part_clearances, in_axes=(1, None, None), out_axes=1),
                               in_axes=(1, None, None), out_axes=0)
         self.ks = jnp.arange(1, points + 1, dtype=a.dtype)[:, None]  # (points, 1)
 
@@ -188,12 +189,15 @@ class _Sweep:
             di = dist[:, i]  # (m, lanes)
             steps = steps + 1
             hit = jnp.any(~(cs > 0), axis=(0, 1))
-            moving = jnp.ones_like(live)
-            moved = jnp.zeros_like(steps)
-            for k in range(points):  # move the front over the proven leading pieces
-                moving = moving & jnp.all(clo + cs[k] > di * (ts[k] - lo) + margin, axis=0)
-                lo, clo = jnp.where(moving, ts[k], lo), jnp.where(moving, cs[k], clo)
-                moved = moved + moving
+            # move the front over the proven leading pieces: piece k runs from point k - 1
+            # (the front for k = 0) to point k; the front passes the first ``moved``
+            prev_c = jnp.concatenate([clo[None], cs[:-1]], axis=0)  # (points, m, lanes)
+            prev_t = jnp.concatenate([lo[None], ts[:-1]], axis=0)  # (points, lanes)
+            proven = jnp.all(prev_c + cs > di * (ts - prev_t)[:, None] + margin, axis=1)
+            moved = jnp.sum(jnp.cumsum(~proven, axis=0) == 0, axis=0, dtype=steps.dtype)
+            last = jnp.maximum(moved - 1, 0)
+            lo = jnp.where(moved > 0, jnp.take_along_axis(ts, last[None], axis=0)[0], lo)
+            clo = jnp.where(moved > 0, jnp.take_along_axis(cs, last[None, None], axis=0)[0], clo)
             g = jnp.where(moved == 0, 0.5 * g, jnp.where(moved == points, 2.0 * g, g))
             ok = live & ~hit & jnp.all(clo + cb[:, i] > di * (1.0 - lo) + margin, axis=0)
             out_of_steps = live & ~ok & ~hit & (steps >= max_steps)

@@ -51,7 +51,7 @@ def _per_call_us(fn, args, repeat=3):
     return best
 
 
-def main(argv=None) -> int:
+def parse_args(argv):
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--env", default="rigid/0", help="preset or JSON map (default rigid/0)")
@@ -62,23 +62,13 @@ def main(argv=None) -> int:
     ap.add_argument("--callback-queries", type=int, default=3,
                     help="queries for the in-process callback comparison (default 3)")
     ap.add_argument("--seed", type=int, default=0)
-    args = ap.parse_args(argv)
+    return ap.parse_args(argv)
 
-    import numpy as np
 
-    import ntq_jax
-    from ntq_jax.planners.ompl_bridge import plan_bitstar, query_seeds
-    from ntq_jax.planners.ompl_checker import NumpyChecker
-    from ntq_jax.planners.ompl_worker import OmplProblem
+def throughput(env, q, args) -> None:
+    """Table 1: ``plan_bitstar`` on the queries with each worker count of ``--workers``."""
+    from ntq_jax.planners.ompl_bridge import plan_bitstar
     from ntq_jax.types import PlanStatus
-
-    env = ntq_jax.make_env(args.env)
-    q = _nontrivial_queries(env, args.queries, args.seed)
-    print(f"# BIT* bridge on {env.name}: {len(q)} non-trivial queries, {args.budget:g} s budget "
-          f"per query (full budget, best solution kept)")
-
-    # warm-up: compiles the parent's jitted checks (start/goal validity, path check) once
-    plan_bitstar(env, q[:1], time_budget=0.05, workers=1, stop_on_first=True)
 
     print("\n## Throughput (plan_bitstar, spawn workers)\n")
     print("| workers | solved | wall s | worker start s | mean solve s | queries/s |"
@@ -92,6 +82,13 @@ def main(argv=None) -> int:
               f"{res.info['solve_times'].mean():.3f} | {len(q) / wall:.2f} | "
               f"{len(q) / max(wall - start, 1e-9):.2f} | "
               f"{res.costs[ok].mean() if ok.any() else float('nan'):.3f} |", flush=True)
+
+
+def callbacks(env, q, args):
+    """Table 2: Python callbacks per second of BIT* with either motion validator; the checker."""
+    from ntq_jax.planners.ompl_bridge import query_seeds
+    from ntq_jax.planners.ompl_checker import NumpyChecker
+    from ntq_jax.planners.ompl_worker import OmplProblem
 
     print("\n## Python callbacks during BIT* (in process, same queries and budget)\n")
     checker = NumpyChecker.from_env(env)
@@ -116,6 +113,12 @@ def main(argv=None) -> int:
         print(f"| {name} | {tot['n_valid'] / t:,.0f} | {tot['n_motion'] / t:,.0f} | "
               f"{calls / t:,.0f} | {tot['n_edges'] / t:,.0f} | "
               f"{calls / max(tot['n_edges'], 1):.1f} | {statistics.mean(costs):.3f} |", flush=True)
+    return checker
+
+
+def per_call(env, checker) -> None:
+    """Table 3: microseconds per state / per edge, the NumPy checker vs the jitted JAX kernels."""
+    import numpy as np
 
     print("\n## Per call (microseconds)\n")
     states = np.asarray(env.sample_states(__import__("jax").random.key(7), 64), np.float64)
@@ -133,6 +136,24 @@ def main(argv=None) -> int:
           f"{jax_valid / np_valid:.0f}x |")
     print(f"| one edge (steer_to, random valid pairs) | {np_steer:.1f} | {jax_steer:.1f} | "
           f"{jax_steer / np_steer:.0f}x |")
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
+
+    import ntq_jax
+    from ntq_jax.planners.ompl_bridge import plan_bitstar
+
+    env = ntq_jax.make_env(args.env)
+    q = _nontrivial_queries(env, args.queries, args.seed)
+    print(f"# BIT* bridge on {env.name}: {len(q)} non-trivial queries, {args.budget:g} s budget "
+          f"per query (full budget, best solution kept)")
+
+    # warm-up: compiles the parent's jitted checks (start/goal validity, path check) once
+    plan_bitstar(env, q[:1], time_budget=0.05, workers=1, stop_on_first=True)
+    throughput(env, q, args)
+    checker = callbacks(env, q, args)
+    per_call(env, checker)
     return 0
 
 

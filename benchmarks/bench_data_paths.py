@@ -15,6 +15,7 @@ path gives before and after includeData's pruning (Alg. 4). Writes
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import sys
 import time
@@ -47,21 +48,62 @@ def samples(env, paths, lengths, padding):
     return len(full) / len(lengths), len(kept) / len(lengths)
 
 
-def main(argv=None) -> int:
+def parse_args(argv):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--record", required=True, help="folder of a BIT* record (record.json, N/)")
     ap.add_argument("--config", required=True)
     ap.add_argument("--spacings", default="0.3,0.4,0.5,0.6,0.8")
     ap.add_argument("--limit", type=int, default=None, help="first LIMIT queries of the record")
     ap.add_argument("--out", default="results/data_paths")
-    args = ap.parse_args(argv)
+    return ap.parse_args(argv)
+
+
+def plan_both_modes(env, q, planner, opts, pad):
+    """The data planner's raw and shortcut plans of ``q`` and their seconds together."""
+    from ntq_jax.planners import plan
+
+    cache = Path("runs") / "roadmap_cache"
+    extra = {"cache_dir": cache} if planner == "roadmap" else {}
+    t0 = time.perf_counter()
+    raw = plan(env, q, planner, padding=pad, smooth=False, **opts, **extra)
+    cut = plan(env, q, planner, padding=pad, **opts, **extra)
+    return raw, cut, time.perf_counter() - t0
+
+
+def density_row(env, pad, both, bit, label, paths, lengths, costs) -> dict:
+    """One mode's figures on the queries ``both`` solved; ``bit``: BIT*'s (states, costs) there."""
+    bit_len, bit_cost = bit
+    L = lengths[both].astype(np.float64)
+    s_full, s_kept = samples(env, paths[both], lengths[both], pad)
+    return {"mode": label, "mean_states": float(L.mean()), "median_states": float(np.median(L)),
+            "ratio_to_bitstar": float(L.mean() / bit_len.mean()),
+            "cost_ratio_to_bitstar": float(np.median(costs[both] / bit_cost)),
+            "samples_per_path": s_full, "samples_after_pruning": s_kept}
+
+
+def print_table(out: dict, planner: str, seg, dest: Path) -> None:
+    """The Markdown table of the modes (and where the JSON went)."""
+    print(f"{out['env']}: {out['solved_by_both']} non-trivial queries solved by BIT* "
+          f"({out['bitstar_time_budget']} s) and "
+          f"the {planner}; BIT* segment mean {seg.mean():.3f}, median {np.median(seg):.3f}")
+    print("| data paths | states/path (mean) | median | / BIT* | cost / BIT* (median) | "
+          "samples/path | after pruning |")
+    print("|---|---:|---:|---:|---:|---:|---:|")
+    for r in out["rows"]:
+        print(f"| {r['mode']} | {r['mean_states']:.2f} | {r['median_states']:.0f} | "
+              f"{r['ratio_to_bitstar']:.2f} | {r['cost_ratio_to_bitstar']:.3f} | "
+              f"{r['samples_per_path']:.2f} | {r['samples_after_pruning']:.2f} |")
+    print(f"wrote {dest}")
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
 
     from ntq_jax.experiment import config as C
     from ntq_jax import make_env
     from ntq_jax.envs import env_slug
     from ntq_jax.planners.path_modes import shape_paths
     from ntq_jax.planners.jobs import planner_options
-    from ntq_jax.planners import plan
 
     record = Path(args.record)
     meta = json.loads((record / "record.json").read_text())
@@ -74,26 +116,13 @@ def main(argv=None) -> int:
         q, bp, bl, bs, bc = (a[:args.limit] for a in (q, bp, bl, bs, bc))
     planner = cfg.planner.name_for(name)
     opts = {k: v for k, v in planner_options(cfg, name, planner).items() if k != "smooth"}
-    cache = Path("runs") / "roadmap_cache"
-    extra = {"cache_dir": cache} if planner == "roadmap" else {}
-    t0 = time.perf_counter()
-    raw = plan(env, q, planner, padding=pad, smooth=False, **opts, **extra)
-    cut = plan(env, q, planner, padding=pad, **opts, **extra)
-    seconds = time.perf_counter() - t0
+    raw, cut, seconds = plan_both_modes(env, q, planner, opts, pad)
     both = (bs == 0) & raw.solved & cut.solved
     n = int(both.sum())
     bit_len = bl[both].astype(np.float64)
     bit_cost = bc[both]
     seg = bit_cost / np.maximum(bit_len - 1, 1)
-
-    def row(label, paths, lengths, costs):
-        L = lengths[both].astype(np.float64)
-        s_full, s_kept = samples(env, paths[both], lengths[both], pad)
-        return {"mode": label, "mean_states": float(L.mean()), "median_states": float(np.median(L)),
-                "ratio_to_bitstar": float(L.mean() / bit_len.mean()),
-                "cost_ratio_to_bitstar": float(np.median(costs[both] / bit_cost)),
-                "samples_per_path": s_full, "samples_after_pruning": s_kept}
-
+    row = functools.partial(density_row, env, pad, both, (bit_len, bit_cost))
     rows = [row("bitstar", bp, bl, bc), row("raw", raw.paths, raw.lengths, raw.costs),
             row("shortcut", cut.paths, cut.lengths, cut.costs)]
     for s in (float(x) for x in args.spacings.split(",") if x.strip()):
@@ -107,16 +136,7 @@ def main(argv=None) -> int:
     dest = Path(args.out) / f"density_{env_slug(name, env)}.json"
     dest.parent.mkdir(parents=True, exist_ok=True)
     dest.write_text(json.dumps(out, indent=1) + "\n")
-    print(f"{name}: {n} non-trivial queries solved by BIT* ({out['bitstar_time_budget']} s) and "
-          f"the {planner}; BIT* segment mean {seg.mean():.3f}, median {np.median(seg):.3f}")
-    print("| data paths | states/path (mean) | median | / BIT* | cost / BIT* (median) | "
-          "samples/path | after pruning |")
-    print("|---|---:|---:|---:|---:|---:|---:|")
-    for r in rows:
-        print(f"| {r['mode']} | {r['mean_states']:.2f} | {r['median_states']:.0f} | "
-              f"{r['ratio_to_bitstar']:.2f} | {r['cost_ratio_to_bitstar']:.3f} | "
-              f"{r['samples_per_path']:.2f} | {r['samples_after_pruning']:.2f} |")
-    print(f"wrote {dest}")
+    print_table(out, planner, seg, dest)
     return 0
 
 

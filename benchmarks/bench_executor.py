@@ -75,7 +75,7 @@ def _run(env, pool, executor, planner, chunk: int, seed: int) -> tuple[float, li
         shutil.rmtree(work, ignore_errors=True)
 
 
-def main(argv=None) -> int:
+def parse_args(argv):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--env", default="rigid/0")
@@ -87,20 +87,15 @@ def main(argv=None) -> int:
     ap.add_argument("--repeats", type=int, default=3, help="warm runs per executor")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", default=None, help="write the figures to this file")
-    args = ap.parse_args(argv)
-    os.environ.setdefault("JAX_PLATFORMS", "cpu")
+    return ap.parse_args(argv)
 
+
+def start_ray(args):
+    """Starts the local Ray instance and warms its workers: the executor and both timings."""
     import ray
 
-    from ntq_jax import make_env
-    from ntq_jax.planners.jobs import resolve_planner
-    from ntq_jax.executors import LocalExecutor, RayExecutor
+    from ntq_jax.executors import RayExecutor
 
-    env = make_env(args.env)
-    pool = _queries(env, args.queries, args.seed)
-    planner, _ = resolve_planner("bitstar", {"time_budget": args.budget,
-                                             "workers": args.workers})
-    local = LocalExecutor()
     t0 = time.perf_counter()
     ray.init(num_cpus=args.cpus, include_dashboard=False, configure_logging=False,
              runtime_env={"env_vars": {"JAX_PLATFORMS": "cpu"}})
@@ -109,7 +104,11 @@ def main(argv=None) -> int:
     t0 = time.perf_counter()
     list(rex.imap_unordered(_noop, [(i,) for i in range(args.cpus)]))  # start the workers
     warm_workers = time.perf_counter() - t0
+    return rex, ray_init, warm_workers
 
+
+def alternating_runs(args, env, pool, planner, local, rex) -> dict:
+    """The runs, alternating local, ray, local_1call: walls, loads and the ray runs' details."""
     rows: dict[str, list] = {"local": [], "local_1call": [], "ray": [], "ray_cold": []}
     loads: dict[str, list] = {k: [] for k in rows}
     chunk_seconds: list[float] = []
@@ -131,8 +130,12 @@ def main(argv=None) -> int:
                 busy.append(sum(rex.task_seconds) / (args.cpus * wall))
         rows[kind].append(wall)
         print(f"{kind:9s} {wall:7.2f} s   load {loads[kind][-1]:.2f}", flush=True)
+    return {"rows": rows, "loads": loads, "chunk_seconds": chunk_seconds,
+            "latencies": latencies, "busy": busy}
 
-    # scheduling latency of a no-op task, one at a time, warm workers
+
+def noop_latency(rex) -> tuple[list[float], list[float]]:
+    """Round trip and submit -> start seconds of 100 no-op tasks, one at a time, warm workers."""
     rt, start = [], []
     for i in range(100):
         rex.latencies.clear()
@@ -140,22 +143,26 @@ def main(argv=None) -> int:
         list(rex.imap_unordered(_noop, [(i,)]))
         rt.append(time.perf_counter() - t0)
         start.append(rex.latencies[0])
-    ray.shutdown()
+    return rt, start
 
+
+def figures(args, argv, runs: dict, rt, start, ray_init, warm_workers) -> dict:
+    """The JSON record of the benchmark."""
+    rows, busy, chunk_seconds = runs["rows"], runs["busy"], runs["chunk_seconds"]
     med = {k: statistics.median(v) for k, v in rows.items() if v}
     ideal = args.queries * args.budget / args.cpus
-    res = {
+    return {
         "command": "python benchmarks/bench_executor.py " + " ".join(argv or sys.argv[1:]),
         "env": args.env, "queries": args.queries, "budget": args.budget, "chunk": args.chunk,
         "workers_local": args.workers, "ray_cpus": args.cpus, "repeats": args.repeats,
-        "walls": rows, "load_1min": loads, "median_wall": med,
+        "walls": rows, "load_1min": runs["loads"], "median_wall": med,
         "ray_minus_local_fraction": (med["ray"] - med["local"]) / med["ray"],
         "ray_minus_local_1call_fraction": (med["ray"] - med["local_1call"]) / med["ray"],
         # the share of the ray run's CPU-slots time not spent inside a chunk (scheduling,
         # argument and result transfer, the driver's writes, idle slots at the end)
         "ray_overhead_fraction_median": 1.0 - statistics.median(busy),
         "ray_overhead_fractions": [1.0 - b for b in busy],
-        "chunk_submit_to_start_s": latencies,
+        "chunk_submit_to_start_s": runs["latencies"],
         "ideal_wall": ideal,
         "ray_init_seconds": ray_init, "ray_warm_workers_seconds": warm_workers,
         "chunk_seconds_median": statistics.median(chunk_seconds),
@@ -165,6 +172,29 @@ def main(argv=None) -> int:
         "noop_round_trip_ms_p90": 1e3 * sorted(rt)[int(0.9 * len(rt))],
         "cpu_count": os.cpu_count(),
     }
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
+    os.environ.setdefault("JAX_PLATFORMS", "cpu")
+
+    import ray
+
+    from ntq_jax import make_env
+    from ntq_jax.planners.jobs import resolve_planner
+    from ntq_jax.executors import LocalExecutor
+
+    env = make_env(args.env)
+    pool = _queries(env, args.queries, args.seed)
+    planner, _ = resolve_planner("bitstar", {"time_budget": args.budget,
+                                             "workers": args.workers})
+    local = LocalExecutor()
+    rex, ray_init, warm_workers = start_ray(args)
+    runs = alternating_runs(args, env, pool, planner, local, rex)
+    rt, start = noop_latency(rex)
+    ray.shutdown()
+
+    res = figures(args, argv, runs, rt, start, ray_init, warm_workers)
     print(json.dumps({k: v for k, v in res.items() if k not in ("chunk_seconds",)}, indent=1))
     if args.json:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)

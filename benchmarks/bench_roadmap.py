@@ -349,7 +349,7 @@ def stage_child(env, args, out: Path, which: str) -> None:
 
 # ---------------------------------------------------------------------------
 
-def main(argv=None) -> int:
+def parse_args(argv):
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--stage", default="all",
@@ -379,6 +379,44 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if args.queries < 1:
         ap.error("--queries must be >= 1")
+    return args
+
+
+def stage_maps(stage: str, envs: list[str], args) -> list[str]:
+    """The maps ``stage`` runs on (the pool and memory stages: ``--pool-env`` or a default)."""
+    names = envs
+    if stage in ("pool", "memory"):
+        names = args.pool_env or ([e for e in envs if e in POOL_ENVS] if args.env
+                                  else list(POOL_ENVS))
+        if not names:
+            print(f"  no map for {stage} (--pool-env)", flush=True)
+    return names
+
+
+def run_stage(stage: str, names: list[str], args, out: Path) -> bool:
+    """Runs ``stage`` on each map of ``names``; whether it failed (StageError) on any."""
+    import ntq_jax
+
+    failed = False
+    for name in names:
+        try:
+            env = ntq_jax.make_env(name)
+            if stage == "bitstar":
+                stage_bitstar(env, args, out)
+            elif stage == "roadmap":
+                stage_roadmap(env, args, out)
+            else:
+                stage_child(env, args, out, stage)
+        except StageError as e:
+            print(f"bench_roadmap: {stage}: {e}", file=sys.stderr, flush=True)
+            failed = True
+            if "not registered" in str(e):
+                break   # the same for every map
+    return failed
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
     if args.child:
         try:
             return _child(args)
@@ -386,7 +424,7 @@ def main(argv=None) -> int:
             print(f"bench_roadmap: {e}", file=sys.stderr)
             return 2
 
-    import ntq_jax
+    import ntq_jax  # noqa: F401  (loaded once, before the first stage heading)
 
     out = Path(args.out) if args.out else ROOT / "results" / "bench_roadmap"
     envs = args.env or list(DEFAULT_ENVS)
@@ -398,26 +436,8 @@ def main(argv=None) -> int:
         if stage == "report":
             stage_report(envs, args, out)
             continue
-        names = envs
-        if stage in ("pool", "memory"):
-            names = args.pool_env or ([e for e in envs if e in POOL_ENVS] if args.env
-                                      else list(POOL_ENVS))
-            if not names:
-                print(f"  no map for {stage} (--pool-env)", flush=True)
-        for name in names:
-            try:
-                env = ntq_jax.make_env(name)
-                if stage == "bitstar":
-                    stage_bitstar(env, args, out)
-                elif stage == "roadmap":
-                    stage_roadmap(env, args, out)
-                else:
-                    stage_child(env, args, out, stage)
-            except StageError as e:
-                print(f"bench_roadmap: {stage}: {e}", file=sys.stderr, flush=True)
-                failed.append(stage)
-                if "not registered" in str(e):
-                    break   # the same for every map
+        if run_stage(stage, stage_maps(stage, envs, args), args, out):
+            failed.append(stage)
     return 2 if failed else 0
 
 

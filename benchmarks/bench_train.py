@@ -138,7 +138,7 @@ def run_child(argv, variant: str) -> dict | None:
     return json.loads(line[0][6:])
 
 
-def main(argv=None) -> int:
+def parse_args(argv):
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--hidden", default="256,256,128,64", help="hidden widths (comma-separated)")
@@ -164,16 +164,11 @@ def main(argv=None) -> int:
     ap.add_argument("--child", choices=sorted(VARIANTS), help=argparse.SUPPRESS)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", type=Path, default=None, help="also write the figures as JSON")
-    args = ap.parse_args(argv)
-    argv_child = [a for a in (argv if argv is not None else sys.argv[1:])]
+    return ap.parse_args(argv)
 
-    import jax
 
-    from ntq_jax import data as data_mod
-    from ntq_jax import make_env, models
-    from ntq_jax import training as T
-
-    T.use_cpu_devices(args.cpu_devices)  # before any JAX operation
+def configs(args):
+    """The hidden widths, the model and the training configurations of ``args``."""
     from ntq_jax.models import ModelConfig
     from ntq_jax.training.config import TrainConfig
 
@@ -182,6 +177,14 @@ def main(argv=None) -> int:
     train_cfg = TrainConfig(epochs=args.epochs, batch_size=args.batch, optimizer="adagrad",
                             learning_rate=0.01, val_fraction=args.val_fraction,
                             steps_per_call=args.steps_per_call, eval_every=10**9)
+    return hidden, model_cfg, train_cfg
+
+
+def load_data(args):
+    """The environment, the four datasets and a line saying where they come from."""
+    from ntq_jax import data as data_mod
+    from ntq_jax import make_env
+
     if args.data is not None:
         env = make_env(args.data / "env.json")
         datasets = data_mod.load_datasets(args.data)
@@ -193,6 +196,104 @@ def main(argv=None) -> int:
         datasets = [data_mod.straight_line_rows(10 + i, lo, hi, step=1.0, n_rows=n)
                     for i, n in enumerate(sizes)]
         source = f"synthetic straight paths on point/0, rows {sizes}"
+    return env, datasets, source
+
+
+def torch_available(args) -> bool:
+    """Whether the PyTorch column runs (says why not when PyTorch is missing)."""
+    have_torch = not args.no_torch
+    if have_torch:
+        import importlib.util
+        if importlib.util.find_spec("torch") is None:
+            have_torch = False
+            print("PyTorch not installed: skipping the PyTorch comparison "
+                  "(pip install torch==2.13.0+cpu into the venv to include it)")
+    return have_torch
+
+
+def steady_state(args, run, variants, members, spec, train_cfg, member_steps):
+    """Compiles every variant first (timed apart), then runs them interleaved ``--repeats`` times.
+
+    Returns the compile seconds, the per-repeat seconds of each variant (and
+    ``"torch"``) and the PyTorch run's details (None without PyTorch).
+    """
+    compile_s = {v: run(v, stop_after=train_cfg.steps_per_call) for v in variants}
+    have_torch = torch_available(args)
+    times = {v: [] for v in variants}
+    times["torch"] = []
+    torch_info = None
+    for r in range(args.repeats):
+        for v in variants:
+            times[v].append(run(v))
+        if have_torch:
+            torch_info = bench_torch(members, spec, train_cfg, args.seed + r, args.torch_threads)
+            times["torch"].append(torch_info["seconds"])
+        print(f"repeat {r + 1}/{args.repeats}: " + ", ".join(
+            f"{v} {member_steps / t[-1]:.1f}/s" for v, t in times.items() if t), flush=True)
+    return compile_s, times, torch_info
+
+
+def end_to_end(args, argv_child, variants) -> dict:
+    """Wall seconds of each variant in a fresh process, compilation included."""
+    e2e = {}
+    if not args.no_end_to_end:
+        for v in variants:
+            r = run_child(argv_child, v)
+            if r is not None:
+                e2e[v] = r["seconds"]
+    return e2e
+
+
+def variant_names(mesh, torch_info) -> dict:
+    """The table's label of each variant."""
+    return {"together": "JAX, 4 members together (vmap, one jit, one device)",
+            "together_sharded": "JAX, 4 members together, member axis sharded over "
+                                f"{mesh.devices.size if mesh else 0} CPU devices",
+            "sequential": "JAX, 4 sequential single-model trainings",
+            "torch": (f"PyTorch {torch_info['version']} CPU ({torch_info['threads']} threads), "
+                      "4 sequential") if torch_info else ""}
+
+
+def print_table(args, names, times, compile_s, e2e, member_steps) -> None:
+    """The table of member-steps/s, compile and end-to-end seconds per variant."""
+    med = {v: float(np.median(t)) for v, t in times.items() if t}
+    print("\n| variant | member-steps/s (median of %d) | compile s | end to end s (fresh "
+          "process, incl. compile) |" % args.repeats)
+    print("|---|---:|---:|---:|")
+    for v, t in med.items():
+        c = compile_s.get(v)
+        print(f"| {names[v]} | {member_steps / t:.1f} | {'-' if c is None else f'{c:.1f}'} | "
+              f"{f'{e2e[v]:.1f}' if v in e2e else '-'} |")
+
+
+def print_ratios(names, times, e2e) -> None:
+    """The speed-ups of the ensemble variants over sequential trainings and PyTorch."""
+    pair = lambda a, b: float(np.median(np.array(times[b]) / np.array(times[a])))  # noqa: E731
+    print()
+    for v in ("together", "together_sharded"):
+        if v not in times:
+            continue
+        print(f"{names[v]} vs sequential: {pair(v, 'sequential'):.2f}x steady state "
+              f"(goal >= 2x)" + (f", {e2e['sequential'] / e2e[v]:.2f}x end to end incl. "
+                                 "compilation" if v in e2e and "sequential" in e2e else ""))
+        if times["torch"]:
+            print(f"  vs PyTorch: {pair(v, 'torch'):.2f}x the member-steps/s (goal >= 1x)")
+    if times["torch"]:
+        print(f"JAX single-model vs PyTorch: {pair('sequential', 'torch'):.2f}x")
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
+    argv_child = [a for a in (argv if argv is not None else sys.argv[1:])]
+
+    import jax
+
+    from ntq_jax import models
+    from ntq_jax import training as T
+
+    T.use_cpu_devices(args.cpu_devices)  # before any JAX operation
+    hidden, model_cfg, train_cfg = configs(args)
+    env, datasets, source = load_data(args)
     spec = models.ModelSpec.from_env(env, model_cfg)
     run = functools.partial(lambda f, **kw: VARIANTS[f](datasets, env, model_cfg, train_cfg,
                                                         args.seed, **kw))
@@ -214,65 +315,15 @@ def main(argv=None) -> int:
 
     mesh = T.member_mesh(len(datasets))
     variants = [v for v in VARIANTS if v != "together_sharded" or mesh is not None]
-
-    # -- steady state: compile first (timed apart), then interleaved repeats -----------
-    compile_s = {v: run(v, stop_after=train_cfg.steps_per_call) for v in variants}
-    have_torch = not args.no_torch
-    if have_torch:
-        import importlib.util
-        if importlib.util.find_spec("torch") is None:
-            have_torch = False
-            print("PyTorch not installed: skipping the PyTorch comparison "
-                  "(pip install torch==2.13.0+cpu into the venv to include it)")
-    times = {v: [] for v in variants}
-    times["torch"] = []
-    torch_info = None
-    for r in range(args.repeats):
-        for v in variants:
-            times[v].append(run(v))
-        if have_torch:
-            torch_info = bench_torch(members, spec, train_cfg, args.seed + r, args.torch_threads)
-            times["torch"].append(torch_info["seconds"])
-        print(f"repeat {r + 1}/{args.repeats}: " + ", ".join(
-            f"{v} {member_steps / t[-1]:.1f}/s" for v, t in times.items() if t), flush=True)
-    med = {v: float(np.median(t)) for v, t in times.items() if t}
-    pair = lambda a, b: float(np.median(np.array(times[b]) / np.array(times[a])))  # noqa: E731
-
-    # -- end to end: fresh processes, compilation included -------------------------------
-    e2e = {}
-    if not args.no_end_to_end:
-        for v in variants:
-            r = run_child(argv_child, v)
-            if r is not None:
-                e2e[v] = r["seconds"]
-
-    print("\n| variant | member-steps/s (median of %d) | compile s | end to end s (fresh "
-          "process, incl. compile) |" % args.repeats)
-    print("|---|---:|---:|---:|")
-    names = {"together": "JAX, 4 members together (vmap, one jit, one device)",
-             "together_sharded": "JAX, 4 members together, member axis sharded over "
-                                 f"{mesh.devices.size if mesh else 0} CPU devices",
-             "sequential": "JAX, 4 sequential single-model trainings",
-             "torch": (f"PyTorch {torch_info['version']} CPU ({torch_info['threads']} threads), "
-                       "4 sequential") if torch_info else ""}
-    for v, t in med.items():
-        c = compile_s.get(v)
-        print(f"| {names[v]} | {member_steps / t:.1f} | {'-' if c is None else f'{c:.1f}'} | "
-              f"{f'{e2e[v]:.1f}' if v in e2e else '-'} |")
+    compile_s, times, torch_info = steady_state(args, run, variants, members, spec, train_cfg,
+                                                member_steps)
+    e2e = end_to_end(args, argv_child, variants)
+    names = variant_names(mesh, torch_info)
+    print_table(args, names, times, compile_s, e2e, member_steps)
     out = {"hidden": hidden, "batch": args.batch, "epochs": args.epochs, "source": source,
            "member_steps": member_steps, "seconds": times, "compile_s": compile_s,
            "end_to_end_s": e2e}
-    print()
-    for v in ("together", "together_sharded"):
-        if v not in times:
-            continue
-        print(f"{names[v]} vs sequential: {pair(v, 'sequential'):.2f}x steady state "
-              f"(goal >= 2x)" + (f", {e2e['sequential'] / e2e[v]:.2f}x end to end incl. "
-                                 "compilation" if v in e2e and "sequential" in e2e else ""))
-        if times["torch"]:
-            print(f"  vs PyTorch: {pair(v, 'torch'):.2f}x the member-steps/s (goal >= 1x)")
-    if times["torch"]:
-        print(f"JAX single-model vs PyTorch: {pair('sequential', 'torch'):.2f}x")
+    print_ratios(names, times, e2e)
     if args.json:
         args.json.write_text(json.dumps(out, indent=1))
     return 0

@@ -216,7 +216,9 @@ def discretized_steer_to_batch(robot, a: Array, b: Array, world: World, padding:
     n = jax.vmap(_steps, in_axes=(None, 1, 1, None))(robot, a, b, resolution)
     interpolate = jax.vmap(jax.vmap(robot.interpolate, in_axes=(None, None, 0), out_axes=1),
                            in_axes=(1, 1, 1), out_axes=2)
-    is_valid = jax.vmap(jax.vmap(robot.is_valid, in_axes=(1, None, None)), in_axes=(1, None, None))
+    # traced once (jit) for the loop's two uses of it, then batched at each
+    is_valid = jax.vmap(jax.vmap(jax.jit(robot.is_valid, static_argnums=2), in_axes=(1, None, None)),
+                        in_axes=(1, None, None))
 
     def valid_at(ap, bp, t):
         return is_valid(interpolate(ap, bp, t), world, padding)

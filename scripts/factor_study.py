@@ -284,12 +284,15 @@ def run_cell(cell: Cell, runs: Path, results: Path, progress: bool, extra: list[
     from ntq_jax import artifacts
     if cell.budget != "ours" or cell.train_seed:  # the same data (and models for a budget)
         base = run_folder(Cell(cell.map, cell.data, "ours"), runs, paper_runs)
-        if not (base / "results.json").is_file():
-            raise UsageError(f"{cell.key} needs {Cell(cell.map, cell.data, 'ours').key} first")
-        artifacts.link_tree(base / "data" / cell.slug, run / "data" / cell.slug)
-        if not cell.train_seed:
-            artifacts.link_tree(base / "models" / cell.slug, run / "models" / cell.slug)
-            artifacts.link_tree(base / "eval" / cell.slug, run / "eval" / cell.slug)
+        if (base / "results.json").is_file():
+            artifacts.link_tree(base / "data" / cell.slug, run / "data" / cell.slug)
+            if not cell.train_seed:
+                artifacts.link_tree(base / "models" / cell.slug, run / "models" / cell.slug)
+                artifacts.link_tree(base / "eval" / cell.slug, run / "eval" / cell.slug)
+        else:  # a fresh machine: the base cell's run folder is gone; its data (and, for a
+            # budget cell, its models) are made again from the same config and seeds
+            print(f"[{cell.key}] no run of {Cell(cell.map, cell.data, 'ours').key} here: "
+                  "its data (and models) are made again", flush=True)
     t0 = time.perf_counter()
     print(f"[{cell.key}] run folder {run}", flush=True)
     run_pipeline(cfg, run, progress=progress, figures=False)

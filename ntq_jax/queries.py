@@ -362,6 +362,34 @@ def _chunk_prefix(robot, world: World, seeds: Array, padding: float, chunk: int,
     return int(rows_blocked[:r].sum()) + int(blk[: last + 1].sum()), r * row + last + 1
 
 
+#: Rows of a chunk (:func:`count_rows`) that :func:`gamma_nt` checks lane by lane before it
+#: counts whole chunks: an estimate over at most ``SMALL_ROWS / 2`` rows' worth of queries
+#: is read off the first rows of chunk 0 (one compiled program, the one the last chunk's
+#: prefix uses), and only a run that needs more counts whole chunks.
+SMALL_ROWS = 8
+
+
+def _small_estimate(robot, world: World, seeds: Array, padding: float, chunk: int,
+                    n: int) -> tuple[int, int] | None:
+    """``(blocked, candidates)`` of chunk 0's lanes up to its ``n``-th valid one, from its
+    first :data:`SMALL_ROWS` rows checked lane by lane; None when they hold fewer than ``n``
+    valid queries (or ``n`` is above half their lanes: whole chunks are then cheaper)."""
+    rows = math.gcd(chunk, COUNT_ROWS)
+    row = chunk // rows
+    if n > row * min(SMALL_ROWS, rows) // 2:
+        return None
+    seen = blocked = 0
+    for r in range(min(SMALL_ROWS, rows)):
+        both, blk = _gamma_chunk_lanes(robot, world, seeds, jnp.uint32(r * row), padding, row)
+        both, blk = np.asarray(both), np.asarray(blk)
+        v = int(both.sum())
+        if seen + v >= n:
+            last = int(np.flatnonzero(both)[n - seen - 1])
+            return blocked + int(blk[: last + 1].sum()), r * row + last + 1
+        seen, blocked = seen + v, blocked + int(blk.sum())
+    return None
+
+
 #: Candidate pairs per chunk of :func:`gamma_nt` for the point robot on a world with a
 #: broad-phase index (more than ``broadphase.UNROLL_MAX`` boxes): its work queue keeps about
 #: half a kilobyte per pair, so 2**18 pairs hold the working memory near 150 MB whatever the
@@ -388,7 +416,8 @@ def gamma_nt(robot, world: World, key: Array, n: int, padding: float, chunk: int
     counts only the valid queries needed to reach exactly ``n`` (its lanes up to
     the ``n``-th valid query). The next chunk is queued while one is counted, so
     dispatch overlaps compute, except when the chunk being counted is expected
-    to be the last.
+    to be the last. A small ``n`` (see :data:`SMALL_ROWS`) is read off the first rows of
+    chunk 0 lane by lane instead: the same stream, the same counts.
 
     Args:
         n: uniform valid queries to examine, an int >= 1.
@@ -418,6 +447,12 @@ def gamma_nt(robot, world: World, key: Array, n: int, padding: float, chunk: int
     counts = (0, 0, 0)  # valid queries, blocked, raw candidates: one tuple, updated at once
     i, nxt = 0, None
     try:
+        small = _small_estimate(robot, world, seeds(0), padding, chunk, n)
+        if small is not None:
+            counts = (n, *small)
+            if progress is not None:
+                progress(n)
+            return _estimate(counts, t0)
         pending = _gamma_chunk_counts(robot, world, seeds(0), padding, chunk)
         while True:
             queries, blocked, cands = counts
@@ -449,7 +484,10 @@ def gamma_nt(robot, world: World, key: Array, n: int, padding: float, chunk: int
         partial = (GammaEstimate(blocked / queries, wilson_interval(blocked, queries), queries,
                                  blocked, cands, time.perf_counter() - t0) if queries else None)
         raise GammaInterrupted(partial) from None
+    return _estimate(counts, t0)
+
+
+def _estimate(counts: tuple[int, int, int], t0: float) -> GammaEstimate:
     queries, blocked, cands = counts
-    secs = time.perf_counter() - t0
     return GammaEstimate(blocked / queries, wilson_interval(blocked, queries), queries, blocked,
-                         cands, secs)
+                         cands, time.perf_counter() - t0)

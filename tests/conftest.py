@@ -38,13 +38,15 @@ if _PROFILE:
 
     import jax.monitoring
 
-    def _on_duration(event, duration, **_):
+    def _on_duration(event, duration, fun_name=None, **_):
         if _current["test"] is not None and event.startswith("/jax/"):
             row = _profile.setdefault(_current["test"], {})
             key = event.rsplit("/", 1)[-1]
             row[key] = row.get(key, 0.0) + duration
             if key == "backend_compile_duration":
                 row["compiles"] = row.get("compiles", 0) + 1
+            if fun_name is not None:  # each program's name and its times
+                row.setdefault("programs", []).append([key, str(fun_name), duration])
 
     jax.monitoring.register_event_duration_secs_listener(_on_duration)
 

@@ -563,13 +563,14 @@ def test_map_same_file_names_run_into_their_own_folders(tmp_path):
     from ntq_jax.experiment.pipeline import load_config, prepare_run, run_pipeline
     from ntq_jax.training import load_ensemble
 
-    a = _write_map(tmp_path / "maps" / "a" / "map.json", "point/1")
+    # two maps of point/2's shape (its walls, one of them moved in ``a``) and the tiny run's
+    # settings: the compiled programs are the session's tiny run's (same shapes)
+    a = _write_map(tmp_path / "maps" / "a" / "map.json", "point/2")
+    spec = json.loads(a.read_text())
+    spec["boxes"][0][0] = 6.0
+    a.write_text(json.dumps(spec))
     b = _write_map(tmp_path / "maps" / "b" / "map.json", "point/2")
-    tiny = [f"envs=[{a}, {b}]", "data.k_train=30", "data.gamma_queries=2000",
-            "data.gamma_eval=false", "train.epochs=1", "model.hidden=[16,16]", "eval.k_test=8",
-            "eval.n_plan=10", "eval.replan_rounds=1", "eval.replan_steps=4",
-            "eval.gamma_queries=2000"]
-    cfg = load_config(None, tiny)
+    cfg = load_config(None, TINY + [f"envs=[{a}, {b}]"])
     run = prepare_run(cfg, tmp_path / "run")
     run_pipeline(cfg, run, progress=False, figures=False, log=lambda s: None)
     sa, sb = env_slug(str(a)), env_slug(str(b))

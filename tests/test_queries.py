@@ -20,7 +20,7 @@ from hypothesis import given, settings, strategies as st
 from scipy import stats
 
 import ntq_jax as nj
-from ntq_jax import queries as Q
+from ntq_jax import prng, queries as Q
 from ntq_jax.geometry import World
 from ntq_jax.robots import PointRobot, RigidBody
 from ntq_jax.robots.batch import is_valid_batch, steer_to_batch
@@ -457,6 +457,24 @@ def test_gamma_nt_counts_exactly_n_queries():
     assert all(d in (0, 1) for d in np.diff([0] + firsts))
     with pytest.raises(ValueError):
         ENV.gamma_nt(key, 0)
+
+
+def test_gamma_nt_small_n_read_lane_by_lane_equals_whole_chunks(monkeypatch):
+    """The first rows of chunk 0 read lane by lane (a small ``n``) give exactly the counts
+    of the whole-chunk path, and a run they cannot finish falls back to it unchanged."""
+    key = jax.random.PRNGKey(7)
+    chunk = 4096  # rows of 64 lanes: the lane-by-lane path takes n <= 256
+    ns = [1, 2, 63, 64, 65, 200, 256, 257, 1000]
+    small = [ENV.gamma_nt(key, n, chunk=chunk) for n in ns]
+    monkeypatch.setattr(Q, "SMALL_ROWS", 0)  # whole chunks only
+    whole = [ENV.gamma_nt(key, n, chunk=chunk) for n in ns]
+    for n, a, b in zip(ns, small, whole):
+        assert (a.queries, a.non_trivial, a.candidates) == (b.queries, b.non_trivial, b.candidates), n
+    # rows too few for n: the lane-by-lane attempt gives up and whole chunks count it
+    monkeypatch.setattr(Q, "SMALL_ROWS", 8)
+    assert Q._small_estimate(ROBOT, WORLD, prng.stream_seeds(key, 0), PAD, chunk, 10**6) is None
+    nearly_empty = World.create(BOUNDS, np.array([[5.0, 5.0, 4.6, 4.6]]), np.zeros((0, 3)))
+    assert Q._small_estimate(ROBOT, nearly_empty, prng.stream_seeds(key, 0), PAD, chunk, 250) is None
 
 
 @pytest.mark.parametrize("k, n", [(0, 1), (1, 1), (0, 10), (3, 10), (10, 10), (1, 1000),

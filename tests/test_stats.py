@@ -132,6 +132,23 @@ def test_cost_and_wilcoxon_edge_cases():
         assert 0 <= S.wilcoxon_p([1.0, 2.0, 1.0], [1.0, 1.0, 2.0]) <= 1  # ties, one zero
 
 
+def test_wilcoxon_with_zeros_or_ties_is_scipys_exact_sign_flip_test():
+    """Up to 13 pairs with zeros or ties scipy runs a permutation test over all sign flips
+    (about a second a call); wilcoxon_p computes the same p-value itself, to the bit."""
+    # by hand: d = (1, -1, 2, 0) -> ranks (1.5, 1.5, 3), R+ = 4.5; the 8 flips' R+ are
+    # 0, 1.5, 1.5, 3, 3, 4.5, 4.5, 6: P(<= 4.5) = 7/8, P(>= 4.5) = 3/8, p = 2 * 3/8
+    assert S.wilcoxon_p([1.0, 0.0, 2.0, 5.0], [0.0, 1.0, 0.0, 5.0]) == 0.75
+    rng = np.random.default_rng(4)
+    for n in (2, 5, 9, 13):
+        x = rng.integers(0, 4, n) * rng.choice([1.0, 0.5], n)
+        y = rng.integers(0, 4, n).astype(float)
+        x[0], y[0] = 3.0, 1.0  # at least one non-zero difference
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            ref = wilcoxon(x - y).pvalue
+        assert S.wilcoxon_p(x, y) == ref, (n, x - y)
+
+
 def test_paired_comparison_uses_queries_both_solve_with_a_reference():
     k = 8
     inf = np.inf

@@ -39,6 +39,15 @@ def triple32(x: Array) -> Array:
     return x
 
 
+def typed_key(key: Array) -> Array:
+    """``key`` as a typed ``jax.random`` key (``jax.random.key``): a raw ``uint32[2]`` key
+    (``jax.random.PRNGKey``) is wrapped with the default implementation, which draws the
+    same bits from it, so jitted code that takes keys compiles once for both kinds."""
+    if jnp.issubdtype(key.dtype, jax.dtypes.prng_key):
+        return key
+    return jax.random.wrap_key_data(key)
+
+
 def stream_seeds(key: Array, index: Array | int) -> Array:
     """The two uint32 seed words of stream ``index``, derived from a ``jax.random`` key."""
     return jax.random.bits(jax.random.fold_in(key, index), (2,), jnp.uint32)

@@ -34,7 +34,7 @@ import numpy as np
 from ntq_jax import prng
 from ntq_jax.validation import check_count, check_padding, check_probability
 from ntq_jax.geometry import KERNEL_COMPILER_OPTIONS, World
-from ntq_jax.robots.batch import is_valid_cm, steer_to_cm
+from ntq_jax.robots.batch import is_valid_cm, steer_to_cm, steer_to_pairs
 from ntq_jax.stats import wilson_interval
 
 Array = jax.Array
@@ -71,6 +71,7 @@ def valid_state_stream(robot, world: World, key: Array, padding: float):
         FreeSpaceTooSmall: when the first 64 blocks hold no valid state, or the
             acceptance rate makes further sampling hopeless.
     """
+    key = prng.typed_key(key)  # raw and typed keys share one compiled program
     accepted = drawn = 0
     for i in range(MAX_STATE_BLOCKS):
         cand, ok = _state_block(robot, world, jax.random.fold_in(key, i), padding, STATE_BLOCK)
@@ -156,11 +157,6 @@ def replay_nontrivial(blocked: np.ndarray, n_max: int, attempts0: int = 0):
     return idx, exhausted[idx], after
 
 
-@functools.partial(jax.jit, static_argnames=("robot", "padding"))
-def _blocked(robot, world, q: Array, padding: float) -> Array:
-    return ~steer_to_cm(robot, world, q[:, 0].T, q[:, 1].T, padding)
-
-
 def sample_nontrivial_queries(robot, world: World, key: Array, n: int, padding: float,
                               n_max: int = DEFAULT_N_MAX):
     """``n`` queries from Alg. 3, ``((n, 2, d), exhausted (n,) bool)``.
@@ -180,7 +176,8 @@ def sample_nontrivial_queries(robot, world: World, key: Array, n: int, padding: 
             buf = np.concatenate([buf, next(stream)])
         cand = buf[: 2 * QUERY_BLOCK].reshape(QUERY_BLOCK, 2, robot.dim)
         buf = buf[2 * QUERY_BLOCK:]
-        blocked = np.asarray(_blocked(robot, world, jnp.asarray(cand), padding))
+        # the shared chunked program of steer_to_pairs (the same answers at any batch size)
+        blocked = ~steer_to_pairs(robot, world, cand[:, 0], cand[:, 1], padding)
         idx, exh, attempts = replay_nontrivial(blocked, n_max, attempts)
         out_q.append(cand[idx])
         out_x.append(exh)

@@ -18,6 +18,7 @@ import jax
 from ntq_jax import Env, make_env, plan
 from ntq_jax.planners import check_paths
 from ntq_jax.planners.smoothing import shortcut, shortcut_paths, shortcut_reference
+from ntq_jax.robots import batch as steer_batch
 
 SET = settings(max_examples=8, deadline=None, derandomize=True,
                suppress_health_check=[HealthCheck.too_slow])
@@ -108,17 +109,41 @@ def test_blocked_input_is_flagged_and_trivial_paths_kept():
     np.testing.assert_array_equal(out[0, :2], [a, b])
 
 
-def test_one_compilation_per_bucket():
+def test_shortcut_paths_compiles_nothing_of_its_own():
+    """After one call, batches of other sizes and path widths, and another map with the
+    same obstacle counts, reuse the motion check's one chunk program (steer_to_pairs)."""
     env = random_env(1)
     rng = np.random.default_rng(0)
     shortcut_paths(env.robot, env.world, *polyline_batch(rng, 9, 7), env.padding)
-    before = shortcut._cache_size()
-    for b, l in [(10, 8), (16, 6), (200, 16)]:  # same path buffer (16), chunks of 128
+    before = (steer_batch._steer_masked._cache_size(), shortcut._cache_size())
+    for b, l in [(10, 8), (16, 6), (200, 40), (5000, 3)]:
         shortcut_paths(env.robot, env.world, *polyline_batch(rng, b, l), env.padding)
-    assert shortcut._cache_size() == before
     other = random_env(2)  # same obstacle count: world is traced, no recompilation
     shortcut_paths(other.robot, other.world, *polyline_batch(rng, 9, 7), other.padding)
-    assert shortcut._cache_size() == before
+    assert (steer_batch._steer_masked._cache_size(), shortcut._cache_size()) == before
+
+
+@pytest.mark.parametrize("chunk", [1, 5, 4096])
+def test_group_size_does_not_change_the_answer(chunk):
+    env = random_env(3, padding=0.3)
+    paths, lengths = polyline_batch(np.random.default_rng(1), 23, 9)
+    ref = shortcut_paths(env.robot, env.world, paths, lengths, 0.3, chunk_size=7)
+    got = shortcut_paths(env.robot, env.world, paths, lengths, 0.3, chunk_size=chunk)
+    for r, g in zip(ref, got):
+        np.testing.assert_array_equal(r, g)
+
+
+def test_host_rounds_equal_the_traced_core():
+    """shortcut_paths (host rounds) and the jitted shortcut (one while_loop) keep the same
+    waypoints, lengths and flags."""
+    env = random_env(4, padding=0.3)
+    paths, lengths = polyline_batch(np.random.default_rng(2), 32, 16)
+    out, n, ok = shortcut_paths(env.robot, env.world, paths, lengths, 0.3)
+    o2, n2, ok2 = (np.asarray(x) for x in shortcut(env.robot, env.world, paths, lengths, 0.3))
+    np.testing.assert_array_equal(n, n2)
+    np.testing.assert_array_equal(ok, ok2)
+    np.testing.assert_array_equal(out, o2[:, :out.shape[1]])
+    assert np.isnan(o2[:, out.shape[1]:]).all()
 
 
 def test_bad_shapes_rejected():

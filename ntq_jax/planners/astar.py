@@ -34,7 +34,7 @@ from ntq_jax.planners.jps import (MAX_OPEN_CAPACITY, MAX_QUERIES_PER_CALL, cells
                                   search)
 from ntq_jax.planners.options import (bool_option, check_option_names, float_option, int_option,
                                       motion_check_option, unsupported_robot)
-from ntq_jax.planners.smoothing import shortcut_paths
+from ntq_jax.planners.smoothing import SHORTCUT_GROUP, shortcut_paths
 from ntq_jax.planners.verify import finalize, valid_queries
 from ntq_jax.robots.batch import steer_to_pairs, valid_states
 from ntq_jax.types import PlanResult, PlanStatus
@@ -389,7 +389,7 @@ def _check_astar_options(options: dict) -> None:
 
 
 def plan_astar(env, queries, *, padding: float, seed: int = 0, resolution: float = 0.1,
-               smooth: bool = True, chunk_size: int = 1024, smooth_chunk: int = 128,
+               smooth: bool = True, chunk_size: int = 1024, smooth_chunk: int = SHORTCUT_GROUP,
                check: str = "discretized", **astar_options) -> PlanResult:
     """Grid A* + shortcutting for a 2-D configuration space (the registry's ``"astar"``).
 
@@ -404,8 +404,8 @@ def plan_astar(env, queries, *, padding: float, seed: int = 0, resolution: float
             on a map imported from a grid: A* plans on the map's own cells
             (:func:`map_grid`).
         smooth: shortcut the grid paths (greedy farthest-visible rule).
-        chunk_size: queries per :func:`astar` call; ``smooth_chunk``: paths per
-            shortcutting call.
+        chunk_size: queries per :func:`astar` call; ``smooth_chunk``: paths shortcut
+            together (:func:`~ntq_jax.planners.smoothing.shortcut_paths`' ``chunk_size``).
         check: the motion check of the snapping, the shortcuts and the final
             verification (see :func:`ntq_jax.robots.batch.motion_check`).
         **astar_options: :func:`astar` options (``open_capacity``, ``max_path_len``, ...).

@@ -47,7 +47,7 @@ from ntq_jax.planners.env_cache import EnvCache
 from ntq_jax.planners.graph_search import (QueryEdges, heuristic_metric, search_graph,
                                            shortest_paths)
 from ntq_jax.planners.options import bool_option, int_option, motion_check_option
-from ntq_jax.planners.smoothing import shortcut_paths
+from ntq_jax.planners.smoothing import SHORTCUT_GROUP, shortcut_paths
 from ntq_jax.planners.verify import finalize, valid_queries
 from ntq_jax.queries import sample_states
 from ntq_jax.robots.batch import distances, steer_to_pairs
@@ -237,7 +237,7 @@ def _pack(paths: list[np.ndarray | None], d: int) -> tuple[np.ndarray, np.ndarra
 def plan_roadmap(env, queries, *, padding: float | None = None, seed: int = 0,
                  milestones: int = DEFAULT_MILESTONES, k: int | None = None,
                  grow_rounds: int = 2, roadmap_seed: int = 0, smooth: bool = True,
-                 smooth_chunk: int = 128, cache_dir: str | Path | None = None,
+                 smooth_chunk: int = SHORTCUT_GROUP, cache_dir: str | Path | None = None,
                  threads: int | None = None, check: str = "discretized") -> PlanResult:
     """Plans every query on the environment's roadmap (the registry's ``"roadmap"``).
 
@@ -252,7 +252,8 @@ def plan_roadmap(env, queries, *, padding: float | None = None, seed: int = 0,
             (None: :func:`prm_star_k`).
         grow_rounds: extra rounds on larger roadmaps for unconnected queries.
         roadmap_seed: seed of the milestone sample.
-        smooth: shortcut the roadmap paths; ``smooth_chunk``: paths per call.
+        smooth: shortcut the roadmap paths; ``smooth_chunk``: paths shortcut together
+            (:func:`~ntq_jax.planners.smoothing.shortcut_paths`' ``chunk_size``).
         cache_dir: a folder to keep built roadmaps in (reused when the map, robot,
             padding and settings match).
         threads: search threads (None: the CPU count); the result does not depend on it.

@@ -17,15 +17,16 @@ itself blocked (the input was not feasible) and nothing further is visible, the
 rule keeps ``i + 1`` anyway and the path is flagged ``ok = False``; callers must
 not report such a path as solved.
 
-Vectorisation: a batch of ``B`` NaN-padded paths ``(B, L, d)`` with lengths
-``(B,)`` is shortcut in one ``lax.while_loop``; each iteration checks, for every
-path, the connections from its current waypoint to all ``L`` waypoints (masked
-to the later ones) as one coordinate-major batch of ``B * L`` segments through
-:func:`ntq_jax.robots.batch.steer_to_cm`, and stops when every path reached its
-goal. Shapes are static: :func:`shortcut_paths` runs any batch in chunks of a
-fixed size with the path buffer padded to a power of two, so one program
-serves many calls. :func:`shortcut_batch` is the traceable core (the neural
-planner calls it inside its own jitted code). Measurements: BENCHMARKS.md.
+Vectorisation: :func:`shortcut_paths` (the host entry point every planner uses)
+runs the rule in rounds: each round checks, for every path not yet at its goal,
+the connections from its current waypoint to all its later waypoints, the
+connections of all paths in one call of :func:`ntq_jax.robots.batch.steer_to_pairs`
+(the motion check's one shared compiled program), so shortcutting adds no
+program of its own. :func:`shortcut_batch` is the traceable core for jitted
+callers (the neural planner): the same rule in one ``lax.while_loop`` over a
+batch of ``B`` NaN-padded paths ``(B, L, d)``, each iteration checking ``B * L``
+masked connections through :func:`ntq_jax.robots.batch.steer_to_cm`. Both make
+exactly the same checks and keep the same waypoints.
 """
 
 from __future__ import annotations
@@ -35,11 +36,13 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-from ntq_jax.batching import bucket_size, padded_chunks
 from ntq_jax.geometry import KERNEL_COMPILER_OPTIONS, World
-from ntq_jax.robots.batch import steer_to_cm
+from ntq_jax.robots.batch import steer_to_cm, steer_to_pairs
 
 Array = jax.Array
+
+#: Paths shortcut together by :func:`shortcut_paths` (bounds the connections of one round).
+SHORTCUT_GROUP = 4096
 
 
 def shortcut_batch(robot, world: World, paths: Array, lengths: Array, padding: float,
@@ -103,20 +106,25 @@ shortcut.__doc__ = shortcut_batch.__doc__
 
 
 def shortcut_paths(robot, world: World, paths, lengths, padding: float, *,
-                   chunk_size: int = 128, check: str = "discretized") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                   chunk_size: int = SHORTCUT_GROUP, check: str = "discretized"
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Shortcuts a batch of NaN-padded paths (greedy farthest-visible rule), any batch size.
 
-    The batch is processed in chunks of exactly ``chunk_size`` paths (the last
-    one padded with empty paths) and the path buffer is padded to a power of
-    two >= 16 (from the longest path of the batch), so repeated calls reuse
-    one compiled program per buffer size.
+    The same rule and the same waypoints as :func:`shortcut_batch`, driven from the
+    host: in each round, every path not yet at its goal checks the connections
+    from its current waypoint to all its later waypoints, and the connections of
+    all paths of a group go through :func:`ntq_jax.robots.batch.steer_to_pairs`
+    together (its one compiled program per robot, map, padding and check, shared
+    with every other caller), so shortcutting compiles nothing of its own. A
+    round's answers are exactly those of the check the traced core makes.
 
     Args:
         robot, world: the geometry.
         paths: ``(B, L, d)`` waypoints, start first; rows after ``lengths[b]`` are ignored.
         lengths: ``(B,)`` int waypoint counts.
         padding: planning clearance (a number).
-        chunk_size: paths per jitted call.
+        chunk_size: paths shortcut together (a round checks at most
+            ``chunk_size * L`` connections at once); the answers do not depend on it.
         check: the motion check (see :func:`ntq_jax.robots.batch.motion_check`).
 
     Returns:
@@ -137,16 +145,44 @@ def shortcut_paths(robot, world: World, paths, lengths, padding: float, *,
     if chunk < 1:
         raise ValueError(f"chunk_size must be >= 1, got {chunk_size}")
     n_in = np.clip(n_in, 0, p.shape[1]).astype(np.int32)
-    lp = bucket_size(int(n_in.max()), 16)
-    buf = np.full((bsz, lp, d), np.nan, np.float32)  # the path buffer of every chunk
-    w = min(lp, p.shape[1])
-    buf[:, :w] = p[:, :w]
-    # padding rows are empty paths (length 0): never checked, dropped below
-    pending = [(m, shortcut(robot, world, jnp.asarray(b), jnp.asarray(n), padding, check))
-               for _, m, (b, n), _ in padded_chunks([buf, n_in], chunk, fill=0)]
-    out, n_out, ok = (np.concatenate([np.asarray(r[i])[:m] for m, r in pending]) for i in range(3))
+    keep = np.full((bsz, max(1, p.shape[1])), -1, np.int64)  # kept waypoint indices per path
+    n_out, ok = np.minimum(n_in, 1), np.ones(bsz, bool)
+    keep[:, 0] = 0
+    for lo in range(0, bsz, chunk):
+        rows = np.arange(lo, min(lo + chunk, bsz))
+        _greedy_rounds(robot, world, p, n_in, rows, keep, n_out, ok, padding, check)
+    n_out = np.where(n_in <= 1, n_in, n_out).astype(np.int32)
     width = max(2, int(n_out.max()))
-    return out[:, :width], n_out, ok
+    cols = np.arange(width)
+    take = np.clip(keep[:, :width], 0, None)
+    if take.shape[1] < width:
+        take = np.pad(take, ((0, 0), (0, width - take.shape[1])))
+    out = np.take_along_axis(p, take[:, :, None], axis=1) if p.shape[1] else np.zeros((bsz, width, d), np.float32)
+    out = np.where((cols[None, :] < n_out[:, None])[:, :, None], out, np.float32(np.nan))
+    return out.astype(np.float32), n_out, ok
+
+
+def _greedy_rounds(robot, world, p, n_in, rows, keep, n_out, ok, padding, check):
+    """The rounds of :func:`shortcut_paths` for the paths ``rows`` (updates ``keep``,
+    ``n_out`` and ``ok`` in place)."""
+    cur = np.zeros(len(rows), np.int64)
+    live = n_in[rows] > 1
+    while live.any():
+        r, c = rows[live], cur[live]
+        count = n_in[r] - 1 - c  # the later waypoints of each live path
+        owner = np.repeat(np.arange(len(r)), count)
+        j = c[owner] + 1 + (np.arange(owner.size) - np.repeat(np.cumsum(count) - count, count))
+        vis = steer_to_pairs(robot, world, p[r[owner], c[owner]], p[r[owner], j], padding,
+                             check=check)
+        far = np.full(len(r), -1, np.int64)
+        np.maximum.at(far, owner[vis], j[vis])
+        seen = far > c
+        nxt = np.where(seen, far, c + 1)
+        ok[r] &= seen
+        keep[r, n_out[r]] = nxt
+        n_out[r] += 1
+        cur[live] = nxt
+        live[live] = nxt < n_in[r] - 1
 
 
 def shortcut_reference(steer, path: np.ndarray) -> tuple[np.ndarray, bool]:

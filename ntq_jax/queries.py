@@ -34,7 +34,7 @@ import numpy as np
 from ntq_jax import prng
 from ntq_jax.validation import check_count, check_padding, check_probability
 from ntq_jax.geometry import KERNEL_COMPILER_OPTIONS, World
-from ntq_jax.robots.batch import is_valid_cm, steer_to_cm, steer_to_pairs
+from ntq_jax.robots.batch import is_valid_cm, steer_to_cm, steer_to_pairs, valid_states
 from ntq_jax.stats import wilson_interval
 
 Array = jax.Array
@@ -56,12 +56,20 @@ class FreeSpaceTooSmall(ValueError):
 # Uniform valid states
 # ---------------------------------------------------------------------------
 
-@functools.partial(jax.jit, static_argnames=("robot", "padding", "size"))
-def _state_block(robot, world: World, key: Array, padding: float, size: int):
+@functools.partial(jax.jit, static_argnames=("robot", "size"))
+def _uniform_block(robot, world: World, key: Array, size: int) -> Array:
+    """``(size, d)`` states uniform on the robot's configuration box."""
     lo, hi = robot.config_bounds(world)
     u = jax.random.uniform(key, (robot.dim, size), jnp.float32)
-    cand = lo[:, None] + u * (hi - lo)[:, None]
-    return cand.T, is_valid_cm(robot, world, cand, padding)
+    return (lo[:, None] + u * (hi - lo)[:, None]).T
+
+
+def _state_block(robot, world: World, key: Array, padding: float, size: int):
+    """A block of uniform candidates and their validity (host arrays); the validity by
+    :func:`ntq_jax.robots.batch.valid_states`, whose compiled program every other
+    validity check of the robot, map and padding shares."""
+    cand = np.asarray(_uniform_block(robot, world, key, size))
+    return cand, valid_states(robot, world, cand, padding)
 
 
 def valid_state_stream(robot, world: World, key: Array, padding: float):
@@ -83,7 +91,7 @@ def valid_state_stream(robot, world: World, key: Array, padding: float):
                 f"no valid state among {drawn} uniform samples (padding={padding}): the free "
                 "space is empty or too small to sample; reduce the padding or the obstacles")
         if ok.any():
-            yield np.asarray(cand)[ok]
+            yield cand[ok]
     raise FreeSpaceTooSmall(f"only {accepted} valid states among {drawn} samples "
                             f"(padding={padding}); the free space is too small to sample")
 

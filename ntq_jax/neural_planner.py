@@ -295,7 +295,8 @@ def padded_world(world: World, multiple: int = 16) -> World:
 
 def plan_batch(env, pnet: Callable, queries, key: Array,
                opts: PlannerOptions = PlannerOptions(), *, chunk: int = 1024,
-               repair_width: int = 256, pad_obstacles: int = 0) -> NeuralPlanResult:
+               repair_width: int = 256, pad_obstacles: int = 0,
+               rows: int | None = None) -> NeuralPlanResult:
     """Plans every query with the neural planner (all of a chunk in one jitted call).
 
     1. **Coarse plan** (Alg. 1, lines 2-9): for ``n_plan`` iterations, if
@@ -335,6 +336,11 @@ def plan_batch(env, pnet: Callable, queries, key: Array,
         repair_width: batch width of the replanning calls (rounded to a power of two).
         pad_obstacles: if > 0, pad the obstacle lists to a multiple of it
             (:func:`padded_world`) so maps with similar counts share one compilation.
+        rows: plan with the compiled shapes (chunk and replanning widths) of a batch
+            of ``max(rows, K)`` queries (default ``K``). The shapes also lay out the
+            dropout masks, so the result is that of the batch size they are taken
+            from; a caller planning subsets of one batch passes its size, and every
+            subset reuses the batch's programs.
 
     Returns:
         A :class:`NeuralPlanResult` with paths trimmed to the longest one.
@@ -346,7 +352,9 @@ def plan_batch(env, pnet: Callable, queries, key: Array,
     q = _check_inputs(env, queries, opts, chunk)
     world = padded_world(env.world, pad_obstacles) if pad_obstacles > 0 else env.world
     stages = Stages(env.robot, opts, world, as_pnet(pnet))
-    b = _plan(stages, q, key, chunk, repair_width, members=1)
+    if rows is not None:
+        check_count("rows", rows, 1)
+    b = _plan(stages, q, key, chunk, repair_width, members=1, rows=rows)
     return _result(env.robot, b, stages, slice(None))
 
 
@@ -394,10 +402,11 @@ def plan_cascade(env, pnets, queries, key: Array, opts: PlannerOptions = Planner
     """The PNets as fallbacks: the first plans every query, the next the queries still
     unsolved, and so on; each query keeps its first success.
 
-    Attempt ``j`` is :func:`plan_batch` with ``pnets[order[j]]`` and key
-    ``fold_in(key, j)`` on the queries no earlier attempt solved (a smaller batch:
-    its first use of a batch size compiles the coarse plan and the neural connection
-    for it, once per process; the check stage has one size). A query
+    Attempt ``j`` is :func:`plan_batch` with ``pnets[order[j]]``, key
+    ``fold_in(key, j)`` and ``rows=K`` on the queries no earlier attempt solved: a
+    smaller batch planned with the shapes of the whole batch of ``K`` queries, so
+    every attempt runs the programs the member's own ``plan_batch`` on the ``K``
+    queries compiles, and the cascade compiles nothing more. A query
     succeeds iff one of its attempts succeeds; its path, cost and cause are that
     attempt's. A query no attempt solves keeps the failure closest to a success
     (:data:`ntq_jax.types.CAUSE_RANK`; ties: the earliest attempt). The work
@@ -439,7 +448,7 @@ def plan_cascade(env, pnets, queries, key: Array, opts: PlannerOptions = Planner
         if not len(left):
             break
         res = plan_batch(env, pnets[m], q[left], fold_in(key, j), opts, chunk=chunk,
-                         repair_width=repair_width)
+                         repair_width=repair_width, rows=k)
         seconds, compile_seconds = seconds + res.seconds, compile_seconds + res.compile_seconds
         calls[left] += res.pnet_calls
         replans[left] += res.replans
@@ -468,10 +477,11 @@ def _check_inputs(env, queries, opts: PlannerOptions, chunk: int) -> np.ndarray:
 
 
 def _plan(stages: Stages, q: np.ndarray, key, chunk: int, repair_width: int,
-          members: int) -> _Batch:
-    """Steps 1-4 of :func:`plan_batch` for ``members`` planners side by side."""
+          members: int, rows: int | None = None) -> _Batch:
+    """Steps 1-4 of :func:`plan_batch` for ``members`` planners side by side (``rows``:
+    the batch size that sets the compiled shapes, default ``len(q)``)."""
     opts = stages.opts
-    size = bucket_size(min(len(q), chunk))
+    size = bucket_size(min(len(q) if rows is None else max(len(q), rows), chunk))
     width = bucket_size(min(repair_width, size))
     b = _Batch.empty(members * len(q), opts.max_len, q.shape[2], members)
     k_coarse, k_rep = split2(key)

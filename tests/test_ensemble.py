@@ -258,7 +258,7 @@ def test_cascade_keeps_the_first_success_and_replans_only_the_failures():
     a0 = plan_batch(env, nets[0], q, jax.random.fold_in(key, 0), OPTS)
     left = np.flatnonzero(~a0.success)
     assert a0.success[4] and len(left) == 4  # the stay-put member solves only the free query
-    a1 = plan_batch(env, nets[1], q[left], jax.random.fold_in(key, 1), OPTS)
+    a1 = plan_batch(env, nets[1], q[left], jax.random.fold_in(key, 1), OPTS, rows=len(q))
     left2 = left[~a1.success]
     assert res.success.all() and res.member[4] == 0
     np.testing.assert_array_equal(res.member[left[a1.success]], 1)
@@ -279,3 +279,24 @@ def test_cascade_keeps_the_first_success_and_replans_only_the_failures():
         with pytest.raises(ValueError, match="order"):
             plan_cascade(env, nets, q, key, OPTS, order=bad)
 
+
+
+def test_cascade_compiles_nothing_beyond_its_members_programs():
+    """Each attempt plans its (smaller) batch with the whole batch's shapes: once every
+    member planned the K queries on its own, the cascade adds no compiled stage."""
+    from ntq_jax import neural_steps
+    from ntq_jax.neural_planner import plan_cascade
+    env = make("wall")
+    q = np.asarray([[[2, 5], [8, 5]], [[1, 1], [9, 6]], [[4, 9], [6, 1]], [[2, 2], [8, 8]],
+                    [[3, 3], [3.5, 3.5]], [[1, 8], [9, 2]], [[2, 6], [8, 4]], [[7, 2], [7.5, 2.5]],
+                    [[2, 8], [2.5, 8.5]], [[7, 7], [7.5, 7.5]]], np.float32)
+    nets = [pnet("wall", SEEKER, sigma=s) for s in (0.05, 0.7, 1.5)]  # 10 queries, then 8 or fewer
+    key = jax.random.key(4)
+    for net in nets:
+        plan_batch(env, net, q, key, OPTS)
+    before = set(neural_steps._COMPILED)
+    res = plan_cascade(env, nets, q, key, OPTS)
+    assert set(neural_steps._COMPILED) <= before
+    assert len(np.unique(res.member)) > 1  # later members did plan smaller batches
+    with pytest.raises(ValueError, match="rows"):
+        plan_batch(env, nets[0], q, key, OPTS, rows=0)

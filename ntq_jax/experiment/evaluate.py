@@ -84,7 +84,7 @@ EVAL_TAG = 0x7E57  # key tag of the test queries (training uses other streams)
 ENSEMBLE = "ens"  # model id of the ensemble neural planner (row PNet_ens)
 CASCADE = "cascade"  # model id of the members as fallbacks (row PNet_cascade)
 VALIDATION_TAG = EVAL_TAG + 5  # key tag of the cascade's validation queries
-CASCADE_VERSION = 3  # in the cascade cells' fingerprint: bump when plan_cascade's results change
+CASCADE_VERSION = 4  # in the cascade cells' fingerprint: bump when plan_cascade's results change
 
 
 def task_of(env) -> str:

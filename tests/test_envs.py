@@ -255,20 +255,27 @@ def test_numpy_input_shape_errors():
 
 
 def test_varying_batch_sizes_share_compiled_programs():
-    """Env.steer_to / is_valid / distance pad a batch to a power-of-two bucket: sizes 65..128
-    compile once, and every answer equals the per-row one."""
+    """Env.steer_to and is_valid run batches of 65 rows up to one chunk through the shared
+    chunk programs of steer_to_pairs / valid_states, distance pads to power-of-two buckets:
+    sizes 65..2048 compile at most one program of each, and every answer equals the one the
+    bucketed kernels give the whole batch."""
     from ntq_jax.robots import batch as B
-    env = nj.make_env("point/3")
-    s = np.asarray(env.sample_states(jax.random.key(7), 260), np.float32)
-    before = (B._steer_to_batch._cache_size(), B.is_valid_batch._cache_size(),
-              B.distance_batch._cache_size())
-    outs = {n: (np.asarray(env.steer_to(s[:n], s[130:130 + n])), np.asarray(env.is_valid(s[:n])),
-                np.asarray(env.distance(s[:n], s[130:130 + n]))) for n in (65, 77, 100, 128)}
-    after = (B._steer_to_batch._cache_size(), B.is_valid_batch._cache_size(),
-             B.distance_batch._cache_size())
-    assert all(a - b <= 1 for a, b in zip(after, before)), (before, after)
-    for n, (st, va, di) in outs.items():
-        assert st.shape == va.shape == di.shape == (n,)
-        np.testing.assert_array_equal(st, outs[128][0][:n])
-        np.testing.assert_array_equal(va, outs[128][1][:n])
-        np.testing.assert_array_equal(di, outs[128][2][:n])
+    env = nj.make_env("rigid/0")
+    s = np.asarray(env.sample_states(jax.random.key(7), 4200), np.float32)
+    a, b = s[:2048], s[2100:4148]
+    programs = (B._steer_masked, B.is_valid_batch, B.distance_batch, B._steer_to_batch)
+    env.steer_to(a[:65], b[:65]), env.is_valid(a[:65]), env.distance(a[:65], b[:65])
+    before = [f._cache_size() for f in programs]
+    outs = {n: (np.asarray(env.steer_to(a[:n], b[:n])), np.asarray(env.is_valid(a[:n])),
+                np.asarray(env.distance(a[:n], b[:n]))) for n in (77, 100, 128, 1000, 2048)}
+    after = [f._cache_size() for f in programs]
+    assert after[0] == before[0] and after[1] == before[1] and after[3] == before[3], (before, after)
+    assert after[2] - before[2] <= 4  # 128, 1024, 2048 (77 and 100 share 128's bucket)
+    ref = (np.asarray(B.steer_to_batch(env.robot, env.world, a, b, env.padding)),
+           np.asarray(B.is_valid_batch(env.robot, env.world, a, env.padding)),
+           np.asarray(B.distance_batch(env.robot, a, b)))
+    assert ref[0].any() and not ref[0].all()
+    for n, got in outs.items():
+        for g, r in zip(got, ref):
+            assert g.shape == (n,)
+            np.testing.assert_array_equal(g, r[:n])

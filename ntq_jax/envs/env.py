@@ -191,7 +191,10 @@ class Env:
         float32 C-contiguous NumPy array is read in place, without a copy to the
         device; for NumPy input the call returns once the answer is computed, so
         the array may be modified afterwards. Other float dtypes and layouts are
-        converted to float32 (round to nearest) first.
+        converted to float32 (round to nearest) first. Compiled programs: one for
+        up to ``BUCKET_MIN_ROWS`` states, :func:`~ntq_jax.robots.batch.valid_states`'
+        shared chunk program up to :data:`~ntq_jax.robots.batch.CHECK_CHUNK`, and
+        one per power of two above.
         """
         p = self.resolve_padding(padding)
         host = self._host_states(states)
@@ -201,6 +204,8 @@ class Env:
                                                ).block_until_ready()
         x = self._states(states, "states")
         n = x.shape[0]
+        if _shared(n, _batch.CHECK_CHUNK, x):
+            return jnp.asarray(_batch.valid_states(self.robot, self.world, np.asarray(x), p))
         return is_valid_batch(self.robot, self.world, _bucketed(x), p)[:n]
 
     def steer_to(self, a, b, padding: float | None = None, check: str = "discretized") -> Array:
@@ -213,7 +218,11 @@ class Env:
         check runs in padded chunks of
         :data:`ntq_jax.robots.batch.CERTIFIED_CHUNK` rows (the program
         :func:`ntq_jax.robots.batch.steer_to_pairs` uses too), so every batch
-        size shares one compiled shape.
+        size shares one compiled shape. The discretised check compiles one
+        program for batches of up to ``BUCKET_MIN_ROWS`` pairs, shares
+        :func:`~ntq_jax.robots.batch.steer_to_pairs`' chunk program for up to
+        :data:`~ntq_jax.robots.batch.STEER_CHUNK`, and pads larger batches to a
+        power of two (one program per size class).
 
         ``a`` and ``b`` may be JAX arrays, NumPy arrays or nested lists; the
         answer is a JAX array in every case. Large float32 C-contiguous NumPy
@@ -236,6 +245,9 @@ class Env:
         if a.shape != b.shape:
             raise ValueError(f"a and b must have the same shape, got {a.shape} and {b.shape}")
         n = a.shape[0]
+        if _shared(n, _batch.STEER_CHUNK, a, b):
+            return jnp.asarray(_batch.steer_to_pairs(self.robot, self.world, np.asarray(a),
+                                                     np.asarray(b), p, check=check))
         return steer_to_batch(self.robot, self.world, _bucketed(a), _bucketed(b), p, check)[:n]
 
     def _certified(self, a, b, padding: float) -> Array:
@@ -397,6 +409,16 @@ class Env:
 #: Batches of the device path are padded to the next power of two of at least this many
 #: rows: a user's varying batch sizes compile a handful of programs, not one per size.
 BUCKET_MIN_ROWS = 64
+
+
+def _shared(n: int, chunk: int, *xs) -> bool:
+    """Whether a batch of ``n`` rows goes through the shared chunk program of
+    :mod:`ntq_jax.robots.batch` (``chunk`` rows, the same one the planners and data
+    generation run): more rows than the smallest bucket, at most one chunk, and
+    concrete arrays (not traced inside a caller's ``jit``). Batches of other sizes
+    are padded to :func:`_bucketed` sizes. The answers do not depend on the route."""
+    return (BUCKET_MIN_ROWS < n <= chunk
+            and not any(isinstance(x, jax.core.Tracer) for x in xs))
 
 
 def _bucketed(x: Array) -> Array:

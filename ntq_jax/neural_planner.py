@@ -336,11 +336,9 @@ def plan_batch(env, pnet: Callable, queries, key: Array,
         repair_width: batch width of the replanning calls (rounded to a power of two).
         pad_obstacles: if > 0, pad the obstacle lists to a multiple of it
             (:func:`padded_world`) so maps with similar counts share one compilation.
-        rows: plan with the compiled shapes (chunk and replanning widths) of a batch
-            of ``max(rows, K)`` queries (default ``K``). The shapes also lay out the
-            dropout masks, so the result is that of the batch size they are taken
-            from; a caller planning subsets of one batch passes its size, and every
-            subset reuses the batch's programs.
+        rows: plan with the compiled shapes of a batch of ``max(rows, K)`` queries
+            (default ``K``; they also lay out the dropout masks): subsets of one batch
+            planned with its size reuse its programs.
 
     Returns:
         A :class:`NeuralPlanResult` with paths trimmed to the longest one.
@@ -352,8 +350,7 @@ def plan_batch(env, pnet: Callable, queries, key: Array,
     q = _check_inputs(env, queries, opts, chunk)
     world = padded_world(env.world, pad_obstacles) if pad_obstacles > 0 else env.world
     stages = Stages(env.robot, opts, world, as_pnet(pnet))
-    if rows is not None:
-        check_count("rows", rows, 1)
+    rows = 0 if rows is None else check_count("rows", rows, 1)
     b = _plan(stages, q, key, chunk, repair_width, members=1, rows=rows)
     return _result(env.robot, b, stages, slice(None))
 
@@ -403,10 +400,8 @@ def plan_cascade(env, pnets, queries, key: Array, opts: PlannerOptions = Planner
     unsolved, and so on; each query keeps its first success.
 
     Attempt ``j`` is :func:`plan_batch` with ``pnets[order[j]]``, key
-    ``fold_in(key, j)`` and ``rows=K`` on the queries no earlier attempt solved: a
-    smaller batch planned with the shapes of the whole batch of ``K`` queries, so
-    every attempt runs the programs the member's own ``plan_batch`` on the ``K``
-    queries compiles, and the cascade compiles nothing more. A query
+    ``fold_in(key, j)`` and ``rows=K`` on the queries no earlier attempt solved (the
+    shapes of all ``K``: the member's own programs, nothing more compiles). A query
     succeeds iff one of its attempts succeeds; its path, cost and cause are that
     attempt's. A query no attempt solves keeps the failure closest to a success
     (:data:`ntq_jax.types.CAUSE_RANK`; ties: the earliest attempt). The work
@@ -477,11 +472,11 @@ def _check_inputs(env, queries, opts: PlannerOptions, chunk: int) -> np.ndarray:
 
 
 def _plan(stages: Stages, q: np.ndarray, key, chunk: int, repair_width: int,
-          members: int, rows: int | None = None) -> _Batch:
-    """Steps 1-4 of :func:`plan_batch` for ``members`` planners side by side (``rows``:
-    the batch size that sets the compiled shapes, default ``len(q)``)."""
+          members: int, rows: int = 0) -> _Batch:
+    """Steps 1-4 of :func:`plan_batch` for ``members`` planners side by side, with the
+    compiled shapes of ``max(len(q), rows)`` queries."""
     opts = stages.opts
-    size = bucket_size(min(len(q) if rows is None else max(len(q), rows), chunk))
+    size = bucket_size(min(max(len(q), rows), chunk))
     width = bucket_size(min(repair_width, size))
     b = _Batch.empty(members * len(q), opts.max_len, q.shape[2], members)
     k_coarse, k_rep = split2(key)

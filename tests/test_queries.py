@@ -549,7 +549,8 @@ def test_batch_kernels_compile_once_per_shape():
     rng = np.random.default_rng(0)
     for i in range(4):
         world = _world(i)  # a new map with the same obstacle counts
-        # 1024 rows: a bucket size of Env's calls, so they share the direct calls' program
+        # 1024 rows: Env's calls go through the shared chunk programs of steer_to_pairs
+        # and valid_states (one more trace each), the direct calls through their own
         a = jnp.asarray(rng.uniform(0, 10, (1024, 2)), jnp.float32)
         b = jnp.asarray(rng.uniform(0, 10, (1024, 2)), jnp.float32)
         steer_to_batch(robot, world, a, b, 0.3)
@@ -557,11 +558,15 @@ def test_batch_kernels_compile_once_per_shape():
         env = nj.Env("traced", robot, world, 0.3)
         env.steer_to(np.asarray(a), np.asarray(b))
         env.is_valid(np.asarray(a))
-    assert TRACES == {"steer_to": 1, "is_valid": 1}
+    assert TRACES == {"steer_to": 2, "is_valid": 2}
     # a new shape (or padding) compiles again, once
     steer_to_batch(robot, _world(9), a[:10], b[:10], 0.3)
     steer_to_batch(robot, _world(9), a[:10], b[:10], 0.3)
-    assert TRACES["steer_to"] == 2
+    assert TRACES["steer_to"] == 3
+    env = nj.Env("traced", robot, _world(9), 0.3)  # Env: any size of one chunk, no new trace
+    for n in (100, 3000, 8192):
+        env.steer_to(np.asarray(a[:1])[[0] * n], np.asarray(b[:1])[[0] * n])
+    assert TRACES["steer_to"] == 3
 
 
 def test_samplers_and_gamma_compile_once():

@@ -187,6 +187,8 @@ def test_numpy_input_matches_device_input(monkeypatch, min_rows):
     env = nj.Env.from_json(_DYADIC)
     n = 3 * batch.HOST_MIN_ROWS + 5
     a, b = _grid_pairs(n, seed=1)
+    split = (batch.steer_to_batch_split, batch.is_valid_batch_split, batch.distance_batch_split)
+    programs = [f._cache_size() for f in split]
     dev_a, dev_b = jax.device_put(a), jax.device_put(b)
     for padding in (0.0, None):
         want = np.asarray(env.steer_to(dev_a, dev_b, padding=padding))
@@ -214,6 +216,8 @@ def test_numpy_input_matches_device_input(monkeypatch, min_rows):
             np.testing.assert_array_equal(np.asarray(env.distance(x, y)), dist, err_msg=name)
             for v, w in zip((x, y), before):
                 np.testing.assert_array_equal(np.asarray(v), w, err_msg=f"{name}: input modified")
+    # every row phase (the split's k) runs one compiled program per padding and size
+    assert [f._cache_size() - c for f, c in zip(split, programs)] == [2, 2, 1]
 
 
 def test_numpy_input_may_be_modified_after_the_call(monkeypatch):

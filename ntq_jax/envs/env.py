@@ -199,8 +199,8 @@ class Env:
         p = self.resolve_padding(padding)
         host = self._host_states(states)
         if host is not None:
-            k, (head,), (bulk,) = host
-            return _batch.is_valid_batch_split(self.robot, self.world, head, bulk, p, k
+            k, (edge,), (bulk,) = host
+            return _batch.is_valid_batch_split(self.robot, self.world, edge, bulk, p, k
                                                ).block_until_ready()
         x = self._states(states, "states")
         n = x.shape[0]

@@ -147,10 +147,11 @@ def distances(robot, a, b, chunk: int = CHECK_CHUNK) -> np.ndarray:
 # HOST_ALIGN-byte boundary is handed to XLA without a copy; any other array is
 # copied first, which for large batches costs several times the kernel itself.
 # Arrays from NumPy's allocator usually start 16 bytes past such a boundary, so
-# the rows are split: the first ``k < HOST_HEAD`` rows (a small copy, padded to
-# HOST_HEAD rows so that one shape serves every ``k``) and the rest, which
-# starts on the boundary and is used in place. One compiled call evaluates both
-# parts and concatenates the answers.
+# the rows are split: the first ``k < HOST_HEAD`` rows and the last
+# ``HOST_HEAD - k`` (small copies, in one ``(2 HOST_HEAD, d)`` edge array) and the
+# ``N - HOST_HEAD`` rows between, which start on the boundary and are used in
+# place. ``k`` is traced, so every alignment shares one compiled program per
+# ``N``: one call evaluates both parts and puts the answers back in row order.
 
 HOST_ALIGN = 64  # bytes
 HOST_HEAD = 16  # rows: a row of 4*d bytes reaches the boundary within 16 rows
@@ -186,12 +187,16 @@ def host_rows(x, dim: int) -> np.ndarray | None:
     return out
 
 
-def split_host_rows(arrays: list[np.ndarray]) -> tuple[int, list[np.ndarray], list[Array]]:
-    """Splits same-shape ``(N, d)`` float32 C-contiguous arrays for the ``*_split`` kernels.
+def split_host_rows(arrays: list[np.ndarray]) -> tuple[Array, list[np.ndarray], list[Array]]:
+    """Splits same-shape ``(N, d)`` float32 C-contiguous arrays (``N >= 2 HOST_HEAD``)
+    for the ``*_split`` kernels.
 
-    Returns ``(k, heads, bulks)``: ``heads[i]`` is a ``(HOST_HEAD, d)`` copy whose
-    first ``k`` rows are ``arrays[i][:k]`` (the rest zero), and ``bulks[i]`` is
-    ``arrays[i][k:]`` on the device, sharing the NumPy memory when it is aligned.
+    Returns ``(k, edges, bulks)``: ``k`` an int32 scalar in ``[0, HOST_HEAD)``;
+    ``edges[i]`` a ``(2 HOST_HEAD, d)`` copy whose rows ``0..k-1`` are
+    ``arrays[i][:k]`` and whose rows ``HOST_HEAD..2 HOST_HEAD - k - 1`` are the last
+    ``HOST_HEAD - k`` rows of ``arrays[i]`` (the rest zero); ``bulks[i]`` is
+    ``arrays[i][k:N - HOST_HEAD + k]`` on the device, sharing the NumPy memory when
+    it is aligned. :func:`join_split` puts per-row answers back in row order.
     ``k`` is chosen so that every array's bulk is aligned when possible, else the
     first array's (the others are then copied by ``jax.device_put``). The bulks
     read the callers' memory in place: wait for the results before the arrays
@@ -207,35 +212,46 @@ def split_host_rows(arrays: list[np.ndarray]) -> tuple[int, list[np.ndarray], li
     k = next((k for k in ks if all(aligned_from(x, k) for x in arrays)), None)
     if k is None:
         k = next((k for k in ks if aligned_from(arrays[0], k)), 0)
-    heads = []
+    end = n - HOST_HEAD + k
+    edges = []
     for x in arrays:
-        h = np.zeros((HOST_HEAD, d), np.float32)
-        h[:k] = x[:k]
-        heads.append(h)
-    bulks = [jax.device_put(x[k:], may_alias=True) for x in arrays]
-    return k, heads, bulks
+        e = np.zeros((2 * HOST_HEAD, d), np.float32)
+        e[:k] = x[:k]
+        e[HOST_HEAD:2 * HOST_HEAD - k] = x[end:]
+        edges.append(e)
+    bulks = [jax.device_put(x[k:end], may_alias=True) for x in arrays]
+    return np.int32(k), edges, bulks
 
 
-@functools.partial(_kernel_jit, static_argnames=("robot", "padding", "k", "check"))
-def steer_to_batch_split(robot, world: World, head_a: Array, head_b: Array, bulk_a: Array,
-                         bulk_b: Array, padding: float, k: int, check: str = "discretized") -> Array:
-    """:func:`steer_to_batch` of the rows ``head[:k]`` followed by ``bulk`` (see :func:`split_host_rows`)."""
+def join_split(edge: Array, bulk: Array, k: Array) -> Array:
+    """Per-row answers of :func:`split_host_rows`' parts (``edge`` ``(2 HOST_HEAD,)``,
+    ``bulk`` ``(N - HOST_HEAD,)``) in the rows' order, ``(N,)``."""
+    full = jax.numpy.concatenate([edge[:HOST_HEAD], bulk, edge[HOST_HEAD:]])
+    i = jax.numpy.arange(bulk.shape[0] + HOST_HEAD, dtype=jax.numpy.int32)
+    return full[jax.numpy.where(i < k, i, i + HOST_HEAD - k)]
+
+
+@functools.partial(_kernel_jit, static_argnames=("robot", "padding", "check"))
+def steer_to_batch_split(robot, world: World, edge_a: Array, edge_b: Array, bulk_a: Array,
+                         bulk_b: Array, padding: float, k: Array,
+                         check: str = "discretized") -> Array:
+    """:func:`steer_to_batch` of the rows split by :func:`split_host_rows`, in row order."""
     steer = motion_check(robot, check)
-    head = steer(head_a.T, head_b.T, world, padding)[:k]
-    return jax.numpy.concatenate([head, steer(bulk_a.T, bulk_b.T, world, padding)])
+    return join_split(steer(edge_a.T, edge_b.T, world, padding),
+                      steer(bulk_a.T, bulk_b.T, world, padding), k)
 
 
-@functools.partial(_kernel_jit, static_argnames=("robot", "padding", "k"))
-def is_valid_batch_split(robot, world: World, head: Array, bulk: Array, padding: float,
-                         k: int) -> Array:
-    """:func:`is_valid_batch` of the rows ``head[:k]`` followed by ``bulk``."""
-    return jax.numpy.concatenate([is_valid_cm(robot, world, head.T, padding)[:k],
-                            is_valid_cm(robot, world, bulk.T, padding)])
+@functools.partial(_kernel_jit, static_argnames=("robot", "padding"))
+def is_valid_batch_split(robot, world: World, edge: Array, bulk: Array, padding: float,
+                         k: Array) -> Array:
+    """:func:`is_valid_batch` of the rows split by :func:`split_host_rows`, in row order."""
+    return join_split(is_valid_cm(robot, world, edge.T, padding),
+                      is_valid_cm(robot, world, bulk.T, padding), k)
 
 
-@functools.partial(_kernel_jit, static_argnames=("robot", "k"))
-def distance_batch_split(robot, head_a: Array, head_b: Array, bulk_a: Array, bulk_b: Array,
-                         k: int) -> Array:
-    """:func:`distance_batch` of the rows ``head[:k]`` followed by ``bulk``."""
+@functools.partial(_kernel_jit, static_argnames=("robot",))
+def distance_batch_split(robot, edge_a: Array, edge_b: Array, bulk_a: Array, bulk_b: Array,
+                         k: Array) -> Array:
+    """:func:`distance_batch` of the rows split by :func:`split_host_rows`, in row order."""
     dist = jax.vmap(robot.distance, in_axes=(1, 1))
-    return jax.numpy.concatenate([dist(head_a.T, head_b.T)[:k], dist(bulk_a.T, bulk_b.T)])
+    return join_split(dist(edge_a.T, edge_b.T), dist(bulk_a.T, bulk_b.T), k)

@@ -354,9 +354,11 @@ def report(results: Path) -> Path:
             lines.append(f"| {c['map']} | {c['data']} | {c['budget']} | {c['train_seed']} | "
                          f"{kind} | {'yes' if steer else 'no'} | {model} | " + " | ".join(cellf)
                          + " |")
-    path = results / "README.md"
     from ntq_jax import artifacts
-    artifacts.write_text(path, "\n".join(lines) + "\n")
+    from ntq_jax.experiment import factor_table
+    lines += [""] + factor_table.decomposition(factor_table.load_cells(results))
+    path = results / "README.md"
+    artifacts.write_text(path, "\n".join(lines).rstrip("\n") + "\n")
     return path
 
 

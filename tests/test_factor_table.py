@@ -18,7 +18,7 @@ def _cell(root, map_, data, budget, seed, nt_diff, nt_p):
     rows = [_row("PNet_3", "nontrivial", True, b, nt_diff, nt_p) for b in F.BANDS]
     rows += [_row("PNet_3", "nontrivial", False, "all", -0.01, 0.9, base=0.06),
              _row("PNet_3", "uniform", True, "all", 0.002, 0.95),
-             _row("PNet_2", "nontrivial", True, "all", 0.3, 1e-6)]  # not PNet_3: not shown
+             _row("PNet_2", "nontrivial", True, "all", 0.3, 1e-6)]  # in the decomposition only
     folder = root / map_.replace("/", "_") / data / budget
     if seed:
         folder = folder / "seeds" / f"train_seed_{seed}"
@@ -42,7 +42,9 @@ def test_section_lists_each_cell_and_the_verdicts_per_factor(tmp_path):
     lines = F.section(tmp_path)
     text = "\n".join(lines)
     assert lines[0] == "## What decides PNet_3 vs PNet_0"
-    rows = [ln for ln in lines if ln.startswith("| rigid/0")]
+    first = lines.index("| map | data paths | budgets | seed | PNet_0 | non-trivial | in band "
+                        "| out of band | without steerTo | uniform |")
+    rows = lines[first + 2:lines.index("", first)]  # the first table (the decomposition follows)
     # sorted by map, data paths, budgets, seed; PNet_0 with / without steerTo
     assert [r.split(" | ")[1:4] for r in rows] == [["bitstar", "ours", "0"], ["bitstar", "ours", "1"],
                                                   ["shortcut", "ours", "0"]]
@@ -62,3 +64,20 @@ def test_render_includes_the_sibling_factor_study(tmp_path):
     doc = R.render(paper)
     assert "## What decides PNet_3 vs PNet_0" in doc and "`results/factors/`" in doc
     assert "What decides" not in R.render(paper, factors=tmp_path / "elsewhere")
+
+
+def test_decomposition_splits_the_difference_into_gain_and_pruning(tmp_path):
+    """PNet_3 - PNet_0 = (PNet_2 - PNet_0) + (PNet_3 - PNet_2), beside the data's density and
+    the samples pruning kept (from summary.json); cells of other budgets are left out."""
+    _cell(tmp_path, "point/0", "shortcut", "ours", 0, -0.06, 0.01)
+    _cell(tmp_path, "point/0", "shortcut", "mpnet", 0, -0.02, 0.5)
+    summary = {"datasets": {"D2": {"paths": 3000, "samples": 7120, "states_per_path": 3.3733},
+                            "D3": {"paths": 3000, "samples": 4120, "states_per_path": 3.3733}}}
+    (tmp_path / "point_0" / "shortcut" / "ours" / "summary.json").write_text(json.dumps(summary))
+    lines = F.decomposition(F.load_cells(tmp_path))
+    rows = [ln for ln in lines if ln.startswith("| point/0")]
+    # PNet_0 0.5; PNet_2 0.5 + 0.3; PNet_3 0.5 - 0.06
+    assert rows == ["| point/0 | shortcut | 0 | 3.37 | 0.58 | 0.500 | 0.800 | 0.440 | +0.300 "
+                    "| -0.360 | -0.060 |"]
+    assert "\n".join(lines) in "\n".join(F.section(tmp_path))
+    assert F.decomposition([]) == []

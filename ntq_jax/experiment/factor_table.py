@@ -17,7 +17,11 @@ Functions (pure, data only):
   p < :data:`ALPHA`) or ``0`` (not resolvable at this size).
 * :func:`section` is the Markdown section: one row per cell (PNet_3 - PNet_0
   with steerTo, on non-trivial queries in all three bands and on uniform
-  queries), then per factor level the cells' verdicts on non-trivial queries.
+  queries), then per factor level the cells' verdicts on non-trivial queries,
+  then (:func:`decomposition`) PNet_3 - PNet_0 split into the gain from
+  non-trivial queries (PNet_2 - PNet_0) and the cost of pruning (PNet_3 - PNet_2)
+  per cell of the config's budgets, beside its data paths' density and the
+  samples pruning kept (from the cell's ``summary.json``, where present).
 """
 
 from __future__ import annotations
@@ -28,7 +32,7 @@ from pathlib import Path
 from ntq_jax.experiment.claims import ALPHA
 from ntq_jax.experiment.formatting import fixed, num, p_value, signed
 
-__all__ = ["CONCLUSION", "load_cells", "sign_of", "section"]
+__all__ = ["CONCLUSION", "load_cells", "sign_of", "decomposition", "section"]
 
 CONCLUSION = "CONCLUSION.md"
 BANDS = ("all", "in_band", "out_band")
@@ -39,7 +43,13 @@ def load_cells(root) -> list[dict]:
     root = Path(root)
     if not root.is_dir():
         return []
-    cells = [json.loads(f.read_text(encoding="utf-8")) for f in root.rglob("paired.json")]
+    cells = []
+    for f in root.rglob("paired.json"):
+        cell = json.loads(f.read_text(encoding="utf-8"))
+        summary = f.with_name("summary.json")
+        if summary.is_file():  # the datasets' sizes (``datasets`` of the run's summary)
+            cell["datasets"] = json.loads(summary.read_text(encoding="utf-8")).get("datasets")
+        cells.append(cell)
     return sorted(cells, key=lambda p: (p["cell"]["map"], p["cell"]["data"],
                                         p["cell"]["budget"], p["cell"]["train_seed"]))
 
@@ -89,6 +99,36 @@ def _by_factor(cells: list[dict]) -> list[str]:
     return out + [""]
 
 
+def decomposition(cells: list[dict]) -> list[str]:
+    """PNet_3 - PNet_0 = (PNet_2 - PNet_0) + (PNet_3 - PNet_2) on non-trivial queries with
+    steerTo, per cell of the config's budgets (``ours``), with the mean states per D2 data
+    path and D3's share of D2's samples (empty when no cell has both comparisons)."""
+    rows = []
+    for c in cells:
+        cell = c["cell"]
+        r2, r3 = (_find(c, "nontrivial", "all", model=m) for m in ("PNet_2", "PNet_3"))
+        if cell["budget"] != "ours" or not r2 or not r3:
+            continue
+        p0, p2, p3 = r2["baseline_success"], r2["success"], r3["success"]
+        ds = c.get("datasets") or {}
+        d2, d3 = ds.get("D2") or {}, ds.get("D3") or {}
+        spp = fixed(d2.get("states_per_path"), 2)
+        kept = (fixed(d3["samples"] / d2["samples"], 2)
+                if num(d3.get("samples")) and num(d2.get("samples")) and d2["samples"] else "-")
+        rows.append(f"| {cell['map']} | {cell['data']} | {cell['train_seed']} | {spp} | {kept} | "
+                    f"{fixed(p0)} | {fixed(p2)} | {fixed(p3)} | {signed(p2 - p0)} | "
+                    f"{signed(p3 - p2)} | {signed(p3 - p0)} |")
+    if not rows:
+        return []
+    return ["Where PNet_3 - PNet_0 comes from (non-trivial queries with steerTo, the config's "
+            "budgets): the gain from non-trivial queries (PNet_2 - PNet_0) plus the cost of "
+            "includeData's pruning (PNet_3 - PNet_2, the same queries pruned). `states/path`: "
+            "mean states per D2 data path; `D3/D2`: the share of D2's samples pruning kept.", "",
+            "| map | data paths | seed | states/path | D3/D2 | PNet_0 | PNet_2 | PNet_3 "
+            "| PNet_2 - PNet_0 | PNet_3 - PNet_2 | PNet_3 - PNet_0 |",
+            "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|", *rows, ""]
+
+
 def section(root, label: str = "results/factors") -> list[str]:
     """The section's Markdown lines (empty when ``root`` holds no cell)."""
     cells = load_cells(root)
@@ -116,7 +156,7 @@ def section(root, label: str = "results/factors") -> list[str]:
         nt.append(_diff(_find(c, "nontrivial", "all", steer=False)))
         out.append(f"| {cell['map']} | {cell['data']} | {cell['budget']} | {cell['train_seed']} | "
                    f"{base} | " + " | ".join(nt) + f" | {_diff(_find(c, 'uniform', 'all'))} |")
-    out += [""] + _by_factor(cells)
+    out += [""] + _by_factor(cells) + decomposition(cells)
     conclusion = Path(root) / CONCLUSION
     if conclusion.is_file():
         out += [conclusion.read_text(encoding="utf-8").strip(), ""]

@@ -20,6 +20,9 @@ def test_every_cell_has_a_config_that_varies_one_factor(monkeypatch):
     fs = _script()
     cells = fs.cells()
     assert len({c.key for c in cells}) == len(cells)
+    # the point maps' dense data modes (hours of training each) are queued last
+    tail = [c for c in cells if fs.task_of(c.map) == "point" and c.data in fs.COSTLY]
+    assert tail and cells[-len(tail):] == tail
     from ntq_jax.experiment.paper import MAPS as PAPER_MAPS
     # every map of Tables I-IV is re-run by the queue (its default cell)
     assert {c.map for c in cells if c.data == fs.default_data(c.map) and c.budget == "ours"

@@ -33,7 +33,9 @@ class PlannerOptions:
             vector, angles not wrapped: the paper's text, Sec. V).
         nosteer_check: without steerTo, a reached path counts as a success only if
             every segment passes the feasibility check (True); False is the paper's
-            "only executing the lines 8 and 9" (success once the goal test passes).
+            "only executing the lines 8 and 9" (success once the goal test passes);
+            ``"states"``: only if every state of the path is valid (the segments
+            between them not checked).
         replan_rounds: neural replanning rounds (0 disables replanning).
         replan_steps: PNet predictions per repaired segment.
         bidirectional: MPNet's bidirectional coarse plan instead of Alg. 1's forward one.
@@ -51,7 +53,7 @@ class PlannerOptions:
     steer: bool = True
     delta: float = 1.0
     delta_norm: str = "robot"
-    nosteer_check: bool = True
+    nosteer_check: bool | str = True
     replan_rounds: int = 5
     replan_steps: int = 20
     bidirectional: bool = False
@@ -65,6 +67,9 @@ class PlannerOptions:
             raise ValueError(f"eval_check must be one of {MOTION_CHECKS}, got {self.eval_check!r}")
         if self.delta_norm not in DELTA_NORMS:
             raise ValueError(f"delta_norm must be one of {DELTA_NORMS}, got {self.delta_norm!r}")
+        if self.nosteer_check not in (True, False, "states"):
+            raise ValueError(f"nosteer_check must be True, False or 'states', got "
+                             f"{self.nosteer_check!r}")
         if self.n_plan < 1:
             raise ValueError(f"n_plan must be >= 1, got {self.n_plan}")
         if not (self.delta > 0 and math.isfinite(self.delta)):
@@ -89,7 +94,8 @@ class PlannerOptions:
         return PlannerOptions(
             n_plan=ev.n_plan, steer=ev.steer[0] if steer is None else bool(steer),
             delta=ev.delta, delta_norm=ev.delta_norm or "robot",
-            nosteer_check=True if ev.nosteer_check is None else bool(ev.nosteer_check),
+            nosteer_check=(True if ev.nosteer_check is None else ev.nosteer_check
+                           if ev.nosteer_check == "states" else bool(ev.nosteer_check)),
             replan_rounds=ev.replan_rounds, replan_steps=ev.replan_steps,
             bidirectional=ev.bidirectional, eval_check=ev.motion_check)
 

@@ -359,7 +359,8 @@ def _contract_and_check(robot, world, opts, p, n, mask, do_contract: bool):
 
     Returns ``(p, n, feasible, blocked)``: ``blocked (N, L-1)`` are the segments in
     collision at ``eval_padding``; ``feasible`` rows have none (without steerTo and
-    ``opts.nosteer_check`` False: every row with a state). A path of one state
+    ``opts.nosteer_check`` False: every row with a state; ``"states"``: every row whose
+    states are all valid at ``eval_padding``). A path of one state
     (without steerTo, a start within ``delta`` of the goal) has no segment and is
     feasible: its state is the query's start, already checked valid.
     """
@@ -368,8 +369,12 @@ def _contract_and_check(robot, world, opts, p, n, mask, do_contract: bool):
     free, seg = _segments(robot, world, p, n, opts.eval_padding, mask, opts.eval_check)
     blocked = seg & ~free
     feasible = mask & (n >= 1)
-    if opts.steer or opts.nosteer_check:  # else: the paper's variant, not checked
+    if opts.steer or opts.nosteer_check is True:  # else: the paper's variant, not checked
         feasible = feasible & ~jnp.any(blocked, axis=1)
+    elif opts.nosteer_check == "states":  # the waypoints only
+        num, length, d = p.shape
+        ok = is_valid_cm(robot, world, p.reshape(-1, d).T, opts.eval_padding).reshape(num, length)
+        feasible = feasible & jnp.all(ok | (jnp.arange(length)[None, :] >= n[:, None]), axis=1)
     return p, n, feasible, blocked
 
 

@@ -261,6 +261,33 @@ def test_without_steer_to_the_papers_goal_test_and_unchecked_paths():
         PlannerOptions(delta_norm="l1")
 
 
+def test_without_steer_to_states_checks_the_waypoints_only():
+    """nosteer_check="states": success needs every state of the path valid, not its segments:
+    the seeker's waypoints 1 apart step over both thin walls (success), and on the thick wall
+    one lands inside it (infeasible), where the unchecked variant calls both a success."""
+    from ntq_jax.experiment import config
+    net, env = pnet("twowalls", SEEKER), make("twowalls")
+    q = np.asarray([[[2.5, 5], [8.5, 5]]], np.float32)
+    run = {c: plan_batch(env, net, q, jax.random.key(0),
+                         PlannerOptions(n_plan=12, steer=False, delta=1.0, nosteer_check=c))
+           for c in ("states", True, False)}
+    path = run["states"].path(0)
+    assert np.asarray(env.is_valid(path)).all() and not shapely_free("twowalls", path)
+    assert run["states"].success[0] and run[False].success[0]
+    assert run[True].cause[0] == PlanCause.INFEASIBLE
+    wall = np.asarray([[[2, 5], [8, 5]]], np.float32)
+    inside = plan_batch(make("wall"), pnet("wall", SEEKER), wall, jax.random.key(0),
+                        PlannerOptions(n_plan=12, steer=False, delta=1.0, nosteer_check="states"))
+    assert not np.asarray(make("wall").is_valid(inside.path(0))).all()
+    assert inside.cause[0] == PlanCause.INFEASIBLE and not inside.success[0]
+    cfg = config.load(None, ["eval.nosteer_check=states"])
+    assert PlannerOptions.from_config(cfg.eval, steer=False).nosteer_check == "states"
+    with pytest.raises(config.ConfigError, match="nosteer_check"):
+        config.load(None, ["eval.nosteer_check=segments"])
+    with pytest.raises(ValueError, match="nosteer_check"):
+        PlannerOptions(nosteer_check="segments")
+
+
 def test_without_steer_to_a_start_within_delta_is_solved():
     """A start already within delta of the goal is reached like a last prediction would be."""
     nosteer = PlannerOptions(n_plan=12, steer=False, delta=1.0)

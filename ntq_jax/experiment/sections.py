@@ -337,7 +337,8 @@ class EvalConfig:
         nosteer_check: without steerTo, success needs every segment collision-free
             (null or true, ours); false is the paper's "only executing the lines 8
             and 9" of Alg. 1 (success once the goal test passes, the path's
-            segments not checked). Left out of the hash when null.
+            segments not checked); ``states``: every state of the path valid, its
+            segments not checked. Left out of the hash when null.
         replan_rounds: neural replanning rounds.
         replan_steps: PNet predictions per repaired segment in a replanning round.
         bidirectional: MPNet's bidirectional coarse plan instead of Alg. 1's forward one.
@@ -381,7 +382,7 @@ class EvalConfig:
     steer: tuple[bool, ...] = (True,)
     delta: float = 1.0
     delta_norm: Optional[str] = None
-    nosteer_check: Optional[bool] = None
+    nosteer_check: typing.Union[bool, str, None] = None
     replan_rounds: int = 5
     replan_steps: int = 20
     bidirectional: bool = False
@@ -413,6 +414,8 @@ class EvalConfig:
         _check(self.delta > 0, f"{p}.delta", f"must be > 0, got {self.delta}")
         _check(self.delta_norm in (None, "robot", "l2"), f"{p}.delta_norm",
                f"must be robot, l2 or null, got {self.delta_norm!r}")
+        _check(self.nosteer_check in (None, True, False, "states"), f"{p}.nosteer_check",
+               f"must be true, false, states or null, got {self.nosteer_check!r}")
         _check(self.replan_rounds >= 0, f"{p}.replan_rounds",
                f"must be >= 0, got {self.replan_rounds}")
         _check(self.replan_steps >= 1, f"{p}.replan_steps",

@@ -369,9 +369,10 @@ def _contract_and_check(robot, world, opts, p, n, mask, do_contract: bool):
     free, seg = _segments(robot, world, p, n, opts.eval_padding, mask, opts.eval_check)
     blocked = seg & ~free
     feasible = mask & (n >= 1)
-    if opts.steer or opts.nosteer_check is True:  # else: the paper's variant, not checked
+    states_only = not opts.steer and opts.nosteer_check == "states"
+    if opts.steer or (opts.nosteer_check and not states_only):  # else: the paper's, unchecked
         feasible = feasible & ~jnp.any(blocked, axis=1)
-    elif opts.nosteer_check == "states":  # the waypoints only
+    elif states_only:  # the waypoints only
         num, length, d = p.shape
         ok = is_valid_cm(robot, world, p.reshape(-1, d).T, opts.eval_padding).reshape(num, length)
         feasible = feasible & jnp.all(ok | (jnp.arange(length)[None, :] >= n[:, None]), axis=1)

@@ -94,8 +94,7 @@ class PlannerOptions:
         return PlannerOptions(
             n_plan=ev.n_plan, steer=ev.steer[0] if steer is None else bool(steer),
             delta=ev.delta, delta_norm=ev.delta_norm or "robot",
-            nosteer_check=(True if ev.nosteer_check is None else ev.nosteer_check
-                           if ev.nosteer_check == "states" else bool(ev.nosteer_check)),
+            nosteer_check=True if ev.nosteer_check is None else ev.nosteer_check,
             replan_rounds=ev.replan_rounds, replan_steps=ev.replan_steps,
             bidirectional=ev.bidirectional, eval_check=ev.motion_check)
 

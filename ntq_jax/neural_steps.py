@@ -369,14 +369,12 @@ def _contract_and_check(robot, world, opts, p, n, mask, do_contract: bool):
     free, seg = _segments(robot, world, p, n, opts.eval_padding, mask, opts.eval_check)
     blocked = seg & ~free
     feasible = mask & (n >= 1)
-    states_only = not opts.steer and opts.nosteer_check == "states"
-    if opts.steer or (opts.nosteer_check and not states_only):  # else: the paper's, unchecked
+    if opts.steer or opts.nosteer_check not in (False, "states"):
         feasible = feasible & ~jnp.any(blocked, axis=1)
-    elif states_only:  # the waypoints only
-        num, length, d = p.shape
-        ok = is_valid_cm(robot, world, p.reshape(-1, d).T, opts.eval_padding).reshape(num, length)
-        feasible = feasible & jnp.all(ok | (jnp.arange(length)[None, :] >= n[:, None]), axis=1)
-    return p, n, feasible, blocked
+    elif opts.nosteer_check == "states":  # the waypoints only
+        (ok,) = valid_core(robot, opts, world, p, n)
+        feasible = feasible & jnp.all(ok | (jnp.arange(p.shape[1])[None, :] >= n[:, None]), axis=1)
+    return p, n, feasible, blocked  # nosteer_check False: the paper's variant, unchecked
 
 
 # ---------------------------------------------------------------------------

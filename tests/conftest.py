@@ -62,12 +62,44 @@ if _PROFILE:
         _current["test"] = None
 
 
+#: Seconds each test file took in a profiled run (``NTQ_TEST_PROFILE``); refresh it by
+#: copying the run's ``file_weights.json`` here. Only the order of the files uses it.
+FILE_WEIGHTS = Path(__file__).with_name("file_weights.json")
+
+
+def pytest_collection_modifyitems(session, config, items):
+    """Heaviest files first (longest-processing-time order): with ``--dist loadfile`` and
+    ``--no-loadscope-reorder`` the workers take whole files in this order, so the last
+    files to start are the short ones and the workers finish close together. Files not in
+    :data:`FILE_WEIGHTS` keep their place after the known ones; tests within a file keep
+    theirs."""
+    try:
+        weights = json.loads(FILE_WEIGHTS.read_text())
+    except (OSError, ValueError):
+        return
+    rank = {f: i for i, f in enumerate(sorted(weights, key=lambda f: -weights[f]))}
+    items[:] = sorted(items, key=lambda it: rank.get(it.nodeid.split("::", 1)[0], len(rank)))
+
+
+def _file_weights(folder: Path) -> dict:
+    """Per-file wall seconds summed over the workers' profiles in ``folder``."""
+    out: dict = {}
+    for f in sorted(folder.glob("gw*.json")) + sorted(folder.glob("main.json")):
+        for test, row in json.loads(f.read_text()).items():
+            name = test.split("::", 1)[0]
+            out[name] = round(out.get(name, 0.0) + row.get("wall", 0.0), 1)
+    return dict(sorted(out.items(), key=lambda kv: -kv[1]))
+
+
 def pytest_unconfigure(config):
     if _PROFILE and _profile:
         out = Path(_PROFILE)
         out.mkdir(parents=True, exist_ok=True)
         worker = os.environ.get("PYTEST_XDIST_WORKER", "main")
         (out / f"{worker}.json").write_text(json.dumps(_profile, indent=1))
+    if _PROFILE and os.environ.get("PYTEST_XDIST_WORKER") is None and Path(_PROFILE).is_dir():
+        weights = _file_weights(Path(_PROFILE))  # the workers have written theirs by now
+        (Path(_PROFILE) / "file_weights.json").write_text(json.dumps(weights, indent=1) + "\n")
     folder = getattr(config, "_ntq_jit_cache", None)
     if folder:
         shutil.rmtree(folder, ignore_errors=True)

@@ -20,6 +20,8 @@ def test_maze_through_train_all(tmp_path):
     env = make_env(maze)
     assert env.grid.shape == (256, 256) and env.world.index is not None
     cfg = tmp_path / "maze.yaml"
+    # the ensemble rows: best-of-N only (from the members' saved plans); the ensemble and
+    # cascade planners' programs are the tiny_run's and test_ensemble's to compile
     cfg.write_text(f"""task: point
 envs: [{maze}]
 seed: 0
@@ -27,7 +29,8 @@ data: {{k_train: 24, gamma_queries: 2000, gamma_eval: false}}
 planner: {{name: astar, resolution: 1.0}}
 model: {{hidden: [32, 32]}}
 train: {{epochs: 2}}
-eval: {{k_test: 8, n_plan: 10, replan_rounds: 2, replan_steps: 6, gamma_queries: 2000}}
+eval: {{k_test: 8, n_plan: 10, replan_rounds: 2, replan_steps: 6, gamma_queries: 2000,
+       ensemble: [best]}}
 """)
     out = tmp_path / "run"
     r = subprocess.run([sys.executable, str(ROOT / "scripts" / "train_all.py"), "--config", str(cfg),

@@ -18,6 +18,10 @@ DELTA_NORMS = ("robot", "l2")
 ALGORITHM_VERSION = 4  # bump when planning results change (saved evaluations are then redone)
 
 
+#: The values of ``PlannerOptions.nosteer_check`` (see there).
+NOSTEER_CHECKS = (True, False, "states", "replan")
+
+
 @dataclasses.dataclass(frozen=True)
 class PlannerOptions:
     """Static settings of the neural planner (hashable: part of the compile key).
@@ -35,7 +39,11 @@ class PlannerOptions:
             every segment passes the feasibility check (True); False is the paper's
             "only executing the lines 8 and 9" (success once the goal test passes);
             ``"states"``: only if every state of the path is valid (the segments
-            between them not checked).
+            between them not checked); ``"replan"``: Alg. 1 with only the test of
+            line 4 replaced by the goal test: a path that reaches it gets the goal
+            appended (so the goal is in the path, line 10), then lines 11-14 run as
+            with steerTo (contraction, every segment checked, neural replanning,
+            whose connections use the planner's steerTo).
         replan_rounds: neural replanning rounds (0 disables replanning).
         replan_steps: PNet predictions per repaired segment.
         bidirectional: MPNet's bidirectional coarse plan instead of Alg. 1's forward one.
@@ -67,8 +75,8 @@ class PlannerOptions:
             raise ValueError(f"eval_check must be one of {MOTION_CHECKS}, got {self.eval_check!r}")
         if self.delta_norm not in DELTA_NORMS:
             raise ValueError(f"delta_norm must be one of {DELTA_NORMS}, got {self.delta_norm!r}")
-        if self.nosteer_check not in (True, False, "states"):
-            raise ValueError(f"nosteer_check must be True, False or 'states', got "
+        if self.nosteer_check not in NOSTEER_CHECKS:
+            raise ValueError(f"nosteer_check must be True, False, 'states' or 'replan', got "
                              f"{self.nosteer_check!r}")
         if self.n_plan < 1:
             raise ValueError(f"n_plan must be >= 1, got {self.n_plan}")
@@ -83,9 +91,15 @@ class PlannerOptions:
                 raise ValueError(f"{name} must be a finite number >= 0, got {v}")
 
     @property
+    def repairs(self) -> bool:
+        """Whether Alg. 1's lines 10-14 run as with steerTo: the goal appended once reached,
+        contraction and neural replanning (with steerTo, or ``nosteer_check="replan"``)."""
+        return self.steer or self.nosteer_check == "replan"
+
+    @property
     def max_len(self) -> int:
         """Rows of the path buffer: coarse plan plus what replanning can add."""
-        rounds = self.replan_rounds if self.steer else 0
+        rounds = self.replan_rounds if self.repairs else 0
         return self.n_plan + 2 + rounds * self.replan_steps
 
     @staticmethod

@@ -310,7 +310,9 @@ def plan_batch(env, pnet: Callable, queries, key: Array,
        ``delta`` of it and its cost is that of its own segments. A start already
        within ``delta`` is reached with a path of one state (no segment, cost 0).
        This variant has no contraction and no replanning (both need the
-       steering function).
+       steering function), except with ``nosteer_check="replan"``: there the
+       goal test only replaces line 4's steerTo, the goal is appended once it
+       passes, and steps 2-4 run as with steerTo.
     2. **Lazy states contraction** (MPNet): from each kept state jump to the
        farthest later state it can ``steerTo``.
     3. **Feasibility** at ``eval_padding``: every segment checked by ``steer_to``.
@@ -481,7 +483,7 @@ def _plan(stages: Stages, q: np.ndarray, key, chunk: int, repair_width: int,
     b = _Batch.empty(members * len(q), opts.max_len, q.shape[2], members)
     k_coarse, k_rep = split2(key)
     _coarse(stages, b, q, k_coarse, size)
-    for r in range(opts.replan_rounds if opts.steer else 0):
+    for r in range(opts.replan_rounds if opts.repairs else 0):
         todo = np.flatnonzero(b.reached & ~b.feasible)
         if not len(todo):
             break

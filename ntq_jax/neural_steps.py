@@ -312,7 +312,8 @@ def _forward(robot, world, pnet, key, starts, goals, active, opts, length):
     Without steerTo a query is reached once its path's end (the start included)
     is within ``opts.delta`` of the goal in the robot's metric (``robot.distance``;
     ``opts.delta_norm == "l2"``: the raw state vector's Euclidean norm);
-    the goal is not appended, so a start already that close keeps a path of one state.
+    the goal is not appended, so a start already that close keeps a path of one state
+    (``opts.nosteer_check == "replan"``: the goal is appended, as with steerTo).
     """
     num, d = starts.shape
     rows = jnp.arange(num)
@@ -336,8 +337,8 @@ def _forward(robot, world, pnet, key, starts, goals, active, opts, length):
             hit = live & near(end)
         nxt = propose(robot, world, pnet, fold_in(key, i), end, goals, live & ~hit,
                       opts.plan_padding, opts.steer)
-        new = jnp.where(hit[:, None], goals, nxt) if opts.steer else nxt
-        append = live & (~hit | opts.steer)
+        new = jnp.where(hit[:, None], goals, nxt) if opts.repairs else nxt
+        append = live & (~hit | opts.repairs)
         p = p.at[rows, jnp.where(append, n, length)].set(new, mode="drop")
         n = n + append
         end = jnp.where(append[:, None], new, end)
@@ -350,7 +351,11 @@ def _forward(robot, world, pnet, key, starts, goals, active, opts, length):
             jnp.zeros(num, jnp.int32))
     _, p, n, end, done, reached, calls = jax.lax.while_loop(cond, body, init)
     if not opts.steer:  # the state appended last is checked too
-        reached = reached | (active & ~done & near(end))
+        last = active & ~done & near(end)
+        reached = reached | last
+        if opts.repairs:  # ... and gets the goal appended (the buffer has room: n <= n_plan + 1)
+            p = p.at[rows, jnp.where(last, n, length)].set(goals, mode="drop")
+            n = n + last
     return p, n, reached, calls
 
 
@@ -422,12 +427,13 @@ def connect_core(robot, opts, world, pnet, key, a, b, active):
 
 
 def check_core(robot, opts, world, p, n, todo):
-    """Contraction (with steerTo, if on) and the feasibility check of the rows ``todo``
-    (one jitted call; the planner calls it on :data:`CHECK_ROWS` paths at a time).
+    """Contraction (if on, where lines 10-14 run: ``opts.repairs``) and the feasibility
+    check of the rows ``todo`` (one jitted call; the planner calls it on
+    :data:`CHECK_ROWS` paths at a time).
 
     Returns ``(p, n, feasible, blocked)``.
     """
-    return _contract_and_check(robot, world, opts, p, n, todo, opts.steer and opts.contract)
+    return _contract_and_check(robot, world, opts, p, n, todo, opts.repairs and opts.contract)
 
 
 def cost_core(robot, p, n):

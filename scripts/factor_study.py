@@ -24,7 +24,9 @@ Factors, on point/0, point/3, rigid/0, rigid/2 and nlink/4 at the paper's sizes
   (``||pi_end - x_g||_2`` on the raw state vector), its unchecked paths ("only
   the lines 8 and 9"), and both, against ours (robot metric, paths checked by the
   certified check), the paths checked by the paper's discretised check instead, and
-  the paper's goal test with only the paths' states checked (``nosteer_states``);
+  the paper's goal test with only the paths' states checked (``nosteer_states``),
+  and the paper's goal test in place of line 4's steerTo only, the rest of Alg. 1
+  (the goal appended, Feasible, Replan) as with steerTo (``nosteer_replan``);
 * test band: every test query, in band (both endpoints valid at the data
   padding, where training states lie) and out of band, from the same runs;
 * pruning that keeps each path's last step (beyond the paper): the default data
@@ -73,6 +75,9 @@ EVAL_VARIANTS = {
     # the paper's goal test, and "Feasible" read as every state of the path valid (its
     # segments not checked): between the checked and the unchecked variants
     "nosteer_states": ["eval.delta_norm=l2", "eval.nosteer_check=states"],
+    # the paper's goal test in place of line 4's steerTo only: the goal appended once it
+    # passes, then Alg. 1's lines 10-14 as with steerTo (Feasible, else Replan)
+    "nosteer_replan": ["eval.delta_norm=l2", "eval.nosteer_check=replan"],
 }
 MPNET_BUDGETS = EVAL_VARIANTS["mpnet"]
 BITSTAR_RECORD = "results/data_paths/bitstar/rigid_0"
@@ -155,7 +160,7 @@ def cells(seeds: bool = True) -> list[Cell]:
         if task_of(m) == "rigid":  # Table III: the rigid body without steerTo
             out += [Cell(m, default_data(m), v) for v in ("nosteer_l2", "nosteer_unchecked",
                                                          "nosteer_paper", "nosteer_discretized",
-                                                         "nosteer_states")]
+                                                         "nosteer_states", "nosteer_replan")]
         if seeds:
             out += [Cell(m, default_data(m), "ours", k) for k in (1, 2)]
     out += [Cell(m, default_data(m), "ours") for m in PAPER_ONLY]

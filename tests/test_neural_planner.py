@@ -261,6 +261,36 @@ def test_without_steer_to_the_papers_goal_test_and_unchecked_paths():
         PlannerOptions(delta_norm="l1")
 
 
+def test_without_steer_to_replan_runs_lines_10_to_14():
+    """nosteer_check="replan": the goal test replaces only line 4's steerTo; a path that passes
+    it gets the goal appended and is then contracted, checked and repaired as with steerTo
+    (the broken jump through the wall lands within delta of the goal)."""
+    from ntq_jax.experiment import config
+    s, g, jump = (2.0, 5.0), (8.0, 5.0), (7.3, 5.0)
+    kw = dict(jump=((s, g, jump), NO_JUMP))
+
+    def nosteer(check, rounds=2):
+        return PlannerOptions(n_plan=12, steer=False, delta=1.0, nosteer_check=check,
+                              replan_rounds=rounds, replan_steps=8)
+
+    _, checked = run("wall", BROKEN, [[s, g]], opts=nosteer(True), **kw)
+    assert np.all(checked.cause == PlanCause.INFEASIBLE) and np.all(checked.replans == 0)
+    np.testing.assert_allclose(checked.path(0), [s, jump])  # ends within delta, no goal, no repair
+    _, broken = run("wall", BROKEN, [[s, g]], opts=nosteer("replan", rounds=0), **kw)
+    assert np.all(broken.cause == PlanCause.INFEASIBLE)
+    np.testing.assert_allclose(broken.path(0), [s, jump, g])  # the goal appended
+    q, res = run("wall", BROKEN, [[s, g]], opts=nosteer("replan"), **kw)
+    assert np.all(res.success) and np.all(res.replans == 1)
+    np.testing.assert_allclose(res.path(0)[-1], g)
+    np.testing.assert_allclose(res.costs, optimum("wall", q), rtol=1e-4)  # repaired, contracted
+    assert nosteer("replan").max_len == nosteer(True).max_len + 2 * 8
+    # a start within delta of the goal: the goal appended, as steerTo would
+    _, near = run("straight", STAY, [[[1, 1], [1.5, 1.5]]], opts=nosteer("replan"))
+    assert np.all(near.success) and np.all(near.lengths == 2) and np.all(near.pnet_calls == 0)
+    cfg = config.load(None, ["eval.nosteer_check=replan"])
+    assert PlannerOptions.from_config(cfg.eval, steer=False).nosteer_check == "replan"
+
+
 def test_without_steer_to_states_checks_the_waypoints_only():
     """nosteer_check="states": success needs every state of the path valid, not its segments:
     the seeker's waypoints 1 apart step over both thin walls (success), and on the thick wall

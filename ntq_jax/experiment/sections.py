@@ -338,7 +338,10 @@ class EvalConfig:
             (null or true, ours); false is the paper's "only executing the lines 8
             and 9" of Alg. 1 (success once the goal test passes, the path's
             segments not checked); ``states``: every state of the path valid, its
-            segments not checked. Left out of the hash when null.
+            segments not checked; ``replan``: the goal test replaces only line 4's
+            steerTo, the goal is appended once it passes and lines 10-14 run as with
+            steerTo (contraction, every segment checked, neural replanning). Left out
+            of the hash when null.
         replan_rounds: neural replanning rounds.
         replan_steps: PNet predictions per repaired segment in a replanning round.
         bidirectional: MPNet's bidirectional coarse plan instead of Alg. 1's forward one.
@@ -414,8 +417,8 @@ class EvalConfig:
         _check(self.delta > 0, f"{p}.delta", f"must be > 0, got {self.delta}")
         _check(self.delta_norm in (None, "robot", "l2"), f"{p}.delta_norm",
                f"must be robot, l2 or null, got {self.delta_norm!r}")
-        _check(self.nosteer_check in (None, True, False, "states"), f"{p}.nosteer_check",
-               f"must be true, false, states or null, got {self.nosteer_check!r}")
+        _check(self.nosteer_check in (None, True, False, "states", "replan"), f"{p}.nosteer_check",
+               f"must be true, false, states, replan or null, got {self.nosteer_check!r}")
         _check(self.replan_rounds >= 0, f"{p}.replan_rounds",
                f"must be >= 0, got {self.replan_rounds}")
         _check(self.replan_steps >= 1, f"{p}.replan_steps",

@@ -128,12 +128,26 @@ def data_overrides(cell: Cell, cfg) -> list[str]:
         return [f"planner.per_env=[{{env: {cell.map}, name: roadmap, data_paths: raw}}]",
                 f"data.per_env=[{{env: {cell.map}, paths_from: {BITSTAR_RECORD}}}]"]
     if cell.data in ("shortcut", "raw"):
-        return [f"planner.data_paths={cell.data}"]
+        return [f"planner.data_paths={cell.data}"] + _per_env_data_paths(cfg, cell.map, cell.data)
     spacing = DENSITY.get(cell.map, cfg.planner.data_paths_for(cell.map))
     if isinstance(spacing, bool) or not isinstance(spacing, (int, float)):
         raise UsageError(f"{cell.map}: no resampling spacing for the density cells (set "
                          "planner.data_paths in its task config)")
     return [f"planner.data_paths={spacing}"]
+
+
+def _per_env_data_paths(cfg, map_name: str, mode) -> list[str]:
+    """``planner.per_env`` with ``map_name``'s own ``data_paths`` (which would override the
+    global key) set to ``mode``; ``[]`` when the task config gives that map none."""
+    rows = [dict(e) for e in cfg.to_dict()["planner"]["per_env"]]
+    if not any(r["env"] == map_name and r.get("data_paths") is not None for r in rows):
+        return []
+    for r in rows:
+        if r["env"] == map_name:
+            r["data_paths"] = mode
+    items = ", ".join("{" + ", ".join(f"{k}: {v}" for k, v in r.items() if v is not None) + "}"
+                      for r in rows)
+    return [f"planner.per_env=[{items}]"]
 
 
 #: Data modes of the point maps queued last: dense A* paths give 20-50x the shortcut

@@ -37,6 +37,16 @@ def test_every_cell_has_a_config_that_varies_one_factor(monkeypatch):
             assert [d.p_nt for d in ds] == [0.0, 0.5, 1.0, 1.0, 1.0]
             # the same data paths, planner and training as the default cell: only D4 is added
             assert cfg.planner == base.planner and cfg.train == base.train
+        # the data mode the cell names is the one its map's data planner gets (a task
+        # config's per-map data_paths must not override it)
+        mode = c.data[: -len(fs.KEEP_LAST)] if c.data.endswith(fs.KEEP_LAST) else c.data
+        got = cfg.planner.data_paths_for(c.map)
+        if mode in ("shortcut", "raw"):
+            assert got == mode, (c.key, got)
+        elif mode == "density":
+            assert isinstance(got, float) and got > 0, (c.key, got)
+        else:  # bitstar: the roadmap's raw paths stand in, replaced by the committed record
+            assert mode == "bitstar" and got == "raw" and cfg.data.per_env, (c.key, got)
         if c.train_seed:
             assert cfg.train.seed == c.train_seed and cfg.data == base.data
         if c.budget != "ours":

@@ -39,8 +39,7 @@ package's path shortcutting (:mod:`ntq_jax.planners.smoothing`). The
 algorithm (coarse plan, lazy states contraction, feasibility check, neural
 replanning; the variant without steerTo) is described step by step in
 :func:`plan_batch`; its jitted steps are in :mod:`ntq_jax.neural_steps`, this
-module drives them over chunks of queries. Measured throughput: BENCHMARKS.md,
-"Neural planner evaluation" (``benchmarks/bench_plan.py``).
+module drives them over chunks of queries (throughput: ``benchmarks/bench_plan.py``).
 """
 
 from __future__ import annotations
@@ -309,10 +308,9 @@ def plan_batch(env, pnet: Callable, queries, key: Array,
        is tested first); the goal is not appended, so the path ends within
        ``delta`` of it and its cost is that of its own segments. A start already
        within ``delta`` is reached with a path of one state (no segment, cost 0).
-       This variant has no contraction and no replanning (both need the
-       steering function), except with ``nosteer_check="replan"``: there the
-       goal test only replaces line 4's steerTo, the goal is appended once it
-       passes, and steps 2-4 run as with steerTo.
+       No contraction and no replanning (both need the steering function),
+       except with ``nosteer_check="replan"``: the goal is appended once the
+       test passes and steps 2-4 run as with steerTo.
     2. **Lazy states contraction** (MPNet): from each kept state jump to the
        farthest later state it can ``steerTo``.
     3. **Feasibility** at ``eval_padding``: every segment checked by ``steer_to``.

@@ -312,8 +312,8 @@ def _forward(robot, world, pnet, key, starts, goals, active, opts, length):
     Without steerTo a query is reached once its path's end (the start included)
     is within ``opts.delta`` of the goal in the robot's metric (``robot.distance``;
     ``opts.delta_norm == "l2"``: the raw state vector's Euclidean norm);
-    the goal is not appended, so a start already that close keeps a path of one state
-    (``opts.nosteer_check == "replan"``: the goal is appended, as with steerTo).
+    the goal is not appended (``opts.nosteer_check == "replan"``: it is, as with steerTo),
+    so a start already that close keeps a path of one state.
     """
     num, d = starts.shape
     rows = jnp.arange(num)
@@ -350,12 +350,11 @@ def _forward(robot, world, pnet, key, starts, goals, active, opts, length):
     init = (jnp.int32(0), p, jnp.ones(num, jnp.int32), starts, ~active, jnp.zeros(num, bool),
             jnp.zeros(num, jnp.int32))
     _, p, n, end, done, reached, calls = jax.lax.while_loop(cond, body, init)
-    if not opts.steer:  # the state appended last is checked too
+    if not opts.steer:  # the state appended last is checked too (with repairs: goal appended)
         last = active & ~done & near(end)
         reached = reached | last
-        if opts.repairs:  # ... and gets the goal appended (the buffer has room: n <= n_plan + 1)
-            p = p.at[rows, jnp.where(last, n, length)].set(goals, mode="drop")
-            n = n + last
+        if opts.repairs:
+            p, n = p.at[rows, jnp.where(last, n, length)].set(goals, mode="drop"), n + last
     return p, n, reached, calls
 
 
@@ -400,8 +399,7 @@ def coarse_core(robot, opts, world, pnet, key, starts, goals, active):
                                                   opts.n_plan, opts.plan_padding)
         p, n = _join(pa, na, pb, nb, length)
     else:
-        p, n, reached, calls = _forward(robot, world, pnet, key, starts, goals, valid, opts,
-                                        length)
+        p, n, reached, calls = _forward(robot, world, pnet, key, starts, goals, valid, opts, length)
     return p, n, valid, reached, calls
 
 
@@ -427,9 +425,8 @@ def connect_core(robot, opts, world, pnet, key, a, b, active):
 
 
 def check_core(robot, opts, world, p, n, todo):
-    """Contraction (if on, where lines 10-14 run: ``opts.repairs``) and the feasibility
-    check of the rows ``todo`` (one jitted call; the planner calls it on
-    :data:`CHECK_ROWS` paths at a time).
+    """Contraction (if on, where lines 10-14 run: ``opts.repairs``) and the feasibility check
+    of the rows ``todo`` (one jitted call on :data:`CHECK_ROWS` paths at a time).
 
     Returns ``(p, n, feasible, blocked)``.
     """

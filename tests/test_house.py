@@ -6,6 +6,7 @@
   function of theirs has over 60 lines of code (docstring, blank and comment
   lines aside);
 * no script or benchmark edits ``sys.path`` (they run against the installed package).
+* the suite hands its files to the xdist workers heaviest first.
 """
 
 from __future__ import annotations
@@ -93,3 +94,25 @@ def test_no_script_edits_sys_path(folder):
     edits = [str(f.relative_to(REPO)) for f in _files(folder)
              if edit.search(f.read_text(encoding="utf-8"))]
     assert not edits, edits
+
+
+def test_the_suite_hands_out_the_heaviest_files_first(tmp_path, monkeypatch):
+    """``conftest.pytest_collection_modifyitems``: files in the order of
+    ``tests/file_weights.json`` (heaviest first), unknown files after them, each file's tests
+    in their own order; every test file of the suite has a weight."""
+    import json
+    from types import SimpleNamespace
+
+    import conftest
+
+    weights = json.loads(conftest.FILE_WEIGHTS.read_text())
+    files = {f"tests/{p.name}" for p in (REPO / "tests").glob("test_*.py")}
+    assert files <= set(weights), sorted(files - set(weights))
+    w = tmp_path / "weights.json"
+    w.write_text(json.dumps({"tests/a.py": 1.0, "tests/b.py": 9.0}))
+    monkeypatch.setattr(conftest, "FILE_WEIGHTS", w)
+    ids = ["tests/a.py::x", "tests/new.py::y", "tests/b.py::z", "tests/a.py::w", "tests/b.py::v"]
+    items = [SimpleNamespace(nodeid=i) for i in ids]
+    conftest.pytest_collection_modifyitems(None, None, items)
+    assert [i.nodeid for i in items] == ["tests/b.py::z", "tests/b.py::v", "tests/a.py::x",
+                                         "tests/a.py::w", "tests/new.py::y"]

@@ -15,6 +15,7 @@ import math
 from typing import Optional
 
 from ntq_jax.errors import check_config as _check
+from ntq_jax.neural_options import NOSTEER_CHECKS
 
 __all__ = ["SamplingConfig", "PRUNE_GAMMA", "PRUNE_KEEP_LAST", "DatasetSpec",
            "DataEnvOverride", "DataConfig", "PlannerEnvOverride", "PLANNERS",
@@ -417,7 +418,7 @@ class EvalConfig:
         _check(self.delta > 0, f"{p}.delta", f"must be > 0, got {self.delta}")
         _check(self.delta_norm in (None, "robot", "l2"), f"{p}.delta_norm",
                f"must be robot, l2 or null, got {self.delta_norm!r}")
-        _check(self.nosteer_check in (None, True, False, "states", "replan"), f"{p}.nosteer_check",
+        _check(self.nosteer_check in (None, *NOSTEER_CHECKS), f"{p}.nosteer_check",
                f"must be true, false, states, replan or null, got {self.nosteer_check!r}")
         _check(self.replan_rounds >= 0, f"{p}.replan_rounds",
                f"must be >= 0, got {self.replan_rounds}")

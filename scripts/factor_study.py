@@ -155,6 +155,13 @@ def _per_env_data_paths(cfg, map_name: str, mode) -> list[str]:
 #: (point/0 density: epoch 21-42 of 100 after 1.5 h on one core); the data-path factor is
 #: measured first where it is cheaper (rigid/0, with BIT*'s own paths; nlink/4; rigid/2)
 COSTLY = ("density", "raw")
+#: Training epochs of the point maps' :data:`COSTLY` cells. An epoch of their data is
+#: 19x (density, 45 samples per path) and 50x (raw, 119) the shortcut paths' (2.4 samples
+#: per path; results/data_paths/density_point_0.json), so 10 epochs give every PNet 1.9x
+#: and 5x the optimizer steps of the shortcut cells' 100 epochs at the same batch size:
+#: the comparison within a cell (PNet_k vs PNet_0, one protocol) is unchanged, and each
+#: cell's ``history.csv`` records its PNets' validation loss per epoch (flattened or not).
+COSTLY_EPOCHS = 10
 
 
 def cells(seeds: bool = True) -> list[Cell]:
@@ -246,6 +253,8 @@ def cell_config(cell: Cell, extra: list[str] = ()):
     base = load_config(path, [f"envs=[{cell.map}]", *extra])
     sets = [f"envs=[{cell.map}]", *data_overrides(cell, base)]
     sets += EVAL_VARIANTS[cell.budget]
+    if task == "point" and cell.data.split("+")[0] in COSTLY:
+        sets.append(f"train.epochs={COSTLY_EPOCHS}")
     if cell.train_seed:
         sets.append(f"train.seed={cell.train_seed}")
     sets += list(extra)
@@ -344,6 +353,9 @@ def run_cell(cell: Cell, runs: Path, results: Path, progress: bool, extra: list[
         from ntq_jax.experiment import reproduction
         print(f"report: {reproduction.write(paper_results)}", flush=True)
     from ntq_jax import artifacts
+    history = run / "models" / cell.slug / "history.csv"
+    if cell.budget == "ours" and history.is_file():  # the loss per epoch of the cell's PNets
+        artifacts.write_text(out / "history.csv", history.read_text())
     artifacts.write_json(out / "paired.json", {"cell": cell._asdict(), "sets": sets,
                                                "paired": paired(run, cell, env)})
     print(f"[{cell.key}] done in {time.perf_counter() - t0:.0f} s", flush=True)
@@ -363,6 +375,11 @@ def report(results: Path) -> Path:
         "",
         "The rigid/0 `density` cells made before a trivial query's data path kept its two",
         "ends (as BIT* returns it) are in `results/ablations/density_trivial_resampled/`.",
+        "",
+        f"The point maps' `density` and `raw` cells train {COSTLY_EPOCHS} epochs, not the config's",
+        "100: their data have 19x and 50x the shortcut paths' samples per path, so that is",
+        "1.9x and 5x the optimizer steps of the `shortcut` cells (`COSTLY_EPOCHS` in the",
+        "script); each such cell's `history.csv` has its PNets' losses per epoch.",
         "",
         "| map | data paths | budgets | seed | kind | steerTo | model | all | in band | out of band |",
         "|---|---|---|---:|---|---|---|---|---|---|",

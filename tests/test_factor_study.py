@@ -49,6 +49,10 @@ def test_every_cell_has_a_config_that_varies_one_factor(monkeypatch):
             assert mode == "bitstar" and got == "raw" and cfg.data.per_env, (c.key, got)
         if c.train_seed:
             assert cfg.train.seed == c.train_seed and cfg.data == base.data
+        # the point maps' dense cells train fewer epochs (more optimizer steps than the
+        # default's 100 epochs); every other cell trains the task config's epochs
+        costly = fs.task_of(c.map) == "point" and mode in fs.COSTLY
+        assert cfg.train.epochs == (fs.COSTLY_EPOCHS if costly else base.train.epochs), c.key
         if c.budget != "ours":
             assert cfg.data == base.data and cfg.eval != base.eval
 

@@ -124,6 +124,9 @@ def data_overrides(cell: Cell, cfg) -> list[str]:
     if cell.data.endswith(KEEP_LAST):
         base = Cell(cell.map, cell.data[: -len(KEEP_LAST)], cell.budget, cell.train_seed)
         return data_overrides(base, cfg) + [KEEP_LAST_DATASETS]
+    if cell.data.endswith(FULL_EPOCHS):
+        base = Cell(cell.map, cell.data[: -len(FULL_EPOCHS)], cell.budget, cell.train_seed)
+        return data_overrides(base, cfg)
     if cell.data == "bitstar":
         return [f"planner.per_env=[{{env: {cell.map}, name: roadmap, data_paths: raw}}]",
                 f"data.per_env=[{{env: {cell.map}, paths_from: {BITSTAR_RECORD}}}]"]
@@ -162,6 +165,9 @@ COSTLY = ("density", "raw")
 #: the comparison within a cell (PNet_k vs PNet_0, one protocol) is unchanged, and each
 #: cell's ``history.csv`` records its PNets' validation loss per epoch (flattened or not).
 COSTLY_EPOCHS = 10
+#: Data-mode suffix of the check on that choice: point/0's density cell at the config's
+#: 100 epochs (the same data), so that the two trainings' PNet_3 - PNet_0 can be compared.
+FULL_EPOCHS = "+full_epochs"
 
 
 def cells(seeds: bool = True) -> list[Cell]:
@@ -169,8 +175,9 @@ def cells(seeds: bool = True) -> list[Cell]:
     the config's budgets, then MPNet's budgets on the default data, then the default's
     training seeds 1 and 2 (one factor varied at a time around the task's default); then
     the default cell of each of the paper's other maps (:data:`PAPER_ONLY`); then the
-    pruning beyond the paper (``+keep_last``) on the factor maps; last the point maps'
-    :data:`COSTLY` data modes."""
+    pruning beyond the paper (``+keep_last``) on the factor maps; then the point maps'
+    :data:`COSTLY` data modes; last point/0's density cell at the config's epochs
+    (:data:`FULL_EPOCHS`)."""
     out, costly = [], []
     for m in MAPS:
         modes = ("density", "shortcut", "raw") + (("bitstar",) if m == "rigid/0" else ())
@@ -186,7 +193,7 @@ def cells(seeds: bool = True) -> list[Cell]:
             out += [Cell(m, default_data(m), "ours", k) for k in (1, 2)]
     out += [Cell(m, default_data(m), "ours") for m in PAPER_ONLY]
     out += [Cell(m, default_data(m) + KEEP_LAST, "ours") for m in MAPS]
-    return out + costly
+    return out + costly + [Cell("point/0", "density" + FULL_EPOCHS, "ours")]
 
 
 def record_rows(record: Path, pool: str) -> int:
@@ -253,7 +260,8 @@ def cell_config(cell: Cell, extra: list[str] = ()):
     base = load_config(path, [f"envs=[{cell.map}]", *extra])
     sets = [f"envs=[{cell.map}]", *data_overrides(cell, base)]
     sets += EVAL_VARIANTS[cell.budget]
-    if task == "point" and cell.data.split("+")[0] in COSTLY:
+    if (task == "point" and cell.data.split("+")[0] in COSTLY
+            and not cell.data.endswith(FULL_EPOCHS)):
         sets.append(f"train.epochs={COSTLY_EPOCHS}")
     if cell.train_seed:
         sets.append(f"train.seed={cell.train_seed}")
@@ -379,7 +387,8 @@ def report(results: Path) -> Path:
         f"The point maps' `density` and `raw` cells train {COSTLY_EPOCHS} epochs, not the config's",
         "100: their data have 19x and 50x the shortcut paths' samples per path, so that is",
         "1.9x and 5x the optimizer steps of the `shortcut` cells (`COSTLY_EPOCHS` in the",
-        "script); each such cell's `history.csv` has its PNets' losses per epoch.",
+        "script); each such cell's `history.csv` has its PNets' losses per epoch, and",
+        "`point/0`'s `density+full_epochs` cell trains the same data for the 100 epochs.",
         "",
         "| map | data paths | budgets | seed | kind | steerTo | model | all | in band | out of band |",
         "|---|---|---|---:|---|---|---|---|---|---|",

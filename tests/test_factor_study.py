@@ -22,7 +22,8 @@ def test_every_cell_has_a_config_that_varies_one_factor(monkeypatch):
     assert len({c.key for c in cells}) == len(cells)
     # the point maps' dense data modes (hours of training each) are queued last
     tail = [c for c in cells if fs.task_of(c.map) == "point" and c.data in fs.COSTLY]
-    assert tail and cells[-len(tail):] == tail
+    assert tail and cells[-len(tail) - 1:-1] == tail
+    assert cells[-1] == fs.Cell("point/0", "density" + fs.FULL_EPOCHS, "ours")
     from ntq_jax.experiment.paper import MAPS as PAPER_MAPS
     # every map of Tables I-IV is re-run by the queue (its default cell)
     assert {c.map for c in cells if c.data == fs.default_data(c.map) and c.budget == "ours"
@@ -39,7 +40,9 @@ def test_every_cell_has_a_config_that_varies_one_factor(monkeypatch):
             assert cfg.planner == base.planner and cfg.train == base.train
         # the data mode the cell names is the one its map's data planner gets (a task
         # config's per-map data_paths must not override it)
-        mode = c.data[: -len(fs.KEEP_LAST)] if c.data.endswith(fs.KEEP_LAST) else c.data
+        mode = c.data
+        for suffix in (fs.KEEP_LAST, fs.FULL_EPOCHS):
+            mode = mode[: -len(suffix)] if mode.endswith(suffix) else mode
         got = cfg.planner.data_paths_for(c.map)
         if mode in ("shortcut", "raw"):
             assert got == mode, (c.key, got)
@@ -51,8 +54,13 @@ def test_every_cell_has_a_config_that_varies_one_factor(monkeypatch):
             assert cfg.train.seed == c.train_seed and cfg.data == base.data
         # the point maps' dense cells train fewer epochs (more optimizer steps than the
         # default's 100 epochs); every other cell trains the task config's epochs
-        costly = fs.task_of(c.map) == "point" and mode in fs.COSTLY
+        costly = (fs.task_of(c.map) == "point" and mode in fs.COSTLY
+                  and not c.data.endswith(fs.FULL_EPOCHS))
         assert cfg.train.epochs == (fs.COSTLY_EPOCHS if costly else base.train.epochs), c.key
+        if c.data.endswith(fs.FULL_EPOCHS):  # the same data as the 10-epoch cell
+            short, _ = fs.cell_config(fs.Cell(c.map, mode, "ours"))
+            assert cfg.data == short.data and cfg.planner == short.planner
+            assert cfg.train.epochs == 100 and short.train.epochs == fs.COSTLY_EPOCHS
         if c.budget != "ours":
             assert cfg.data == base.data and cfg.eval != base.eval
 

@@ -165,8 +165,9 @@ COSTLY = ("density", "raw")
 #: the comparison within a cell (PNet_k vs PNet_0, one protocol) is unchanged, and each
 #: cell's ``history.csv`` records its PNets' validation loss per epoch (flattened or not).
 COSTLY_EPOCHS = 10
-#: Data-mode suffix of the check on that choice: point/0's density cell at the config's
-#: 100 epochs (the same data), so that the two trainings' PNet_3 - PNet_0 can be compared.
+#: Data-mode suffix of the check on that choice: the point maps' density cells at the
+#: config's 100 epochs (the same data), so that the two trainings' PNet_3 - PNet_0 can be
+#: compared.
 FULL_EPOCHS = "+full_epochs"
 
 
@@ -176,7 +177,7 @@ def cells(seeds: bool = True) -> list[Cell]:
     training seeds 1 and 2 (one factor varied at a time around the task's default); then
     the default cell of each of the paper's other maps (:data:`PAPER_ONLY`); then the
     pruning beyond the paper (``+keep_last``) on the factor maps; then the point maps'
-    :data:`COSTLY` data modes; last point/0's density cell at the config's epochs
+    :data:`COSTLY` data modes; last their density cells at the config's epochs
     (:data:`FULL_EPOCHS`)."""
     out, costly = [], []
     for m in MAPS:
@@ -193,7 +194,7 @@ def cells(seeds: bool = True) -> list[Cell]:
             out += [Cell(m, default_data(m), "ours", k) for k in (1, 2)]
     out += [Cell(m, default_data(m), "ours") for m in PAPER_ONLY]
     out += [Cell(m, default_data(m) + KEEP_LAST, "ours") for m in MAPS]
-    return out + costly + [Cell("point/0", "density" + FULL_EPOCHS, "ours")]
+    return out + costly + [Cell(m, "density" + FULL_EPOCHS, "ours") for m in DENSITY]
 
 
 def record_rows(record: Path, pool: str) -> int:
@@ -388,7 +389,7 @@ def report(results: Path) -> Path:
         "100: their data have 19x and 50x the shortcut paths' samples per path, so that is",
         "1.9x and 5x the optimizer steps of the `shortcut` cells (`COSTLY_EPOCHS` in the",
         "script); each such cell's `history.csv` has its PNets' losses per epoch, and",
-        "`point/0`'s `density+full_epochs` cell trains the same data for the 100 epochs.",
+        "the `density+full_epochs` cells train the same data for the 100 epochs.",
         "",
         "| map | data paths | budgets | seed | kind | steerTo | model | all | in band | out of band |",
         "|---|---|---|---:|---|---|---|---|---|---|",

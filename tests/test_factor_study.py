@@ -20,7 +20,7 @@ def test_every_cell_has_a_config_that_varies_one_factor(monkeypatch):
     fs = _script()
     cells = fs.cells()
     assert len({c.key for c in cells}) == len(cells)
-    # the point maps' dense data modes (hours of training each) are queued last
+    # the point maps' dense data modes are queued last, then their 100-epoch checks
     tail = [c for c in cells if fs.task_of(c.map) == "point" and c.data in fs.COSTLY]
     checks = [fs.Cell(m, "density" + fs.FULL_EPOCHS, "ours") for m in ("point/0", "point/3")]
     assert tail and cells[-len(tail) - 2:] == tail + checks

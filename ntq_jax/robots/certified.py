@@ -218,12 +218,19 @@ class _Sweep:
             ts, cs = self.ahead(j, lo, clo, g, done & first)
             return head, pos, lo, clo, g, steps, ts, cs, free, left, out_lo, out_clo, out_g
 
+        # A boot iteration: every lane starts on the queue's first motions with zero
+        # clearances ahead, so the first pass through ``body`` decides each of them
+        # "hit" and writes back exactly the initial values (free False, left False, the
+        # motion's own lo0, clo0, g0); its lanes then take the same motions afresh and
+        # evaluate their first points at the end of ``body``. The program thus holds the
+        # clearance once per loop (at the end of ``body``) rather than once more here.
         pos = jnp.arange(lanes, dtype=jnp.int32)
         i = motion(pos)
         lo, clo, g = lo0[i], clo0[:, i], g0[i]
         no = jnp.zeros((num,), bool)
-        init = ((jnp.int32(lanes), pos, lo, clo, g, jnp.zeros((lanes,), jnp.int32))
-                + self.ahead(i, lo, clo, g, jnp.full((lanes,), first))
-                + (no, no, lo0, clo0, g0))
+        m = clo0.shape[0]
+        init = (jnp.int32(0), pos, lo, clo, g, jnp.zeros((lanes,), jnp.int32),
+                jnp.zeros((points, lanes), lo0.dtype), jnp.zeros((points, m, lanes), clo0.dtype),
+                no, no, lo0, clo0, g0)
         out = jax.lax.while_loop(cond, body, init)
         return out[8:]

@@ -327,19 +327,15 @@ def _queue_loop(a, b, n, valid_at, pick, work, per_step: int, lanes: int, state=
             return head, pos, k, check(pos, k, i), out, i
         return head, pos, k, check(pos, k), out
 
-    if state is None and not cache:
+    if state is None:
         pos = jnp.arange(lanes, dtype=jnp.int32)
-        k = jnp.zeros_like(pos)
-        init = (jnp.int32(lanes), pos, k, check(pos, k), jnp.zeros((num,), bool))
-    else:
-        if state is None:
-            pos = jnp.arange(lanes, dtype=jnp.int32)
-            state = (jnp.int32(lanes), pos, jnp.zeros_like(pos), jnp.zeros((num,), bool))
-        head, pos, k, out = state
-        if cache:
-            i = pick(pos)
-            init = (head, pos, k, check(pos, k, i), out, i)
-        else:
-            init = (head, pos, k, check(pos, k), out)
+        state = (jnp.int32(lanes), pos, jnp.zeros_like(pos), jnp.zeros((num,), bool))
+    head, pos, k, out = state
+    # A boot iteration instead of a check before the loop (the program then holds the
+    # validity test once, at the end of ``body``): every lane enters one step behind
+    # with all of that step's states valid, so the first pass decides nothing (a lane
+    # still holding a motion has ``k <= n``) and moves each lane on to ``k`` unchanged.
+    boot = (head, pos, k - per_step, jnp.ones((per_step, lanes), bool), out)
+    init = boot + (pick(pos),) if cache else boot
     head, pos, k, _, out = jax.lax.while_loop(cond, body, init)[:5]
     return out if stop_lanes is None else (head, pos, k, out)

@@ -159,6 +159,34 @@ def test_flag_queue_lists_the_flags_in_order(num, density):
     np.testing.assert_array_equal(np.asarray(pick)[:len(ref)], ref)
 
 
+@pytest.mark.parametrize("work", [0, 1, 5, 32, 33, 200])
+@pytest.mark.parametrize("cache", [False, True])
+def test_check_queue_checks_exactly_the_states_of_each_motion(work, cache):
+    """Every queued motion has all its states ``t = k / n`` (``k = 0..n``) checked and no
+    other: ``valid_at`` fails outside ``[0, 1]`` and at one planted state, so a motion is
+    free exactly when it does not hold the planted state. Queues of 0 to 200 motions on 64
+    lanes with a tail of 32, so the first loop runs many iterations, one, or none (at most
+    32 motions: the tail takes them from the start)."""
+    num = 256
+    rng = np.random.default_rng(work)
+    n = np.zeros(num, np.int32)
+    todo = rng.choice(num, work, replace=False)
+    n[todo] = rng.integers(1, 40, work)
+    planted = rng.random(num) < 0.5  # these motions are invalid at state k = n // 2
+    a = jnp.asarray(np.stack([np.arange(num), n // 2]).astype(np.float32))  # row 0: motion id
+
+    def valid_at(ap, bp, t):
+        nq = jnp.asarray(n)[ap[0].astype(jnp.int32)]
+        bad = jnp.asarray(planted)[ap[0].astype(jnp.int32)] & (
+            jnp.abs(t * nq - ap[1]) < 0.25)  # the planted state k = n // 2
+        return (t >= 0) & (t <= 1) & ~bad
+
+    queue = base.flag_queue(jnp.asarray(n > 0)) if cache else None
+    got = jax.jit(lambda a: base.check_queue(a, a, jnp.asarray(n), valid_at, lanes=64,
+                                             per_step=2, queue=queue, tail_lanes=32))(a)
+    np.testing.assert_array_equal(np.asarray(got), (n > 0) & ~planted)
+
+
 # ---------------------------------------------------------------------------
 # steer_to: indexed with the bitmap against the unindexed exact kernel
 # ---------------------------------------------------------------------------

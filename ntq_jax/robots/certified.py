@@ -220,10 +220,11 @@ class _Sweep:
 
         # A boot iteration: every lane starts on the queue's first motions with zero
         # clearances ahead, so the first pass through ``body`` decides each of them
-        # "hit" and writes back exactly the initial values (free False, left False, the
-        # motion's own lo0, clo0, g0); its lanes then take the same motions afresh and
-        # evaluate their first points at the end of ``body``. The program thus holds the
-        # clearance once per loop (at the end of ``body``) rather than once more here.
+        # "hit" (free False, left False; its other writes are placeholders) and its
+        # lanes take the same motions afresh from lo0, clo0, g0, evaluating their first
+        # points at the end of ``body``. The loop ends only once every motion it took
+        # is decided for real, which rewrites all five outputs of that motion. The
+        # program thus holds the clearance once per loop rather than once more here.
         pos = jnp.arange(lanes, dtype=jnp.int32)
         i = motion(pos)
         lo, clo, g = lo0[i], clo0[:, i], g0[i]

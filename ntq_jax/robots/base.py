@@ -337,7 +337,8 @@ def _queue_loop(a, b, n, valid_at, pick, work, per_step: int, lanes: int, state=
     # still holding a motion has ``k <= n``) and moves each lane on to ``k`` unchanged.
     boot = (head, pos, k - per_step, jnp.ones((per_step, lanes), bool), out)
     init = boot + (pick(pos),) if cache else boot
-    ran = cond(init)  # a loop that never runs hands back the entry state, not the boot's
     head, pos, k_end, _, out = jax.lax.while_loop(cond, body, init)[:5]
-    k = jnp.where(ran, k_end, k)
-    return out if stop_lanes is None else (head, pos, k, out)
+    if stop_lanes is None:
+        return out
+    # a loop that never ran hands back its entry state, not the boot's step-behind ``k``
+    return head, pos, jnp.where(cond(init), k_end, k), out

@@ -105,6 +105,36 @@ def pytest_unconfigure(config):
         shutil.rmtree(folder, ignore_errors=True)
 
 
+_SCRIPTS = Path(__file__).resolve().parents[1] / "scripts"
+_script_modules: dict = {}
+
+
+@pytest.fixture
+def script(capsys):
+    """``script(name, *argv)``: ``scripts/<name>.py``'s ``main(argv)`` in this process, as
+    ``SimpleNamespace(returncode, stdout, stderr)`` (captured with ``capsys``).
+
+    The script's whole command line (argument parsing, its work, and ``run_cli``'s one
+    ``error:`` line and exit code) without a new interpreter: no JAX import to pay, and the
+    programs this worker compiled are reused. Every script is still started as a real
+    subprocess by some test (what only a process shows: the ``__main__`` guard, stray
+    output at import)."""
+    import importlib.util
+
+    def run(name: str, *argv) -> SimpleNamespace:
+        if name not in _script_modules:
+            spec = importlib.util.spec_from_file_location(f"_script_{name}", _SCRIPTS / f"{name}.py")
+            mod = importlib.util.module_from_spec(spec)
+            spec.loader.exec_module(mod)
+            _script_modules[name] = mod
+        capsys.readouterr()  # drop what the test printed before
+        code = _script_modules[name].main([str(a) for a in argv])
+        out = capsys.readouterr()
+        return SimpleNamespace(returncode=code, stdout=out.out, stderr=out.err)
+
+    return run
+
+
 #: The tiny point/2 pipeline run several files check (test_golden, test_train_all,
 #: test_bad_inputs): data -> four PNets -> evaluation -> report, figures included.
 TINY_RUN = ["envs=[point/2]", "data.k_train=40", "data.gamma_queries=2000", "data.gamma_eval=false",

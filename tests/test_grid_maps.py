@@ -145,14 +145,13 @@ def _ros_yaml(path, image, resolution, origin):
     ("0.05", "[500000.0, 4000000.0, 0.0]", r"move its cell edges by up to .* cells.*origin to "
                                           r"\[0, 0, 0\]"),  # UTM: float32 spacing 3 cm > cells/100
 ])
-def test_map_geometry_float32_cannot_hold_is_refused(tmp_path, resolution, origin, match):
+def test_map_geometry_float32_cannot_hold_is_refused(tmp_path, resolution, origin, match, script):
     _pgm_p5(tmp_path / "m.pgm", PIXELS)
     y = _ros_yaml(tmp_path / "m.yaml", "m.pgm", resolution, origin)
     with pytest.raises(EnvError, match=match):
         nj.make_env(y)
     out = tmp_path / "env.json"
-    proc = subprocess.run([sys.executable, str(ROOT / "scripts" / "import_map.py"), str(y),
-                           "--out", str(out)], capture_output=True, text=True, timeout=300)
+    proc = script("import_map", y, "--out", out)
     assert proc.returncode == 2 and proc.stderr.startswith("error: ") and not out.exists()
     assert "Traceback" not in proc.stderr
 
@@ -250,7 +249,7 @@ def test_rectangle_cover_merges():
 # Wrapper JSON, import_map.py, make_env arguments
 # ---------------------------------------------------------------------------
 
-def test_wrapper_json_and_import_script(tmp_path):
+def test_wrapper_json_and_import_script(tmp_path, script):
     (tmp_path / "maps").mkdir()
     grid_maps.write_movingai(tmp_path / "maps" / "maze.map", grid_maps.maze_grid(32, 2, seed=3))
     robot = {"kind": "rigid_body", "length": 0.6, "width": 0.2}
@@ -268,13 +267,9 @@ def test_wrapper_json_and_import_script(tmp_path):
     assert r.returncode == 0, r.stderr
     assert "boxes" in r.stdout
     assert nj.make_env(out).content_hash() == env.content_hash()
-    r = subprocess.run([sys.executable, str(ROOT / "scripts" / "import_map.py"),
-                        str(tmp_path / "maps" / "maze.map"), "--robot", "{bad"],
-                       capture_output=True, text=True)
+    r = script("import_map", tmp_path / "maps" / "maze.map", "--robot", "{bad")
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and "--robot is not valid JSON" in r.stderr
-    r = subprocess.run([sys.executable, str(ROOT / "scripts" / "import_map.py"),
-                        str(tmp_path / "maps" / "maze.map"), "--out", str(tmp_path)],
-                       capture_output=True, text=True)
+    r = script("import_map", tmp_path / "maps" / "maze.map", "--out", tmp_path)
     assert r.returncode == 2 and r.stderr.count("\n") == 1
     assert f"--out {tmp_path} is a folder; give a file name" in r.stderr
 

@@ -53,12 +53,13 @@ import shapely
 from hypothesis import HealthCheck, Phase, given, settings, strategies as st
 
 from ntq_jax import geometry as G, make_env
+from ntq_jax.batching import map_chunks
 from ntq_jax.envs import Env
 from ntq_jax.geometry import World
 from ntq_jax.presets import PRESETS
 from ntq_jax.robots import NLinkArm, RigidBody
-from ntq_jax.robots.batch import is_valid_batch, steer_to_pairs
-from ntq_jax.robots.certified import CERT_MARGIN, certified_steer_to_batch
+from ntq_jax.robots.batch import CERTIFIED_CHUNK, _steer_masked, steer_to_pairs, valid_states
+from ntq_jax.robots.certified import CERT_MARGIN
 from test_geometry_oracle import tangent_segments
 
 EPS32 = float(np.finfo(np.float32).eps)
@@ -310,13 +311,23 @@ def test_distance_kernels_match_shapely(shape, kind):
 # 1b / 2. Robot clearance against shapely, and clearance > 0 iff is_valid
 # ---------------------------------------------------------------------------
 
+# The test-side clearance program: one per robot and map shape, shared by every test, padding and
+# batch size here. The padding is traced (without a broad-phase index it only enters the
+# arithmetic, bit-identical to the static one: the decision made on it, ``index_covers``, needs an
+# index, which no map here has), and the states run in chunks of one fixed shape.
+CLEARANCE_CHUNK = 4096
+
+
 @functools.lru_cache(maxsize=None)
-def _clearance_fn(robot, padding: float):
-    return jax.jit(jax.vmap(lambda q, w: robot.clearance(q, w, padding), in_axes=(0, None)))
+def _clearance_fn(robot):
+    return jax.jit(jax.vmap(robot.clearance, in_axes=(0, None, None)))
 
 
 def clearance(robot, world, q, padding):
-    return np.asarray(_clearance_fn(robot, float(padding))(jnp.asarray(f32(q)), world), F64)
+    assert world.index is None, "a broad-phase index makes the padding static: trace it per padding"
+    fn, pad = _clearance_fn(robot), jnp.float32(padding)
+    q = f32(q).reshape(-1, robot.dim)
+    return map_chunks(lambda x: fn(x, world, pad), q, chunk=CLEARANCE_CHUNK).astype(F64)
 
 
 def oracle_rigid_clearance(robot: RigidBody, world: World, q, padding):
@@ -431,13 +442,13 @@ def boundary_states(rng, env: Env, pad: float, n: int):
     robot, world = env.robot, env.world
     lo, hi = (np.asarray(v, F64) for v in robot.config_bounds(world))
     q = f32(rng.uniform(lo, hi, (4 * n, robot.dim)))
-    v = np.asarray(is_valid_batch(robot, world, jnp.asarray(q), pad))
+    v = valid_states(robot, world, q, pad)  # (CHECK_CHUNK rows per call: one program per padding)
     assert v.any() and (~v).any()
     a = q[rng.choice(np.flatnonzero(v), n)].astype(F64)
     b = q[rng.choice(np.flatnonzero(~v), n)].astype(F64)
     for _ in range(30):
         m = 0.5 * (a + b)
-        vm = np.asarray(is_valid_batch(robot, world, jnp.asarray(f32(m)), pad))
+        vm = valid_states(robot, world, f32(m), pad)
         a = np.where(vm[:, None], m, a)
         b = np.where(vm[:, None], b, m)
     u = rng.normal(size=a.shape)
@@ -496,7 +507,7 @@ def test_clearance_positive_iff_valid(name):
         rng = np.random.default_rng(zlib.crc32(f"{name} {pad}".encode()))
         q = boundary_states(rng, env, pad, 4096)
         c = clearance(robot, env.world, q, pad)
-        valid = np.asarray(is_valid_batch(robot, env.world, jnp.asarray(q), pad))
+        valid = valid_states(robot, env.world, q, pad)
         sure_valid, sure_invalid = oracle_sure(robot, env.world, q, pad, band)
         assert not (sure_valid & sure_invalid).any()
         in_band = ~sure_valid & ~sure_invalid
@@ -724,8 +735,8 @@ def test_certified_implies_valid_ends_and_discretised_free(name):
         cert = certified(env, a, b, pad)
         disc = np.asarray(steer_to_pairs(env.robot, env.world, a, b, pad, chunk=N_MOTIONS,
                                          check="discretized"), bool)
-        va = np.asarray(is_valid_batch(env.robot, env.world, jnp.asarray(a), pad))
-        vb = np.asarray(is_valid_batch(env.robot, env.world, jnp.asarray(b), pad))
+        va = valid_states(env.robot, env.world, a, pad)
+        vb = valid_states(env.robot, env.world, b, pad)
         assert not (cert & ~(va & vb)).any(), "certified free with an invalid endpoint"
         assert not (disc & ~(va & vb)).any()
         # certified free => every state is clear by ~margin / 2 (>> the 1e-5 band in which
@@ -739,9 +750,13 @@ def test_certified_implies_valid_ends_and_discretised_free(name):
 def test_blocked_inputs_and_zero_length_motions():
     """Invalid endpoints, NaN / inf coordinates and masked-out motions are blocked; a zero-length
     motion of a valid state with clearance > margin is free (coordinate-major kernel with mask)."""
+    # One box and one disc, each repeated to rigid/0+discs' obstacle counts (3 boxes, 2 discs:
+    # the same map): with rigid/0's robot and padding (0.4) the certified program (and the
+    # clearance one) are the ones test_certified_has_no_false_frees compiles.
     env = Env.from_json({"name": "one-box", "bounds": [[0, 10], [0, 10]],
                          "robot": {"kind": "rigid_body", "length": 1.2, "width": 0.4},
-                         "boxes": [[5.0, 5.0, 1.0, 1.0]], "discs": [[8.0, 8.0, 0.5]], "padding": 0.4})
+                         "boxes": [[5.0, 5.0, 1.0, 1.0]] * 3, "discs": [[8.0, 8.0, 0.5]] * 2,
+                         "padding": 0.4})
     robot, world = env.robot, env.world
     free_q = [2.0, 2.0, 0.3]
     near_q = [7.5, 5.0, 0.0]  # rectangle x in [6.9, 8.1]: 0.9 from the box, clearance 0.5
@@ -771,15 +786,22 @@ def test_blocked_inputs_and_zero_length_motions():
     want = [r[3] for r in rows]
     c = clearance(robot, world, f32([free_q, near_q]), 0.4)
     assert (c > CERT_MARGIN).all() and c[1] < 1.0, c
-    kernel = jax.jit(lambda a, b, m: certified_steer_to_batch(robot, a, b, world, 0.4, m))
-    got = np.asarray(kernel(jnp.asarray(a.T), jnp.asarray(b.T), jnp.asarray(mask)))
-    assert got.tolist() == want
-    # the public chunked entry point agrees (its padding rows are masked out); a zero-length
-    # motion with clearance below the margin is (conservatively) blocked
+    # the kernel with this mask (the library's masked certified program: rows transposed to
+    # coordinate-major, robot.certified_steer_to_batch(a, b, world, 0.4, mask)), the rows padded
+    # to its one chunk shape with masked-out zero rows
+    n, fill = len(rows), CERTIFIED_CHUNK - len(rows)
+    got = np.asarray(_steer_masked(robot, world, np.pad(a, ((0, fill), (0, 0))),
+                                   np.pad(b, ((0, fill), (0, 0))), np.pad(mask, (0, fill)), 0.4,
+                                   "certified"))
+    assert got[:n].tolist() == want
+    assert not got[n:].any()  # masked out
+    # the public chunked entry point agrees (its padding rows are masked out; several chunks:
+    # test_certified_steer_to_compiles_once_for_every_batch_size); a zero-length motion with
+    # clearance below the margin is (conservatively) blocked
     tight = f32([[7.0 + CERT_MARGIN / 4, 5.0, 0.0]])  # 0.4 + margin/4 from the box
     assert 0 < clearance(robot, world, tight, 0.4)[0] < CERT_MARGIN
     a2, b2 = np.concatenate([a[mask], tight]), np.concatenate([b[mask], tight])
-    assert steer_to_pairs(robot, world, a2, b2, 0.4, chunk=8, check="certified").tolist() == \
+    assert steer_to_pairs(robot, world, a2, b2, 0.4, check="certified").tolist() == \
         [w for w, m in zip(want, mask) if m] + [False]
 
 

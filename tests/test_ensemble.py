@@ -12,6 +12,8 @@
 * The rows and files in a tiny pipeline run (the fixture of tests/test_train_all.py).
 """
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -28,6 +30,29 @@ from test_neural_planner import (OPTS, ORACLE, SEEKER, STAY, make, optimum, pnet
                                  shapely_free)
 
 FIELDS = ("paths", "lengths", "success", "costs", "cause", "replans")
+
+# The real PNets' tests share one map, query set, ensemble per dropout rate and planner
+# settings: their single members' compiled stages are built once. chunk=16 and
+# repair_width=4 give several coarse chunks and several repair calls per member.
+PNET_OPTS = PlannerOptions(n_plan=15, replan_rounds=3, replan_steps=6)
+PNET_PLAN = {"chunk": 16, "repair_width": 4}
+# The stand-ins' tests plan BATCH = 4 rows per call with OPTS (as test_neural_planner.py),
+# so the single stand-in's stages are compiled once here too.
+STAND_IN_PLAN = {"chunk": 4, "repair_width": 4}
+
+
+@functools.cache
+def _point2():
+    env = make_env("point/2")
+    q = np.asarray(env.sample_queries(jax.random.key(5), 40, 1.0, padding=0.0)[0], np.float32)
+    return env, q
+
+
+@functools.cache
+def _ensemble(dropout):
+    """Four members with random weights (cached: built once per dropout rate)."""
+    spec = models.ModelSpec.from_env(_point2()[0], ModelConfig(hidden=(32, 32), dropout=dropout))
+    return models.init_ensemble(spec, 0, 4)
 
 
 def _assert_same(a, b, calls_factor):
@@ -67,20 +92,18 @@ def test_identical_members_equal_the_single_member_pnet():
     indices 0..3 draws four different dropout masks (four different candidates):
     only without dropout is it again the single member.
     """
-    env = make_env("point/2")
-    q = np.asarray(env.sample_queries(jax.random.key(5), 24, 1.0, padding=0.0)[0], np.float32)
-    opts = PlannerOptions(n_plan=15, replan_rounds=2, replan_steps=6)
+    env, q = _point2()
     for dropout in (0.5, 0.0):
-        spec = models.ModelSpec.from_env(env, ModelConfig(hidden=(32, 32), dropout=dropout))
-        ens = models.init_ensemble(spec, 0, 4)
+        ens = _ensemble(dropout)
         p1 = models.member_pnets(ens)[1]
-        one = plan_batch(env, p1, q, jax.random.key(7), opts)
-        _assert_same(one, plan_batch(env, [p1] * 4, q, jax.random.key(7), opts), 4)
+        one = plan_batch(env, p1, q, jax.random.key(7), PNET_OPTS, **PNET_PLAN)
+        _assert_same(one, plan_batch(env, [p1] * 4, q, jax.random.key(7), PNET_OPTS, **PNET_PLAN),
+                     4)
         if dropout == 0.0:  # four members with one member's parameters
             same = models.Ensemble(ens.graphdef, models.stack_states(
                 [models.unstack_state(ens.params, 1)] * 4), ens.spec)
-            _assert_same(one, plan_batch(env, models.member_pnets(same), q, jax.random.key(7), opts),
-                         4)
+            _assert_same(one, plan_batch(env, models.member_pnets(same), q, jax.random.key(7),
+                                         PNET_OPTS, **PNET_PLAN), 4)
 
 
 def test_a_useless_member_does_not_hurt_the_ensemble():
@@ -102,10 +125,13 @@ def test_choose_rule_by_hand():
     env = make("wall")  # wall x 4.5..5.5, y 2..8
     cur = jnp.asarray([[2.0, 5.0]])
     tgt = jnp.asarray([[8.0, 5.0]])
+    # jitted: one program per candidate count and steer, not every op compiled op by op
+    rule = jax.jit(choose, static_argnames=("robot", "padding", "steer"))
 
     def pick(cands, steer=True):
         c = jnp.asarray(cands, jnp.float32)[:, None, :]
-        return int(choose(env.robot, env.world, c, cur, tgt, jnp.ones(1, bool), 0.0, steer)[0])
+        return int(rule(env.robot, env.world, c, cur, tgt, jnp.ones(1, bool), padding=0.0,
+                        steer=steer)[0])
 
     # tier 0 (cur -> c -> goal free) beats a closer cost-to-go; cheapest path among tier 0
     assert pick([[4.0, 5.0], [5.0, 9.0], [5.0, 9.5]]) == 1
@@ -220,28 +246,24 @@ def test_plan_members_equals_each_member_alone(real):
     (stand-ins: the per-member loop; real PNets of one ensemble: the vmapped members)."""
     from ntq_jax.neural_planner import plan_members
     if real:
-        env = make_env("point/2")
-        q = np.asarray(env.sample_queries(jax.random.key(5), 40, 1.0, padding=0.0)[0],
-                       np.float32)
-        spec = models.ModelSpec.from_env(env, ModelConfig(hidden=(32, 32), dropout=0.5))
-        nets = models.member_pnets(models.init_ensemble(spec, 0, 3))
+        env, q = _point2()
+        nets = models.member_pnets(_ensemble(0.5))[:3]
+        opts, plan = PNET_OPTS, PNET_PLAN
     else:
         env = make("wall")
         q = np.asarray([[[2, 5], [8, 5]], [[1, 1], [9, 6]], [[4, 9], [6, 1]],
                         [[2, 2], [8, 8]], [[1, 5], [9, 5]]], np.float32)
         nets = [pnet("wall", SEEKER, sigma=0.7), pnet("wall", STAY), pnet("wall", ORACLE)]
-    opts = PlannerOptions(n_plan=15, replan_rounds=3, replan_steps=6)
+        opts, plan = OPTS, STAND_IN_PLAN
     keys = jnp.stack([jax.random.key(m + 10) for m in range(3)])
-    together = plan_members(env, nets, q, keys, opts, chunk=16, repair_width=4)
-    alone = [plan_batch(env, n, q, keys[m], opts, chunk=16, repair_width=4)
-             for m, n in enumerate(nets)]
+    together = plan_members(env, nets, q, keys, opts, **plan)
+    alone = [plan_batch(env, n, q, keys[m], opts, **plan) for m, n in enumerate(nets)]
     assert sum(int(r.replans.max()) for r in alone) >= 1  # replanning ran
     for a, b in zip(alone, together):
         _assert_equal_results(a, b)
     # one key for all: each member with that key
-    one = plan_members(env, nets, q, jax.random.key(4), opts, chunk=16, repair_width=4)
-    _assert_equal_results(plan_batch(env, nets[1], q, jax.random.key(4), opts, chunk=16,
-                                     repair_width=4), one[1])
+    one = plan_members(env, nets, q, jax.random.key(4), opts, **plan)
+    _assert_equal_results(plan_batch(env, nets[1], q, jax.random.key(4), opts, **plan), one[1])
     with pytest.raises(ValueError, match="keys"):
         plan_members(env, nets, q, keys[:2], opts)
 
@@ -253,12 +275,14 @@ def test_cascade_keeps_the_first_success_and_replans_only_the_failures():
                     [[3, 3], [3.5, 3.5]]], np.float32)
     nets = [pnet("wall", STAY), pnet("wall", SEEKER, sigma=0.7), pnet("wall", ORACLE)]
     key = jax.random.key(2)
-    res = plan_cascade(env, nets, q, key, OPTS, order=[0, 1, 2])
+    plan = STAND_IN_PLAN  # 5 queries: two chunks of BATCH rows
+    res = plan_cascade(env, nets, q, key, OPTS, order=[0, 1, 2], **plan)
     # attempt by attempt, by hand
-    a0 = plan_batch(env, nets[0], q, jax.random.fold_in(key, 0), OPTS)
+    a0 = plan_batch(env, nets[0], q, jax.random.fold_in(key, 0), OPTS, **plan)
     left = np.flatnonzero(~a0.success)
     assert a0.success[4] and len(left) == 4  # the stay-put member solves only the free query
-    a1 = plan_batch(env, nets[1], q[left], jax.random.fold_in(key, 1), OPTS, rows=len(q))
+    a1 = plan_batch(env, nets[1], q[left], jax.random.fold_in(key, 1), OPTS, rows=len(q),
+                    **plan)
     left2 = left[~a1.success]
     assert res.success.all() and res.member[4] == 0
     np.testing.assert_array_equal(res.member[left[a1.success]], 1)
@@ -273,7 +297,7 @@ def test_cascade_keeps_the_first_success_and_replans_only_the_failures():
     for i in range(len(q)):
         assert shapely_free("wall", res.path(i))
     # a useless member alone: failures keep the closest cause; the order is checked
-    alone = plan_cascade(env, nets[:1], q, key, OPTS)
+    alone = plan_cascade(env, nets[:1], q, key, OPTS, **plan)
     np.testing.assert_array_equal(alone.cause, a0.cause)
     for bad in ([], [0, 0], [3]):
         with pytest.raises(ValueError, match="order"):

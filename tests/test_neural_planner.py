@@ -15,6 +15,8 @@ Every path counted as a success is re-checked by shapely (float64 segment
 against the closed boxes, and the bounds), never by the planner's own flag.
 """
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -44,6 +46,9 @@ MAPS = {
 V_PAD = 32
 BATCH = 4
 OPTS = PlannerOptions(n_plan=12, replan_rounds=2, replan_steps=8)
+# the variant without steerTo: one option set (without repairs the replanning settings
+# are unused) and, like ``run``, BATCH queries per compiled call, so the tests share programs
+NOSTEER = PlannerOptions(n_plan=12, steer=False, delta=1.0)
 
 
 def make(name):
@@ -51,23 +56,50 @@ def make(name):
                           "boxes": MAPS[name], "padding": 0.0})
 
 
+def _fmix(x):
+    """murmur3's 32-bit finaliser (a bijective integer mix)."""
+    x = x ^ (x >> 16)
+    x = x * np.uint32(0x85EBCA6B)
+    x = x ^ (x >> 13)
+    x = x * np.uint32(0xC2B2AE35)
+    return x ^ (x >> 16)
+
+
+def _normal(key, shape):
+    """Standard normal noise, a deterministic function of ``key``: a counter hashed with the
+    key's words, then Box-Muller. Used instead of ``jax.random.normal``, whose threefry
+    kernel alone adds about half a second to every compiled stage holding a stand-in."""
+    words = jax.random.key_data(key) if jnp.issubdtype(key.dtype, jax.dtypes.prng_key) else key
+    h = jnp.uint32(0x9E3779B9)
+    for w in words.astype(jnp.uint32).reshape(-1):
+        h = _fmix(h ^ _fmix(w + np.uint32(0x7F4A7C15)))
+    size = int(np.prod(shape))
+    x = _fmix(jnp.arange(2 * size, dtype=jnp.uint32) * np.uint32(0x9E3779B1) + h)
+    u = ((x >> 8).astype(jnp.float32) + 0.5) * np.float32(2.0 ** -24)  # in (0, 1)
+    z = jnp.sqrt(-2.0 * jnp.log(u[:size])) * jnp.cos(np.float32(2 * np.pi) * u[size:])
+    return z.reshape(shape)
+
+
 def _stand_in(mode, nodes, dist, world, jump, sigma, key, cur, goal):
     robot = ENV_ROBOT
     n, v = cur.shape[0], nodes.shape[0]
     tile = jnp.tile(nodes, (n, 1))
-    vis_c = steer_to_cm(robot, world, jnp.repeat(cur, v, 0).T, tile.T, 0.0).reshape(n, v)
-    vis_g = steer_to_cm(robot, world, tile.T, jnp.repeat(goal, v, 0).T, 0.0).reshape(n, v)
+    d = goal - cur
+    dn = jnp.linalg.norm(d, axis=1, keepdims=True)
+    seek = cur + d / jnp.maximum(dn, 1e-9) * jnp.minimum(dn, 1.0)
+    # one steerTo call for the four kinds of segment (current -> node, node -> goal,
+    # current -> goal, current -> seek): one motion check in every compiled stage, not four
+    a = jnp.concatenate([jnp.repeat(cur, v, 0), tile, cur, cur])
+    b = jnp.concatenate([tile, jnp.repeat(goal, v, 0), goal, seek])
+    vis_c, vis_g, direct, ok = jnp.split(steer_to_cm(robot, world, a.T, b.T, 0.0),
+                                         [n * v, 2 * n * v, 2 * n * v + n])
+    vis_c, vis_g = vis_c.reshape(n, v), vis_g.reshape(n, v)
     dg = jnp.where(vis_g, jnp.linalg.norm(nodes[None] - goal[:, None], axis=-1), jnp.inf)
     h = jnp.min(dist[None] + dg[:, None, :], axis=-1)
     dc = jnp.linalg.norm(nodes[None] - cur[:, None], axis=-1)
     score = jnp.where(vis_c & (dc > 1e-6), dc + h, jnp.inf)
-    direct = steer_to_cm(robot, world, cur.T, goal.T, 0.0)
     oracle = jnp.where(direct[:, None], goal, nodes[jnp.argmin(score, axis=1)])
-    d = goal - cur
-    dn = jnp.linalg.norm(d, axis=1, keepdims=True)
-    seek = cur + d / jnp.maximum(dn, 1e-9) * jnp.minimum(dn, 1.0)
-    seek_noisy = seek + sigma * jax.random.normal(key, cur.shape)
-    ok = steer_to_cm(robot, world, cur.T, seek.T, 0.0)
+    seek_noisy = seek + sigma * _normal(key, cur.shape)
     cautious = jnp.where(ok[:, None], seek, cur)
     broken = oracle
     for rule in jump:  # (from, towards, to): jump straight to ``to`` from ``from`` towards ``towards``
@@ -85,7 +117,11 @@ _GRAPHS = {}
 NO_JUMP = ((-99, -99), (-99, -99), (0, 0))
 
 
+@functools.cache
 def pnet(name, mode, jump=(NO_JUMP, NO_JUMP), sigma=0.0):
+    """The stand-in ``mode`` on map ``name`` (cached: equal arguments, one object; every
+    stand-in is a ``Partial`` of ``_stand_in`` with arguments of one shape, so all of them
+    share the planner's compiled stages)."""
     env = make(name)
     if name not in _GRAPHS:
         g = VisGraph.build(env, 0.0)
@@ -191,7 +227,7 @@ def test_one_round_repairs_every_blocked_segment():
 
 
 def test_without_steer_to():
-    nosteer = PlannerOptions(n_plan=12, steer=False, delta=1.0)
+    nosteer = NOSTEER
     _, res = run("straight", SEEKER, [[[1, 1], [9, 1]]], opts=nosteer)
     assert np.all(res.success) and np.all(res.lengths == 8)  # 1, 2, ..., 8: within delta of 9
     np.testing.assert_allclose(res.costs, 7.0, rtol=1e-5)
@@ -241,10 +277,10 @@ def test_without_steer_to_the_papers_goal_test_and_unchecked_paths():
     assert not res.success[0] and res.cause[0] == PlanCause.NO_PATH and res.pnet_calls[0] == 5
     wall = np.asarray([[[2, 5], [8, 5]]], np.float32)
     net = pnet("wall", SEEKER)
-    checked = plan_batch(make("wall"), net, wall, jax.random.key(0),
-                         PlannerOptions(n_plan=12, steer=False, delta=1.0))
+    checked = plan_batch(make("wall"), net, wall, jax.random.key(0), NOSTEER, rows=BATCH)
     loose = plan_batch(make("wall"), net, wall, jax.random.key(0),
-                       PlannerOptions(n_plan=12, steer=False, delta=1.0, nosteer_check=False))
+                       PlannerOptions(n_plan=12, steer=False, delta=1.0, nosteer_check=False),
+                       rows=BATCH)
     assert checked.cause[0] == PlanCause.INFEASIBLE and not checked.success[0]
     assert loose.cause[0] == PlanCause.SUCCESS and loose.success[0]
     np.testing.assert_array_equal(loose.path(0), checked.paths[0, :checked.lengths[0]])
@@ -273,7 +309,8 @@ def test_without_steer_to_replan_runs_lines_10_to_14():
         return PlannerOptions(n_plan=12, steer=False, delta=1.0, nosteer_check=check,
                               replan_rounds=rounds, replan_steps=8)
 
-    _, checked = run("wall", BROKEN, [[s, g]], opts=nosteer(True), **kw)
+    # nosteer(True) but for its replanning settings, unused without repairs
+    _, checked = run("wall", BROKEN, [[s, g]], opts=NOSTEER, **kw)
     assert np.all(checked.cause == PlanCause.INFEASIBLE) and np.all(checked.replans == 0)
     np.testing.assert_allclose(checked.path(0), [s, jump])  # ends within delta, no goal, no repair
     _, broken = run("wall", BROKEN, [[s, g]], opts=nosteer("replan", rounds=0), **kw)
@@ -283,7 +320,7 @@ def test_without_steer_to_replan_runs_lines_10_to_14():
     assert np.all(res.success) and np.all(res.replans == 1)
     np.testing.assert_allclose(res.path(0)[-1], g)
     np.testing.assert_allclose(res.costs, optimum("wall", q), rtol=1e-4)  # repaired, contracted
-    assert nosteer("replan").max_len == nosteer(True).max_len + 2 * 8
+    assert nosteer("replan").max_len == nosteer(True).max_len + 2 * 8 == NOSTEER.max_len + 2 * 8
     # a start within delta of the goal: the goal appended, as steerTo would
     _, near = run("straight", STAY, [[[1, 1], [1.5, 1.5]]], opts=nosteer("replan"))
     assert np.all(near.success) and np.all(near.lengths == 2) and np.all(near.pnet_calls == 0)
@@ -299,7 +336,8 @@ def test_without_steer_to_states_checks_the_waypoints_only():
     net, env = pnet("twowalls", SEEKER), make("twowalls")
     q = np.asarray([[[2.5, 5], [8.5, 5]]], np.float32)
     run = {c: plan_batch(env, net, q, jax.random.key(0),
-                         PlannerOptions(n_plan=12, steer=False, delta=1.0, nosteer_check=c))
+                         PlannerOptions(n_plan=12, steer=False, delta=1.0, nosteer_check=c),
+                         rows=BATCH)
            for c in ("states", True, False)}
     path = run["states"].path(0)
     assert np.asarray(env.is_valid(path)).all() and not shapely_free("twowalls", path)
@@ -307,7 +345,8 @@ def test_without_steer_to_states_checks_the_waypoints_only():
     assert run[True].cause[0] == PlanCause.INFEASIBLE
     wall = np.asarray([[[2, 5], [8, 5]]], np.float32)
     inside = plan_batch(make("wall"), pnet("wall", SEEKER), wall, jax.random.key(0),
-                        PlannerOptions(n_plan=12, steer=False, delta=1.0, nosteer_check="states"))
+                        PlannerOptions(n_plan=12, steer=False, delta=1.0, nosteer_check="states"),
+                        rows=BATCH)
     assert not np.asarray(make("wall").is_valid(inside.path(0))).all()
     assert inside.cause[0] == PlanCause.INFEASIBLE and not inside.success[0]
     cfg = config.load(None, ["eval.nosteer_check=states"])
@@ -320,7 +359,7 @@ def test_without_steer_to_states_checks_the_waypoints_only():
 
 def test_without_steer_to_a_start_within_delta_is_solved():
     """A start already within delta of the goal is reached like a last prediction would be."""
-    nosteer = PlannerOptions(n_plan=12, steer=False, delta=1.0)
+    nosteer = NOSTEER
     q, res = run("straight", STAY, [[[1, 1], [1.5, 1.5]], [[8, 8], [8, 9]]], opts=nosteer)
     assert np.all(res.success) and np.all(res.cause == PlanCause.SUCCESS)
     assert np.all(res.lengths == 1) and np.all(res.pnet_calls == 0)
@@ -432,12 +471,16 @@ def test_compiled_stages_are_bounded(monkeypatch):
     monkeypatch.setattr(neural_steps, "COMPILED_CACHE_SIZE", 4)
     env = make("straight")
     q = np.asarray([[[1, 2], [9, 8]]], np.float32)
-    for n_plan in (1, 2, 3):  # two compiled stages (coarse, check) per option set
-        res = plan_batch(env, _stay, q, jax.random.key(0),
-                         PlannerOptions(n_plan=n_plan, replan_rounds=0))
+    # three option sets the tests above compile too (stand-ins, BATCH rows): the bound is
+    # checked on the cache's entries, whichever the options, without compiling anything new
+    sets = (PlannerOptions(n_plan=12, replan_rounds=0, replan_steps=8), OPTS,
+            PlannerOptions(n_plan=12, replan_rounds=2, replan_steps=8, bidirectional=True))
+    for opts in sets:  # two compiled stages (coarse, check) per option set
+        res = plan_batch(env, pnet("straight", STAY), q, jax.random.key(0), opts, rows=BATCH)
         assert res.success[0] and len(neural_steps._COMPILED) <= 4
     sigs = list(neural_steps._COMPILED)
-    assert [s[2].n_plan for s in sigs] == [2, 2, 3, 3]  # the least recently used went first
+    # the least recently used went first
+    assert [s[2] for s in sigs] == [sets[1]] * 2 + [sets[2]] * 2
     assert [s[0] for s in sigs] == ["coarse", "check"] * 2
 
 
@@ -446,7 +489,7 @@ def test_check_stage_compiles_once_for_every_batch_size():
     other sizes (the cascade's fallbacks) reuse its one compilation; results are per row."""
     from ntq_jax import neural_steps
     env = make("wall")
-    opts = PlannerOptions(n_plan=4, replan_rounds=0)
+    opts = PlannerOptions(n_plan=12, replan_rounds=0, replan_steps=8)  # as the tests above
     rng = np.random.default_rng(3)
     q = rng.uniform(0.5, 9.5, (300, 2, 2)).astype(np.float32)
     neural_steps._COMPILED.clear()

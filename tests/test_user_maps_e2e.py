@@ -3,8 +3,6 @@
 unroll, so the broad phase runs) through scripts/train_all.py at tiny sizes."""
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -15,7 +13,7 @@ from ntq_jax.planners import visgraph
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def test_maze_through_train_all(tmp_path):
+def test_maze_through_train_all(tmp_path, script):
     maze = grid_maps.write_movingai(tmp_path / "maze.map", grid_maps.maze_grid(256, corridor=16))
     env = make_env(maze)
     assert env.grid.shape == (256, 256) and env.world.index is not None
@@ -33,9 +31,7 @@ eval: {{k_test: 8, n_plan: 10, replan_rounds: 2, replan_steps: 6, gamma_queries:
        ensemble: [best]}}
 """)
     out = tmp_path / "run"
-    r = subprocess.run([sys.executable, str(ROOT / "scripts" / "train_all.py"), "--config", str(cfg),
-                        "--out", str(out), "--no-progress", "--no-figures"],
-                       capture_output=True, text=True, cwd=tmp_path)
+    r = script("train_all", "--config", cfg, "--out", out, "--no-progress", "--no-figures")
     assert r.returncode == 0, r.stderr[-2000:]
     res = json.loads((out / "results.json").read_text())
     rows = res["rows"]

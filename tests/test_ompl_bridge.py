@@ -15,6 +15,7 @@ import ntq_jax as nj
 from ntq_jax.planners import ompl_bridge
 from ntq_jax.planners.ompl_bridge import PLAN_STATUS, BridgeOutcome, plan_bitstar, query_seeds
 from ntq_jax.planners.ompl_checker import NumpyChecker
+from ntq_jax.robots.batch import CHECK_CHUNK
 from ntq_jax.types import PlanStatus
 
 #: Candidate queries per draw in ``_easy_queries`` (and the row count of the test's own jitted
@@ -73,7 +74,11 @@ def test_numpy_checker_equals_jax_is_valid(name):
     env = _env(name)
     states = _uniform_states(env, 10_000, seed=len(name))
     for padding in (env.padding, 0.0):
-        ref = np.asarray(env.is_valid(states, padding=padding))
+        # env.is_valid in slices of CHECK_CHUNK states: each runs the shared chunk program
+        # (valid_states', which the planners run too) instead of one 16384-row bucket
+        # program per robot, map and padding; the same kernel per state
+        ref = np.concatenate([np.asarray(env.is_valid(states[i:i + CHECK_CHUNK], padding=padding))
+                              for i in range(0, len(states), CHECK_CHUNK)])
         assert 0.05 < ref.mean() < 0.98, "the sample must contain valid and invalid states"
         ch = NumpyChecker.from_env(env, padding)
         one = np.array([ch.is_valid(s) for s in states.astype(np.float64)])
@@ -298,9 +303,13 @@ def test_kept_workers_are_reused_with_the_same_results(rigid_batch):
 def test_no_path_is_a_status_not_an_exception():
     """A goal walled off from the start: no path after the budget (TIMEOUT: BIT* is anytime,
     so it proves nothing), nothing raised."""
-    spec = {"name": "sealed", "robot": {"kind": "rigid_body", "length": 1.0, "width": 0.4},
-            "bounds": [[0, 10], [0, 10]], "padding": 0.1,
-            "boxes": [[7.5, 5, 0.2, 5]], "discs": []}
+    # rigid/0's robot, padding, bounds and obstacle counts (the wall three times: the same
+    # free space), so the package's checks run rigid/0's compiled programs; the goal keeps
+    # 0.5 of clearance from the wall and 0.6 from the bounds at this padding
+    rigid0 = nj.make_env("rigid/0")
+    spec = {"name": "sealed", "robot": rigid0.robot.to_json(),
+            "bounds": [[0, 10], [0, 10]], "padding": rigid0.padding,
+            "boxes": [[7.5, 5, 0.2, 5]] * 3, "discs": []}
     env = nj.Env.from_json(spec)
     q = np.array([[[2, 5, 0], [8.8, 5, 0]], [[2, 2, 0], [4, 8, 1]]], np.float32)
     res = plan_bitstar(env, q, time_budget=0.3, workers=1, stop_on_first=True)

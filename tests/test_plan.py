@@ -14,6 +14,7 @@ import jax
 
 import ntq_jax
 from ntq_jax import Env, PlanResult, make_env, plan, register_planner
+from ntq_jax.envs import BUCKET_MIN_ROWS
 from ntq_jax.planners import PlanStatus, available_planners
 from ntq_jax.planners.astar import astar
 
@@ -54,7 +55,14 @@ def assert_contract(env, q, res: PlanResult, padding):
         a.append(p[:-1]), b.append(p[1:]), owner.append(np.full(len(p) - 1, i))
     if idx.size:
         a, b, owner = np.concatenate(a), np.concatenate(b), np.concatenate(owner)
-        free = np.asarray(env.steer_to(a, b, padding=padding))
+        # at least BUCKET_MIN_ROWS + 1 pairs (padded with a[0] -> a[0], answers dropped):
+        # env.steer_to then runs its shared chunk program (steer_to_pairs'), already compiled
+        # by the planners, instead of compiling a small-batch program per robot and map;
+        # the same kernel per pair, and the answers do not depend on the route
+        m = len(a)
+        fill = np.repeat(a[:1], max(0, BUCKET_MIN_ROWS + 1 - m), axis=0)
+        free = np.asarray(env.steer_to(np.concatenate([a, fill]), np.concatenate([b, fill]),
+                                       padding=padding))[:m]
         assert free.all(), f"blocked segments in queries {np.unique(owner[~free])}"
         seg = np.asarray(env.distance(a, b), np.float64)
         cost = np.bincount(owner, seg, minlength=k)[idx]

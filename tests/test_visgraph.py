@@ -32,6 +32,7 @@ from shapely.ops import unary_union
 import jax
 
 from ntq_jax import Env, make_env
+from ntq_jax.envs.env import BUCKET_MIN_ROWS
 from ntq_jax.planners.visgraph import VisGraph, benchmark_visgraph, obstacle_vertices
 from ntq_jax.types import PlanStatus
 
@@ -148,6 +149,32 @@ def polygon_vertices(geom, bounds):
 # Maps and queries
 # ---------------------------------------------------------------------------
 
+# Compiled programs. ``VisGraph.plan`` compiles its query kernel once per (obstacle counts,
+# padding, node count and route buffer rounded up to ``NODE_PAD``). The hypothesis tests'
+# random maps would compile it for nearly every example, so they give their maps a fixed
+# box count (duplicates of a box: the same free space and, after the build's
+# de-duplication, the same nodes) and, while planning, round the tables up to the map's
+# candidate node count (``plan_fixed``): the library's own padding (NaN nodes that are
+# never visible, routes repeating their last node), just more of it, so every example of a
+# test plans with one program (``table_size``). The tests outside hypothesis keep the
+# default tables.
+LATTICE_BOXES = 10  # the padding-0 tests' box count: 6 lattice boxes, or 6 random boxes + a cage
+
+
+def pad_boxes(boxes, count):
+    """``boxes`` followed by copies of its first box up to ``count`` boxes (the same free space)."""
+    boxes = [tuple(b) for b in boxes]
+    return boxes + [boxes[0]] * (count - len(boxes))
+
+
+def plan_fixed(graph, queries):
+    """``graph.plan(queries)`` with the tables padded to the candidate node count of the
+    graph's obstacles (fixed by their counts; a route never has more nodes than the graph)."""
+    cap = len(obstacle_vertices(graph.world, graph.padding, graph.eps, graph.arc_step))
+    assert graph.num_nodes <= cap and graph.routes.shape[-1] <= max(cap, 1)
+    return graph.plan(queries, table_size=cap)
+
+
 def make_point_env(boxes, discs=(), padding=0.0):
     return Env.from_json({"name": "test", "robot": {"kind": "point"},
                           "bounds": [[0, SIDE], [0, SIDE]], "boxes": [list(b) for b in boxes],
@@ -199,7 +226,9 @@ def make_queries(env, seed, n, padding, cage_center=None):
     g = env.sample_states(k2, n, padding)
     q = [np.stack([s, g], 1)]
     near = s[: n // 4] + np.asarray(jax.random.uniform(k3, (n // 4, 2), minval=-1.5, maxval=1.5))
-    ok = np.asarray(env.is_valid(near, padding))
+    # padded past BUCKET_MIN_ROWS: the chunk program ``VisGraph.build`` compiled (per-row answers)
+    ok = np.asarray(env.is_valid(np.concatenate([near, np.repeat(near[:1], BUCKET_MIN_ROWS + 1, 0)]),
+                                 padding))[: len(near)]
     q.append(np.stack([s[: n // 4][ok], near[ok]], 1))
     if cage_center is not None:
         inside = np.array(cage_center) + np.array([[0.3, -0.2], [-0.25, 0.1]])
@@ -230,9 +259,10 @@ def check_paths(env, res, queries, padding):
         np.testing.assert_allclose(res.costs[i], seg, rtol=1e-9, atol=1e-9)
         a.append(p[:-1])
         b.append(p[1:])
-    if a:  # every segment in one exact-kernel call, padded to a power of two (few compilations)
+    if a:  # every segment in one exact-kernel call, padded past BUCKET_MIN_ROWS so that
+        # env.steer_to runs the chunk program VisGraph.build compiled (steer_to_pairs)
         a, b = np.concatenate(a), np.concatenate(b)
-        size = 1 << (len(a) - 1).bit_length()
+        size = max(len(a), BUCKET_MIN_ROWS + 1)
         a = np.concatenate([a, np.repeat(a[:1], size - len(a), 0)])
         b = np.concatenate([b, np.repeat(b[:1], size - len(b), 0)])
         free = np.asarray(env.steer_to(a, b, padding=padding))
@@ -252,10 +282,10 @@ lattice_box = st.tuples(half_units, half_units, st.integers(1, 8).map(lambda k: 
 @given(boxes=st.lists(lattice_box, min_size=6, max_size=6), seed=st.integers(0, 2**31 - 1))
 def test_lengths_equal_bruteforce_oracle_on_lattice_maps(boxes, seed):
     """Degenerate maps (touching boxes, collinear corners): same nodes, independent visibility."""
-    env = make_point_env(boxes)
+    env = make_point_env(pad_boxes(boxes, LATTICE_BOXES))  # + 4 duplicates: the same map
     graph = VisGraph.build(env, 0.0)
     q = make_queries(env, seed, 24, 0.0)
-    res = graph.plan(q)
+    res = plan_fixed(graph, q)
     check_paths(env, res, q, 0.0)
     ref = Oracle(box_polys(boxes), graph.nodes, "closed").lengths(q)
     lo, hi = ref[:, 0], ref[:, 1]
@@ -272,11 +302,12 @@ def test_lengths_equal_bruteforce_oracle_on_lattice_maps(boxes, seed):
 def test_padding0_is_the_true_optimum_within_eps_bound(seed):
     """Generic maps at padding 0: L* <= L <= L* + 2 sqrt(2) eps bends (true corners, touching allowed)."""
     boxes, center = generic_map(seed, 6)
+    assert len(boxes) == LATTICE_BOXES
     env = make_point_env(boxes)
     graph = VisGraph.build(env, 0.0)
     assert graph.exact
     q = make_queries(env, seed, 30, 0.0, cage_center=center)
-    res = graph.plan(q)
+    res = plan_fixed(graph, q)
     check_paths(env, res, q, 0.0)
     bounds = [[0, SIDE], [0, SIDE]]
     polys = box_polys(np.asarray(env.world.boxes, np.float64))
@@ -309,7 +340,7 @@ def test_padded_and_disc_maps_between_inscribed_and_circumscribed_optima(seed):
     graph = VisGraph.build(env)  # the environment's padding
     assert graph.padding == pad and not graph.exact and graph.delta > 0
     q = make_queries(env, seed, 30, pad, cage_center=center)
-    res = graph.plan(q)
+    res = plan_fixed(graph, q)
     check_paths(env, res, q, pad)
     b64 = np.asarray(env.world.boxes, np.float64)
     d64 = np.asarray(env.world.discs, np.float64)
@@ -362,6 +393,10 @@ def test_single_disc_matches_analytic_wrap_length():
     assert np.all(res.costs >= low - 1e-4)
     assert np.all(res.costs <= high + 1e-4)
     assert graph.delta == pytest.approx((r + pad) * (1 / math.cos(math.pi / m) - 1))
+    # larger tables (table_size) change the compiled program, not the answers
+    big = graph.plan(q, table_size=graph.num_nodes + 13)
+    for f in ("status", "costs", "lengths", "paths"):
+        np.testing.assert_array_equal(getattr(big, f), getattr(res, f), err_msg=f)
 
 
 def test_invalid_queries_and_empty_maps():
@@ -407,8 +442,10 @@ def test_preset_smoke_and_rejections():
         q = make_queries(env, 3, 200, p)
         res = graph.plan(q, chunk_size=64)  # several chunks
         check_paths(env, res, q, p)
-    stats = benchmark_visgraph(env, 256, repeats=1)
-    assert stats["n"] == 256 and stats["queries_per_s"] > 0
+    # 64 queries: one chunk of 64, the program of the padding-0 plan above (``n`` only sets
+    # the batch the helper times)
+    stats = benchmark_visgraph(env, 64, repeats=1)
+    assert stats["n"] == 64 and stats["queries_per_s"] > 0
     with pytest.raises(ValueError, match="point robot"):
         VisGraph.build(make_env("rigid/0"))
     with pytest.raises(ValueError, match=r"\(N, 2, 2\)"):

@@ -313,16 +313,17 @@ class VisGraph:
         return VisGraph(env.robot, env.world, pad, float(eps), float(arc_step), float(delta),
                         nodes, visible, dist, routes, route_len)
 
-    def _padded_tables(self) -> tuple[Array, Array, Array, Array]:
-        """``(nodes_cm, dist, routes, route_len)`` padded to multiples of ``NODE_PAD`` for :func:`_solve`.
+    def _padded_tables(self, table_size: int = 0) -> tuple[Array, Array, Array, Array]:
+        """``(nodes_cm, dist, routes, route_len)`` padded to multiples of ``NODE_PAD`` (and to at
+        least ``table_size``) for :func:`_solve`.
 
         Padding nodes are NaN (never visible), so maps with similar node counts
         share the compiled code; routes are padded by repeating their last node.
         """
         v = self.num_nodes
-        vp = max(NODE_PAD, -(-v // NODE_PAD) * NODE_PAD)
+        vp = max(NODE_PAD, -(-v // NODE_PAD) * NODE_PAD, table_size)
         r0 = self.routes.shape[-1] if v else 1
-        r = max(NODE_PAD, -(-r0 // NODE_PAD) * NODE_PAD)  # route buffer: same bucketing
+        r = max(NODE_PAD, -(-r0 // NODE_PAD) * NODE_PAD, table_size)  # route buffer: the same
         nodes_cm = np.full((2, vp), np.nan, np.float32)
         nodes_cm[:, :v] = self.nodes.T
         dist32 = np.full((vp, vp), np.inf, np.float32)
@@ -334,13 +335,18 @@ class VisGraph:
         route_len[:v, :v] = self.route_len
         return tuple(jnp.asarray(a) for a in (nodes_cm, dist32, routes, route_len))
 
-    def plan(self, queries, *, chunk_size: int = 8192) -> PlanResult:
+    def plan(self, queries, *, chunk_size: int = 8192, table_size: int = 0) -> PlanResult:
         """Shortest paths for a batch of queries.
 
         Args:
             queries: ``(N, 2, 2)`` (start, goal) points; cast to float32.
             chunk_size: queries per jitted call (batches are padded to a power
                 of two up to this size, so repeated calls reuse the compiled code).
+            table_size: pad the node tables and the route buffer to at least this
+                many nodes (NaN nodes, never visible). Graphs of maps with the same
+                obstacle counts and padding plan with one compiled program when it is
+                their candidate count, ``len(obstacle_vertices(world, padding, eps,
+                arc_step))`` (no graph has more nodes). The answers do not depend on it.
 
         Returns:
             A :class:`PlanResult` (costs as described in the module docstring;
@@ -349,7 +355,7 @@ class VisGraph:
         q = np.asarray(queries, np.float32)
         if q.ndim != 3 or q.shape[1:] != (2, 2):
             raise ValueError(f"queries must have shape (N, 2, 2), got {q.shape}")
-        tables = self._padded_tables()
+        tables = self._padded_tables(int(table_size))
         width = tables[2].shape[-1] + 2
         empty = (np.zeros(0, np.int8), np.zeros(0, bool), np.zeros(0, np.int32),
                  np.zeros(0, np.int32), np.zeros(0, np.int32), np.zeros((0, width, 2), np.float32))

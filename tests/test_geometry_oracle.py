@@ -497,6 +497,18 @@ ARM_BOUNDS = np.array([[-10.0, 10.0], [-10.0, 10.0]])
 ARMS = [NLinkArm((4.0, 3.5)), NLinkArm((2.0, 1.5, 2.5, 1.0, 1.8, 1.2), base=(1.0, -0.5))]
 
 
+@jax.jit
+def _arm_fk(link_lengths, base, q):
+    """``jax.vmap(robot.forward_kinematics)(q)`` of the arm with these (validated) link lengths
+    and base, passed as traced float32 values instead of constants baked into the program, so
+    all arms with the same number of links share one compiled program. The method's code is
+    unchanged; its float32 operations are the same (the values are float32 numbers either way)."""
+    robot = object.__new__(NLinkArm)  # the fields only: the constructor's checks need numbers
+    object.__setattr__(robot, "link_lengths", tuple(link_lengths))
+    object.__setattr__(robot, "base", tuple(base))
+    return jax.vmap(robot.forward_kinematics)(q)
+
+
 @settings(max_examples=12, deadline=None, database=None, phases=PHASES)
 @given(lengths=st.lists(st.floats(0.125, 5.0, width=32), min_size=1, max_size=6),
        base=st.tuples(st.floats(-5, 5, width=32), st.floats(-5, 5, width=32)), seed=seeds)
@@ -504,7 +516,7 @@ def test_arm_forward_kinematics_matches_numpy(lengths, base, seed):
     robot = NLinkArm(tuple(lengths), base=base)
     rng = np.random.default_rng(seed)
     q = f32(rng.uniform(-np.pi, np.pi, (2048, robot.dim)))
-    got = np.asarray(jax.jit(jax.vmap(robot.forward_kinematics))(jnp.asarray(q)))
+    got = np.asarray(_arm_fk(f32(robot.link_lengths), f32(robot.base), jnp.asarray(q)))
     np.testing.assert_allclose(got, numpy_fk(robot, q), rtol=0, atol=_fk_tol(robot))
 
 
@@ -563,11 +575,19 @@ EXACT_BOX = np.array([10.0, 10.0, 2.0, 1.0], np.float32)    # x in [8, 12], y in
 EXACT_DISC = np.array([10.0, 10.0, 2.0], np.float32)
 
 
+def _exact_kernel(name, pad, cases, obstacle):
+    """``_kernel(name, pad)`` on ``cases`` against ``obstacle``, as a list of bools. The cases
+    are padded to N_CASES rows (copies of the first; a per-case kernel) so they run through
+    the program of test_kernel_matches_shapely's shape (the same one at padding 0)."""
+    cases = np.asarray(cases, np.float32)
+    padded = np.concatenate([cases, np.repeat(cases[:1], N_CASES - len(cases), 0)])
+    obst = np.tile(np.asarray(obstacle, np.float32), (N_CASES, 1))
+    return np.asarray(_kernel(name, pad)(jnp.asarray(padded), jnp.asarray(obst)))[:len(cases)].tolist()
+
+
 @pytest.mark.parametrize("pad", [0.0, 0.5, 0.25])
 def test_exact_touching_counts_as_collision(pad):
     p = pad
-    seg_box = _kernel("segment_box", pad)
-    box = jnp.asarray(np.tile(EXACT_BOX, (1, 1)))
     # (segment, expected hit)
     cases = [
         ((8.0 - p, 9.5, 8.0 - p, 10.5), True),      # along the left edge, offset = padding
@@ -584,28 +604,23 @@ def test_exact_touching_counts_as_collision(pad):
         ((0.0, 0.0, 20.0, 20.0), True),             # through the box
         ((8.0, 9.0 - p, 8.0, 9.0 - p), True),       # zero length, below the corner by the padding
     ]
-    segs = jnp.asarray(np.array([c for c, _ in cases], np.float32))
-    got = np.asarray(seg_box(segs, jnp.tile(box, (len(cases), 1))))
-    assert got.tolist() == [e for _, e in cases]
+    got = _exact_kernel("segment_box", pad, [c for c, _ in cases], EXACT_BOX)
+    assert got == [e for _, e in cases]
     # touching the disc exactly (padding grows its radius)
     r = 2.0 + p
-    seg_disc = _kernel("segment_disc", pad)
     dcases = [((8.0, 10.0 + r, 12.0, 10.0 + r), True), ((10.0 + r, 10.0, 15.0, 10.0), True),
               ((10.0 + r, 5.0, 10.0 + r, 15.0), True), ((10.0 + r + 2**-10, 5.0, 10.0 + r + 2**-10, 15.0), False),
               ((10.0, 10.0, 10.0, 10.0), True), ((10.0, 10.0 + r, 10.0, 10.0 + r), True)]
-    segs = jnp.asarray(np.array([c for c, _ in dcases], np.float32))
-    got = np.asarray(seg_disc(segs, jnp.tile(jnp.asarray(EXACT_DISC), (len(dcases), 1))))
-    assert got.tolist() == [e for _, e in dcases]
+    got = _exact_kernel("segment_disc", pad, [c for c, _ in dcases], EXACT_DISC)
+    assert got == [e for _, e in dcases]
     # points
-    pts = jnp.asarray(np.array([[12.0 + p, 10.0], [10.0, 9.0 - p], [12.0 + p + 2**-10, 10.0]], np.float32))
-    got = np.asarray(_kernel("point_box", pad)(pts, jnp.tile(box, (3, 1))))
-    assert got.tolist() == [True, True, False]
+    pts = [[12.0 + p, 10.0], [10.0, 9.0 - p], [12.0 + p + 2**-10, 10.0]]
+    assert _exact_kernel("point_box", pad, pts, EXACT_BOX) == [True, True, False]
     # rectangles at theta = 0: edge-to-edge contact with the box at exactly the padding
-    rects = jnp.asarray(np.array([[13.0 + p, 10.0, 0.0, 1.0, 0.5],      # left edge x = 12 + p
-                                  [10.0, 11.5 + p, 0.0, 1.0, 0.5],      # bottom edge y = 11 + p
-                                  [13.0 + p + 2**-10, 10.0, 0.0, 1.0, 0.5]], np.float32))
-    got = np.asarray(_kernel("rect_box", pad)(rects, jnp.tile(box, (3, 1))))
-    assert got.tolist() == [True, True, False]
+    rects = [[13.0 + p, 10.0, 0.0, 1.0, 0.5],      # left edge x = 12 + p
+             [10.0, 11.5 + p, 0.0, 1.0, 0.5],      # bottom edge y = 11 + p
+             [13.0 + p + 2**-10, 10.0, 0.0, 1.0, 0.5]]
+    assert _exact_kernel("rect_box", pad, rects, EXACT_BOX) == [True, True, False]
 
 
 def test_workspace_bounds_are_closed():
@@ -637,7 +652,6 @@ def test_non_finite_states_are_invalid_and_blocked(robot, pad):
         good = np.array([[-8.0, 8.0]], np.float32)
     elif robot.kind == "rigid_body":
         good = np.array([[-8.0, 8.0, 0.3]], np.float32)
-    assert np.asarray(is_valid_batch(robot, world, jnp.asarray(good), pad)).all()
     bad = []
     for j in range(d):
         for v in BAD_VALUES:
@@ -649,8 +663,9 @@ def test_non_finite_states_are_invalid_and_blocked(robot, pad):
         s[0, 0] = v
         bad.append(s[0])
     bad = np.array(bad, np.float32)
+    goods = np.repeat(good, len(bad), 0)  # the good state in every row: one shape, one program
+    assert np.asarray(is_valid_batch(robot, world, jnp.asarray(goods), pad)).all()
     assert not np.asarray(is_valid_batch(robot, world, jnp.asarray(bad), pad)).any()
-    goods = np.repeat(good, len(bad), 0)
     assert np.asarray(steer_to_batch(robot, world, jnp.asarray(goods), jnp.asarray(goods), pad)).all()
     assert not np.asarray(steer_to_batch(robot, world, jnp.asarray(goods), jnp.asarray(bad), pad)).any()
     assert not np.asarray(steer_to_batch(robot, world, jnp.asarray(bad), jnp.asarray(goods), pad)).any()

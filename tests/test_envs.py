@@ -74,7 +74,9 @@ def test_bad_names_and_files(tmp_path):
 @pytest.mark.parametrize("name", ["point/0", "rigid/0", "nlink/4"])
 def test_nan_and_inf_states_are_invalid_and_blocked(name):
     env = nj.make_env(name)
-    good = env.sample_states(jax.random.key(0), 3, padding=0.0)
+    # the good states only need to be valid: sampled at the map's own padding, as the other
+    # tests of rigid/0 here sample (one compiled validity program for them all)
+    good = env.sample_states(jax.random.key(0), 3)
     bad = good.copy()
     bad[0, 0], bad[1, -1], bad[2, 1] = np.nan, np.inf, -np.inf
     assert not np.asarray(env.is_valid(bad)).any()
@@ -121,10 +123,14 @@ def test_preset_gamma_matches_the_paper(name):
     env = nj.make_env(name)
     point = env.robot.kind == "point"
     n = 400_000 if point else 6_000
-    # the rigid body and the arms read their 6,000 queries off the first rows of one chunk of
-    # 2**18 pairs: one compiled program per map instead of two (the same stream and counts as
-    # whole chunks: test_queries.py::test_gamma_nt_small_n_read_lane_by_lane_equals_whole_chunks)
-    est = env.gamma_nt(jax.random.key(11), n, padding=0.0, chunk=None if point else 1 << 18)
+    # every preset reads its queries off the first rows of chunk 0 (the point robot's 400,000
+    # from rows of 2**17 pairs of a 2**23 chunk, about two rows at its > 80% valid pairs; the
+    # rigid body's and the arms' 6,000 from a 2**18 chunk): one compiled program per map
+    # instead of two, and the same stream and counts as whole chunks of any size (the lanes of
+    # chunk 0 do not depend on the chunk size: the point presets' estimates equal those of
+    # the default 2**22 chunks exactly; test_queries.py::
+    # test_gamma_nt_small_n_read_lane_by_lane_equals_whole_chunks checks the equality)
+    est = env.gamma_nt(jax.random.key(11), n, padding=0.0, chunk=1 << 23 if point else 1 << 18)
     target = nj.PAPER_GAMMA[name]
     half = 1.96 * math.sqrt(target * (1 - target) / n)
     assert abs(est.gamma - target) <= 0.03 + half, (name, est.gamma, target)
@@ -222,11 +228,15 @@ def test_numpy_input_matches_device_input(monkeypatch, min_rows):
     assert [f._cache_size() - c for f, c in zip(split, programs)] == [2, 2, 1]
 
 
-def test_numpy_input_may_be_modified_after_the_call(monkeypatch):
+def test_numpy_input_may_be_modified_after_the_call():
     from ntq_jax.robots import batch
-    monkeypatch.setattr(batch, "HOST_MIN_ROWS", 64)
     env = nj.Env.from_json(_DYADIC)
-    a, b = _grid_pairs(4096, seed=2)
+    # the size of test_numpy_input_matches_device_input[None] (above the default
+    # HOST_MIN_ROWS, so the in-place path as users meet it): its compiled split and
+    # device programs answer here, and a larger array only widens the window a call
+    # returning early would leave
+    a, b = _grid_pairs(3 * batch.HOST_MIN_ROWS + 5, seed=2)
+    assert batch.host_rows(a, 2) is a  # read in place
     want = np.asarray(env.steer_to(jax.device_put(a), jax.device_put(b)))
     got = env.steer_to(a, b)
     a[:] = -5.0  # out of bounds: every answer would become False
@@ -237,18 +247,29 @@ def test_numpy_input_on_a_preset_and_the_rigid_body(monkeypatch):
     # Random (not dyadic) states: the host-split and device programs compute each row
     # with the same elementwise arithmetic, so they agree unless the compiler contracted
     # a multiply-add in one program and not the other AND a state lies within that
-    # rounding of contact. Checked with XLA told 128- and 512-bit vectors; the dyadic
-    # tests above are the layout-proof ones.
+    # rounding of contact. Checked with XLA told 128- and 512-bit vectors and with
+    # --xla_cpu_max_isa=AVX (no FMA), on point/2 and rigid/0; the dyadic tests above are the
+    # layout-proof ones.
+    #
+    # The maps and paddings are those of test_sample_queries_kinds_and_validity (point/2) and
+    # test_varying_batch_sizes_share_compiled_programs (rigid/0), each at its own padding: the
+    # subject (host-split program == device program, row for row) does not depend on which
+    # preset or padding, and so the sampling and device-side programs are shared, only the
+    # split programs under test are compiled here. The device reference of is_valid is read
+    # in pieces of at most CHECK_CHUNK rows (Env's shared chunk path for device input, the
+    # program sample_states runs) rather than one 4096-row bucket.
     from ntq_jax.robots import batch
     monkeypatch.setattr(batch, "HOST_MIN_ROWS", 64)
-    for name in ("point/3", "rigid/1"):
+    for name in ("point/2", "rigid/0"):
         env = nj.make_env(name)
         s = np.asarray(env.sample_states(jax.random.key(0), 2 * 3000), np.float32)
         a, b = _unaligned(s[:3000], 16), _unaligned(s[3000:], 48)
-        want = np.asarray(env.steer_to(jax.device_put(a), jax.device_put(b), padding=0))
-        np.testing.assert_array_equal(np.asarray(env.steer_to(a, b, padding=0)), want, err_msg=name)
-        np.testing.assert_array_equal(np.asarray(env.is_valid(a)),
-                                      np.asarray(env.is_valid(jax.device_put(a))), err_msg=name)
+        want = np.asarray(env.steer_to(jax.device_put(a), jax.device_put(b)))
+        assert 0.05 < want.mean() < 0.95, (name, want.mean())  # both answers are compared
+        np.testing.assert_array_equal(np.asarray(env.steer_to(a, b)), want, err_msg=name)
+        valid = np.concatenate([np.asarray(env.is_valid(jax.device_put(a[i:i + batch.CHECK_CHUNK])))
+                                for i in range(0, len(a), batch.CHECK_CHUNK)])
+        np.testing.assert_array_equal(np.asarray(env.is_valid(a)), valid, err_msg=name)
 
 
 def test_numpy_input_shape_errors():
@@ -277,7 +298,12 @@ def test_varying_batch_sizes_share_compiled_programs():
     after = [f._cache_size() for f in programs]
     assert after[0] == before[0] and after[1] == before[1] and after[3] == before[3], (before, after)
     assert after[2] - before[2] <= 4  # 128, 1024, 2048 (77 and 100 share 128's bucket)
-    ref = (np.asarray(B.steer_to_batch(env.robot, env.world, a, b, env.padding)),
+    # the steer_to reference in 64-row pieces: the bucket program of Env's small batches
+    # (test_nan_and_inf_states_are_invalid_and_blocked[rigid/0] compiles it), independent
+    # of the chunk program under test, like one 2048-row call and without its compilation
+    ref = (np.concatenate([np.asarray(B.steer_to_batch(env.robot, env.world, a[i:i + 64],
+                                                       b[i:i + 64], env.padding))
+                           for i in range(0, len(a), 64)]),
            np.asarray(B.is_valid_batch(env.robot, env.world, a, env.padding)),
            np.asarray(B.distance_batch(env.robot, a, b)))
     assert ref[0].any() and not ref[0].all()

@@ -383,8 +383,10 @@ def test_sample_queries_kinds_follow_p_nt():
     nt = q[kind == Q.NON_TRIVIAL]
     margin = ORACLE.segment_margin(nt[:, 0], nt[:, 1])
     assert (margin[np.abs(margin) > BAND] < 0).all()
-    _, kind0 = Q.sample_queries(ROBOT, WORLD, jax.random.PRNGKey(22), 200, 0.0, PAD)
-    _, kind1 = Q.sample_queries(ROBOT, WORLD, jax.random.PRNGKey(22), 200, 1.0, PAD)
+    # 300 queries: a size test_samplers_and_gamma_compile_once (and test_envs.py) samples too,
+    # so the mixture's draw (jax.random.uniform, compiled per n) is shared
+    _, kind0 = Q.sample_queries(ROBOT, WORLD, jax.random.PRNGKey(22), 300, 0.0, PAD)
+    _, kind1 = Q.sample_queries(ROBOT, WORLD, jax.random.PRNGKey(22), 300, 1.0, PAD)
     assert (kind0 == Q.UNIFORM).all() and (kind1 != Q.UNIFORM).all()
 
 
@@ -402,12 +404,16 @@ def test_p_nt_outside_unit_interval_raises(p_nt):
 
 def test_same_key_same_queries_and_more_queries_extend_the_stream():
     key = jax.random.PRNGKey(31)
-    q1, k1 = ENV.sample_queries(key, 700, p_nt=0.5)
-    q2, k2 = ENV.sample_queries(key, 700, p_nt=0.5)
+    # n = N_STAT (3000): the size test_sample_queries_kinds_follow_p_nt samples, so the
+    # mixture's draw (jax.random.uniform, compiled per n) is shared; its uniform and
+    # non-trivial parts still fit in the first state and query blocks, which n = 9000 crosses
+    n = N_STAT
+    q1, k1 = ENV.sample_queries(key, n, p_nt=0.5)
+    q2, k2 = ENV.sample_queries(key, n, p_nt=0.5)
     assert np.array_equal(q1, q2) and np.array_equal(k1, k2)
     q3, k3 = ENV.sample_queries(key, 9000, p_nt=0.5)  # crosses state and query block boundaries
-    assert np.array_equal(q3[:700], q1) and np.array_equal(k3[:700], k1)
-    q4, _ = ENV.sample_queries(jax.random.PRNGKey(32), 700, p_nt=0.5)
+    assert np.array_equal(q3[:n], q1) and np.array_equal(k3[:n], k1)
+    q4, _ = ENV.sample_queries(jax.random.PRNGKey(32), n, p_nt=0.5)
     assert not np.array_equal(q4, q1)
     for f in (Q.sample_states, Q.sample_uniform_queries):
         a = f(ROBOT, WORLD, key, 50, PAD)
@@ -473,8 +479,10 @@ def test_gamma_nt_small_n_read_lane_by_lane_equals_whole_chunks(monkeypatch):
     # rows too few for n: the lane-by-lane attempt gives up and whole chunks count it
     monkeypatch.setattr(Q, "SMALL_ROWS", 8)
     assert Q._small_estimate(ROBOT, WORLD, prng.stream_seeds(key, 0), PAD, chunk, 10**6) is None
+    # (no padding: the lane program test_free_space_too_small_is_raised runs on its one-box
+    # map; the 0.4-wide free border holds ~12 valid pairs among those 512 lanes, not 250)
     nearly_empty = World.create(BOUNDS, np.array([[5.0, 5.0, 4.6, 4.6]]), np.zeros((0, 3)))
-    assert Q._small_estimate(ROBOT, nearly_empty, prng.stream_seeds(key, 0), PAD, chunk, 250) is None
+    assert Q._small_estimate(ROBOT, nearly_empty, prng.stream_seeds(key, 0), 0.0, chunk, 250) is None
 
 
 @pytest.mark.parametrize("k, n", [(0, 1), (1, 1), (0, 10), (3, 10), (10, 10), (1, 1000),
@@ -502,8 +510,8 @@ def test_free_space_too_small_is_raised():
     key = jax.random.PRNGKey(0)
     with pytest.raises(nj.FreeSpaceTooSmall, match="padding"):
         Q.sample_states(ROBOT, world, key, 1, 0.0)
-    with pytest.raises(nj.FreeSpaceTooSmall):
-        Q.sample_queries(ROBOT, world, key, 5, 0.5, 0.0)
+    with pytest.raises(nj.FreeSpaceTooSmall):  # 300: a size sampled above (one mixture draw)
+        Q.sample_queries(ROBOT, world, key, 300, 0.5, 0.0)
     with pytest.raises(nj.FreeSpaceTooSmall):
         Q.sample_nontrivial_queries(ROBOT, world, key, 5, 0.0)
     with pytest.raises(nj.FreeSpaceTooSmall):
@@ -575,7 +583,9 @@ def test_samplers_and_gamma_compile_once():
     Q.sample_queries(robot, _world(0), key, 300, 0.5, 0.3, n_max=3)
     Q.gamma_nt(robot, _world(0), key, 5000, 0.3, chunk=4096)
     before = TRACES.copy()
-    for i in range(1, 4):
-        Q.sample_queries(robot, _world(i), jax.random.PRNGKey(i), 300 + 100 * i, 0.5, 0.3, n_max=3)
+    # other sizes than the first call's, ones other tests here sample (the mixture's
+    # jax.random.uniform draw, not a robot kernel, compiles per n: those programs are shared)
+    for i, n in zip(range(1, 4), (120, N_STAT, 9000)):
+        Q.sample_queries(robot, _world(i), jax.random.PRNGKey(i), n, 0.5, 0.3, n_max=3)
         Q.gamma_nt(robot, _world(i), jax.random.PRNGKey(i), 5000 * i, 0.3, chunk=4096)
     assert TRACES == before

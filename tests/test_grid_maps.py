@@ -20,7 +20,7 @@ from ntq_jax import broadphase, grid_maps
 from ntq_jax.envs import Env, EnvError
 from ntq_jax.geometry import World
 from ntq_jax.grid_maps import GridMapError, rectangle_cover
-from ntq_jax.robots import robot_from_json
+from ntq_jax.robots import batch as _batch, robot_from_json
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -307,6 +307,19 @@ def _random_world(n, seed=1):
     return World.create([[0, 50], [0, 50]], np.c_[rng.uniform(0, 50, (n, 2)), rng.uniform(0.1, 0.8, (n, 2))])
 
 
+def _shared_world():
+    """The map of test_looped_and_indexed_equal_unrolled (and test_gamma_chunk_...): the point
+    and rigid cases of test_indexed_equals_looped use it too, so their indexed and looped
+    programs at the robot's padding (valid_states' and steer_to_pairs' chunk shapes, the
+    world traced) are compiled once for both tests. It is equivalent to the 150-box map for
+    what that test proves: above UNROLL_MAX (so an index and the looped fold), the same
+    index code paths (no blocked-cell bitmap, candidate lists within INDEX_UNROLL_MAX; the
+    rigid body's lists are 8 long on both maps), and over a hundred of the test's 3000
+    states invalid and hundreds of its motions blocked. The arm keeps the 150-box map: there
+    its lists are 8 long (two blocks of the clearances' looped candidate fold), here 4."""
+    return _random_world(broadphase.UNROLL_MAX + 7, seed=5)
+
+
 def _pairs(env, rng, n, spread):
     lo, hi = (np.asarray(v) for v in env.robot.config_bounds(env.world))
     a = rng.uniform(lo, hi, (n, env.dim)).astype(np.float32)
@@ -317,14 +330,18 @@ def _pairs(env, rng, n, spread):
 def test_indexed_equals_looped(robot, pad):
     """The broad phase against the looped fold over every box (same per-box formulas)."""
     rng = np.random.default_rng(0)
-    world = _random_world(150)
+    world = _random_world(150) if robot["kind"] == "nlink" else _shared_world()
     env = Env("x", robot_from_json(robot), world, pad)
     assert env.world.index is not None
     plain = Env("x", env.robot, world, pad)
     object.__setattr__(plain, "world", dataclasses.replace(env.world, index=None))
     a, b = _pairs(env, rng, 3000, 0.5 if robot["kind"] == "nlink" else 3.0)
+    # is_valid through valid_states' chunk program (what Env.is_valid runs for up to
+    # CHECK_CHUNK states; 3000 would be padded to a size of its own): the programs
+    # test_looped_and_indexed_equal_unrolled's 2000 states run
+    valid = lambda e, p: _batch.valid_states(e.robot, e.world, a, p)  # noqa: E731
     for p in (pad, pad + 5.0):  # pad + 5 is beyond the index's reach: the looped path
-        np.testing.assert_array_equal(env.is_valid(a, p), plain.is_valid(a, p))
+        np.testing.assert_array_equal(valid(env, p), valid(plain, p))
     # the rigid body's and the arm's discretised steer_to is is_valid along the motion (the
     # same work queue either way); the point robot's has its own broad-phase queue
     if robot["kind"] != "nlink":
@@ -341,14 +358,14 @@ def test_indexed_equals_looped(robot, pad):
     exact = ref < cap - 1e-4
     np.testing.assert_allclose(got[exact], ref[exact], rtol=0, atol=1e-5)
     assert np.all(got[~exact] >= cap - 1e-4) and np.all(ref[~exact] >= got[~exact] - 1e-5)
-    np.testing.assert_array_equal(np.all(got > 0, axis=1), np.asarray(env.is_valid(a, pad)))
+    np.testing.assert_array_equal(np.all(got > 0, axis=1), valid(env, pad))
 
 
 @pytest.mark.parametrize("robot, pad", ROBOTS[:2], ids=["point", "rigid"])
 def test_looped_and_indexed_equal_unrolled(robot, pad, monkeypatch):
     """Just above UNROLL_MAX boxes: the unrolled kernels (UNROLL_MAX raised) are the reference."""
     rng = np.random.default_rng(2)
-    world = _random_world(broadphase.UNROLL_MAX + 7, seed=5)
+    world = _shared_world()
     env = Env("x", robot_from_json(robot), world, pad)
     a, b = _pairs(env, rng, 2000, 3.0)
     point = robot["kind"] == "point"
@@ -502,7 +519,7 @@ def test_gamma_chunk_of_a_large_map_keeps_memory_small():
     env = nj.make_env("point/0")
     assert env.world.index is None and Q.default_chunk(env.robot, env.world) == 1 << 22
     assert Q.default_chunk(nj.make_env("rigid/0").robot) == 1 << 15
-    world = _random_world(broadphase.UNROLL_MAX + 7, seed=5)
+    world = _shared_world()
     big = Env("many", env.robot, world, 0.0)
     assert big.world.index is not None
     assert Q.default_chunk(big.robot, big.world) == Q.INDEXED_POINT_CHUNK == 1 << 18

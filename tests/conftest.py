@@ -26,6 +26,13 @@ def pytest_configure(config):
         # every program, however quick to compile: the workers and subprocesses share them
         os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0"
         config._ntq_jit_cache = folder
+        import sys
+
+        if "jax" in sys.modules:  # imported already (the profiler below): it read the old values
+            import jax
+
+            jax.config.update("jax_compilation_cache_dir", folder)
+            jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
 
 
 _PROFILE = os.environ.get("NTQ_TEST_PROFILE")  # a folder: per-test compile times (see below)

@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import os
 import socket
+import sys
 import threading
 import time
 import warnings
@@ -202,9 +203,7 @@ class RayExecutor:
                             "configure_logging": False}
                 if self.address is None:
                     kw["num_cpus"] = self.local_cpus
-                # the tasks are host-side work: JAX on the CPU there, never a GPU of the node
-                # (each worker process would otherwise reserve most of its memory)
-                kw["runtime_env"] = {"env_vars": {"JAX_PLATFORMS": "cpu"}}
+                kw["runtime_env"] = {"env_vars": worker_env(local=self.address is None)}
                 with warnings.catch_warnings():  # Ray's fork+exec of its own daemons
                     warnings.filterwarnings("ignore", message=r"os\.fork\(\) was called")
                     ray.init(address=self.address, **kw)
@@ -250,6 +249,30 @@ class RayExecutor:
     def __repr__(self) -> str:
         return (f"RayExecutor(address={self.address!r}, num_cpus={self.num_cpus}, "
                 f"max_retries={self.max_retries})")
+
+
+def worker_env(*, local: bool) -> dict[str, str]:
+    """The environment variables of the Ray instance's worker processes.
+
+    ``JAX_PLATFORMS=cpu``: the tasks are host-side work, never on a GPU of the node
+    (each worker process would otherwise reserve most of its memory). On a local
+    instance (``local``), also this process's persistent compilation cache when it is
+    on (``JAX_COMPILATION_CACHE_DIR`` and ``JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS``,
+    e.g. from :func:`ntq_jax.artifacts.enable_compile_cache`): the workers then load
+    the programs compiled here, by each other and by earlier runs instead of each
+    compiling every one. A cluster's nodes keep their own settings (the folder is a
+    path on this machine).
+    """
+    env = {"JAX_PLATFORMS": "cpu"}
+    if local and "jax" in sys.modules:
+        import jax
+
+        folder = jax.config.jax_compilation_cache_dir
+        if folder and jax.config.jax_enable_compilation_cache:
+            env["JAX_COMPILATION_CACHE_DIR"] = str(folder)
+            env["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = repr(
+                float(jax.config.jax_persistent_cache_min_compile_time_secs))
+    return env
 
 
 def _timed_call(fn: Callable, submitted: float, *args):

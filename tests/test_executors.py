@@ -21,7 +21,7 @@ import pytest
 from ntq_jax.experiment import config as C
 from ntq_jax import data, make_env
 from ntq_jax.planners import jobs as planning
-from ntq_jax.executors import LocalExecutor, RayExecutor, make_executor
+from ntq_jax.executors import LocalExecutor, RayExecutor, make_executor, worker_env
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "scripts"))
@@ -50,7 +50,7 @@ def ray_session():
     with warnings.catch_warnings():  # Ray's fork+exec of its own daemons
         warnings.filterwarnings("ignore", message=r"os\.fork\(\) was called")
         ray.init(num_cpus=2, include_dashboard=False, configure_logging=False,
-                 runtime_env={"env_vars": {"JAX_PLATFORMS": "cpu"}})
+                 runtime_env={"env_vars": worker_env(local=True)})
     yield ray
     ray.shutdown()
 
@@ -106,6 +106,27 @@ def test_missing_ray_is_one_line(monkeypatch, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert err == ["error: the ray executor needs Ray: pip install -e '.[ray]' "
                    "(or pip install 'ray>=2.40')"]
+
+
+def test_local_workers_get_this_process_compilation_cache():
+    """A local instance's workers are told this process's cache folder and threshold (read
+    from jax.config, where enable_compile_cache puts them, not only inherited through the
+    environment); a cluster's nodes are not, and with the cache off there is nothing to pass.
+    (The suite's own cache is on: tests/conftest.py.)"""
+    import jax
+
+    folder = jax.config.jax_compilation_cache_dir
+    assert folder, "the suite runs with a compilation cache"
+    assert worker_env(local=True) == {
+        "JAX_PLATFORMS": "cpu", "JAX_COMPILATION_CACHE_DIR": folder,
+        "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS":
+            repr(float(jax.config.jax_persistent_cache_min_compile_time_secs))}
+    assert worker_env(local=False) == {"JAX_PLATFORMS": "cpu"}
+    jax.config.update("jax_enable_compilation_cache", False)  # nothing compiles meanwhile
+    try:
+        assert worker_env(local=True) == {"JAX_PLATFORMS": "cpu"}
+    finally:
+        jax.config.update("jax_enable_compilation_cache", True)
 
 
 # ---------------------------------------------------------------------------

@@ -46,7 +46,7 @@ import warnings
 from typing import Any, Callable, Iterable, Iterator, Protocol, Sequence
 
 __all__ = ["EXECUTORS", "Executor", "LocalExecutor", "RayExecutor", "make_executor",
-           "executor_from_config", "RAY_MISSING"]
+           "executor_from_config", "worker_env", "RAY_MISSING"]
 
 EXECUTORS = ("local", "ray")
 _INIT_LOCK = threading.Lock()  # threads of one driver share one Ray connection

@@ -112,7 +112,6 @@ def pytest_unconfigure(config):
         shutil.rmtree(folder, ignore_errors=True)
 
 
-_SCRIPTS = Path(__file__).resolve().parents[1] / "scripts"
 _script_modules: dict = {}
 
 
@@ -126,14 +125,11 @@ def script(capsys):
     programs this worker compiled are reused. Every script is still started as a real
     subprocess by some test (what only a process shows: the ``__main__`` guard, stray
     output at import)."""
-    import importlib.util
+    from script_loader import load_script
 
     def run(name: str, *argv) -> SimpleNamespace:
         if name not in _script_modules:
-            spec = importlib.util.spec_from_file_location(f"_script_{name}", _SCRIPTS / f"{name}.py")
-            mod = importlib.util.module_from_spec(spec)
-            spec.loader.exec_module(mod)
-            _script_modules[name] = mod
+            _script_modules[name] = load_script(name, f"_script_{name}")
         capsys.readouterr()  # drop what the test printed before
         code = _script_modules[name].main([str(a) for a in argv])
         out = capsys.readouterr()

@@ -7,7 +7,6 @@ mtimes before and after).
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import os
 import time
@@ -28,15 +27,13 @@ from ntq_jax.envs import env_slug, resolve_envs
 from ntq_jax.envs import MAX_STATES_PER_MOTION, EnvError
 from ntq_jax.presets import PRESETS
 
+from script_loader import load_script
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def _script(name):
-    spec = importlib.util.spec_from_file_location(f"_bad_inputs_{name}",
-                                                  ROOT / "scripts" / f"{name}.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_script(name, f"_bad_inputs_{name}")
 
 
 def _listing(root: Path) -> dict:

@@ -164,14 +164,8 @@ def test_config_key_reaches_the_data_planner_and_the_fingerprint():
 
 
 def _record_script():
-    import importlib.util
-    from pathlib import Path
-    root = Path(__file__).resolve().parents[1]
-    spec = importlib.util.spec_from_file_location("record_paths",
-                                                  root / "scripts" / "record_paths.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    from script_loader import load_script
+    return load_script("record_paths")
 
 
 def test_datasets_rebuild_from_a_record_without_planning(tmp_path, monkeypatch):

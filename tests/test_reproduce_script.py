@@ -7,13 +7,14 @@ REPRODUCTION.md regenerated from them (and flagged as not paper-size).
 
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
 
 import pytest
 
 from ntq_jax.experiment import reproduction, summaries
+
+from script_loader import load_script
 
 ROOT = Path(__file__).resolve().parents[1]
 TINY = ["data.k_train=40", "data.gamma_queries=2000", "data.gamma_eval=false",
@@ -22,10 +23,7 @@ TINY = ["data.k_train=40", "data.gamma_queries=2000", "data.gamma_eval=false",
 
 
 def _script():
-    spec = importlib.util.spec_from_file_location("reproduce", ROOT / "scripts" / "reproduce.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_script("reproduce")
 
 
 def test_reproduce_one_map_with_a_training_seed(tmp_path, capsys):

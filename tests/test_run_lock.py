@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import importlib.util
 import os
 import subprocess
 import sys
@@ -12,6 +11,8 @@ from pathlib import Path
 import pytest
 
 from ntq_jax import artifacts
+
+from script_loader import load_script
 
 ROOT = Path(__file__).resolve().parents[1]
 TINY = ["envs=[point/2]", "data.k_train=40", "data.gamma_queries=2000", "data.gamma_eval=false",
@@ -33,10 +34,7 @@ def _holder(run: Path, how: str) -> subprocess.Popen:
 
 
 def _train_all():
-    spec = importlib.util.spec_from_file_location("_lock_train_all", ROOT / "scripts/train_all.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_script("train_all", "_lock_train_all")
 
 
 def test_second_run_on_a_folder_in_use_is_one_line_naming_the_pid(tmp_path, capsys):

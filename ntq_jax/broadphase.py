@@ -282,11 +282,19 @@ def bitmap_cell(bounds: np.ndarray, boxes: np.ndarray, cell: float) -> float:
     return bcell
 
 
+def _round_up_2(x: float) -> float:
+    """``x > 0`` rounded up to two significant digits: maps that differ only in the last digits
+    of their extent get the same (static) ``margin``, hence share compiled programs."""
+    step = 10.0 ** (math.floor(math.log10(x)) - 1)
+    return math.ceil(x / step * (1.0 - 1e-12)) * step
+
+
 def blocked_bitmap(bounds, boxes, cell: float, scale: float, min_fill: float | None = None):
     """``(blocked, bcell, margin)`` of the blocked-cell bitmap (module docstring), or None
     when fewer than ``min_fill`` (default :data:`BITMAP_MIN_FILL`) of its cells are blocked
     (``scale``: the largest coordinate of the bounds and boxes, which sets the float32
-    rounding the ``margin`` must absorb): ``blocked`` ``(bny, bnx)`` uint8 is 1 where the closed cell
+    rounding the ``margin`` must absorb; the margin is rounded up to two significant
+    digits): ``blocked`` ``(bny, bnx)`` uint8 is 1 where the closed cell
     ``[x0 + c bcell, x0 + (c + 1) bcell] x [...]`` lies inside one box (up to a tolerance
     of ``margin / 2``, which :meth:`ObstacleIndex.certainly_blocked` leaves as slack)."""
     b = np.asarray(bounds, np.float64)
@@ -298,7 +306,7 @@ def blocked_bitmap(bounds, boxes, cell: float, scale: float, min_fill: float | N
     x0, y0 = float(b[0, 0]), float(b[1, 0])
     nx = max(1, math.ceil((b[0, 1] - x0) / bcell * (1.0 - 1e-6)))  # cells past the bounds: 0
     ny = max(1, math.ceil((b[1, 1] - y0) / bcell * (1.0 - 1e-6)))
-    margin = 1e-3 * bcell + 1e-5 * max(scale, 1.0)
+    margin = _round_up_2(1e-3 * bcell + 1e-5 * max(scale, 1.0))
     if margin >= 0.25 * bcell:
         return None
     tol = 0.5 * margin

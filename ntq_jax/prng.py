@@ -14,7 +14,8 @@ with threefry). It is NOT a cryptographic generator. It is used in two places, b
 threefry call): the streaming gamma_nt estimator (:func:`stream_seeds`) and
 PNet's dropout masks (:func:`uniform_array`; vmapped threefry draws of the masks
 halved the ensemble's training steps/s on the CPU). Everything else in the
-package uses ``jax.random`` directly.
+package uses ``jax.random`` directly; :func:`uniform_prefix` draws the host-side
+``jax.random.uniform(key, (n,))`` of any ``n`` with few compiled programs.
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ import math
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 Array = jax.Array
 
@@ -87,3 +89,19 @@ def uniform_array(key: Array, shape: tuple[int, ...]) -> Array:
                          "split the batch")
     seeds = jax.random.bits(key, (2,), jnp.uint32)
     return uniform(seeds, jnp.arange(n, dtype=jnp.uint32).reshape(shape))
+
+
+def uniform_prefix(key: Array, n: int) -> np.ndarray:
+    """``np.asarray(jax.random.uniform(key, (n,)))``, bit for bit, as a host array.
+
+    ``jax.random`` compiles one program per shape. With ``jax_threefry_partitionable``
+    (JAX's default) element ``i`` of a 1-D draw depends only on the key and ``i``, so the
+    first ``n`` of a draw of ``2**ceil(log2 n)`` values are the draw of ``n``: every ``n``
+    of one power-of-two bucket shares one program. Without that flag the draw of ``n``
+    itself is taken.
+    """
+    n = int(n)
+    if n <= 0:
+        return np.zeros((0,), np.float32)
+    size = 1 << (n - 1).bit_length() if jax.config.jax_threefry_partitionable else n
+    return np.asarray(jax.random.uniform(key, (size,)))[:n]

@@ -222,7 +222,7 @@ def sample_queries(robot, world: World, key: Array, n: int, p_nt: float, padding
     n_max = check_count("n_max", n_max, 1)
     padding = check_padding(padding)
     k_mix, k_uni, k_nt = jax.random.split(key, 3)
-    use_nt = np.asarray(jax.random.uniform(k_mix, (n,))) < p_nt
+    use_nt = prng.uniform_prefix(k_mix, n) < p_nt
     n_nt = int(use_nt.sum())
     queries = np.zeros((n, 2, robot.dim), np.float32)
     kind = np.zeros(n, np.int8)

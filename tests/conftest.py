@@ -57,6 +57,21 @@ if _PROFILE:
 
     jax.monitoring.register_event_duration_secs_listener(_on_duration)
 
+    import logging
+
+    class _CompileLog(logging.Handler):
+        """Each lowering's module name and argument shapes (JAX logs them at DEBUG)."""
+
+        def emit(self, record):
+            if _current["test"] is not None and record.msg.startswith("Compiling %s with global"):
+                name, avals = record.args[0], record.args[1]
+                _profile.setdefault(_current["test"], {}).setdefault("lowered", []).append(
+                    [str(name), " ".join(str(a) for a in avals)])
+
+    _pxla_log = logging.getLogger("jax._src.interpreters.pxla")
+    _pxla_log.setLevel(logging.DEBUG)
+    _pxla_log.addHandler(_CompileLog(logging.DEBUG))
+
     @pytest.hookimpl(hookwrapper=True)
     def pytest_runtest_protocol(item, nextitem):
         """With ``NTQ_TEST_PROFILE=<folder>``: each test's wall time and JAX compile

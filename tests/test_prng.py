@@ -166,3 +166,30 @@ def test_uniform_array_for_dropout_masks():
         np.testing.assert_array_equal(w[i], np.asarray(prng.uniform_array(keys[i], (4, 5))))
     with pytest.raises(ValueError, match="2\\*\\*32"):
         prng.uniform_array(key, (2**16, 2**16 + 1))
+
+
+def test_uniform_prefix_is_jax_random_uniform_bit_for_bit(monkeypatch):
+    """``uniform_prefix(key, n)`` equals ``jax.random.uniform(key, (n,))`` bit for bit for
+    every ``n`` (both key kinds), draws one program per power-of-two bucket, and without
+    ``jax_threefry_partitionable`` falls back to the draw of ``n`` itself."""
+    sizes = [0, 1, 2, 3, 5, 100, 127, 128, 129, 1000, 4097]
+    for key in (jax.random.key(7), jax.random.PRNGKey(7)):
+        for n in sizes:
+            got = prng.uniform_prefix(key, n)
+            want = np.asarray(jax.random.uniform(key, (n,)))
+            assert got.dtype == np.float32 and got.shape == (n,)
+            np.testing.assert_array_equal(got.view(np.uint32), want.view(np.uint32))
+    seen = []
+    real = jax.random.uniform
+    monkeypatch.setattr(jax.random, "uniform", lambda k, shape: seen.append(shape) or real(k, shape))
+    for n in (65, 100, 128):
+        prng.uniform_prefix(jax.random.key(1), n)
+    assert seen == [(128,)] * 3
+    seen.clear()
+    before = jax.config.jax_threefry_partitionable
+    jax.config.update("jax_threefry_partitionable", False)
+    try:
+        prng.uniform_prefix(jax.random.key(1), 100)
+    finally:
+        jax.config.update("jax_threefry_partitionable", before)
+    assert seen == [(100,)]

@@ -16,7 +16,7 @@ from typing import NamedTuple
 import jax
 import numpy as np
 
-from ntq_jax import queries as Q
+from ntq_jax import prng, queries as Q
 from ntq_jax.progress import open_bar
 
 __all__ = ["Keys", "run_keys", "mixing_bits", "pool_sizes", "Pools", "sample_pools",
@@ -49,7 +49,7 @@ def mixing_bits(key: jax.Array, k: int, p_nt: float) -> np.ndarray:
     if p_nt >= 1.0:
         return np.ones(k, bool)
     sub = jax.random.fold_in(key, int(round(p_nt * 1_000_000)))
-    return np.asarray(jax.random.uniform(sub, (k,))) < p_nt
+    return prng.uniform_prefix(sub, k) < p_nt
 
 
 def pool_sizes(bits: list[np.ndarray]) -> tuple[int, int]:

@@ -10,14 +10,55 @@ Public API (stable):
   :func:`register_planner`; :class:`PlanCause` (the neural planner's outcomes).
 """
 
-from ntq_jax.envs import Env, EnvError, make_env
-from ntq_jax.geometry import World
-from ntq_jax.planners import PlanResult, plan, register_planner
-from ntq_jax.presets import PAPER_GAMMA, PRESETS
-from ntq_jax.queries import NON_TRIVIAL, NT_EXHAUSTED, UNIFORM, FreeSpaceTooSmall, GammaEstimate
-from ntq_jax.types import PlanCause, PlanStatus
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING
+
 from ntq_jax.version import __version__
+
+if TYPE_CHECKING:  # the names below, for type checkers and the API docs
+    from ntq_jax.envs import Env, EnvError, make_env
+    from ntq_jax.geometry import World
+    from ntq_jax.planners import PlanResult, plan, register_planner
+    from ntq_jax.presets import PAPER_GAMMA, PRESETS
+    from ntq_jax.queries import (NON_TRIVIAL, NT_EXHAUSTED, UNIFORM, FreeSpaceTooSmall,
+                                 GammaEstimate)
+    from ntq_jax.types import PlanCause, PlanStatus
+
+#: Where each public name lives. They load on first use (PEP 562), so a process that
+#: imports only a JAX-free module of the package (the BIT* workers) never loads JAX.
+_EXPORTS = {
+    "Env": "ntq_jax.envs", "EnvError": "ntq_jax.envs", "make_env": "ntq_jax.envs",
+    "World": "ntq_jax.geometry",
+    "PlanResult": "ntq_jax.planners", "plan": "ntq_jax.planners",
+    "register_planner": "ntq_jax.planners",
+    "PRESETS": "ntq_jax.presets", "PAPER_GAMMA": "ntq_jax.presets",
+    "GammaEstimate": "ntq_jax.queries", "FreeSpaceTooSmall": "ntq_jax.queries",
+    "UNIFORM": "ntq_jax.queries", "NON_TRIVIAL": "ntq_jax.queries",
+    "NT_EXHAUSTED": "ntq_jax.queries",
+    "PlanStatus": "ntq_jax.types", "PlanCause": "ntq_jax.types",
+}
 
 __all__ = ["Env", "EnvError", "make_env", "World", "PRESETS", "PAPER_GAMMA", "GammaEstimate",
            "FreeSpaceTooSmall", "UNIFORM", "NON_TRIVIAL", "NT_EXHAUSTED", "plan", "PlanResult",
            "PlanStatus", "PlanCause", "register_planner", "__version__"]
+
+
+def __getattr__(name: str):
+    """A public name from its module, or a submodule (``ntq_jax.data``), loaded on first use."""
+    if name in _EXPORTS:
+        value = getattr(importlib.import_module(_EXPORTS[name]), name)
+    else:
+        try:
+            value = importlib.import_module(f"{__name__}.{name}")
+        except ModuleNotFoundError as e:
+            if e.name != f"{__name__}.{name}":
+                raise
+            raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_EXPORTS))

@@ -90,6 +90,27 @@ def test_numpy_checker_equals_jax_is_valid(name):
                 assert _near_tangency(env, states[i], padding), (name, padding, states[i])
 
 
+def test_a_worker_process_does_not_load_jax(tmp_path):
+    """What a spawned BIT* worker unpickles (its entry point and the checker) imports NumPy,
+    not JAX: the package ``__init__`` modules load their names lazily. The public API still
+    loads on first use."""
+    import pickle
+    import subprocess
+    import sys
+
+    from ntq_jax.planners.ompl_worker import worker_main
+
+    payload = tmp_path / "payload.pkl"
+    payload.write_bytes(pickle.dumps((worker_main, NumpyChecker.from_env(_env("nlink/4")))))
+    code = (f"import pickle, sys; fn, ch = pickle.loads(open({str(payload)!r}, 'rb').read()); "
+            "print(sorted(m for m in sys.modules if m == 'jax' or m.startswith('jax.'))[:3]); "
+            "assert ch.dim == 4 and callable(fn); "
+            "import ntq_jax; env = ntq_jax.make_env('point/0'); print('jax' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.split() == ["[]", "True"], out.stdout
+
+
 def test_numpy_checker_rejects_non_finite_states():
     for name in ("rigid/0", "nlink/4", "point/0"):
         env = _env(name)

@@ -58,81 +58,44 @@ Register your own with :func:`register_planner`. Measurements: BENCHMARKS.md
 
 from __future__ import annotations
 
-import numpy as np
+import importlib
+from typing import TYPE_CHECKING
 
-from ntq_jax.planners import astar, ompl_bridge, roadmap, visgraph
-from ntq_jax.planners.astar import config_grid
-from ntq_jax.planners.options import check_option_names
-from ntq_jax.planners.verify import check_paths, finalize, valid_queries
-from ntq_jax.validation import check_count
-from ntq_jax.types import STATUS_NAMES, PlannerFn, PlanResult, PlanStatus
+if TYPE_CHECKING:  # the names below, for type checkers and the API docs
+    from ntq_jax.planners.astar import config_grid
+    from ntq_jax.planners.registry import available_planners, plan, register_planner
+    from ntq_jax.planners.verify import check_paths, finalize, valid_queries
+    from ntq_jax.types import STATUS_NAMES, PlanResult, PlanStatus
 
-_REGISTRY: dict[str, PlannerFn] = {}
-
-
-def register_planner(name: str, fn: PlannerFn) -> None:
-    """Registers (or replaces) a planner usable as ``plan(env, queries, name)``.
-
-    Args:
-        name: the planner's name.
-        fn: ``fn(env, queries (K, 2, d) float32, *, padding: float, seed: int,
-            **options) -> PlanResult``; ``padding`` is already resolved to a number.
-    """
-    if not isinstance(name, str) or not name:
-        raise ValueError(f"planner name must be a non-empty string, got {name!r}")
-    if not callable(fn):
-        raise TypeError(f"planner {name!r} must be callable, got {type(fn).__name__}")
-    _REGISTRY[name] = fn
-
-
-def available_planners() -> tuple[str, ...]:
-    """Names of the registered planners, sorted."""
-    return tuple(sorted(_REGISTRY))
-
-
-def plan(env, queries, planner: str = "astar", *, padding: float | None = None, seed: int = 0,
-         **options) -> PlanResult:
-    """Plans a batch of queries with a registered planner.
-
-    Args:
-        env: an :class:`ntq_jax.Env`.
-        queries: ``(K, 2, d)`` array of (start, goal) states.
-        planner: ``"astar"``, ``"visgraph"``, ``"bitstar"`` or a registered name.
-        padding: planning clearance; ``None`` = the environment's padding (the
-            data-generation geometry), ``0`` = the evaluation geometry.
-        seed: seed for randomised planners.
-        **options: planner options (see the module docstring).
-
-    Returns:
-        A :class:`PlanResult`.
-
-    Raises:
-        ValueError: unknown planner (the message lists the available ones), bad
-            query shape, or a planner that does not support the robot.
-        TypeError, ValueError: an option the planner does not take (the message
-            lists those it does), or one of the wrong type or out of range (the
-            message names it); a non-integer or negative ``seed``.
-    """
-    if not isinstance(planner, str) or planner not in _REGISTRY:
-        raise ValueError(f"unknown planner {planner!r}; available: {', '.join(available_planners())}")
-    seed = check_count("seed", seed)
-    pad = env.resolve_padding(padding)
-    try:
-        q = np.asarray(queries, np.float32)
-    except (TypeError, ValueError):
-        raise TypeError(f"queries must be a numeric (K, 2, {env.dim}) array of (start, goal) "
-                        f"states for {env.name}, got {type(queries).__name__}") from None
-    if q.ndim != 3 or q.shape[1:] != (2, env.dim):
-        raise ValueError(f"queries must have shape (K, 2, {env.dim}) for {env.name}, got {q.shape}")
-    fn = _REGISTRY[planner]
-    check_option_names(planner, fn, options)
-    return fn(env, q, padding=pad, seed=seed, **options)
-
-
-register_planner("astar", astar.plan_astar)
-register_planner("visgraph", visgraph.plan_visgraph)
-register_planner("bitstar", ompl_bridge.plan_bitstar)
-register_planner("roadmap", roadmap.plan_roadmap)
+#: Where each public name lives. They load on first use (PEP 562): a BIT* worker process
+#: imports :mod:`ntq_jax.planners.ompl_worker` (NumPy and OMPL only) without loading JAX.
+_EXPORTS = {
+    "plan": "ntq_jax.planners.registry", "register_planner": "ntq_jax.planners.registry",
+    "available_planners": "ntq_jax.planners.registry",
+    "PlanResult": "ntq_jax.types", "PlanStatus": "ntq_jax.types",
+    "STATUS_NAMES": "ntq_jax.types",
+    "check_paths": "ntq_jax.planners.verify", "valid_queries": "ntq_jax.planners.verify",
+    "finalize": "ntq_jax.planners.verify", "config_grid": "ntq_jax.planners.astar",
+}
 
 __all__ = ["plan", "register_planner", "available_planners", "PlanResult", "PlanStatus",
            "STATUS_NAMES", "check_paths", "valid_queries", "finalize", "config_grid"]
+
+
+def __getattr__(name: str):
+    """A public name from its module, or a submodule (``planners.astar``), loaded on first use."""
+    if name in _EXPORTS:
+        value = getattr(importlib.import_module(_EXPORTS[name]), name)
+    else:
+        try:
+            value = importlib.import_module(f"{__name__}.{name}")
+        except ModuleNotFoundError as e:
+            if e.name != f"{__name__}.{name}":
+                raise
+            raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_EXPORTS))

@@ -14,8 +14,8 @@ for the arm, joint bounds ``[-pi, pi]`` as the kernel applies them in float32).
 :mod:`ntq_jax.planners.ompl_bridge`: it receives the pickled checker (no
 environment is rebuilt) and leaves with ``os._exit`` so nanobind's "leaked
 instances" report at interpreter shutdown is never printed. This module and the
-checker import only NumPy (and ``ompl`` when a problem is built); a worker still
-loads JAX through the ``ntq_jax`` package's ``__init__``.
+checker import only NumPy (and ``ompl`` when a problem is built), and the packages'
+``__init__`` modules load their names lazily, so a worker never loads JAX.
 """
 
 from __future__ import annotations

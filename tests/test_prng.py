@@ -172,7 +172,7 @@ def test_uniform_prefix_is_jax_random_uniform_bit_for_bit(monkeypatch):
     """``uniform_prefix(key, n)`` equals ``jax.random.uniform(key, (n,))`` bit for bit for
     every ``n`` (both key kinds), draws one program per power-of-two bucket, and without
     ``jax_threefry_partitionable`` falls back to the draw of ``n`` itself."""
-    sizes = [0, 1, 2, 3, 5, 100, 127, 128, 129, 1000, 4097]
+    sizes = [0, 1, 3, 100, 128, 129, 4097]
     for key in (jax.random.key(7), jax.random.PRNGKey(7)):
         for n in sizes:
             got = prng.uniform_prefix(key, n)

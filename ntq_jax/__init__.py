@@ -12,9 +12,9 @@ Public API (stable):
 
 from __future__ import annotations
 
-import importlib
 from typing import TYPE_CHECKING
 
+from ntq_jax.lazy import lazy_exports
 from ntq_jax.version import __version__
 
 if TYPE_CHECKING:  # the names below, for type checkers and the API docs
@@ -45,20 +45,4 @@ __all__ = ["Env", "EnvError", "make_env", "World", "PRESETS", "PAPER_GAMMA", "Ga
            "PlanStatus", "PlanCause", "register_planner", "__version__"]
 
 
-def __getattr__(name: str):
-    """A public name from its module, or a submodule (``ntq_jax.data``), loaded on first use."""
-    if name in _EXPORTS:
-        value = getattr(importlib.import_module(_EXPORTS[name]), name)
-    else:
-        try:
-            value = importlib.import_module(f"{__name__}.{name}")
-        except ModuleNotFoundError as e:
-            if e.name != f"{__name__}.{name}":
-                raise
-            raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_EXPORTS))
+__getattr__, __dir__ = lazy_exports(__name__, globals(), _EXPORTS)

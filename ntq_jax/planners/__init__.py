@@ -58,8 +58,9 @@ Register your own with :func:`register_planner`. Measurements: BENCHMARKS.md
 
 from __future__ import annotations
 
-import importlib
 from typing import TYPE_CHECKING
+
+from ntq_jax.lazy import lazy_exports
 
 if TYPE_CHECKING:  # the names below, for type checkers and the API docs
     from ntq_jax.planners.astar import config_grid
@@ -82,20 +83,4 @@ __all__ = ["plan", "register_planner", "available_planners", "PlanResult", "Plan
            "STATUS_NAMES", "check_paths", "valid_queries", "finalize", "config_grid"]
 
 
-def __getattr__(name: str):
-    """A public name from its module, or a submodule (``planners.astar``), loaded on first use."""
-    if name in _EXPORTS:
-        value = getattr(importlib.import_module(_EXPORTS[name]), name)
-    else:
-        try:
-            value = importlib.import_module(f"{__name__}.{name}")
-        except ModuleNotFoundError as e:
-            if e.name != f"{__name__}.{name}":
-                raise
-            raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_EXPORTS))
+__getattr__, __dir__ = lazy_exports(__name__, globals(), _EXPORTS)

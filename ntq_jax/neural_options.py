@@ -12,7 +12,7 @@ import numpy as np
 
 from ntq_jax.robots.certified import MOTION_CHECKS
 
-__all__ = ["PlannerOptions", "NeuralPlanResult", "DELTA_NORMS", "ALGORITHM_VERSION"]
+__all__ = ["PlannerOptions", "NeuralPlanResult", "DELTA_NORMS", "ALGORITHM_VERSION", "STAGE_FIELDS"]
 
 DELTA_NORMS = ("robot", "l2")
 ALGORITHM_VERSION = 4  # bump when planning results change (saved evaluations are then redone)
@@ -20,6 +20,17 @@ ALGORITHM_VERSION = 4  # bump when planning results change (saved evaluations ar
 
 #: The values of ``PlannerOptions.nosteer_check`` (see there).
 NOSTEER_CHECKS = (True, False, "states", "replan")
+
+
+#: The :class:`PlannerOptions` fields each compiled stage of the neural planner reads
+#: (:mod:`ntq_jax.neural_steps`; a test traces each stage and checks it reads no other).
+STAGE_FIELDS = {
+    "coarse": ("n_plan", "steer", "delta", "delta_norm", "nosteer_check", "replan_rounds",
+               "replan_steps", "bidirectional", "plan_padding", "eval_padding"),
+    "valid": ("eval_padding",),
+    "connect": ("replan_steps", "plan_padding"),
+    "check": ("steer", "nosteer_check", "contract", "plan_padding", "eval_padding", "eval_check"),
+}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -101,6 +112,13 @@ class PlannerOptions:
         """Rows of the path buffer: coarse plan plus what replanning can add."""
         rounds = self.replan_rounds if self.repairs else 0
         return self.n_plan + 2 + rounds * self.replan_steps
+
+    def for_stage(self, stage: str) -> "PlannerOptions":
+        """These options reduced to the fields the planner's stage ``stage`` reads
+        (:data:`STAGE_FIELDS`), the others at their defaults. The stage computes the same
+        with either; its compile key holds the reduced options, so option sets that differ
+        only where a stage does not look share its compiled program."""
+        return type(self)(**{f: getattr(self, f) for f in STAGE_FIELDS[stage]})
 
     @staticmethod
     def from_config(ev, steer: bool | None = None) -> "PlannerOptions":

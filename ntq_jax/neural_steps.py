@@ -12,7 +12,7 @@ it goes through :func:`propose`: one PNet's prediction, or, for an
 the robot and ``opts`` (a :class:`ntq_jax.neural_planner.PlannerOptions`, whose
 paddings are numbers) are static, the world is traced. :class:`Stages` runs
 them through a bounded cache of compiled programs keyed by the static settings
-and the input shapes.
+(``opts.for_stage``: only the fields the stage reads) and the input shapes.
 """
 
 from __future__ import annotations
@@ -490,7 +490,7 @@ class Stages:
         self.compile = 0.0
 
     def __call__(self, name: str, *args) -> list[np.ndarray]:
-        args = (self.robot, self.opts, self.world) + args
+        args = (self.robot, self.opts.for_stage(name), self.world) + args
         t0 = time.perf_counter()
         fn = _compiled(name, args)
         t1 = time.perf_counter()

@@ -15,6 +15,7 @@ Every path counted as a success is re-checked by shapely (float64 segment
 against the closed boxes, and the bounds), never by the planner's own flag.
 """
 
+import dataclasses
 import functools
 
 import jax
@@ -245,6 +246,11 @@ def _flip_to_pi(key, current, goal):
     return goal.at[:, 2].set(jnp.pi)
 
 
+# the rigid body's options without steerTo: the same path buffer (and so the same compiled
+# check stage) as NOSTEER, whose other fields that stage does not read
+RIGID_NOSTEER = PlannerOptions(n_plan=12, steer=False, delta=0.1)
+
+
 def _rigid_env():
     return Env.from_json({"name": "rigid-open", "robot": {"kind": "rigid_body"},
                           "bounds": BOUNDS, "boxes": [[5.0, 5.0, 0.5, 0.5]] + DUMMY,
@@ -254,7 +260,7 @@ def _rigid_env():
 def test_without_steer_to_delta_is_in_the_robots_metric():
     """theta = pi and -pi are one heading: a prediction there is at distance 0, not 2 pi."""
     env = _rigid_env()
-    nosteer = PlannerOptions(n_plan=5, steer=False, delta=0.1)
+    nosteer = RIGID_NOSTEER
     q = np.asarray([[[2, 2, 0], [8, 2, -np.pi]]], np.float32)
     res = plan_batch(env, _flip_to_pi, q, jax.random.key(0), nosteer)
     assert res.success[0] and res.cause[0] == PlanCause.SUCCESS
@@ -272,9 +278,9 @@ def test_without_steer_to_the_papers_goal_test_and_unchecked_paths():
     from ntq_jax.experiment import config
     env = _rigid_env()
     q = np.asarray([[[2, 2, 0], [8, 2, -np.pi]]], np.float32)
-    l2 = PlannerOptions(n_plan=5, steer=False, delta=0.1, delta_norm="l2")
+    l2 = dataclasses.replace(RIGID_NOSTEER, delta_norm="l2")
     res = plan_batch(env, _flip_to_pi, q, jax.random.key(0), l2)
-    assert not res.success[0] and res.cause[0] == PlanCause.NO_PATH and res.pnet_calls[0] == 5
+    assert not res.success[0] and res.cause[0] == PlanCause.NO_PATH and res.pnet_calls[0] == 12
     wall = np.asarray([[[2, 5], [8, 5]]], np.float32)
     net = pnet("wall", SEEKER)
     checked = plan_batch(make("wall"), net, wall, jax.random.key(0), NOSTEER, rows=BATCH)
@@ -374,7 +380,7 @@ def test_without_steer_to_a_start_within_delta_is_solved():
     # a start inside the box stays an invalid query, however close the goal
     assert res.cause[2] == PlanCause.INVALID_QUERY and not res.success[2]
     # with steerTo the same start gets the goal appended: two states
-    res = plan_batch(env, _stay, rq[:2], jax.random.key(0), PlannerOptions(n_plan=3))
+    res = plan_batch(env, _stay, rq[:2], jax.random.key(0), PlannerOptions(n_plan=12, replan_rounds=0))
     assert res.success.all() and np.all(res.lengths == 2)
 
 
@@ -468,20 +474,23 @@ def _stay(key, current, goal):
 
 def test_compiled_stages_are_bounded(monkeypatch):
     from ntq_jax import neural_steps
-    monkeypatch.setattr(neural_steps, "COMPILED_CACHE_SIZE", 4)
+    monkeypatch.setattr(neural_steps, "COMPILED_CACHE_SIZE", 2)
     env = make("straight")
     q = np.asarray([[[1, 2], [9, 8]]], np.float32)
     # three option sets the tests above compile too (stand-ins, BATCH rows): the bound is
     # checked on the cache's entries, whichever the options, without compiling anything new
     sets = (PlannerOptions(n_plan=12, replan_rounds=0, replan_steps=8), OPTS,
             PlannerOptions(n_plan=12, replan_rounds=2, replan_steps=8, bidirectional=True))
-    for opts in sets:  # two compiled stages (coarse, check) per option set
+    # their check stage reads none of the fields they differ in: one program for the three
+    assert len({o.for_stage("check") for o in sets}) == 1
+    assert len({o.for_stage("coarse") for o in sets}) == 3
+    for opts in sets:  # the coarse stage, then the shared check stage
         res = plan_batch(env, pnet("straight", STAY), q, jax.random.key(0), opts, rows=BATCH)
-        assert res.success[0] and len(neural_steps._COMPILED) <= 4
-    sigs = list(neural_steps._COMPILED)
-    # the least recently used went first
-    assert [s[2] for s in sigs] == [sets[1]] * 2 + [sets[2]] * 2
-    assert [s[0] for s in sigs] == ["coarse", "check"] * 2
+        assert res.success[0] and len(neural_steps._COMPILED) <= 2
+    # the least recently used went first: the first two coarse stages
+    assert [s[:3] for s in neural_steps._COMPILED] == [
+        ("coarse", env.robot, sets[2].for_stage("coarse")),
+        ("check", env.robot, sets[0].for_stage("check"))]
 
 
 def test_check_stage_compiles_once_for_every_batch_size():
@@ -502,3 +511,52 @@ def test_check_stage_compiles_once_for_every_batch_size():
     assert 0 < big.success.sum() < len(q)  # both kinds of rows
     np.testing.assert_array_equal(small.success, big.success[:5])
     np.testing.assert_array_equal(small.lengths, big.lengths[:5])
+
+
+class _Reads:
+    """Planner options that record which of their fields a traced stage reads (properties
+    such as ``max_len`` run on the proxy, so the fields behind them count)."""
+
+    def __init__(self, opts, stage):
+        self.opts, self.stage, self.read = opts, stage, set()
+
+    def __getattr__(self, name):
+        attr = getattr(type(self.opts), name)
+        if isinstance(attr, property):
+            return attr.fget(self)
+        self.read.add(name)
+        return getattr(self.opts, name)
+
+
+def test_each_stage_reads_only_the_options_in_its_compile_key(monkeypatch):
+    """Every stage, traced with options that record their reads, reads only the fields of
+    ``STAGE_FIELDS`` (the rest are left out of its compile key), on every path through the
+    planner: steerTo, each nosteer_check, bidirectional, the l2 goal test, no contraction."""
+    from ntq_jax import neural_steps
+    from ntq_jax.neural_options import STAGE_FIELDS
+    cores = {"coarse": neural_steps.coarse_core, "valid": neural_steps.valid_core,
+             "connect": neural_steps.connect_core, "check": neural_steps.check_core}
+    for_stage, compiled = PlannerOptions.for_stage, neural_steps._compiled
+    reads = {name: set() for name in cores}
+
+    def spy(name, args):
+        proxy = args[1]
+        jax.make_jaxpr(functools.partial(cores[name], args[0], proxy))(*args[2:])
+        reads[name] |= proxy.read
+        return compiled(name, (args[0], for_stage(proxy.opts, name)) + args[2:])
+
+    monkeypatch.setattr(PlannerOptions, "for_stage", lambda self, stage: _Reads(self, stage))
+    monkeypatch.setattr(neural_steps, "_compiled", spy)
+    s, g = (2.0, 5.0), (8.0, 5.0)
+    kw = dict(jump=((s, g, (7.3, 5.0)), NO_JUMP))
+    nosteer = dict(n_plan=12, steer=False, delta=1.0)
+    for opts in (OPTS, NOSTEER, PlannerOptions(**nosteer, nosteer_check="states"),
+                 PlannerOptions(**nosteer, nosteer_check="replan", replan_rounds=2, replan_steps=8),
+                 PlannerOptions(**nosteer, nosteer_check=False, delta_norm="l2"),
+                 PlannerOptions(n_plan=12, replan_rounds=2, replan_steps=8, bidirectional=True),
+                 PlannerOptions(n_plan=12, replan_rounds=2, replan_steps=8, contract=False)):
+        plan_batch(make("wall"), pnet("wall", BROKEN, **kw), np.asarray([[s, g]] * BATCH, np.float32),
+                   jax.random.key(0), opts)
+    assert all(reads.values()), reads  # every stage ran
+    for name, fields in reads.items():
+        assert fields <= set(STAGE_FIELDS[name]), (name, fields - set(STAGE_FIELDS[name]))

@@ -229,12 +229,14 @@ PAD_CELLS = (0.0, 0.1, 0.5)  # the paddings, in cells of the grid
 
 
 @given(seed=st.integers(0, 10 ** 6), density=st.sampled_from([0.15, 0.35, 0.6]),
-       setting=st.sampled_from([(1.0, (0.0, 0.0), 1), (0.05, (-3.2, 1.7), 1), (0.5, (2.0, 3.0), 2)]))
+       setting=st.sampled_from([(1.0, (0.0, 0.0), 1), (0.05, (-3.2, 1.7), 2)]))
 @settings(max_examples=14, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 def test_indexed_steer_equals_exact_on_random_grids(seed, density, setting):
     """Random occupancy grids (exact rectangle cover), index cells of 1 or 2 grid cells,
     padding 0 and fractions of a cell (every map at each of :data:`PAD_CELLS`, through one
-    compiled program per setting), segments of the four kinds of :func:`_segments`."""
+    compiled program per setting), segments of the four kinds of :func:`_segments`. The
+    settings: unit cells at the origin; and small cells (float32 rounding of cell edges), an
+    origin off zero and index cells of two grid cells together (one program each)."""
     res, origin, per_cell = setting
     rng = np.random.default_rng(seed)
     occ = rng.random((GRID, GRID)) < density

@@ -978,7 +978,8 @@ def test_grid_astar_on_a_one_cell_grid_map_names_the_map_not_the_resolution(tmp_
         with pytest.raises(ValueError, match=r"1 x 1-cell grid.*resolution option does not apply"
                                              r".*roadmap or visgraph"):
             plan(env, q, "astar", padding=0.0, **opts)
-    assert plan(env, q, "roadmap", padding=0.0).lengths[0] >= 2  # the advice works
+    # the advice works (a small roadmap: the default one checks some 600,000 edges)
+    assert plan(env, q, "roadmap", padding=0.0, milestones=500).lengths[0] >= 2
 
 
 def test_a_full_disk_during_train_all_is_one_line_and_the_run_resumes(run_copy, capsys,

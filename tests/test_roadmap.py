@@ -138,3 +138,17 @@ def test_bad_options_are_one_clear_error():
 
 def test_prm_star_k():
     assert R.prm_star_k(20_000, 3) == 36 and R.prm_star_k(20_000, 6) == 32
+
+
+@pytest.mark.parametrize("n, per_node", [(1, 1), (2, 3), (7, 6), (500, 40)])
+def test_undirected_pairs_equal_numpys_unique_rows(n, per_node):
+    """The roadmap's edge list: NumPy's row-wise unique of the (min, max) pairs, self-loops
+    dropped, in the same order and dtype."""
+    rng = np.random.default_rng(n)
+    i = np.repeat(np.arange(n), per_node)
+    j = rng.integers(0, n, i.size)
+    ref = np.unique(np.stack([np.minimum(i, j), np.maximum(i, j)], 1), axis=0)
+    ref = ref[ref[:, 0] != ref[:, 1]]
+    got = R.undirected_pairs(i, j, n)
+    assert got.dtype == ref.dtype and got.shape[1] == 2
+    np.testing.assert_array_equal(got, ref)

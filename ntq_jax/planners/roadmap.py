@@ -116,16 +116,22 @@ def prm_star_k(n: int, d: int) -> int:
     return max(1, math.ceil(math.e * (1.0 + 1.0 / d) * math.log(max(n, 2))))
 
 
+def undirected_pairs(i: np.ndarray, j: np.ndarray, n: int) -> np.ndarray:
+    """The distinct undirected edges ``{i, j}`` (``i != j``) among nodes ``0..n-1``, as
+    ``(E, 2)`` int64 rows ``(min, max)`` in lexicographic order."""
+    lo, hi = np.minimum(i, j).astype(np.int64), np.maximum(i, j).astype(np.int64)
+    code = np.unique((lo * n + hi)[lo != hi])  # one int64 per edge: sorts as (lo, hi)
+    return np.stack([code // n, code % n], 1)
+
+
 def build_roadmap(robot, world: World, padding: float, *, milestones: int, k: int,
                   key: jax.Array, check: str = "discretized") -> Roadmap:
     """Samples ``milestones`` valid states and keeps the free edges to their ``k`` nearest."""
     states = sample_states(robot, world, key, int(milestones), padding)
     index = MetricIndex(robot, world, states)
     nbr, _ = index.query(states, k, exclude_self=True)
-    i = np.repeat(np.arange(len(states)), nbr.shape[1])
-    j = nbr.reshape(-1)
-    pairs = np.unique(np.stack([np.minimum(i, j), np.maximum(i, j)], 1), axis=0)
-    pairs = pairs[pairs[:, 0] != pairs[:, 1]]
+    pairs = undirected_pairs(np.repeat(np.arange(len(states)), nbr.shape[1]), nbr.reshape(-1),
+                             len(states))
     a, b = states[pairs[:, 0]], states[pairs[:, 1]]
     free = steer_to_pairs(robot, world, a, b, padding, check=check)
     edges = pairs[free].astype(np.int32)

@@ -120,7 +120,8 @@ def undirected_pairs(i: np.ndarray, j: np.ndarray, n: int) -> np.ndarray:
     """The distinct undirected edges ``{i, j}`` (``i != j``) among nodes ``0..n-1``, as
     ``(E, 2)`` int64 rows ``(min, max)`` in lexicographic order."""
     lo, hi = np.minimum(i, j).astype(np.int64), np.maximum(i, j).astype(np.int64)
-    code = np.unique((lo * n + hi)[lo != hi])  # one int64 per edge: sorts as (lo, hi)
+    code = np.sort((lo * n + hi)[lo != hi])  # one int64 per edge: sorts as (lo, hi)
+    code = code[np.r_[True, code[1:] != code[:-1]]] if code.size else code
     return np.stack([code // n, code % n], 1)
 
 

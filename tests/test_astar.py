@@ -201,7 +201,7 @@ def test_one_compilation_per_shape():
     the queries and the batch size (chunks of CHUNK queries)."""
     rng = np.random.default_rng(7)
     occ = random_box_map(rng, 60, 90, 5)
-    solve(occ, *sample_queries(rng, occ, CHUNK))  # compiled by test_costs_equal_dijkstra
+    solve(occ, *sample_queries(rng, occ, CHUNK))  # the program test_costs_equal_dijkstra compiles
     size = A.astar._cache_size()
     for k in range(3):
         occ = random_box_map(rng, 60, 90, 4 + 2 * k)

@@ -378,7 +378,6 @@ def test_looped_and_indexed_equal_unrolled(robot, pad, monkeypatch):
         return [lambda w, x, y: jax.vmap(r.is_valid, in_axes=(1, None, None))(x.T, w, pad)] + (
             [lambda w, x, y: r.steer_to_batch(x.T, y.T, w, pad)] if point else [])
 
-
     got = answers(env)
     looped = Env("x", env.robot, world, pad)
     object.__setattr__(looped, "world", world)

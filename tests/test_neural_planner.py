@@ -260,9 +260,8 @@ def _rigid_env():
 def test_without_steer_to_delta_is_in_the_robots_metric():
     """theta = pi and -pi are one heading: a prediction there is at distance 0, not 2 pi."""
     env = _rigid_env()
-    nosteer = RIGID_NOSTEER
     q = np.asarray([[[2, 2, 0], [8, 2, -np.pi]]], np.float32)
-    res = plan_batch(env, _flip_to_pi, q, jax.random.key(0), nosteer)
+    res = plan_batch(env, _flip_to_pi, q, jax.random.key(0), RIGID_NOSTEER)
     assert res.success[0] and res.cause[0] == PlanCause.SUCCESS
     assert res.lengths[0] == 2 and res.pnet_calls[0] == 1
     np.testing.assert_allclose(res.path(0), [[2, 2, 0], [8, 2, np.pi]], atol=1e-6)
@@ -517,8 +516,8 @@ class _Reads:
     """Planner options that record which of their fields a traced stage reads (properties
     such as ``max_len`` run on the proxy, so the fields behind them count)."""
 
-    def __init__(self, opts, stage):
-        self.opts, self.stage, self.read = opts, stage, set()
+    def __init__(self, opts):
+        self.opts, self.read = opts, set()
 
     def __getattr__(self, name):
         attr = getattr(type(self.opts), name)
@@ -545,7 +544,7 @@ def test_each_stage_reads_only_the_options_in_its_compile_key(monkeypatch):
         reads[name] |= proxy.read
         return compiled(name, (args[0], for_stage(proxy.opts, name)) + args[2:])
 
-    monkeypatch.setattr(PlannerOptions, "for_stage", lambda self, stage: _Reads(self, stage))
+    monkeypatch.setattr(PlannerOptions, "for_stage", lambda self, stage: _Reads(self))
     monkeypatch.setattr(neural_steps, "_compiled", spy)
     s, g = (2.0, 5.0), (8.0, 5.0)
     kw = dict(jump=((s, g, (7.3, 5.0)), NO_JUMP))

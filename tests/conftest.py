@@ -17,15 +17,24 @@ def pytest_configure(config):
     scripts' ``main`` turns on), so it runs alike on a developer's machine and a fresh
     clone; within the session the xdist workers and the subprocesses the tests start
     (they inherit the environment) share what one of them compiled, down to the
-    smallest program."""
+    smallest program.
+
+    ``NTQ_TEST_JIT_CACHE=<folder>`` (a developer's opt-in, never set by the README's
+    command or CI) keeps that cache in ``<folder>`` across runs instead: a run after the
+    first compiles only the programs a change touched. JAX keys every entry on the
+    program, the compile options, ``XLA_FLAGS`` and the JAX/jaxlib versions, so on the
+    machine that filled it a kept cache is never stale, only larger."""
     if os.environ.get("PYTEST_XDIST_WORKER") is None:  # the controller (or a run without xdist)
         import tempfile
 
-        folder = tempfile.mkdtemp(prefix="ntq_jax_test_jit_")
+        kept = os.environ.get("NTQ_TEST_JIT_CACHE")
+        if kept:
+            os.makedirs(kept, exist_ok=True)
+        folder = os.path.abspath(kept) if kept else tempfile.mkdtemp(prefix="ntq_jax_test_jit_")
         os.environ["JAX_COMPILATION_CACHE_DIR"] = folder
         # every program, however quick to compile: the workers and subprocesses share them
         os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0"
-        config._ntq_jit_cache = folder
+        config._ntq_jit_cache = None if kept else folder  # removed at the end unless kept
         import sys
 
         if "jax" in sys.modules:  # imported already (the profiler below): it read the old values

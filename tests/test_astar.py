@@ -6,6 +6,7 @@ import jax
 import numpy as np
 import pytest
 import scipy.sparse as sp
+from scipy import ndimage
 from scipy.sparse.csgraph import dijkstra
 
 from ntq_jax.planners import astar as A
@@ -196,20 +197,85 @@ def test_capacity_is_reported_not_raised():
     check_paths(occ, small, starts, goals)
 
 
+def oracle_tables(occ):
+    """``(jump (H*W, 8), label (H*W,))`` of :class:`GridGraph`, cell by cell from the definitions.
+
+    Straight move d from a free cell x: walk y = x, x + d, ...; stop with ``-n`` after n
+    free steps when the next cell is blocked, or with ``n`` when the n-th cell entered is
+    a jump point (a side cell of it free whose neighbour behind it is blocked). Diagonal
+    move: the next cell needs both side cells free, and is a jump point when one of the
+    two straight moves making up the diagonal finds a jump point from it. Labels: the
+    smallest flat index of the 4-connected component (scipy's labelling), H*W if blocked.
+    """
+    h, w = occ.shape
+
+    def free(r, c):
+        return 0 <= r < h and 0 <= c < w and not occ[r, c]
+
+    table = np.zeros((h, w, 8), np.int64)
+    for k, (dr, dc) in enumerate(MOVES[:4]):
+        pr, pc = dc, dr
+        for r, c in zip(*np.nonzero(~occ)):
+            n, y = 0, (r, c)
+            while free(y[0] + dr, y[1] + dc):
+                n += 1
+                x, y = y, (y[0] + dr, y[1] + dc)
+                if any(free(y[0] + s * pr, y[1] + s * pc) and not free(x[0] + s * pr, x[1] + s * pc)
+                       for s in (1, -1)):
+                    break
+            else:
+                n = -n
+            table[r, c, k] = n
+    for k, (dr, dc) in enumerate(MOVES[4:], start=4):
+        kv, kh = MOVES.index((dr, 0)), MOVES.index((0, dc))
+        for r, c in zip(*np.nonzero(~occ)):
+            n, y = 0, (r, c)
+            while free(y[0] + dr, y[1] + dc) and free(y[0] + dr, y[1]) and free(y[0], y[1] + dc):
+                n += 1
+                y = (y[0] + dr, y[1] + dc)
+                if table[y[0], y[1], kv] > 0 or table[y[0], y[1], kh] > 0:
+                    break
+            else:
+                n = -n
+            table[r, c, k] = n
+    lab, n = ndimage.label(~occ)
+    first = {i: h * w for i in range(n + 1)}
+    for f, i in enumerate(lab.ravel()):
+        first[i] = min(first[i], f) if i else h * w
+    return table.reshape(-1, 8), np.array([first[i] for i in lab.ravel()])
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_grid_tables_equal_the_cell_by_cell_oracle(seed):
+    """:func:`prepare_grid`'s jump distances and component labels, on boxes, walls with doors,
+    salt-and-pepper noise and degenerate shapes, against :func:`oracle_tables`."""
+    rng = np.random.default_rng(seed)
+    grids = [random_box_map(rng, 23, 31, 6, walls=2), noise_map(rng, 17, 19, 0.3),
+             noise_map(rng, 1, 12, 0.2), noise_map(rng, 9, 1, 0.2), np.zeros((5, 7), bool),
+             np.ones((3, 4), bool)]
+    for occ in grids:
+        graph = prepare_grid(occ)
+        jump, label = oracle_tables(occ)
+        assert graph.jump.dtype == np.int16 and graph.label.dtype == np.int32
+        np.testing.assert_array_equal(np.asarray(graph.occ), occ)
+        np.testing.assert_array_equal(np.asarray(graph.jump), jump)
+        np.testing.assert_array_equal(np.asarray(graph.label), label)
+
+
 def test_one_compilation_per_shape():
     """Same grid shape and batch size: one compiled program, whatever the grid contents,
     the queries and the batch size (chunks of CHUNK queries)."""
     rng = np.random.default_rng(7)
     occ = random_box_map(rng, 60, 90, 5)
     solve(occ, *sample_queries(rng, occ, CHUNK))  # the program test_costs_equal_dijkstra compiles
-    size = A.astar._cache_size()
+    size = A._search_batch._cache_size()
     for k in range(3):
         occ = random_box_map(rng, 60, 90, 4 + 2 * k)
         starts, goals = sample_queries(rng, occ, 100 + 50 * k)
         res = A.astar(prepare_grid(occ), *(np.resize(q, (CHUNK, 2)).astype(np.int32)
                                            for q in (starts, goals)))  # queries repeated
         np.testing.assert_array_equal(res.cost[:len(starts)], solve(occ, starts, goals).cost)
-    assert A.astar._cache_size() == size
+    assert A._search_batch._cache_size() == size
 
 
 def test_chunks_are_independent():

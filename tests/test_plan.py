@@ -16,7 +16,7 @@ import ntq_jax
 from ntq_jax import Env, PlanResult, make_env, plan, register_planner
 from ntq_jax.envs import BUCKET_MIN_ROWS
 from ntq_jax.planners import PlanStatus, available_planners
-from ntq_jax.planners.astar import astar
+from ntq_jax.planners.astar import _search_batch
 
 
 @pytest.fixture(scope="module")
@@ -188,7 +188,7 @@ def test_no_recompilation_across_batch_sizes(point3, queries):
     from ntq_jax.robots.batch import _steer_masked, _steer_to_batch, is_valid_batch
 
     plan(point3, queries, "astar")
-    fns = (astar, _steer_masked, _steer_to_batch, is_valid_batch, shortcut)
+    fns = (_search_batch, _steer_masked, _steer_to_batch, is_valid_batch, shortcut)
     before = [f._cache_size() for f in fns]
     longest = int(np.argmax(plan(point3, queries, "astar", smooth=False).lengths))
     for k in (1, 17, 96):

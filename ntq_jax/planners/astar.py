@@ -104,7 +104,7 @@ def _check_sizes(shape, n: int, max_path_len, max_waypoints, open_capacity) -> t
     return max_len, jmax
 
 
-def _astar(occ, starts, goals, *, max_path_len: int | None = None, max_waypoints: int = 128,
+def astar(occ, starts, goals, *, max_path_len: int | None = None, max_waypoints: int = 128,
           lanes: int | None = None, open_capacity: int = 256, trace_steps: int = 4) -> AStarResult:
     """Solves a batch of grid shortest-path queries exactly (8-connected, no corner cutting).
 
@@ -125,13 +125,22 @@ def _astar(occ, starts, goals, *, max_path_len: int | None = None, max_waypoints
 
     Returns:
         An :class:`AStarResult`. Every call with the same grid shape, batch size
-        and options reuses one compiled program.
+        and options (a grid or its :class:`GridGraph` alike) reuses one compiled
+        program. ``occ`` must be concrete (the tables are built on the host).
 
     Raises:
         ValueError: on bad shapes, ``N > MAX_QUERIES_PER_CALL`` (use
             :func:`astar_chunked`) or a grid side above ``MAX_GRID_SIDE``.
     """
-    graph = occ if isinstance(occ, GridGraph) else prepare_grid(occ)
+    graph = occ if isinstance(occ, GridGraph) else prepare_grid(occ)  # host tables, no program
+    return _search_batch(graph, starts, goals, max_path_len=max_path_len,
+                         max_waypoints=max_waypoints, lanes=lanes, open_capacity=open_capacity,
+                         trace_steps=trace_steps)
+
+
+def _astar(graph: GridGraph, starts, goals, *, max_path_len: int | None, max_waypoints: int,
+           lanes: int | None, open_capacity: int, trace_steps: int) -> AStarResult:
+    """:func:`astar` on a prepared grid (traced; one program per grid shape, batch size, options)."""
     h, w = graph.occ.shape
     starts = jnp.asarray(starts)
     goals = jnp.asarray(goals)
@@ -186,8 +195,7 @@ def _astar(occ, starts, goals, *, max_path_len: int | None = None, max_waypoints
 
 
 _STATIC_ARGS = ("max_path_len", "max_waypoints", "lanes", "open_capacity", "trace_steps")
-astar = jax.jit(_astar, static_argnames=_STATIC_ARGS)
-astar.__doc__ = _astar.__doc__
+_search_batch = jax.jit(_astar, static_argnames=_STATIC_ARGS)
 
 
 def astar_chunked(occ, starts, goals, *, chunk_size: int = 1024, **options) -> AStarResult:

@@ -22,7 +22,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax import lax
+from scipy import ndimage
 
 Array = jax.Array
 
@@ -61,46 +61,43 @@ MAX_GRID_SIDE = (1 << JUMP_BITS) - 1
 
 
 # ---------------------------------------------------------------------------
-# Per-grid preprocessing
+# Per-grid preprocessing (host NumPy: integer tables, computed once per grid)
 # ---------------------------------------------------------------------------
 
-def _shift(a: Array, dr: int, dc: int, fill) -> Array:
+def _shift(a: np.ndarray, dr: int, dc: int, fill) -> np.ndarray:
     """``out[i, j] = a[i + dr, j + dc]``, ``fill`` outside the grid."""
     h, w = a.shape
-    p = jnp.pad(a, 1, constant_values=fill)
-    return lax.dynamic_slice(p, (1 + dr, 1 + dc), (h, w))
+    p = np.pad(a, 1, constant_values=fill)
+    return p[1 + dr:1 + dr + h, 1 + dc:1 + dc + w]
 
 
-def _ext(v: Array) -> Array:
-    """One more step before the same event: ``n > 0 -> n + 1``, ``n <= 0 -> n - 1``."""
-    return jnp.where(v > 0, v + 1, v - 1)
-
-
-def _scan_lines(can_move: Array, event: Array, dr: int, dc: int) -> Array:
+def _scan_lines(can_move: np.ndarray, event: np.ndarray, dr: int, dc: int) -> np.ndarray:
     """Solves ``T = where(~can_move, 0, where(event, 1, ext(T shifted by (dr, dc))))``.
 
-    ``T[i, j]`` depends on ``T[i + dr, j + dc]``; the recurrence is solved by a
-    scan over rows (``dr != 0``) or over columns (``dr == 0``).
+    ``ext`` is one more step before the same event (``n > 0 -> n + 1``,
+    ``n <= 0 -> n - 1``). ``T[i, j]`` depends on ``T[i + dr, j + dc]``; the
+    recurrence is solved line by line over rows (``dr != 0``) or over columns
+    (``dr == 0``), each line one vector operation over the other axis.
     """
     if dr == 0:  # transpose so that the scan runs over the moving axis
         return _scan_lines(can_move.T, event.T, dc, 0).T
-    forward = dr < 0  # row i depends on row i - 1: process rows in increasing order
+    h, w = can_move.shape
+    out = np.zeros((h, w), np.int32)
+    nxt = np.zeros(w, np.int32)  # T of the line before, shifted by dc (0 outside the grid)
+    for i in (range(h) if dr < 0 else range(h - 1, -1, -1)):  # row i depends on row i + dr
+        row = np.where(event[i], 1, nxt + np.where(nxt > 0, 1, -1)).astype(np.int32)
+        row[~can_move[i]] = 0
+        out[i] = row
+        if dc > 0:
+            nxt = np.concatenate([row[1:], np.zeros(1, np.int32)])
+        elif dc < 0:
+            nxt = np.concatenate([np.zeros(1, np.int32), row[:-1]])
+        else:
+            nxt = row
+    return out
 
-    def step(prev, xs):
-        cm, ev = xs
-        nxt = _shift(prev[None], 0, dc, 0)[0] if dc else prev
-        row = jnp.where(cm, jnp.where(ev, 1, _ext(nxt)), 0)
-        return row, row
 
-    zero = jnp.zeros(can_move.shape[1], jnp.int32)
-    if forward:
-        _, out = lax.scan(step, zero, (can_move, event))
-        return out
-    _, out = lax.scan(step, zero, (can_move[::-1], event[::-1]))
-    return out[::-1]
-
-
-def _jump_tables(free: Array) -> Array:
+def _jump_tables(free: np.ndarray) -> np.ndarray:
     """JPS+ jump distances ``(8, H, W)`` int32 for the no-corner-cutting 8-grid."""
     tables = [None] * 8
     for k in range(4):  # straight moves
@@ -118,48 +115,42 @@ def _jump_tables(free: Array) -> Array:
         can = _shift(free, dr, dc, False) & _shift(free, dr, 0, False) & _shift(free, 0, dc, False)
         event = _shift((tables[kv] > 0) | (tables[kh] > 0), dr, dc, False)
         tables[k] = _scan_lines(can, event, dr, dc)
-    t = jnp.stack(tables)
-    return jnp.where(free[None], t, 0)
+    return np.where(free[None], np.stack(tables), 0).astype(np.int32)
 
 
-def _components(free: Array) -> Array:
+def _components(free: np.ndarray) -> np.ndarray:
     """4-connected component labels (min flat index per component; ``H*W`` when occupied)."""
-    h, w = free.shape
-    hw = h * w
-    big = jnp.int32(hw)
-    lab0 = jnp.where(free, jnp.arange(hw, dtype=jnp.int32).reshape(h, w), big)
-
-    def body(state):
-        lab, _ = state
-        m = lab
-        for dr, dc in ((-1, 0), (1, 0), (0, -1), (0, 1)):
-            m = jnp.minimum(m, _shift(lab, dr, dc, big))
-        m = jnp.where(free, m, big).reshape(-1)
-        # pointer jumping: the label of a free cell is a free cell of the same component
-        m = jnp.where(m < big, jnp.minimum(m, m[jnp.minimum(m, hw - 1)]), big).reshape(h, w)
-        return m, jnp.any(m != lab)
-
-    lab, _ = lax.while_loop(lambda s: s[1], body, (lab0, jnp.bool_(True)))
-    return lab.reshape(-1)
+    hw = free.size
+    lab, n = ndimage.label(free)  # 4-connectivity (the default cross); 0 = occupied
+    lab = lab.reshape(-1)
+    first = np.full(n + 1, hw, np.int64)
+    np.minimum.at(first, lab, np.arange(hw))
+    first[0] = hw
+    return first[lab].astype(np.int32)
 
 
-@jax.jit
 def prepare_grid(occ) -> GridGraph:
     """Builds the per-grid tables (jump distances, components), once for many searches.
 
+    Host-side NumPy (integer tables, no compiled program), so a new grid shape costs
+    no compilation here; the arrays are returned on the default device.
+
     Args:
-        occ: ``(H, W)`` bool occupancy grid (NumPy or JAX), True = occupied.
+        occ: ``(H, W)`` bool occupancy grid (NumPy or a concrete JAX array), True = occupied.
 
     Returns:
-        A :class:`GridGraph`; pass it to :func:`ntq_jax.planners.jps.astar`
+        A :class:`GridGraph`; pass it to :func:`ntq_jax.planners.astar.astar`
         instead of ``occ`` to skip the preprocessing.
+
+    Raises:
+        ValueError: if ``occ`` is not 2D or a side exceeds :data:`MAX_GRID_SIDE`.
     """
-    occ = jnp.asarray(occ, bool)
+    occ = np.asarray(occ, bool)
     if occ.ndim != 2:
         raise ValueError(f"occ must be a 2D (H, W) bool array, got shape {occ.shape}")
-    free = ~occ
     if max(occ.shape) > MAX_GRID_SIDE:
         raise ValueError(f"grid sides must be <= {MAX_GRID_SIDE}, got {occ.shape}")
+    free = ~occ
     # (cell, direction) layout in int16: the 8 entries of a cell share one cache line
-    jump = _jump_tables(free).reshape(8, -1).T.astype(jnp.int16)
-    return GridGraph(occ=occ, jump=jump, label=_components(free))
+    jump = np.ascontiguousarray(_jump_tables(free).reshape(8, -1).T.astype(np.int16))
+    return GridGraph(occ=jnp.asarray(occ), jump=jnp.asarray(jump), label=jnp.asarray(_components(free)))

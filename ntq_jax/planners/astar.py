@@ -105,7 +105,7 @@ def _check_sizes(shape, n: int, max_path_len, max_waypoints, open_capacity) -> t
 
 
 def astar(occ, starts, goals, *, max_path_len: int | None = None, max_waypoints: int = 128,
-          lanes: int | None = None, open_capacity: int = 256, trace_steps: int = 4) -> AStarResult:
+         lanes: int | None = None, open_capacity: int = 256, trace_steps: int = 4) -> AStarResult:
     """Solves a batch of grid shortest-path queries exactly (8-connected, no corner cutting).
 
     Args:

@@ -297,5 +297,10 @@ def test_bad_input_is_rejected():
         A.astar(occ, np.zeros((3, 2), int), np.zeros((4, 2), int))
     with pytest.raises(ValueError, match="occ must be a 2D"):
         A.astar(np.zeros(10, bool), np.zeros((1, 2), int), np.zeros((1, 2), int))
+    with pytest.raises(TypeError, match="outside jax.jit and pass the GridGraph"):
+        jax.jit(lambda o: A.astar(o, np.zeros((1, 2), int), np.zeros((1, 2), int)).cost)(occ)
+    graph = prepare_grid(occ)  # prepared outside: the search itself may be traced
+    cost = jax.jit(lambda g: A.astar(g, np.zeros((1, 2), int), np.full((1, 2), 9)).cost)(graph)
+    np.testing.assert_allclose(np.asarray(cost), [9 * math.sqrt(2.0)], rtol=1e-6)
     with pytest.raises(ValueError, match="chunk_size"):
         A.astar_chunked(occ, np.zeros((1, 2), int), np.zeros((1, 2), int), chunk_size=0)

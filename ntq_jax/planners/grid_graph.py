@@ -143,8 +143,12 @@ def prepare_grid(occ) -> GridGraph:
         instead of ``occ`` to skip the preprocessing.
 
     Raises:
+        TypeError: if ``occ`` is traced (inside ``jax.jit``): build the graph outside.
         ValueError: if ``occ`` is not 2D or a side exceeds :data:`MAX_GRID_SIDE`.
     """
+    if isinstance(occ, jax.core.Tracer):
+        raise TypeError("prepare_grid builds the grid tables on the host and cannot take a traced "
+                        "grid: call prepare_grid(occ) outside jax.jit and pass the GridGraph to astar")
     occ = np.asarray(occ, bool)
     if occ.ndim != 2:
         raise ValueError(f"occ must be a 2D (H, W) bool array, got shape {occ.shape}")

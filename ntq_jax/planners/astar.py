@@ -131,6 +131,7 @@ def astar(occ, starts, goals, *, max_path_len: int | None = None, max_waypoints:
     Raises:
         ValueError: on bad shapes, ``N > MAX_QUERIES_PER_CALL`` (use
             :func:`astar_chunked`) or a grid side above ``MAX_GRID_SIDE``.
+        TypeError: if ``occ`` is a traced grid (see :func:`prepare_grid`).
     """
     graph = occ if isinstance(occ, GridGraph) else prepare_grid(occ)  # host tables, no program
     return _search_batch(graph, starts, goals, max_path_len=max_path_len,

@@ -88,7 +88,7 @@ def _scan_lines(can_move: np.ndarray, event: np.ndarray, dr: int, dc: int) -> np
         row = np.where(event[i], 1, nxt + np.where(nxt > 0, 1, -1)).astype(np.int32)
         row[~can_move[i]] = 0
         out[i] = row
-        if dc > 0:
+        if dc > 0:  # the next line reads row[j + dc]: a slice per line, not _shift's pad
             nxt = np.concatenate([row[1:], np.zeros(1, np.int32)])
         elif dc < 0:
             nxt = np.concatenate([np.zeros(1, np.int32), row[:-1]])

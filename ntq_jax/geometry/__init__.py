@@ -4,7 +4,10 @@
 * :mod:`~ntq_jax.geometry.shapes`: points, segments and oriented rectangles against
   boxes and discs (``*_hits_*``, ``*_free``);
 * :mod:`~ntq_jax.geometry.clearance`: Euclidean distances and clearances;
-* :mod:`~ntq_jax.geometry.raster`: rasterisation and grid cells.
+* :mod:`~ntq_jax.geometry.raster`: rasterisation and grid cells;
+* :mod:`~ntq_jax.geometry.world3d` and :mod:`~ntq_jax.geometry.shapes3d`: the 3-D world
+  (:class:`World3D`: spheres, oriented cuboids, capsules) and its signed distances and
+  ball clearances, for 3-D arms; the paragraphs below are about the 2-D kernels.
 
 Obstacles are axis-aligned boxes ``[cx, cy, half_w, half_h]`` and discs
 ``[cx, cy, r]`` inside a rectangular workspace ``[[xmin, xmax], [ymin, ymax]]``.
@@ -46,5 +49,11 @@ from ntq_jax.geometry.world import (KERNEL_COMPILER_OPTIONS, World, as_sequence_
 from ntq_jax.geometry.shapes import (sincos, in_bounds, point_hits_box, point_hits_disc, point_free, segment_hits_box, segment_hits_disc, segment_free, segment_cover_steps, segment_hits_near, segment_free_indexed, RectPose, rect_pose, rect_corners, rect_hits_box, rect_hits_disc, pose_hits_box, pose_hits_disc, rect_free)
 from ntq_jax.geometry.clearance import (segment_box_dist2, segment_disc_dist, rect_box_dist2, rect_disc_dist, pose_box_dist2, pose_disc_dist, wall_clearance, segment_clearance, rect_clearance)
 from ntq_jax.geometry.raster import (rasterize, cell_centers, point_to_cell)
+from ntq_jax.geometry.world3d import World3D
+from ntq_jax.geometry.shapes3d import (NO_OBSTACLE_CLEARANCE, point_sphere_dist,
+                                       point_cuboid_dist, point_capsule_dist, sphere_clearance,
+                                       spheres_clearance, spheres_collide)
 
-__all__ = ["KERNEL_COMPILER_OPTIONS", "World", "as_sequence_of_floats", "sincos", "in_bounds", "point_hits_box", "point_hits_disc", "point_free", "segment_hits_box", "segment_hits_disc", "segment_free", "segment_cover_steps", "segment_hits_near", "segment_free_indexed", "RectPose", "rect_pose", "rect_corners", "rect_hits_box", "rect_hits_disc", "pose_hits_box", "pose_hits_disc", "rect_free", "segment_box_dist2", "segment_disc_dist", "rect_box_dist2", "rect_disc_dist", "pose_box_dist2", "pose_disc_dist", "wall_clearance", "segment_clearance", "rect_clearance", "rasterize", "cell_centers", "point_to_cell"]
+__all__ = ["KERNEL_COMPILER_OPTIONS", "World", "as_sequence_of_floats", "sincos", "in_bounds", "point_hits_box", "point_hits_disc", "point_free", "segment_hits_box", "segment_hits_disc", "segment_free", "segment_cover_steps", "segment_hits_near", "segment_free_indexed", "RectPose", "rect_pose", "rect_corners", "rect_hits_box", "rect_hits_disc", "pose_hits_box", "pose_hits_disc", "rect_free", "segment_box_dist2", "segment_disc_dist", "rect_box_dist2", "rect_disc_dist", "pose_box_dist2", "pose_disc_dist", "wall_clearance", "segment_clearance", "rect_clearance", "rasterize", "cell_centers", "point_to_cell",
+           "World3D", "NO_OBSTACLE_CLEARANCE", "point_sphere_dist", "point_cuboid_dist",
+           "point_capsule_dist", "sphere_clearance", "spheres_clearance", "spheres_collide"]

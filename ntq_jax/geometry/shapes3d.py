@@ -1,0 +1,158 @@
+"""3-D signed distances and ball clearances against a :class:`~ntq_jax.geometry.World3D`.
+
+* ``point_*_dist(p, row)``: the exact SIGNED Euclidean distance from the point ``p``
+  ``(3,)`` to one closed solid (a row of ``World3D.spheres``, ``.cuboids`` or
+  ``.capsules``): positive outside, 0 on the surface, minus the depth inside (for a
+  cuboid, the usual box SDF in the box frame: ``|max(q, 0)| + min(max_i q_i, 0)`` with
+  ``q = |R^T (p - c)| - h``).
+* :func:`sphere_clearance` / :func:`spheres_clearance`: for balls ``(center, radius)``,
+  ``min over obstacles of dist(center, obstacle) - radius - padding``. A ball is clear
+  of the world with margin ``padding`` exactly when its clearance is ``> 0`` (*padding
+  means clearance*, as in 2-D: touching is a collision). :func:`spheres_collide` is
+  the predicate "some ball has clearance ``<= 0``".
+
+Contracts:
+
+* Every kernel handles ONE item (one point, one ball, or one robot's ``K`` balls);
+  callers batch with ``jax.vmap``. The obstacle counts are static shapes, their values
+  are traced: worlds with the same counts share a compiled program. Up to
+  :data:`ntq_jax.broadphase.UNROLL_MAX` rows per kind, the obstacle loop is unrolled
+  at trace time (one fused elementwise expression per obstacle, elementwise over the
+  balls and over the caller's batch); above, it is one broadcast ``(K, N)`` expression
+  reduced over ``N``.
+* No kernel divides by a traced value: a capsule's ``1 / |b - a|^2`` is taken only when
+  ``|b - a|^2 > 1e-12`` (shorter segments are their endpoint ``a``, a sphere), so no
+  input of finite numbers produces NaN.
+* Without obstacles the clearance is :data:`NO_OBSTACLE_CLEARANCE` (``1e30``, finite:
+  sums, differences, minima and products with 0 of it stay free of NaN, unlike ``inf``),
+  whatever the radius and padding.
+* A NaN or infinite centre coordinate or radius gives clearance ``-inf`` ("not clear",
+  and it stays NaN-free under ``min``, sums and comparisons); the ``point_*_dist``
+  kernels give NaN for a NaN point.
+* Padding and radii are in world units; ``padding`` may be a Python float or a traced
+  scalar.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+from ntq_jax import broadphase
+from ntq_jax.geometry.world3d import World3D
+
+Array = jax.Array
+
+#: The clearance of a ball in a world without obstacles.
+NO_OBSTACLE_CLEARANCE = 1e30
+
+#: Capsules with ``|b - a|^2`` at most this are the sphere around ``a`` (no division).
+_MIN_SEGMENT2 = 1e-12
+
+
+# ---------------------------------------------------------------------------
+# Signed distances, written on broadcastable coordinates: the same formula serves
+# one point against one row and K balls against N rows ((K, 1) against (N,)).
+# ---------------------------------------------------------------------------
+
+def _sphere_sdf(x, y, z, s):
+    dx, dy, dz = x - s[0], y - s[1], z - s[2]
+    return jnp.sqrt(dx * dx + dy * dy + dz * dz) - s[3]
+
+
+def _cuboid_sdf(x, y, z, c):
+    dx, dy, dz = x - c[0], y - c[1], z - c[2]
+    # box coordinates q = R^T (p - c): q_j = sum_i R[i, j] d_i, R[i, j] = c[6 + 3 i + j]
+    qx = jnp.abs(c[6] * dx + c[9] * dy + c[12] * dz) - c[3]
+    qy = jnp.abs(c[7] * dx + c[10] * dy + c[13] * dz) - c[4]
+    qz = jnp.abs(c[8] * dx + c[11] * dy + c[14] * dz) - c[5]
+    ox, oy, oz = jnp.maximum(qx, 0.0), jnp.maximum(qy, 0.0), jnp.maximum(qz, 0.0)
+    inside = jnp.minimum(jnp.maximum(jnp.maximum(qx, qy), qz), 0.0)
+    return jnp.sqrt(ox * ox + oy * oy + oz * oz) + inside
+
+
+def _capsule_sdf(x, y, z, k):
+    ex, ey, ez = k[3] - k[0], k[4] - k[1], k[5] - k[2]
+    ee = ex * ex + ey * ey + ez * ez
+    inv = jnp.where(ee > _MIN_SEGMENT2, 1.0 / jnp.where(ee > _MIN_SEGMENT2, ee, 1.0), 0.0)
+    wx, wy, wz = x - k[0], y - k[1], z - k[2]
+    t = jnp.clip((wx * ex + wy * ey + wz * ez) * inv, 0.0, 1.0)
+    fx, fy, fz = wx - t * ex, wy - t * ey, wz - t * ez
+    return jnp.sqrt(fx * fx + fy * fy + fz * fz) - k[6]
+
+
+def point_sphere_dist(p: Array, s: Array) -> Array:
+    """Signed distance from the point ``p`` ``(3,)`` to the ball ``s = [cx, cy, cz, r]``."""
+    return _sphere_sdf(p[0], p[1], p[2], s)
+
+
+def point_cuboid_dist(p: Array, c: Array) -> Array:
+    """Signed distance from ``p`` ``(3,)`` to the cuboid row ``c`` ``(15,)`` (box SDF)."""
+    return _cuboid_sdf(p[0], p[1], p[2], c)
+
+
+def point_capsule_dist(p: Array, k: Array) -> Array:
+    """Signed distance from ``p`` ``(3,)`` to the capsule ``k = [ax, ay, az, bx, by, bz, r]``."""
+    return _capsule_sdf(p[0], p[1], p[2], k)
+
+
+# ---------------------------------------------------------------------------
+# Ball clearances
+# ---------------------------------------------------------------------------
+
+_SDFS = (("spheres", _sphere_sdf), ("cuboids", _cuboid_sdf), ("capsules", _capsule_sdf))
+
+
+def _min_dist(x, y, z, world: World3D) -> Array | None:
+    """Min signed distance from the points ``(x, y, z)`` (each ``(K,)``) to all obstacles."""
+    d = None
+    for key, sdf in _SDFS:
+        rows = getattr(world, key)
+        n = rows.shape[0]
+        if n == 0:
+            continue
+        if n > broadphase.UNROLL_MAX:
+            cols = rows.T[:, None, :]  # (width, 1, N) against (K, 1)
+            dk = jnp.min(sdf(x[:, None], y[:, None], z[:, None], cols), axis=1)
+            d = dk if d is None else jnp.minimum(d, dk)
+            continue
+        for i in range(n):
+            dk = sdf(x, y, z, rows[i])
+            d = dk if d is None else jnp.minimum(d, dk)
+    return d
+
+
+def spheres_clearance(centers: Array, radii: Array, world: World3D,
+                      padding: float = 0.0) -> Array:
+    """``(K,)`` clearances of the balls ``centers`` ``(K, 3)``, ``radii`` ``(K,)``.
+
+    ``clearance_k = min over obstacles of dist(centers[k], obstacle) - radii[k] - padding``
+    (:data:`NO_OBSTACLE_CLEARANCE` without obstacles; ``-inf`` for a non-finite centre or
+    radius). ``> 0`` means ball ``k`` is clear of every obstacle by more than ``padding``.
+    """
+    centers = jnp.asarray(centers, jnp.float32)
+    radii = jnp.asarray(radii, jnp.float32)
+    x, y, z = centers[:, 0], centers[:, 1], centers[:, 2]
+    d = _min_dist(x, y, z, world)
+    if d is None:
+        return jnp.full(radii.shape, NO_OBSTACLE_CLEARANCE, jnp.float32)
+    c = d - radii - padding
+    finite = jnp.isfinite(x) & jnp.isfinite(y) & jnp.isfinite(z) & jnp.isfinite(radii)
+    return jnp.where(finite, c, -jnp.inf)
+
+
+def sphere_clearance(center: Array, radius: Array, world: World3D,
+                     padding: float = 0.0) -> Array:
+    """The clearance of one ball (see :func:`spheres_clearance`): a scalar."""
+    center = jnp.asarray(center, jnp.float32)
+    return spheres_clearance(center[None, :], jnp.reshape(radius, (1,)), world, padding)[0]
+
+
+def spheres_collide(centers: Array, radii: Array, world: World3D,
+                    padding: float = 0.0) -> Array:
+    """True when some ball has clearance ``<= 0`` (within ``padding`` of an obstacle).
+
+    The same as ``jnp.any(spheres_clearance(...) <= 0)``, NaN/infinite input included
+    (True).
+    """
+    return jnp.any(~(spheres_clearance(centers, radii, world, padding) > 0.0))

@@ -51,8 +51,13 @@ _KEYS = ("bounds", "spheres", "cuboids", "capsules")
 
 
 def quat_to_matrix(quat_xyzw) -> np.ndarray:
-    """The ``(3, 3)`` float64 rotation of the unit quaternion ``[x, y, z, w]`` (normalised first)."""
-    x, y, z, w = np.asarray(quat_xyzw, np.float64) / np.linalg.norm(quat_xyzw)
+    """The ``(3, 3)`` float64 rotation of the quaternion ``[x, y, z, w]`` (normalised first)."""
+    q = np.asarray(quat_xyzw, np.float64)
+    norm = np.linalg.norm(q)
+    if not (q.shape == (4,) and np.isfinite(norm) and norm > 0):
+        raise ValueError(f"a quaternion [x, y, z, w] must be 4 finite numbers, not all 0, got "
+                         f"{validation.short_repr(quat_xyzw)}")
+    x, y, z, w = q / norm
     return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
                      [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
                      [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
@@ -123,8 +128,7 @@ class World3D:
                                  f"matrix (within {ROTATION_TOL:g}, max |R^T R - I| = {err:.3g}) "
                                  f"with det +1 (det = {np.linalg.det(r):.4g})")
             cu[i, 6:] = _nearest_rotation(r).ravel()
-        f32 = lambda a: jnp.asarray(a, jnp.float32)  # noqa: E731
-        return World3D(f32(b), f32(sp), f32(cu), f32(ca))
+        return World3D(*(jnp.asarray(np.asarray(a, np.float32)) for a in (b, sp, cu, ca)))
 
     @property
     def num_spheres(self) -> int:

@@ -132,7 +132,7 @@ def test_point_distances_match_coal(kind, seed):
 
 
 @pytest.mark.parametrize("counts", [(2, 3, 2), (0, 66, 0), (65, 0, 67)],
-                         ids=["unrolled", "broadcast-cuboids", "broadcast-spheres-capsules"])
+                         ids=["unrolled", "looped-cuboids", "looped-spheres-capsules"])
 @SETTINGS
 @given(seed=seeds, padding=st.sampled_from([0.0, 0.05]))
 def test_spheres_clearance_matches_coal(counts, seed, padding):

@@ -23,14 +23,14 @@ Contracts:
   against a MotionBenchMaker scene (12 to 21 obstacles) it ran at 1.4e6 to 2.5e6
   configurations per second on 2 shared cores (AVX-512), while a broadcast ``(K, N)``
   form reduced over ``N`` ran 30x slower.
-* No kernel divides by a traced value: a capsule's ``1 / |b - a|^2`` is taken only when
+* The only division is a capsule's ``1 / |b - a|^2``, taken only when
   ``|b - a|^2 > 1e-12`` (shorter segments are their endpoint ``a``, a sphere), so no
   input of finite numbers produces NaN.
 * Without obstacles the clearance is :data:`NO_OBSTACLE_CLEARANCE` (``1e30``, finite:
   sums, differences, minima and products with 0 of it stay free of NaN, unlike ``inf``),
   whatever the radius and padding.
-* A NaN or infinite centre coordinate or radius gives clearance ``-inf`` ("not clear",
-  and it stays NaN-free under ``min``, sums and comparisons); the ``point_*_dist``
+* A NaN or infinite centre coordinate or radius gives clearance ``-inf`` ("not clear":
+  every comparison ``> 0`` is False and ``min`` keeps it); the ``point_*_dist``
   kernels give NaN for a NaN point.
 * Padding and radii are in world units; ``padding`` may be a Python float or a traced
   scalar.

@@ -14,12 +14,23 @@ import numpy as np
 
 from ntq_jax.validation import check_count
 
-__all__ = ["bucket_size", "pad_rows", "padded_chunks", "group_chunks", "map_chunks"]
+__all__ = ["bucket_size", "fine_bucket_size", "pad_rows", "padded_chunks", "group_chunks", "map_chunks"]
 
 
 def bucket_size(n: int, minimum: int = 1) -> int:
     """The next power of two ``>= n`` (and ``>= minimum``); 1 for ``n <= 1``."""
     return max(int(minimum), 1 << (max(int(n), 1) - 1).bit_length())
+
+
+def fine_bucket_size(n: int, minimum: int = 1) -> int:
+    """The smallest ``4 * 2^k``, ``5 * 2^k``, ``6 * 2^k`` or ``7 * 2^k`` that is ``>= n`` (and
+    ``>= minimum``): four sizes per power of two, so padding adds less than a quarter of
+    ``n`` rows (``n >= 4``); powers of two are among them."""
+    n = max(int(n), int(minimum), 1)
+    if n <= 4:
+        return n if n != 3 else 4
+    top = 1 << ((n - 1).bit_length() - 3)  # the step between sizes in n's octave
+    return -(-n // top) * top
 
 
 def pad_rows(a: np.ndarray, rows: int, fill=0) -> np.ndarray:

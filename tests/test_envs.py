@@ -161,7 +161,7 @@ def test_measure_gamma_script_json(tmp_path, script):
 
 
 # ---------------------------------------------------------------------------
-# NumPy input (read in place when large; see ntq_jax.robots.batch.split_host_rows)
+# Any input, any size: pieces read in place and an edge (see ntq_jax.robots.rows)
 
 # Dyadic boxes and coordinates on a 1/16 grid: every product and sum in the exact
 # segment test is exact in float32, so the answers cannot depend on how the
@@ -187,26 +187,34 @@ def _unaligned(x, phase):
     return out
 
 
-@pytest.mark.parametrize("min_rows", [64, None])
-def test_numpy_input_matches_device_input(monkeypatch, min_rows):
+@pytest.fixture
+def small_pieces(monkeypatch):
+    """Pieces of 64..256 rows, so that small batches take every route of the split."""
+    from ntq_jax.robots import rows
+    monkeypatch.setattr(rows, "PIECE_MIN", 64)
+    monkeypatch.setattr(rows, "PIECE_MAX", 256)
+
+
+@pytest.mark.parametrize("n", [37, 3 * 256 + 101])
+def test_any_input_matches_the_kernel(small_pieces, n):
+    """Every input kind and row phase, all edge (37 rows) and pieces with an overlapping last
+    piece and an edge (869 rows): the answers of the bare kernels on the whole batch, and
+    every phase shares the same few compiled programs."""
     from ntq_jax.robots import batch
-    if min_rows is not None:  # small arrays through the in-place path too
-        monkeypatch.setattr(batch, "HOST_MIN_ROWS", min_rows)
     env = nj.Env.from_json(_DYADIC)
-    n = 3 * batch.HOST_MIN_ROWS + 5
     a, b = _grid_pairs(n, seed=1)
-    split = (batch.steer_to_batch_split, batch.is_valid_batch_split, batch.distance_batch_split)
-    programs = [f._cache_size() for f in split]
-    dev_a, dev_b = jax.device_put(a), jax.device_put(b)
-    for padding in (0.0, None):
-        want = np.asarray(env.steer_to(dev_a, dev_b, padding=padding))
+    programs = [f._cache_size() for f in (batch._steer_masked, batch.is_valid_batch)]
+    for padding in (0.0, 0.5):
+        want = np.asarray(batch.steer_to_batch(env.robot, env.world, a, b, padding))
         assert 0.05 < want.mean() < 0.95
-        valid = np.asarray(env.is_valid(dev_a, padding=padding))
-        dist = np.asarray(env.distance(dev_a, dev_b))
+        valid = np.asarray(batch.is_valid_batch(env.robot, env.world, a, padding))
+        dist = np.asarray(batch.distance_batch(env.robot, a, b))
         wide = np.concatenate([a, b], axis=1)
         inputs = {
+            "device": (jax.device_put(a), jax.device_put(b)),
             "float32": (a, b),
             "float64": (a.astype(np.float64), b.astype(np.float64)),
+            "int": (np.rint(a).astype(np.int32), np.rint(b).astype(np.int32)),
             "strided rows": (np.repeat(a, 2, axis=0)[::2], np.repeat(b, 2, axis=0)[::2]),
             "column slice": (wide[:, :2], wide[:, 2:]),
             "fortran order": (np.asfortranarray(a), np.asfortranarray(b)),
@@ -216,6 +224,12 @@ def test_numpy_input_matches_device_input(monkeypatch, min_rows):
             inputs[f"phase {pa}"] = (_unaligned(a, pa), _unaligned(b, (pa + 16) % 64))
         for name, (x, y) in inputs.items():
             before = [np.array(v, copy=True) for v in (x, y)]
+            if name == "int":
+                xi, yi = (np.asarray(v, np.float32) for v in (x, y))
+                want_i = np.asarray(batch.steer_to_batch(env.robot, env.world, xi, yi, padding))
+                np.testing.assert_array_equal(np.asarray(env.steer_to(x, y, padding=padding)),
+                                              want_i)
+                continue
             got = env.steer_to(x, y, padding=padding)
             assert isinstance(got, jax.Array) and got.dtype == bool and got.shape == (n,), name
             np.testing.assert_array_equal(np.asarray(got), want, err_msg=name)
@@ -224,51 +238,39 @@ def test_numpy_input_matches_device_input(monkeypatch, min_rows):
             np.testing.assert_array_equal(np.asarray(env.distance(x, y)), dist, err_msg=name)
             for v, w in zip((x, y), before):
                 np.testing.assert_array_equal(np.asarray(v), w, err_msg=f"{name}: input modified")
-    # every row phase (the split's k) runs one compiled program per padding and size
-    assert [f._cache_size() - c for f, c in zip(split, programs)] == [2, 2, 1]
+    # pieces of 64..256 rows and one edge bucket per size: a handful of programs for every
+    # input kind, phase and padding (two paddings, so at most twice the sizes)
+    grown = [f._cache_size() - c for f, c in zip((batch._steer_masked, batch.is_valid_batch),
+                                                 programs)]
+    assert all(g <= 2 * 5 for g in grown), grown
 
 
-def test_numpy_input_may_be_modified_after_the_call():
-    from ntq_jax.robots import batch
+def test_numpy_input_may_be_modified_after_the_call(small_pieces):
+    from ntq_jax.robots import batch, rows
     env = nj.Env.from_json(_DYADIC)
-    # the size of test_numpy_input_matches_device_input[None] (above the default
-    # HOST_MIN_ROWS, so the in-place path as users meet it): its compiled split and
-    # device programs answer here, and a larger array only widens the window a call
-    # returning early would leave
-    a, b = _grid_pairs(3 * batch.HOST_MIN_ROWS + 5, seed=2)
-    assert batch.host_rows(a, 2) is a  # read in place
-    want = np.asarray(env.steer_to(jax.device_put(a), jax.device_put(b)))
+    a, b = _grid_pairs(3 * 256 + 101, seed=2)
+    a = _unaligned(a, 0)
+    assert rows.host_rows(a) is a  # read in place
+    want = np.asarray(batch.steer_to_batch(env.robot, env.world, a, b, env.padding))
     got = env.steer_to(a, b)
     a[:] = -5.0  # out of bounds: every answer would become False
     np.testing.assert_array_equal(np.asarray(got), want)
 
 
-def test_numpy_input_on_a_preset_and_the_rigid_body(monkeypatch):
-    # Random (not dyadic) states: the host-split and device programs compute each row
-    # with the same elementwise arithmetic, so they agree unless the compiler contracted
-    # a multiply-add in one program and not the other AND a state lies within that
-    # rounding of contact. Checked with XLA told 128- and 512-bit vectors and with
-    # --xla_cpu_max_isa=AVX (no FMA), on point/2 and rigid/0; the dyadic tests above are the
-    # layout-proof ones.
-    #
-    # The maps and paddings are those of test_sample_queries_kinds_and_validity (point/2) and
-    # test_varying_batch_sizes_share_compiled_programs (rigid/0), each at its own padding: the
-    # subject (host-split program == device program, row for row) does not depend on which
-    # preset or padding, and so the sampling and device-side programs are shared, only the
-    # split programs under test are compiled here. The device reference of is_valid is read
-    # in pieces of at most CHECK_CHUNK rows (Env's shared chunk path for device input, the
-    # program sample_states runs) rather than one 4096-row bucket.
+def test_numpy_input_on_a_preset_and_the_rigid_body(small_pieces):
+    # Random (not dyadic) states through the pieces and the edge: each row is computed by
+    # the same elementwise arithmetic in every program, so the answers agree with the
+    # bare kernel on the whole batch.
     from ntq_jax.robots import batch
-    monkeypatch.setattr(batch, "HOST_MIN_ROWS", 64)
     for name in ("point/2", "rigid/0"):
         env = nj.make_env(name)
-        s = np.asarray(env.sample_states(jax.random.key(0), 2 * 3000), np.float32)
-        a, b = _unaligned(s[:3000], 16), _unaligned(s[3000:], 48)
-        want = np.asarray(env.steer_to(jax.device_put(a), jax.device_put(b)))
+        s = np.asarray(env.sample_states(jax.random.key(0), 2 * 1000), np.float32)
+        a, b = _unaligned(s[:1000], 16), _unaligned(s[1000:], 48)
+        want = np.asarray(batch.steer_to_batch(env.robot, env.world, a, b, env.padding))
         assert 0.05 < want.mean() < 0.95, (name, want.mean())  # both answers are compared
         np.testing.assert_array_equal(np.asarray(env.steer_to(a, b)), want, err_msg=name)
-        valid = np.concatenate([np.asarray(env.is_valid(jax.device_put(a[i:i + batch.CHECK_CHUNK])))
-                                for i in range(0, len(a), batch.CHECK_CHUNK)])
+        np.testing.assert_array_equal(np.asarray(env.steer_to(jax.device_put(a), b)), want)
+        valid = np.asarray(batch.is_valid_batch(env.robot, env.world, a, env.padding))
         np.testing.assert_array_equal(np.asarray(env.is_valid(a)), valid, err_msg=name)
 
 
@@ -282,28 +284,23 @@ def test_numpy_input_shape_errors():
 
 
 def test_varying_batch_sizes_share_compiled_programs():
-    """Env.steer_to and is_valid run batches of 65 rows up to one chunk through the shared
-    chunk programs of steer_to_pairs / valid_states, distance pads to power-of-two buckets:
-    sizes 65..2048 compile at most one program of each, and every answer equals the one the
-    bucketed kernels give the whole batch."""
+    """Env.steer_to, is_valid and distance pad small batches to one of four sizes per power
+    of two (less than a quarter of padding): sizes 65..2048 compile at most one program per
+    size class, and every answer equals the bare kernel's on the whole batch."""
+    from ntq_jax.batching import fine_bucket_size
     from ntq_jax.robots import batch as B
     env = nj.make_env("rigid/0")
     s = np.asarray(env.sample_states(jax.random.key(7), 4200), np.float32)
     a, b = s[:2048], s[2100:4148]
-    programs = (B._steer_masked, B.is_valid_batch, B.distance_batch, B._steer_to_batch)
-    env.steer_to(a[:65], b[:65]), env.is_valid(a[:65]), env.distance(a[:65], b[:65])
+    programs = (B._steer_masked, B.is_valid_batch, B.distance_batch)
+    sizes = (65, 77, 80, 100, 128, 1000, 2048)
     before = [f._cache_size() for f in programs]
     outs = {n: (np.asarray(env.steer_to(a[:n], b[:n])), np.asarray(env.is_valid(a[:n])),
-                np.asarray(env.distance(a[:n], b[:n]))) for n in (77, 100, 128, 1000, 2048)}
+                np.asarray(env.distance(a[:n], b[:n]))) for n in sizes}
     after = [f._cache_size() for f in programs]
-    assert after[0] == before[0] and after[1] == before[1] and after[3] == before[3], (before, after)
-    assert after[2] - before[2] <= 4  # 128, 1024, 2048 (77 and 100 share 128's bucket)
-    # the steer_to reference in 64-row pieces: the bucket program of Env's small batches
-    # (test_nan_and_inf_states_are_invalid_and_blocked[rigid/0] compiles it), independent
-    # of the chunk program under test, like one 2048-row call and without its compilation
-    ref = (np.concatenate([np.asarray(B.steer_to_batch(env.robot, env.world, a[i:i + 64],
-                                                       b[i:i + 64], env.padding))
-                           for i in range(0, len(a), 64)]),
+    classes = len({fine_bucket_size(n, 64) for n in sizes})  # 80, 112, 128, 1024, 2048
+    assert all(x - y <= classes for x, y in zip(after, before)), (before, after)
+    ref = (np.asarray(B.steer_to_batch(env.robot, env.world, a, b, env.padding)),
            np.asarray(B.is_valid_batch(env.robot, env.world, a, env.padding)),
            np.asarray(B.distance_batch(env.robot, a, b)))
     assert ref[0].any() and not ref[0].all()

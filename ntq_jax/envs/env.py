@@ -56,6 +56,7 @@ from ntq_jax.presets import PRESETS
 from ntq_jax.robots import Robot, robot_from_json
 from ntq_jax.robots import batch as _batch
 from ntq_jax.robots.batch import distance_batch, is_valid_batch, steer_to_batch
+from ntq_jax.robots.rows import MIN_BUCKET, host_rows
 
 Array = jax.Array
 
@@ -160,53 +161,50 @@ class Env:
         """``padding`` as a number: None is the environment's own (data-generation) padding."""
         return self.padding if padding is None else validation.check_padding(padding)
 
-    def _states(self, x, what: str) -> Array:
-        if not (isinstance(x, jax.Array) and x.dtype == jnp.float32):
-            if not hasattr(x, "dtype"):
-                try:
-                    x = np.asarray(x)
-                except (TypeError, ValueError) as e:
-                    raise TypeError(f"{what} must be an (N, {self.dim}) array of real numbers, "
-                                    f"got {type(x).__name__} ({e})") from None
-            if np.dtype(x.dtype).kind not in "fiu":  # not bool, complex, strings, objects
-                raise TypeError(f"{what} must be an (N, {self.dim}) array of real numbers, got "
-                                f"dtype {np.dtype(x.dtype)}")
-            x = jnp.asarray(x, jnp.float32)
+    def _rows(self, x, what: str):
+        """``x`` validated as ``(N, d)`` rows of real numbers: a float32 host NumPy array
+        (:func:`ntq_jax.robots.rows.host_rows`: the caller's own memory where it can be),
+        or a float32 JAX array when ``x`` is traced or lives on another device."""
+        if not isinstance(x, (jax.Array, np.ndarray)):
+            try:
+                x = np.asarray(x)
+            except (TypeError, ValueError) as e:
+                raise TypeError(f"{what} must be an (N, {self.dim}) array of real numbers, "
+                                f"got {type(x).__name__} ({e})") from None
+        if np.dtype(x.dtype).kind not in "fiu":  # not bool, complex, strings, objects
+            raise TypeError(f"{what} must be an (N, {self.dim}) array of real numbers, got "
+                            f"dtype {np.dtype(x.dtype)}")
         if x.ndim != 2 or x.shape[1] != self.dim:
             raise ValueError(f"{what} must have shape (N, {self.dim}) for {self.name} "
                              f"({self.robot.kind}), got {tuple(x.shape)}")
-        return x
+        rows = host_rows(x)
+        return jnp.asarray(x, jnp.float32) if rows is None else rows
 
-    def _host_states(self, *xs) -> tuple[int, list, list] | None:
-        """Large NumPy float inputs, split for the ``*_split`` kernels (read in place); else None."""
-        rows = [_batch.host_rows(x, self.dim) for x in xs]
-        if any(r is None for r in rows) or any(r.shape != rows[0].shape for r in rows):
-            return None
-        return _batch.split_host_rows(rows)
+    def _pairs(self, a, b):
+        a, b = self._rows(a, "a"), self._rows(b, "b")
+        if a.shape != b.shape:
+            raise ValueError(f"a and b must have the same shape, got {a.shape} and {b.shape}")
+        return a, b
 
     def is_valid(self, states, padding: float | None = None) -> Array:
         """``(N, d) -> (N,)`` bool: in bounds and clear of obstacles (False for NaN/inf).
 
-        ``states`` may be a JAX array, a NumPy array or a nested list. A large
-        float32 C-contiguous NumPy array is read in place, without a copy to the
-        device; for NumPy input the call returns once the answer is computed, so
-        the array may be modified afterwards. Other float dtypes and layouts are
-        converted to float32 (round to nearest) first. Compiled programs: one for
-        up to ``BUCKET_MIN_ROWS`` states, :func:`~ntq_jax.robots.batch.valid_states`'
-        shared chunk program up to :data:`~ntq_jax.robots.batch.CHECK_CHUNK`, and
-        one per power of two above.
+        ``states`` may be a JAX array, a NumPy array or a nested list; the answer is
+        a JAX array. Batches of every size run at the kernel's speed in pieces of a
+        few compiled sizes (:mod:`ntq_jax.robots.rows`), read in place: a CPU JAX
+        array or a float32 C-contiguous NumPy array is not copied (other dtypes and
+        layouts are converted to float32, rounding to nearest, first). For NumPy
+        input the call returns once the answer is computed, so the array may be
+        modified afterwards. Inside ``jax.jit`` the kernel runs on the traced batch.
         """
         p = self.resolve_padding(padding)
-        host = self._host_states(states)
-        if host is not None:
-            k, (edge,), (bulk,) = host
-            return _batch.is_valid_batch_split(self.robot, self.world, edge, bulk, p, k
-                                               ).block_until_ready()
-        x = self._states(states, "states")
-        n = x.shape[0]
-        if _shared(n, _batch.CHECK_CHUNK, x):
-            return jnp.asarray(_batch.valid_states(self.robot, self.world, np.asarray(x), p))
-        return is_valid_batch(self.robot, self.world, _bucketed(x), p)[:n]
+        x = self._rows(states, "states")
+        if isinstance(x, jax.Array):
+            if isinstance(x, jax.core.Tracer):
+                return _batch.is_valid_cm(self.robot, self.world, x.T, p)
+            return is_valid_batch(self.robot, self.world, _direct_rows(x), p)[:x.shape[0]]
+        return _settled(states, x, _batch.valid_rows(self.robot, self.world, x, p,
+                                                     _whole(states)))
 
     def steer_to(self, a, b, padding: float | None = None, check: str = "discretized") -> Array:
         """``(N, d), (N, d) -> (N,)`` bool: True where the straight connection is collision-free.
@@ -214,64 +212,44 @@ class Env:
         ``check``: ``"discretized"`` (default; the paper's check: states at most
         the robot's ``resolution`` apart, exact for the point robot) or
         ``"certified"`` (True only when every configuration of the motion is
-        proven clear; see :mod:`ntq_jax.robots.certified`). The certified
-        check runs in padded chunks of
-        :data:`ntq_jax.robots.batch.CERTIFIED_CHUNK` rows (the program
-        :func:`ntq_jax.robots.batch.steer_to_pairs` uses too), so every batch
-        size shares one compiled shape. The discretised check compiles one
-        program for batches of up to ``BUCKET_MIN_ROWS`` pairs, shares
-        :func:`~ntq_jax.robots.batch.steer_to_pairs`' chunk program for up to
-        :data:`~ntq_jax.robots.batch.STEER_CHUNK`, and pads larger batches to a
-        power of two (one program per size class).
+        proven clear; see :mod:`ntq_jax.robots.certified`).
 
         ``a`` and ``b`` may be JAX arrays, NumPy arrays or nested lists; the
-        answer is a JAX array in every case. Large float32 C-contiguous NumPy
-        arrays are read in place, without a copy to the device, so NumPy input
-        runs at nearly the speed of device input; for NumPy input the call
-        returns once the answer is computed, so the arrays may be modified
-        afterwards. Other float dtypes and layouts are converted to float32
-        (round to nearest) first.
+        answer is a JAX array in every case. Batches of every size run at the
+        kernel's speed: the rows reach the compiled check in pieces of a few
+        power-of-two sizes, read in place (:mod:`ntq_jax.robots.rows`; the
+        certified check in pieces of
+        :data:`~ntq_jax.robots.batch.CERTIFIED_CHUNK` rows, the one shape
+        :func:`~ntq_jax.robots.batch.steer_to_pairs` uses too). A CPU JAX array
+        or a float32 C-contiguous NumPy array is not copied; other dtypes and
+        layouts are converted to float32 (round to nearest) first. For NumPy
+        input the call returns once the answer is computed, so the arrays may be
+        modified afterwards. Inside ``jax.jit`` the check runs on the traced batch.
         """
         p = self.resolve_padding(padding)
         _batch.motion_check(self.robot, check)  # an unknown check fails here
-        if check == "certified" and self.robot.kind != "point":
-            return self._certified(a, b, p)
-        host = self._host_states(a, b)
-        if host is not None:
-            k, (ha, hb), (ba, bb) = host
-            return _batch.steer_to_batch_split(self.robot, self.world, ha, hb, ba, bb, p, k,
-                                               check).block_until_ready()
-        a, b = self._states(a, "a"), self._states(b, "b")
-        if a.shape != b.shape:
-            raise ValueError(f"a and b must have the same shape, got {a.shape} and {b.shape}")
-        n = a.shape[0]
-        if _shared(n, _batch.STEER_CHUNK, a, b):
-            return jnp.asarray(_batch.steer_to_pairs(self.robot, self.world, np.asarray(a),
-                                                     np.asarray(b), p, check=check))
-        return steer_to_batch(self.robot, self.world, _bucketed(a), _bucketed(b), p, check)[:n]
-
-    def _certified(self, a, b, padding: float) -> Array:
-        """:meth:`steer_to` with ``check="certified"``, through :func:`ntq_jax.robots.batch.steer_to_pairs`."""
-        a, b = self._states(a, "a"), self._states(b, "b")
-        if a.shape != b.shape:
-            raise ValueError(f"a and b must have the same shape, got {a.shape} and {b.shape}")
-        return jnp.asarray(_batch.steer_to_pairs(self.robot, self.world, np.asarray(a),
-                                                 np.asarray(b), padding, check="certified"))
+        ra, rb = self._pairs(a, b)
+        if isinstance(ra, jax.Array) or isinstance(rb, jax.Array):
+            ra, rb = jnp.asarray(ra), jnp.asarray(rb)
+            if isinstance(ra, jax.core.Tracer) or isinstance(rb, jax.core.Tracer):
+                return _batch.steer_to_cm(self.robot, self.world, ra.T, rb.T, p, check=check)
+            return steer_to_batch(self.robot, self.world, _direct_rows(ra), _direct_rows(rb), p,
+                                  check)[:ra.shape[0]]
+        out = _batch.steer_rows(self.robot, self.world, ra, rb, p, check, _whole(a, b))
+        return _settled((a, b), (ra, rb), out)
 
     def distance(self, a, b) -> Array:
         """``(N, d), (N, d) -> (N,)``: the robot's cost metric.
 
-        Input as for :meth:`steer_to` (large NumPy arrays are read in place).
+        Input as for :meth:`steer_to` (large arrays are read in place).
         """
-        host = self._host_states(a, b)
-        if host is not None:
-            k, (ha, hb), (ba, bb) = host
-            return _batch.distance_batch_split(self.robot, ha, hb, ba, bb, k).block_until_ready()
-        a, b = self._states(a, "a"), self._states(b, "b")
-        if a.shape != b.shape:
-            raise ValueError(f"a and b must have the same shape, got {a.shape} and {b.shape}")
-        n = a.shape[0]
-        return distance_batch(self.robot, _bucketed(a), _bucketed(b))[:n]
+        ra, rb = self._pairs(a, b)
+        if isinstance(ra, jax.Array) or isinstance(rb, jax.Array):
+            ra, rb = jnp.asarray(ra), jnp.asarray(rb)
+            if isinstance(ra, jax.core.Tracer) or isinstance(rb, jax.core.Tracer):
+                return jax.vmap(self.robot.distance)(ra, rb)
+            return distance_batch(self.robot, _direct_rows(ra), _direct_rows(rb))[:ra.shape[0]]
+        return _settled((a, b), (ra, rb), _batch.distance_rows(self.robot, ra, rb, _whole(a, b)))
 
     def rasterize(self, resolution: float, padding: float | None = None) -> np.ndarray:
         """Occupancy grid ``(H, W)`` bool of the workspace (point robot geometry)."""
@@ -406,27 +384,37 @@ class Env:
                              spec.get("scale"), where=where)
 
 
-#: Batches of the device path are padded to the next power of two of at least this many
-#: rows: a user's varying batch sizes compile a handful of programs, not one per size.
-BUCKET_MIN_ROWS = 64
+#: The smallest compiled batch size: smaller batches are padded to it
+#: (:data:`ntq_jax.robots.rows.MIN_BUCKET`).
+BUCKET_MIN_ROWS = MIN_BUCKET
 
 
-def _shared(n: int, chunk: int, *xs) -> bool:
-    """Whether a batch of ``n`` rows goes through the shared chunk program of
-    :mod:`ntq_jax.robots.batch` (``chunk`` rows, the same one the planners and data
-    generation run): more rows than the smallest bucket, at most one chunk, and
-    concrete arrays (not traced inside a caller's ``jit``). Batches of other sizes
-    are padded to :func:`_bucketed` sizes. The answers do not depend on the route."""
-    return (BUCKET_MIN_ROWS < n <= chunk
-            and not any(isinstance(x, jax.core.Tracer) for x in xs))
-
-
-def _bucketed(x: Array) -> Array:
-    """``x`` with its rows padded (zeros) to :func:`ntq_jax.batching.bucket_size`; per-row
-    kernels, so the first rows' answers are those of ``x`` alone."""
+def _direct_rows(x: Array) -> Array:
+    """A concrete batch on another device than the CPU, padded (zeros) to a power of two of
+    at least 64 rows for the kernel, so varying sizes share a handful of programs (the
+    per-row answers of the first rows are those of ``x`` alone)."""
     n = x.shape[0]
     m = bucket_size(n, BUCKET_MIN_ROWS)
     return x if m == n else jnp.pad(x, ((0, m - n), (0, 0)))
+
+
+def _whole(*given) -> tuple | None:
+    """The inputs themselves when all are float32 JAX arrays (the kernels take them as they
+    are when a batch needs no splitting), else None."""
+    if all(isinstance(g, jax.Array) and g.dtype == jnp.float32 for g in given):
+        return given
+    return None
+
+
+def _settled(given, rows, out: Array) -> Array:
+    """``out``, waited for when it reads a caller's NumPy array in place (which may change
+    once the call returns); answers computed from private copies or immutable JAX arrays
+    are returned at once."""
+    given = given if isinstance(given, tuple) else (given,)
+    rows = rows if isinstance(rows, tuple) else (rows,)
+    if any(isinstance(g, np.ndarray) and r is g for g, r in zip(given, rows)):
+        return out.block_until_ready()
+    return out
 
 
 def make_env(name_or_path: str | os.PathLike, *, robot: str | dict | Robot | None = None,

@@ -9,6 +9,9 @@ over contiguous rows (the layout the kernels are fast in).
 arrays of any length and run them through one compiled program of a fixed
 chunk size (the tail padded and masked): the batched entry points of every
 stage above the kernels (includeData, path verification, snapping, ...).
+:func:`steer_rows`, :func:`valid_rows` and :func:`distance_rows` (what ``Env``
+calls) run any number of rows in pieces of a few power-of-two sizes, read in
+place (:mod:`ntq_jax.robots.rows`): full speed at every batch size.
 
 The robot and the padding are static (hashable) arguments; the world is traced,
 so a different map with the same obstacle counts reuses the compiled code. The
@@ -22,9 +25,11 @@ import functools
 import jax
 import numpy as np
 
-from ntq_jax.batching import map_chunks
 from ntq_jax.geometry import KERNEL_COMPILER_OPTIONS, World
 from ntq_jax.robots.certified import MOTION_CHECKS
+from ntq_jax.robots import rows
+from ntq_jax.robots.rows import (RowPlan, aligned_head, aligned_period, host_rows, plan_rows,
+                                 run_rows)
 
 Array = jax.Array
 
@@ -104,6 +109,62 @@ def _steer_masked(robot, world: World, a: Array, b: Array, mask: Array, padding:
     return steer_to_cm(robot, world, a.T, b.T, padding, mask=mask, check=check)
 
 
+def _float_rows(x, dim: int) -> np.ndarray:
+    """``x`` as a C-contiguous float32 ``(N, dim)`` host array (in place where it can be)."""
+    rows = host_rows(x)
+    if rows is None:
+        rows = np.ascontiguousarray(np.asarray(x, np.float32))
+    return rows.reshape(-1, dim)
+
+
+def _fixed(chunk: int, arrays) -> RowPlan:
+    """Pieces of exactly ``chunk`` rows, the rest padded to ``chunk`` (one compiled shape;
+    unaligned pieces when aligning them would leave more than ``chunk`` edge rows)."""
+    n = arrays[0].shape[0]
+    plan = plan_rows(n, aligned_head(arrays), chunk, chunk, chunk)
+    return plan if plan.bucket <= chunk else plan_rows(n, 0, chunk, chunk, chunk)
+
+
+def _flexible(arrays) -> RowPlan:
+    """Pieces of :data:`~ntq_jax.robots.rows.PIECE_MIN` to ``PIECE_MAX`` rows and an edge
+    padded by less than a quarter (a few compiled shapes per power of two)."""
+    n = arrays[0].shape[0]
+    if n < rows.PIECE_MIN:
+        return plan_rows(n, 0, rows.PIECE_MAX, rows.PIECE_MIN)
+    return plan_rows(n, aligned_head(arrays), rows.PIECE_MAX, rows.PIECE_MIN,
+                     period=aligned_period(arrays[0]))
+
+
+def steer_rows(robot, world: World, a: np.ndarray, b: np.ndarray, padding: float,
+               check: str = "discretized", whole: tuple[Array, Array] | None = None) -> Array:
+    """``steer_to`` of host ``(N, d)`` float32 pairs (:func:`~ntq_jax.robots.rows.host_rows`)
+    as a JAX array, not waited for (see :func:`~ntq_jax.robots.rows.run_rows`).
+
+    The discretised check runs in pieces of a few power-of-two sizes; the certified
+    check in pieces of :data:`CERTIFIED_CHUNK` (its one compiled shape, shared with
+    :func:`steer_to_pairs`). Padded rows are masked out: they cost no checks.
+    ``whole``: ``a`` and ``b`` as the JAX arrays they are views of, if they are
+    (see :func:`~ntq_jax.robots.rows.run_rows`).
+    """
+    plan = _fixed(CERTIFIED_CHUNK, [a, b]) if check == "certified" else _flexible([a, b])
+    return run_rows(lambda x, y, m: _steer_masked(robot, world, x, y, m, padding, check),
+                    [a, b], plan, whole)
+
+
+def valid_rows(robot, world: World, states: np.ndarray, padding: float,
+               whole: tuple[Array] | None = None) -> Array:
+    """``is_valid`` of host ``(N, d)`` float32 states as a JAX array (as :func:`steer_rows`)."""
+    return run_rows(lambda x, m: is_valid_batch(robot, world, x, padding), [states],
+                    _flexible([states]), whole)
+
+
+def distance_rows(robot, a: np.ndarray, b: np.ndarray,
+                  whole: tuple[Array, Array] | None = None) -> Array:
+    """The cost metric of host ``(N, d)`` float32 pairs as a JAX array (as :func:`steer_rows`)."""
+    return run_rows(lambda x, y, m: distance_batch(robot, x, y), [a, b], _flexible([a, b]),
+                    whole)
+
+
 def steer_to_pairs(robot, world: World, a, b, padding: float,
                    chunk: int | None = None, check: str = "discretized") -> np.ndarray:
     """``steer_to`` over any number of ``(N, d)`` pairs in fixed-size compiled chunks.
@@ -118,140 +179,29 @@ def steer_to_pairs(robot, world: World, a, b, padding: float,
     motion_check(robot, check)  # an unknown check fails here, before any work
     if chunk is None:
         chunk = CERTIFIED_CHUNK if check == "certified" else STEER_CHUNK
-    a = np.asarray(a, np.float32).reshape(-1, robot.dim)
-    b = np.asarray(b, np.float32).reshape(-1, robot.dim)
-    return map_chunks(lambda x, y, m: _steer_masked(robot, world, x, y, m, padding, check), a, b,
-                      chunk=chunk, with_mask=True).astype(bool)
+    a, b = _float_rows(a, robot.dim), _float_rows(b, robot.dim)
+    if a.shape[0] == 0:
+        return np.zeros(0, bool)
+    out = run_rows(lambda x, y, m: _steer_masked(robot, world, x, y, m, padding, check),
+                   [a, b], _fixed(chunk, [a, b]))
+    return np.asarray(out).astype(bool)
 
 
 def valid_states(robot, world: World, states, padding: float,
                  chunk: int = CHECK_CHUNK) -> np.ndarray:
     """``is_valid`` over any number of ``(N, d)`` states in fixed-size compiled chunks."""
-    states = np.asarray(states, np.float32).reshape(-1, robot.dim)
-    return map_chunks(lambda x: is_valid_batch(robot, world, x, padding), states,
-                      chunk=chunk).astype(bool)
+    states = _float_rows(states, robot.dim)
+    if states.shape[0] == 0:
+        return np.zeros(0, bool)
+    out = run_rows(lambda x, m: is_valid_batch(robot, world, x, padding), [states],
+                   _fixed(chunk, [states]))
+    return np.asarray(out).astype(bool)
 
 
 def distances(robot, a, b, chunk: int = CHECK_CHUNK) -> np.ndarray:
     """The cost metric over any number of ``(N, d)`` pairs (float32 kernel, host array)."""
-    a = np.asarray(a, np.float32).reshape(-1, robot.dim)
-    b = np.asarray(b, np.float32).reshape(-1, robot.dim)
-    return map_chunks(lambda x, y: distance_batch(robot, x, y), a, b, chunk=chunk,
-                      empty=np.zeros(0, np.float32))
-
-
-# ---------------------------------------------------------------------------
-# NumPy input without a host-to-device copy
-#
-# On the CPU backend a float32 NumPy array whose data starts on a
-# HOST_ALIGN-byte boundary is handed to XLA without a copy; any other array is
-# copied first, which for large batches costs several times the kernel itself.
-# Arrays from NumPy's allocator usually start 16 bytes past such a boundary, so
-# the rows are split: the first ``k < HOST_HEAD`` rows and the last
-# ``HOST_HEAD - k`` (small copies, in one ``(2 HOST_HEAD, d)`` edge array) and the
-# ``N - HOST_HEAD`` rows between, which start on the boundary and are used in
-# place. ``k`` is traced, so every alignment shares one compiled program per
-# ``N``: one call evaluates both parts and puts the answers back in row order.
-
-HOST_ALIGN = 64  # bytes
-HOST_HEAD = 16  # rows: a row of 4*d bytes reaches the boundary within 16 rows
-HOST_MIN_ROWS = 1 << 16  # smaller batches take the ordinary (copying) path
-_CAST_CHUNK_ROWS = 1 << 16
-
-
-def _aligned_empty(shape: tuple[int, ...], dtype=np.float32) -> np.ndarray:
-    """An uninitialised C-contiguous array whose data starts on a HOST_ALIGN boundary."""
-    nbytes = int(np.prod(shape)) * np.dtype(dtype).itemsize
-    buf = np.empty(nbytes + HOST_ALIGN, np.uint8)
-    off = -buf.ctypes.data % HOST_ALIGN
-    return buf[off:off + nbytes].view(dtype).reshape(shape)
-
-
-def host_rows(x, dim: int) -> np.ndarray | None:
-    """``x`` as a C-contiguous float32 NumPy ``(N, dim)`` array for :func:`split_host_rows`.
-
-    Returns ``x`` itself when it already is one, an aligned float32 copy of a
-    NumPy float array of another dtype or layout (one pass, cast as
-    ``jnp.asarray(x, jnp.float32)`` casts: round to nearest), and None for
-    anything else (not a NumPy float array, another shape, or fewer than
-    :data:`HOST_MIN_ROWS` rows): the caller's ordinary path handles those.
-    """
-    if (not isinstance(x, np.ndarray) or x.dtype.kind != "f" or x.dtype.itemsize > 8
-            or x.ndim != 2 or x.shape[1] != dim or x.shape[0] < HOST_MIN_ROWS):
-        return None
-    if x.dtype == np.float32 and x.dtype.isnative and x.flags.c_contiguous:
-        return x
-    out = _aligned_empty(x.shape)
-    for lo in range(0, x.shape[0], _CAST_CHUNK_ROWS):  # chunks stay in cache
-        np.copyto(out[lo:lo + _CAST_CHUNK_ROWS], x[lo:lo + _CAST_CHUNK_ROWS], casting="unsafe")
-    return out
-
-
-def split_host_rows(arrays: list[np.ndarray]) -> tuple[Array, list[np.ndarray], list[Array]]:
-    """Splits same-shape ``(N, d)`` float32 C-contiguous arrays (``N >= 2 HOST_HEAD``)
-    for the ``*_split`` kernels.
-
-    Returns ``(k, edges, bulks)``: ``k`` an int32 scalar in ``[0, HOST_HEAD)``;
-    ``edges[i]`` a ``(2 HOST_HEAD, d)`` copy whose rows ``0..k-1`` are
-    ``arrays[i][:k]`` and whose rows ``HOST_HEAD..2 HOST_HEAD - k - 1`` are the last
-    ``HOST_HEAD - k`` rows of ``arrays[i]`` (the rest zero); ``bulks[i]`` is
-    ``arrays[i][k:N - HOST_HEAD + k]`` on the device, sharing the NumPy memory when
-    it is aligned. :func:`join_split` puts per-row answers back in row order.
-    ``k`` is chosen so that every array's bulk is aligned when possible, else the
-    first array's (the others are then copied by ``jax.device_put``). The bulks
-    read the callers' memory in place: wait for the results before the arrays
-    may change or be freed.
-    """
-    n, d = arrays[0].shape
-    row = 4 * d
-
-    def aligned_from(x, k):
-        return (x.ctypes.data + k * row) % HOST_ALIGN == 0
-
-    ks = range(min(HOST_HEAD, n))
-    k = next((k for k in ks if all(aligned_from(x, k) for x in arrays)), None)
-    if k is None:
-        k = next((k for k in ks if aligned_from(arrays[0], k)), 0)
-    end = n - HOST_HEAD + k
-    edges = []
-    for x in arrays:
-        e = np.zeros((2 * HOST_HEAD, d), np.float32)
-        e[:k] = x[:k]
-        e[HOST_HEAD:2 * HOST_HEAD - k] = x[end:]
-        edges.append(e)
-    bulks = [jax.device_put(x[k:end], may_alias=True) for x in arrays]
-    return np.int32(k), edges, bulks
-
-
-def join_split(edge: Array, bulk: Array, k: Array) -> Array:
-    """Per-row answers of :func:`split_host_rows`' parts (``edge`` ``(2 HOST_HEAD,)``,
-    ``bulk`` ``(N - HOST_HEAD,)``) in the rows' order, ``(N,)``."""
-    full = jax.numpy.concatenate([edge[:HOST_HEAD], bulk, edge[HOST_HEAD:]])
-    i = jax.numpy.arange(bulk.shape[0] + HOST_HEAD, dtype=jax.numpy.int32)
-    return full[jax.numpy.where(i < k, i, i + HOST_HEAD - k)]
-
-
-@functools.partial(_kernel_jit, static_argnames=("robot", "padding", "check"))
-def steer_to_batch_split(robot, world: World, edge_a: Array, edge_b: Array, bulk_a: Array,
-                         bulk_b: Array, padding: float, k: Array,
-                         check: str = "discretized") -> Array:
-    """:func:`steer_to_batch` of the rows split by :func:`split_host_rows`, in row order."""
-    steer = motion_check(robot, check)
-    return join_split(steer(edge_a.T, edge_b.T, world, padding),
-                      steer(bulk_a.T, bulk_b.T, world, padding), k)
-
-
-@functools.partial(_kernel_jit, static_argnames=("robot", "padding"))
-def is_valid_batch_split(robot, world: World, edge: Array, bulk: Array, padding: float,
-                         k: Array) -> Array:
-    """:func:`is_valid_batch` of the rows split by :func:`split_host_rows`, in row order."""
-    return join_split(is_valid_cm(robot, world, edge.T, padding),
-                      is_valid_cm(robot, world, bulk.T, padding), k)
-
-
-@functools.partial(_kernel_jit, static_argnames=("robot",))
-def distance_batch_split(robot, edge_a: Array, edge_b: Array, bulk_a: Array, bulk_b: Array,
-                         k: Array) -> Array:
-    """:func:`distance_batch` of the rows split by :func:`split_host_rows`, in row order."""
-    dist = jax.vmap(robot.distance, in_axes=(1, 1))
-    return join_split(dist(edge_a.T, edge_b.T), dist(bulk_a.T, bulk_b.T), k)
+    a, b = _float_rows(a, robot.dim), _float_rows(b, robot.dim)
+    if a.shape[0] == 0:
+        return np.zeros(0, np.float32)
+    out = run_rows(lambda x, y, m: distance_batch(robot, x, y), [a, b], _fixed(chunk, [a, b]))
+    return np.asarray(out)

@@ -41,8 +41,9 @@ training seeds 1 and 2 (``.../seeds/train_seed_<k>/``). Commit each cell as it
 finishes; ``README.md`` is regenerated from every finished cell. The cells of a
 task's default data paths with its budgets are ``scripts/reproduce.py``'s runs
 (``--paper-runs``): either script resumes the other's. The paper's six other maps
-(:data:`PAPER_ONLY`) get their default cell only, so one queue of ``--next`` workers
-also re-runs Tables I-IV on all eleven maps.
+(:data:`PAPER_ONLY`) get their default cell and its training seeds 1 and 2, so one queue
+of ``--next`` workers also re-runs Tables I-IV on all eleven maps, each with three
+training seeds.
 """
 
 from __future__ import annotations
@@ -175,8 +176,8 @@ def cells(seeds: bool = True) -> list[Cell]:
     """Every cell, in the order ``--next`` runs them: per factor map, each data mode with
     the config's budgets, then MPNet's budgets on the default data, then the default's
     training seeds 1 and 2 (one factor varied at a time around the task's default); then
-    the default cell of each of the paper's other maps (:data:`PAPER_ONLY`); then the
-    pruning beyond the paper (``+keep_last``) on the factor maps; then the point maps'
+    the default cell of each of the paper's other maps (:data:`PAPER_ONLY`) and, with
+    ``seeds``, their training seeds 1 and 2; then the pruning beyond the paper (``+keep_last``) on the factor maps; then the point maps'
     :data:`COSTLY` data modes; last their density cells at the config's epochs
     (:data:`FULL_EPOCHS`)."""
     out, costly = [], []
@@ -194,6 +195,8 @@ def cells(seeds: bool = True) -> list[Cell]:
             out += [Cell(m, default_data(m), "ours", k) for k in (1, 2)]
     out += [Cell(m, default_data(m), "ours") for m in PAPER_ONLY]
     out += [Cell(m, default_data(m) + KEEP_LAST, "ours") for m in MAPS]
+    if seeds:  # after every cell already committed, so --next runs them next
+        out += [Cell(m, default_data(m), "ours", k) for k in (1, 2) for m in PAPER_ONLY]
     return out + costly + [Cell(m, "density" + FULL_EPOCHS, "ours") for m in DENSITY]
 
 

@@ -462,7 +462,7 @@ class SerialArm(DiscretizedSteering, CertifiedSteering):
         for i0, i1, k0, k1 in self.self_blocks:
             # frames are non-decreasing, so f_i <= f_k; the joints after frame f_i only
             rel = table[k0:k1].copy()
-            rel[:, :frames[i1 - 1]] = 0.0  # a block's first link is on one frame
+            rel[:, :frames[i0]] = 0.0  # a block's rows are on one frame
             pair = jnp.sum(jnp.asarray(rel) * dq[None, :], axis=1)  # (nk,)
             parts.append(jnp.broadcast_to(pair[None, :], (i1 - i0, k1 - k0)).ravel())
         return jnp.concatenate(parts)

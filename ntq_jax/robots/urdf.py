@@ -35,9 +35,10 @@ The model:
   ``<disable_collisions link1 link2>``, links joined by a joint (adjacent), and
   links rigidly attached to the same frame (their distance never changes).
   Spheres are listed by frame (then in file order), so each link's spheres are
-  contiguous, and ``self_blocks`` gives each checked link pair as the sphere index
-  ranges ``(i0, i1, k0, k1)``, ``i1 <= k0``: every sphere of ``i0:i1`` against every
-  sphere of ``k0:k1``.
+  contiguous, and ``self_blocks`` gives the checked sphere pairs as rectangles of
+  sphere index ranges ``(i0, i1, k0, k1)``, ``i1 <= k0``: every sphere of ``i0:i1``
+  against every sphere of ``k0:k1``, each range on one frame (the checked link pairs,
+  merged where that holds: :func:`merge_blocks`; fewer, larger blocks are faster).
 """
 
 from __future__ import annotations
@@ -80,7 +81,7 @@ class ArmModel:
     sphere_centers: tuple[tuple[float, float, float], ...]  # (S, 3) in its frame
     sphere_radii: tuple[float, ...]  # (S,)
     sphere_links: tuple[str, ...]  # (S,) the link of each sphere (a link's are contiguous)
-    self_blocks: tuple[tuple[int, int, int, int], ...]  # checked link pairs, see above
+    self_blocks: tuple[tuple[int, int, int, int], ...]  # checked sphere pairs, see above
     disabled_links: tuple[tuple[str, str], ...]  # sorted link pairs never checked
 
 
@@ -337,9 +338,10 @@ class _Reader:
         span = {name: (links.index(name), len(links) - links[::-1].index(name))
                 for name in links}
         disabled = self._disabled(srdf, frame_of)
-        blocks = tuple(sorted(span[a] + span[b] for a in span for b in span
-                              if span[a] < span[b] and frame_of[a][0] != frame_of[b][0]
-                              and _pair(a, b) not in disabled))
+        blocks = [span[a] + span[b] for a in span for b in span
+                  if span[a] < span[b] and frame_of[a][0] != frame_of[b][0]
+                  and _pair(a, b) not in disabled]
+        blocks = merge_blocks(blocks, [s[0] for s in spheres])
         return ArmModel(
             name=self.root_el.get("name", self.path.stem), root=root, tip=tip,
             joints=tuple(joints), tip_transform=_snapped(frame_of[tip][1]),
@@ -422,6 +424,36 @@ class _Reader:
                 names.append(value)
             pairs.add(_pair(*names))
         return pairs
+
+
+def merge_blocks(blocks, frames) -> tuple[tuple[int, int, int, int], ...]:
+    """Merges blocks ``(i0, i1, k0, k1)`` with the same rows and adjacent columns (or the same
+    columns and adjacent rows) while each merged range stays on one frame (``frames``: per
+    sphere): the same pairs in fewer, larger rectangles, sorted."""
+    blocks = set(blocks)
+
+    def one_frame(lo, hi):
+        return len(set(frames[lo:hi])) == 1
+
+    merged = True
+    while merged:
+        merged = False
+        for a in sorted(blocks):
+            for b in sorted(blocks):
+                i0, i1, k0, k1 = a
+                if b[:2] == (i0, i1) and b[2] == k1 and one_frame(k0, b[3]):
+                    new = (i0, i1, k0, b[3])
+                elif b[2:] == (k0, k1) and b[0] == i1 and one_frame(i0, b[1]):
+                    new = (i0, b[1], k0, k1)
+                else:
+                    continue
+                blocks -= {a, b}
+                blocks.add(new)
+                merged = True
+                break
+            if merged:
+                break
+    return tuple(sorted(blocks))
 
 
 def _pair(a: str, b: str) -> tuple[str, str]:

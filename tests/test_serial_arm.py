@@ -189,8 +189,8 @@ def _tf(xyz, rpy):
     return t
 
 
-def _tiny_centers(q):
-    """``(N, 7, 3)`` float64 sphere centres of the tiny arm at ``q`` ``(N, 4)``, by 4x4 matrices."""
+def _tiny_frames(q):
+    """Frames 0..4 of the tiny arm at ``q`` ``(N, 4)``, each ``(N, 4, 4)`` float64."""
     q = np.asarray(q, np.float64).reshape(-1, 4)
     frames = [np.broadcast_to(np.eye(4), (len(q), 4, 4))]
     for (xyz, rpy, axis, kind), qk in zip(TINY_JOINTS, q.T):
@@ -201,6 +201,12 @@ def _tiny_centers(q):
         else:
             motion[:, :3, :3] = Rotation.from_rotvec(qk[:, None] * u).as_matrix()
         frames.append(frames[-1] @ _tf(xyz, rpy) @ motion)
+    return frames
+
+
+def _tiny_centers(q):
+    """``(N, 7, 3)`` float64 sphere centres of the tiny arm at ``q`` ``(N, 4)``."""
+    frames = _tiny_frames(q)
     out = []
     for link, f, c, _ in TINY_SPHERES:
         t = frames[f] @ _tf(*TINY_TOOL) if link == "tool" else frames[f]
@@ -284,6 +290,11 @@ def test_tiny_fk_by_hand_and_by_matrices(tiny, programs):
         np.testing.assert_allclose(got[k, s], want, atol=1e-6)
     q = _uniform(tiny, np.random.default_rng(1), 64)
     np.testing.assert_allclose(programs["centers"](tiny, q), _tiny_centers(q), atol=1e-5)
+    # the tool frame as the tip: the wrist frame, then the fixed tool joint
+    tool = SerialArm.from_urdf(TINY_URDF, TINY_SRDF, tip="tool")
+    np.testing.assert_allclose(programs["tip"](tool, q), _tiny_frames(q)[-1] @ _tf(*TINY_TOOL),
+                               atol=1e-5)
+    np.testing.assert_allclose(programs["fk"](tiny, q), np.stack(_tiny_frames(q), 1), atol=1e-5)
 
 
 @pytest.mark.parametrize("padding", [0.0, 0.03])

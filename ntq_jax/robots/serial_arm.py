@@ -25,7 +25,8 @@
   states on a motion of joint distance ``d``, i.e. states at most 1/32 rad apart.
   Between two checked states a sphere centre moves at most
   ``sqrt(sum_j R_j^2) * resolution`` (``R_j`` below; :meth:`SerialArm.step_motion`:
-  at most 6.0 cm for the Panda's hand), so deeper penetrations are always found.
+  at most 6.0 cm for the Panda's hand), so penetrations deeper than that are always
+  found.
 * Certified check (:mod:`ntq_jax.robots.certified`): the parts are each sphere against
   the obstacles (clearance = its ``spheres_clearance``) and each checked sphere pair
   (clearance ``|c_i - c_k| - r_i - r_k``, no padding). Sweep bounds

@@ -389,8 +389,9 @@ class SerialArm(DiscretizedSteering, CertifiedSteering):
     def part_clearances(self, q: Array, world: World3D, padding: float) -> Array:
         """``(S + P,)``: each sphere's obstacle clearance (``spheres_clearance``, minus
         ``padding``), then each checked pair's ``|c_i - c_k| - r_i - r_k`` (in
-        :attr:`self_pairs` order); all ``> 0`` iff ``q`` is valid; all -1 for non-finite
-        ``q`` or one outside the joint limits."""
+        :attr:`self_pairs` order); all ``> 0`` iff ``q`` is valid (up to float32 rounding
+        of a pair at an exact tie: ``is_valid`` compares squared distances); all -1 for
+        non-finite ``q`` or one outside the joint limits."""
         x, y, z = self._sphere_xyz(q)
         radii = jnp.asarray(self.sphere_radii, jnp.float32)
         parts = [spheres_clearance(jnp.stack([x, y, z], axis=1), radii, world, padding)]

@@ -286,19 +286,20 @@ def test_numpy_input_shape_errors():
 def test_varying_batch_sizes_share_compiled_programs():
     """Env.steer_to, is_valid and distance pad small batches to one of four sizes per power
     of two (less than a quarter of padding): sizes 65..2048 compile at most one program per
-    size class, and every answer equals the bare kernel's on the whole batch."""
+    size class, and every answer equals the bare kernel's on the whole batch (two classes,
+    80 and 1024 rows, so the test compiles little)."""
     from ntq_jax.batching import fine_bucket_size
     from ntq_jax.robots import batch as B
     env = nj.make_env("rigid/0")
     s = np.asarray(env.sample_states(jax.random.key(7), 4200), np.float32)
-    a, b = s[:2048], s[2100:4148]
+    a, b = s[:1024], s[2100:3124]
     programs = (B._steer_masked, B.is_valid_batch, B.distance_batch)
-    sizes = (65, 77, 80, 100, 128, 1000, 2048)
+    sizes = (65, 77, 80, 1000, 1024)
     before = [f._cache_size() for f in programs]
     outs = {n: (np.asarray(env.steer_to(a[:n], b[:n])), np.asarray(env.is_valid(a[:n])),
                 np.asarray(env.distance(a[:n], b[:n]))) for n in sizes}
     after = [f._cache_size() for f in programs]
-    classes = len({fine_bucket_size(n, 64) for n in sizes})  # 80, 112, 128, 1024, 2048
+    classes = len({fine_bucket_size(n, 64) for n in sizes})  # 80 and 1024
     assert all(x - y <= classes for x, y in zip(after, before)), (before, after)
     ref = (np.asarray(B.steer_to_batch(env.robot, env.world, a, b, env.padding)),
            np.asarray(B.is_valid_batch(env.robot, env.world, a, env.padding)),

@@ -51,7 +51,7 @@ import numpy as np
 from ntq_jax import artifacts, broadphase, geometry, grid_maps, validation
 from ntq_jax.batching import bucket_size
 from ntq_jax import queries as Q
-from ntq_jax.geometry import World
+from ntq_jax.geometry import World, World3D
 from ntq_jax.presets import PRESETS
 from ntq_jax.robots import Robot, robot_from_json
 from ntq_jax.robots import batch as _batch
@@ -61,6 +61,10 @@ from ntq_jax.robots.rows import MIN_BUCKET, host_rows
 Array = jax.Array
 
 _JSON_KEYS = {"name", "robot", "bounds", "boxes", "discs", "padding"}
+_JSON3D_KEYS = {"name", "robot", "bounds", "spheres", "cuboids", "capsules", "padding", "query"}
+WORLD3D_KEYS = ("bounds", "spheres", "cuboids", "capsules")
+#: ``make_env("panda/<scene>/<number>")``: MotionBenchMaker's problem with the Panda.
+PANDA_PREFIX = "panda/"
 _GRID_JSON_KEYS = {"name", "grid", "robot", "padding", "unknown", "scale"}
 
 
@@ -126,20 +130,25 @@ class Env:
         padding: clearance used for data generation (``>= 0``).
         grid: the :class:`ntq_jax.grid_maps.OccupancyGrid` the world was imported
             from, or None (grid A* plans on it at its own resolution).
+        query: ``(2, d)`` float32 start and goal that come with the environment (a
+            MotionBenchMaker problem's, or a 3-D JSON's ``"query"``), or None. Not part
+            of :meth:`content_hash` (it is a problem posed in the world, not the world).
     """
 
     name: str
     robot: Robot
-    world: World
+    world: World | World3D
     padding: float
     grid: grid_maps.OccupancyGrid | None = None
+    query: np.ndarray | None = None
 
     def __post_init__(self):
         try:
             check_resolution(self.robot, self.world)
         except ValueError as e:
             raise EnvError(f"{self.name}: {e}") from None
-        if self.world.num_boxes > broadphase.UNROLL_MAX and self.world.index is None:
+        if (isinstance(self.world, World) and self.world.num_boxes > broadphase.UNROLL_MAX
+                and self.world.index is None):
             reach, cell = index_reach(self.robot, self.world, self.padding)
             object.__setattr__(self, "world", broadphase.with_index(self.world, reach, cell))
 
@@ -147,9 +156,9 @@ class Env:
         """sha256 (hex) of what the environment is, not what it is called: the robot's
         parameters, the padding and the exact float32 bounds, boxes and discs. Two maps
         with the same content have the same hash whatever their names or file paths."""
+        keys = ("bounds", "boxes", "discs") if isinstance(self.world, World) else WORLD3D_KEYS
         content = {"robot": self.robot.to_json(), "padding": float(self.padding),
-                   **{k: np.asarray(getattr(self.world, k), np.float64).tolist()
-                      for k in ("bounds", "boxes", "discs")}}
+                   **{k: np.asarray(getattr(self.world, k), np.float64).tolist() for k in keys}}
         return artifacts.sha256_json(content)
 
     # -- geometry -----------------------------------------------------------
@@ -252,7 +261,10 @@ class Env:
         return _settled((a, b), (ra, rb), _batch.distance_rows(self.robot, ra, rb, _whole(a, b)))
 
     def rasterize(self, resolution: float, padding: float | None = None) -> np.ndarray:
-        """Occupancy grid ``(H, W)`` bool of the workspace (point robot geometry)."""
+        """Occupancy grid ``(H, W)`` bool of the workspace (point robot geometry; planar
+        worlds only)."""
+        if not isinstance(self.world, World):
+            raise EnvError(f"{self.name}: rasterize is for planar worlds; this one is 3-D")
         return geometry.rasterize(self.world, resolution, self.resolve_padding(padding))
 
     # -- sampling ------------------------------------------------------------
@@ -273,6 +285,12 @@ class Env:
     # -- JSON ------------------------------------------------------------------
     def to_json(self) -> dict[str, Any]:
         """The environment in the JSON format of this module's docstring (a dict)."""
+        if isinstance(self.world, World3D):
+            out = {"name": self.name, "robot": self.robot.to_json(), **self.world.to_json(),
+                   "padding": self.padding}
+            if self.query is not None:
+                out["query"] = np.asarray(self.query, np.float64).tolist()
+            return out
         return {
             "name": self.name,
             "robot": self.robot.to_json(),
@@ -334,6 +352,8 @@ class Env:
             raise EnvError(f"{where}: expected a JSON object, got {type(spec).__name__}")
         if "grid" in spec:
             return Env._from_grid_json(spec, where, base_dir)
+        if _is_3d(spec):
+            return Env._from_json_3d(spec, where)
         unknown = sorted(set(spec) - _JSON_KEYS)
         if unknown:
             raise EnvError(f"{where}: unknown key(s) {unknown}; allowed: {sorted(_JSON_KEYS)}")
@@ -354,6 +374,40 @@ class Env:
         except (TypeError, ValueError) as e:
             raise EnvError(f"{where}: {e}") from None
         return Env(name, robot, world, padding)
+
+    @staticmethod
+    def _from_json_3d(spec: dict[str, Any], where: str) -> "Env":
+        """The 3-D form (see the module docstring)."""
+        unknown = sorted(set(spec) - _JSON3D_KEYS)
+        if unknown:
+            raise EnvError(f"{where}: unknown key(s) {unknown}; a 3-D environment allows "
+                           f"{sorted(_JSON3D_KEYS)}")
+        for key in ("robot", "bounds"):
+            if key not in spec:
+                raise EnvError(f"{where}: missing required key {key!r}")
+        name = spec.get("name", "custom")
+        if not isinstance(name, str) or not name:
+            raise EnvError(f"{where}: name must be a non-empty string, got {validation.short_repr(name)}")
+        try:
+            robot = robot_from_json(spec["robot"], where=f"{where}: robot")
+        except (TypeError, ValueError) as e:
+            raise EnvError(str(e)) from None
+        if robot.kind != "serial_arm":
+            raise EnvError(f"{where}: a 3-D world (spheres, cuboids, capsules, 3 bounds rows) "
+                           f"needs a 3-D robot (kind 'serial_arm'), got {robot.kind!r}")
+        try:
+            world = World3D.from_json({k: spec[k] for k in WORLD3D_KEYS if k in spec})
+            padding = validation.number(spec.get("padding", 0.0), "padding", minimum=0)
+            query = None
+            if spec.get("query") is not None:
+                query = validation.number_rows(spec["query"], "query", robot.dim,
+                                               "[q_1, ..., q_d]")
+                if query.shape[0] != 2:
+                    raise ValueError(f"query must be two rows [start, goal], got {query.shape[0]}")
+                query = np.asarray(query, np.float32)
+        except (TypeError, ValueError) as e:
+            raise EnvError(f"{where}: {e}") from None
+        return Env(name, robot, world, padding, query=query)
 
     @staticmethod
     def _from_grid_json(spec: dict[str, Any], where: str, base_dir) -> "Env":
@@ -387,6 +441,33 @@ class Env:
 #: The smallest compiled batch size: smaller batches are padded to it
 #: (:data:`ntq_jax.robots.rows.MIN_BUCKET`).
 BUCKET_MIN_ROWS = MIN_BUCKET
+
+
+def _is_3d(spec: dict) -> bool:
+    """Whether an environment JSON is the 3-D form: 3-D obstacles, or three bounds rows."""
+    if any(k in spec for k in ("spheres", "cuboids", "capsules")):
+        return True
+    bounds = spec.get("bounds")
+    return isinstance(bounds, (list, tuple)) and len(bounds) == 3
+
+
+def panda_env(name: str) -> Env:
+    """``panda/<scene>/<number>``: MotionBenchMaker's problem ``number`` (1..100) of ``scene``
+    (:data:`ntq_jax.scenes.mbm.SCENES`) with the Panda (:meth:`SerialArm.panda`), padding 0,
+    the problem's start and goal as :attr:`Env.query`."""
+    from ntq_jax.robots import SerialArm
+    from ntq_jax.scenes import mbm
+    parts = name[len(PANDA_PREFIX):].split("/")
+    if len(parts) != 2 or not parts[1].isdigit():
+        raise EnvError(f"unknown environment {name!r}: a Panda problem is "
+                       f"'panda/<scene>/<number>', e.g. 'panda/cage/1' (scenes: "
+                       f"{', '.join(mbm.SCENES)}; numbers {mbm.NUMBERS[0]}..{mbm.NUMBERS[-1]})")
+    try:
+        problem = mbm.load_problem(parts[0], int(parts[1]))
+    except ValueError as e:
+        raise EnvError(f"{name!r}: {e}") from None
+    query = np.stack([np.asarray(problem.start), np.asarray(problem.goal)]).astype(np.float32)
+    return Env(name, SerialArm.panda(), problem.world, 0.0, query=query)
 
 
 def _direct_rows(x: Array) -> Array:
@@ -441,6 +522,8 @@ def make_env(name_or_path: str | os.PathLike, *, robot: str | dict | Robot | Non
                        "(.yaml, .map); a preset or a JSON map carries its own")
     if name in PRESETS:
         return Env.from_json(PRESETS[name], where=f"preset {name}")
+    if name.startswith(PANDA_PREFIX) and not path.exists():
+        return panda_env(name)
     if grid_file:
         if path.is_dir() or not path.is_file():
             raise EnvError(f"grid map file {name!r} does not exist")
@@ -465,4 +548,5 @@ def make_env(name_or_path: str | os.PathLike, *, robot: str | dict | Robot | Non
             raise EnvError(f"environment file {name!r} is not valid JSON: {e}") from None
         return Env.from_json(spec, where=f"environment file {name!r}", base_dir=path.parent)
     raise EnvError(f"unknown environment {name!r}: use a preset ({', '.join(PRESETS)}), "
+                   "a Panda problem ('panda/<scene>/<number>', e.g. 'panda/cage/1'), "
                    "the path of a JSON map file, or a grid map (.yaml, .map)")

@@ -198,7 +198,7 @@ def test_datasets_rebuild_from_a_record_without_planning(tmp_path, monkeypatch):
                 np.load(tmp_path / "replayed" / "point_2" / ds / f"{arr}.npy"))
     other = config.load("configs/point_small.yaml", sets + [
         "seed=1", f"data.per_env=[{{env: point/2, paths_from: '{rec}'}}]"])
-    with pytest.raises(ValueError, match="not this run's pool rows"):
+    with pytest.raises(ValueError, match="with seed 0, not point/2 at 0.8 with seed 1"):
         data.generate_datasets(env, other, tmp_path / "other", env_name="point/2",
                                progress=False, figure=False)
     with pytest.raises(ValueError, match="records point/2"):

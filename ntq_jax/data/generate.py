@@ -58,8 +58,8 @@ from ntq_jax.data.format import (CONFIG_FILE, FORMAT, FORMAT_VERSION, damaged_da
 from ntq_jax.envs import env_slug
 from ntq_jax.data.include import include_data, prune_probability, prune_rng
 from ntq_jax.planners.path_modes import shape_paths
-from ntq_jax.planners.jobs import (PoolPlan, plan_pool, planner_options, resolve_planner,
-                                   seed_from_record)
+from ntq_jax.planners.jobs import PoolPlan, plan_pool, planner_options, resolve_planner
+from ntq_jax.data import records
 from ntq_jax.data.pools import (Keys, Pools, mixing_bits, pool_index, pool_sizes, run_keys,
                                 sample_pools)
 from ntq_jax.progress import open_bar
@@ -98,6 +98,7 @@ class RunSpec(NamedTuple):
     bits: list[np.ndarray]
     fingerprint: str
     data_paths: float | str | None = None  # planner.data_paths (ntq_jax.planners.path_modes)
+    record: dict | None = None  # data.per_env's paths_from: records.provenance of the record
 
     @property
     def n_u(self) -> int:
@@ -126,6 +127,8 @@ def resolve_run(env, config, out_dir, env_name: str | None, planner) -> RunSpec:
     bits = [mixing_bits(keys.mix, k, s.p_nt) for s in specs]
     n_u, n_nt = pool_sizes(bits)
     mode = config.planner.data_paths_for(env_name)
+    source = dc.paths_from_for(env_name)
+    record = None if source is None else records.provenance(source, {"U": n_u, "N": n_nt})
     fp = artifacts.fingerprint({
         "format": FORMAT_VERSION, "env": env.to_json(), "env_name": env_name, "seed": config.seed,
         "pad": pad, "prune_pad": prune_pad, "planner": planner_name, "options": options,
@@ -137,11 +140,12 @@ def resolve_run(env, config, out_dir, env_name: str | None, planner) -> RunSpec:
         # a spacing's paths keep a direct connection as its two ends (path_modes)
         **({"direct": "ends"} if isinstance(mode, (int, float)) and not isinstance(mode, bool)
            else {}),
-        **({} if dc.paths_from_for(env_name) is None
-           else {"paths_from": str(dc.paths_from_for(env_name))}),
+        # the record's chunks, by content: a changed record makes the datasets again
+        **({} if record is None else {"paths_from": str(source), "record": record["digest"]}),
     }, default=artifacts.json_default)
     return RunSpec(env_name, slug, Path(out_dir) / slug, dataset_names(len(specs)), specs, k,
-                   pad, prune_pad, plan_fn, planner_name, options, custom, keys, bits, fp, mode)
+                   pad, prune_pad, plan_fn, planner_name, options, custom, keys, bits, fp, mode,
+                   record)
 
 
 # ---------------------------------------------------------------------------
@@ -267,7 +271,9 @@ def common_meta(env, config, run: RunSpec, g_data: dict, g_eval: dict) -> dict:
         "env_name": run.env_name, "env_slug": run.slug, "seed": config.seed, "k_train": run.k,
         "padding": run.padding, "prune_padding": run.prune_padding,
         "planner": {"name": run.planner_name, "options": run.options,
-                    **({} if run.data_paths is None else {"data_paths": run.data_paths})},
+                    **({} if run.data_paths is None else {"data_paths": run.data_paths}),
+                    # where the recorded paths come from (the planner above plans the rest)
+                    **({} if run.record is None else {"paths_from": run.record})},
         "sampling": {"n_max": config.sampling.n_max}, "gamma_nt": g_data, "gamma_nt_eval": g_eval,
         "package_version": __version__, "config_hash": config.hash(),
         "fingerprint": run.fingerprint, "query_kind_values": _QUERY_KINDS,
@@ -282,12 +288,13 @@ def write_figure(run: RunSpec) -> None:
         warnings.warn(f"{run.env_name}: figure not written: {e}", RuntimeWarning, stacklevel=3)
 
 
-def _warn_rejected(run: RunSpec, planned: PoolPlan) -> None:
+def _warn_rejected(run: RunSpec, planned: PoolPlan, recorded: int = 0) -> None:
     n = int(planned.rejected.sum())
     if n:
-        warnings.warn(f"{run.env_name}: {n} planner path(s) failed the independent check (a "
-                      f"segment in collision at padding {run.padding}, or not finite); they are "
-                      "recorded as unsolved", RuntimeWarning, stacklevel=3)
+        where = f" ({recorded} of them from {run.record['record']})" if recorded else ""
+        warnings.warn(f"{run.env_name}: {n} planner path(s){where} failed the independent "
+                      f"check (a segment in collision at padding {run.padding}, or not finite); "
+                      "they are recorded as unsolved", RuntimeWarning, stacklevel=3)
 
 
 def _open_work(env, config, run: RunSpec) -> Path:
@@ -417,10 +424,11 @@ def generate_datasets(env, config, out_dir, *, env_name: str | None = None, plan
         pools = sample_pools(env, run.keys, run.n_u, run.n_nt, run.padding,
                              config.sampling.n_max, progress, f"{run.slug}: sample queries")
 
-    record = config.data.paths_from_for(run.env_name)
-    if record is not None:
-        seed_from_record(work, Path(record), pools.queries, pools.n_u, env_name=run.env_name,
-                         padding=run.padding)
+    recorded = 0  # recorded paths the verification rejected
+    if run.record is not None:  # checked and verified before plan_pool reuses them
+        recorded = records.seed_work(work, run.record["record"], pools.queries, pools.n_u, env,
+                                     env_name=run.env_name, seed=config.seed,
+                                     padding=run.padding)[1]
 
     with ThreadPoolExecutor(1, thread_name_prefix="ntq_jax-gamma") as gamma_thread:
         # 2. gamma_nt of the map, in the background while the planner runs
@@ -432,7 +440,7 @@ def generate_datasets(env, config, out_dir, *, env_name: str | None = None, plan
                                 padding=run.padding, seed=config.seed, chunk=config.data.chunk,
                                 work=work, progress=progress,
                                 desc=f"{run.slug}: plan ({run.planner_name})", executor=executor)
-        _warn_rejected(run, planned)
+        _warn_rejected(run, planned, recorded)
         with _timed(timings, "shape"):
             shaped, shaping = shape_paths(env, planned.result, run.data_paths,
                                           "custom" if run.verify else run.planner_name,

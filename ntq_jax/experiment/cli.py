@@ -36,6 +36,7 @@ EXPECTED_ERRORS: tuple[tuple[str, str], ...] = (
     ("ntq_jax.envs", "EnvError"),
     ("ntq_jax.errors", "ConfigError"),
     ("ntq_jax.data.format", "DatasetError"),
+    ("ntq_jax.data.records", "RecordError"),
     ("ntq_jax.training.checkpoint", "CheckpointError"),
     ("ntq_jax.experiment.pipeline", "PipelineError"),
     ("ntq_jax.queries", "FreeSpaceTooSmall"),

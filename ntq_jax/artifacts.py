@@ -15,6 +15,7 @@ reused only when the fingerprint matches (:func:`load_npz`,
 
 from __future__ import annotations
 
+import errno
 import hashlib
 import io
 import json
@@ -26,9 +27,12 @@ from typing import Any, Callable
 
 import numpy as np
 
+from ntq_jax.errors import UsageError
+
 __all__ = ["tmp_name", "replace", "write_with", "write_bytes", "write_text", "write_json",
            "save_npy", "save_npz", "save_figure", "write_folder", "clean_tmp", "unwritable_reason",
-           "FolderInUse", "lock_folder", "unlock_folder", "holds_lock", "LOCK_NAME", "sha256", "json_default",
+           "FolderInUse", "LockUnsupported", "lock_folder", "unlock_folder", "holds_lock",
+           "lock_holder", "LOCK_NAME", "sha256", "json_default",
            "sha256_json", "fingerprint", "npy_sha256", "array_digest", "tree_digest", "load_npz",
            "compute_or_load", "enable_compile_cache"]
 
@@ -187,6 +191,13 @@ class FolderInUse(RuntimeError):
     """Another process holds the folder's lock (the message names its pid, host and start)."""
 
 
+class LockUnsupported(UsageError):
+    """The folder's file system has no ``flock`` (ENOLCK, EOPNOTSUPP): one ``error:`` line."""
+
+
+_NO_LOCKS = {getattr(errno, n) for n in ("ENOLCK", "EOPNOTSUPP", "ENOTSUP") if hasattr(errno, n)}
+
+
 def lock_folder(folder: str | os.PathLike, note: bool = True) -> Path:
     """Takes the exclusive lock of ``folder`` (which must exist) for this process's lifetime.
 
@@ -202,6 +213,7 @@ def lock_folder(folder: str | os.PathLike, note: bool = True) -> Path:
 
     Raises:
         FolderInUse: another process holds the lock.
+        LockUnsupported: the file system does not support ``flock`` (one line saying so).
     """
     import fcntl
 
@@ -221,7 +233,13 @@ def lock_folder(folder: str | os.PathLike, note: bool = True) -> Path:
         fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
+        except OSError as e:
+            if e.errno in _NO_LOCKS:
+                os.close(fd)
+                raise LockUnsupported(
+                    f"{folder}: its file system does not support file locks (flock: "
+                    f"{(e.strerror or os.strerror(e.errno)).lower()}), which keep two processes "
+                    "from writing one folder; use a folder on a local disk") from None
             who = os.pread(fd, 4096, 0).decode("utf-8", "replace").strip() or "another process"
             os.close(fd)
             raise FolderInUse(f"{folder} is in use by {who}") from None
@@ -240,6 +258,27 @@ def lock_folder(folder: str | os.PathLike, note: bool = True) -> Path:
 def holds_lock(folder: str | os.PathLike) -> bool:
     """Whether this process holds ``folder``'s lock (:func:`lock_folder`)."""
     return str(Path(folder).resolve()) in _HELD
+
+
+def lock_holder(folder: str | os.PathLike) -> str | None:
+    """Who holds ``folder``'s lock (its note, e.g. ``pid 12 on host since ...``), or None when
+    no process does or it cannot be told (no ``/proc/locks``). Never takes the lock."""
+    path = Path(folder) / LOCK_NAME
+    try:
+        st = path.stat()
+        table = Path("/proc/locks").read_text()
+    except OSError:
+        return None
+    ident = f"{os.major(st.st_dev):02x}:{os.minor(st.st_dev):02x}:{st.st_ino}"
+    for line in table.splitlines():  # "1: FLOCK  ADVISORY  WRITE <pid> <dev:ino> 0 EOF"
+        parts = line.split()
+        if "FLOCK" in parts and "->" not in parts and ident in parts:
+            try:
+                note = path.read_text(encoding="utf-8", errors="replace").strip()
+            except OSError:
+                note = ""
+            return note or f"pid {parts[parts.index(ident) - 1]}"
+    return None
 
 
 def unlock_folder(folder: str | os.PathLike) -> None:

@@ -66,9 +66,11 @@ def test_lock_folder_is_exclusive_between_processes_and_reentrant_within_one(tmp
     try:
         with pytest.raises(artifacts.FolderInUse, match=f"in use by pid {holder.pid} on "):
             artifacts.lock_folder(tmp_path)
+        assert artifacts.lock_holder(tmp_path).startswith(f"pid {holder.pid} on ")  # read only
     finally:
         holder.stdin.close()  # the holder ends normally
         holder.wait()
+    assert artifacts.lock_holder(tmp_path) is None
     assert artifacts.lock_folder(tmp_path) == tmp_path / ".lock"
     assert artifacts.lock_folder(tmp_path) == tmp_path / ".lock"  # already held: no error
     artifacts.unlock_folder(tmp_path)
@@ -87,3 +89,20 @@ def test_refused_folder_gets_no_lock_file(tmp_path):
     with pytest.raises(PipelineError, match="another config"):
         prepare_run(load_config(None, TINY + ["model.hidden=[16,16]"]), run)
     assert sorted(p.name for p in run.iterdir()) == before
+
+
+def test_a_file_system_without_locks_is_one_line_saying_so(tmp_path, capsys, monkeypatch):
+    """flock failing with ENOLCK (e.g. some network file systems) is not "in use by
+    another process" forever: one line says locks are not supported and what to do."""
+    import errno
+    import fcntl
+
+    def no_locks(fd, op):
+        raise OSError(errno.ENOLCK, "No locks available")
+
+    monkeypatch.setattr(fcntl, "flock", no_locks)
+    sets = sum((["--set", s] for s in TINY), [])
+    assert _train_all().main(sets + ["--out", str(tmp_path / "run"), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "does not support file locks" in err[0], err
+    assert "in use" not in err[0]

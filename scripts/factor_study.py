@@ -55,6 +55,7 @@ import time
 from pathlib import Path
 from typing import NamedTuple
 
+from ntq_jax.experiment.cells import check_cells, damaged, is_done, paired
 from ntq_jax.experiment.cli import UsageError, run_cli
 
 MAPS = {"rigid/0": "rigid", "point/0": "point", "nlink/4": "nlink", "rigid/2": "rigid",
@@ -249,10 +250,11 @@ def next_cell(all_cells: list[Cell], results: Path, runs: Path) -> list[Cell]:
     """The first pending, ready cell whose base cell is done, claimed for this process
     (``[]`` if none is free). Only that one cell is claimed: a claim is held until the
     process exits, so claiming more would starve the other workers."""
-    done = lambda c: (results / c.key / "paired.json").is_file()  # noqa: E731
+    done = lambda c: is_done(results / c.key)  # noqa: E731
     base_done = lambda c: c.budget == "ours" and not c.train_seed or done(  # noqa: E731
         Cell(c.map, c.data, "ours"))
-    todo = (c for c in all_cells if not done(c) and ready(c) is None and base_done(c))
+    todo = [c for c in all_cells if not done(c) and ready(c) is None and base_done(c)]
+    todo.sort(key=lambda c: damaged(results / c.key) is None)  # a damaged cell is redone first
     return next(([c] for c in todo if claim(c, runs)), [])
 
 
@@ -271,41 +273,6 @@ def cell_config(cell: Cell, extra: list[str] = ()):
         sets.append(f"train.seed={cell.train_seed}")
     sets += list(extra)
     return load_config(path, sets), sets
-
-
-def paired(run: Path, cell: Cell, env) -> list[dict]:
-    """PNet_k - PNet_0 per query kind, steerTo and band, from the run's saved paths."""
-    import numpy as np
-
-    from ntq_jax.experiment.metrics import in_band
-    from ntq_jax.stats import mcnemar_exact, paired_success_difference
-
-    res = json.loads((run / "results.json").read_text())
-    qs = np.load(run / "eval" / cell.slug / "queries.npz")
-    out = []
-    rows = {(r["model"], r["query_kind"], r["steer"]): r for r in res["rows"]}
-    pairs = [(f"PNet_{k}", "PNet_0") for k in (1, 2, 3, 4)] + [("PNet_4", "PNet_3")]
-    for (model, kind, steer), r in sorted(rows.items(), key=str):
-        for baseline in [b for a, b in pairs if a == model]:
-            base = rows.get((baseline, kind, steer))
-            if base is None:
-                continue
-            a = np.load(run / r["paths_file"])["success"]
-            b = np.load(run / base["paths_file"])["success"]
-            band = in_band(env, qs[kind])
-            for part, mask in (("all", np.ones_like(band)), ("in_band", band),
-                               ("out_band", ~band)):
-                row = {"model": model, "baseline": baseline, "query_kind": kind,
-                       "steer": steer, "band": part, "n": int(mask.sum())}
-                if mask.any():
-                    d = paired_success_difference(a[mask], b[mask])
-                    row.update(success=float(a[mask].mean()),
-                               baseline_success=float(b[mask].mean()),
-                               only_a=d["only_a"], only_b=d["only_b"], success_diff=d["diff"],
-                               success_diff_ci95=d["ci"],
-                               mcnemar_p=mcnemar_exact(d["only_a"], d["only_b"]))
-                out.append(row)
-    return out
 
 
 def run_folder(cell: Cell, runs: Path, paper_runs: Path | None) -> Path:
@@ -328,7 +295,7 @@ def run_cell(cell: Cell, runs: Path, results: Path, progress: bool, extra: list[
     cfg, sets = cell_config(cell, extra)
     out = results / cell.key
     old = read_summary(out)
-    if old is not None and old.get("config_hash") == cfg.hash() and (out / "paired.json").is_file():
+    if old is not None and old.get("config_hash") == cfg.hash() and is_done(out):
         print(f"[{cell.key}] up to date", flush=True)
         return
     why = ready(cell)
@@ -362,6 +329,7 @@ def run_cell(cell: Cell, runs: Path, results: Path, progress: bool, extra: list[
             dest, rcmd = (dest / "seeds" / f"train_seed_{cell.train_seed}",
                           rcmd + f" --train-seeds {cell.train_seed}")
         write_summary(run, cell.map, env, dest, command=rcmd)
+        check_cells(results)  # REPRODUCTION.md reads the factor cells too
         from ntq_jax.experiment import reproduction
         print(f"report: {reproduction.write(paper_results)}", flush=True)
     from ntq_jax import artifacts
@@ -375,6 +343,7 @@ def run_cell(cell: Cell, runs: Path, results: Path, progress: bool, extra: list[
 
 def report(results: Path) -> Path:
     """``<results>/README.md``: PNet_k - PNet_0 per cell (every finished one)."""
+    check_cells(results)
     lines = [
         "# Factor study: what decides PNet_3 vs PNet_0",
         "",
@@ -455,10 +424,14 @@ def _main(argv) -> int:
         print(f"report: {report(results)}")
         return 0
     if args.list or not (args.next or args.cell):
+        from ntq_jax.artifacts import lock_holder
         for c in all_cells.values():
-            done = (results / c.key / "paired.json").is_file()
-            print(f"{'done   ' if done else 'pending'} {c.key}"
-                  + ("" if done else f"  ({ready(c)})" if ready(c) else ""))
+            done, why = is_done(results / c.key), damaged(results / c.key)
+            held = None if done else lock_holder(runs / ".claims" / c.key.replace("/", "__"))
+            note = (f"{why}; --next redoes it" if why else f"claimed by {held}" if held
+                    else None if done else ready(c))
+            print(f"{'done   ' if done else 'running' if held else 'pending'} {c.key}"
+                  + (f"  ({note})" if note else ""))
         return 0
     todo = [all_cells[k] for k in args.cell if k in all_cells]
     unknown = [k for k in args.cell if k not in all_cells]

@@ -80,6 +80,9 @@ def test_next_workers_claim_distinct_cells(tmp_path):
         assert p.stdout.readline().strip() == "True"
         assert not fs.claim(cell, tmp_path)  # held by the other worker
         assert fs.claim(fs.cells()[1], tmp_path)
+        listed = _list(fs, tmp_path, tmp_path / "results")
+        assert listed[cell.key].startswith(f"running {cell.key}  (claimed by pid {p.pid} on ")
+        assert listed[fs.cells()[2].key].startswith("pending")
     finally:
         p.stdin.close()
         p.wait()
@@ -97,3 +100,41 @@ def test_next_claims_only_the_cell_it_runs(tmp_path, monkeypatch):
     cells = fs.cells()
     first = fs.next_cell(cells, tmp_path / "results", tmp_path / "runs")
     assert first == [cells[0]] and claimed == [cells[0]]
+
+
+def _list(fs, runs, results) -> dict[str, str]:
+    import contextlib
+    import io
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        assert fs.main(["--list", "--runs", str(runs), "--results", str(results)]) == 0
+    return {line.split()[1]: line for line in buf.getvalue().splitlines()}
+
+
+def test_a_damaged_cell_is_pending_redone_first_and_stops_a_report_with_one_line(
+        tmp_path, monkeypatch, capsys):
+    """A corrupt paired.json or summary.json: --list shows the cell pending (naming the
+    file), --next redoes it first, and a report says so in one line instead of a traceback."""
+    import json
+
+    fs = _script()
+    cells, results = fs.cells(), tmp_path / "results"
+    good = {"cell": cells[0]._asdict(), "paired": []}
+    for c, paired, summary in ((cells[0], json.dumps(good), "{}"),
+                               (cells[3], json.dumps(good), '{"env": '),
+                               (cells[4], '{"cell": {"map"', None)):
+        (results / c.key).mkdir(parents=True)
+        (results / c.key / "paired.json").write_text(paired)
+        if summary is not None:
+            (results / c.key / "summary.json").write_text(summary)
+    listed = _list(fs, tmp_path / "runs", results)
+    assert listed[cells[0].key].startswith("done")
+    for c, name in ((cells[3], "summary.json"), (cells[4], "paired.json")):
+        assert listed[c.key].startswith("pending") and str(results / c.key / name) in listed[c.key]
+    monkeypatch.setattr(fs, "ready", lambda c: None)
+    assert fs.next_cell(cells, results, tmp_path / "runs") == [cells[3]]
+    capsys.readouterr()
+    assert fs.main(["--report-only", "--results", str(results)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and str(results / cells[3].key / "summary.json") in err[0], err
+    assert f"--cell {cells[3].key}" in err[0] and not (results / "README.md").exists()

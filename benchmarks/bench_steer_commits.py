@@ -26,9 +26,8 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 
 CHILD = r"""
-import json, sys, time
+import json, time
 import numpy as np, jax, jax.numpy as jnp
-sys.path.insert(0, {bench!r})
 import ntq_jax as nj
 from bench_steer import numpy_steer
 env = nj.make_env("point/3")
@@ -53,8 +52,9 @@ print(json.dumps({{"api_qps": n / t_api, "numpy_qps": n_np / t_np, "agree": ok}}
 
 
 def run_child(src: Path, n: int, n_np: int) -> dict:
-    env = dict(os.environ, PYTHONPATH=str(src))
-    code = CHILD.format(bench=str(HERE), n=n, n_np=n_np)
+    # the version's package first, then this folder (for bench_steer's NumPy baseline)
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(src), str(HERE)]))
+    code = CHILD.format(n=n, n_np=n_np)
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
                          cwd=str(src), check=True)
     return json.loads(out.stdout.strip().splitlines()[-1])

@@ -368,6 +368,7 @@ class Env:
         except (TypeError, ValueError) as e:
             raise EnvError(str(e)) from None
         try:
+            validation.check_float32({k: spec.get(k, []) for k in ("bounds", "boxes", "discs")})
             world = World.create(spec["bounds"], spec.get("boxes", []), spec.get("discs", []))
             padding = validation.number(spec.get("padding", 0.0), "padding", minimum=0)
             check_resolution(robot, world)
@@ -396,6 +397,7 @@ class Env:
             raise EnvError(f"{where}: a 3-D world (spheres, cuboids, capsules, 3 bounds rows) "
                            f"needs a 3-D robot (kind 'serial_arm'), got {robot.kind!r}")
         try:
+            validation.check_float32({k: spec[k] for k in WORLD3D_KEYS if k in spec})
             world = World3D.from_json({k: spec[k] for k in WORLD3D_KEYS if k in spec})
             padding = validation.number(spec.get("padding", 0.0), "padding", minimum=0)
             query = None
@@ -451,25 +453,6 @@ def _is_3d(spec: dict) -> bool:
     return isinstance(bounds, (list, tuple)) and len(bounds) == 3
 
 
-def panda_env(name: str) -> Env:
-    """``panda/<scene>/<number>``: MotionBenchMaker's problem ``number`` (1..100) of ``scene``
-    (:data:`ntq_jax.scenes.mbm.SCENES`) with the Panda (:meth:`SerialArm.panda`), padding 0,
-    the problem's start and goal as :attr:`Env.query`."""
-    from ntq_jax.robots import SerialArm
-    from ntq_jax.scenes import mbm
-    parts = name[len(PANDA_PREFIX):].split("/")
-    if len(parts) != 2 or not parts[1].isdigit():
-        raise EnvError(f"unknown environment {name!r}: a Panda problem is "
-                       f"'panda/<scene>/<number>', e.g. 'panda/cage/1' (scenes: "
-                       f"{', '.join(mbm.SCENES)}; numbers {mbm.NUMBERS[0]}..{mbm.NUMBERS[-1]})")
-    try:
-        problem = mbm.load_problem(parts[0], int(parts[1]))
-    except ValueError as e:
-        raise EnvError(f"{name!r}: {e}") from None
-    query = np.stack([np.asarray(problem.start), np.asarray(problem.goal)]).astype(np.float32)
-    return Env(name, SerialArm.panda(), problem.world, 0.0, query=query)
-
-
 def _direct_rows(x: Array) -> Array:
     """A concrete batch on another device than the CPU, padded (zeros) to a power of two of
     at least 64 rows for the kernel, so varying sizes share a handful of programs (the
@@ -496,57 +479,3 @@ def _settled(given, rows, out: Array) -> Array:
     if any(isinstance(g, np.ndarray) and r is g for g, r in zip(given, rows)):
         return out.block_until_ready()
     return out
-
-
-def make_env(name_or_path: str | os.PathLike, *, robot: str | dict | Robot | None = None,
-             padding: float | None = None, unknown: str = "occupied",
-             scale: float | None = None) -> Env:
-    """A preset by name (``point/0..3``, ``rigid/0..3``, ``nlink/2|4|6``), a JSON map file,
-    or a grid map file (a ROS map ``.yaml``/``.yml`` or a MovingAI ``.map``).
-
-    ``robot`` (a kind such as ``"rigid_body"``, a robot JSON dict or a Robot),
-    ``padding``, ``unknown`` (ROS maps) and ``scale`` are for grid map files
-    (default: the point robot, padding 0, unknown cells occupied, one unit per
-    MovingAI cell); a JSON file that names a grid (``{"grid": ...}``) carries them
-    itself. See :mod:`ntq_jax.grid_maps`.
-
-    Raises:
-        EnvError: unknown preset (listing the presets), unreadable or invalid file.
-    """
-    name = str(name_or_path)
-    path = Path(name)
-    grid_file = path.suffix.lower() in (".yaml", ".yml", ".map")
-    if not grid_file and (robot is not None or padding is not None or scale is not None
-                          or unknown != "occupied"):
-        raise EnvError(f"{name!r}: robot, padding, unknown and scale are for grid map files "
-                       "(.yaml, .map); a preset or a JSON map carries its own")
-    if name in PRESETS:
-        return Env.from_json(PRESETS[name], where=f"preset {name}")
-    if name.startswith(PANDA_PREFIX) and not path.exists():
-        return panda_env(name)
-    if grid_file:
-        if path.is_dir() or not path.is_file():
-            raise EnvError(f"grid map file {name!r} does not exist")
-        if isinstance(robot, str):  # a robot kind, as the command line takes it
-            robot = {"kind": robot}
-        if robot is not None and not isinstance(robot, dict) and not hasattr(robot, "is_valid"):
-            raise EnvError(f"{name!r}: robot must be a kind (point, rigid_body, nlink), a robot "
-                           f"JSON dict or a Robot, got {type(robot).__name__}")
-        if path.suffix.lower() == ".map" and unknown != "occupied":
-            raise EnvError(f"{name!r}: unknown={unknown!r} is for ROS maps; a MovingAI map has "
-                           "no unknown cells (its passable and blocked characters are fixed)")
-        return Env.from_grid(path, robot, 0.0 if padding is None else padding, unknown=unknown,
-                             scale=scale)
-    if path.suffix.lower() == ".json" or path.exists():
-        if path.is_dir():
-            raise EnvError(f"environment file {name!r} is a directory, not a JSON map file")
-        if not path.is_file():
-            raise EnvError(f"environment file {name!r} does not exist")
-        try:
-            spec = json.loads(path.read_text())
-        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
-            raise EnvError(f"environment file {name!r} is not valid JSON: {e}") from None
-        return Env.from_json(spec, where=f"environment file {name!r}", base_dir=path.parent)
-    raise EnvError(f"unknown environment {name!r}: use a preset ({', '.join(PRESETS)}), "
-                   "a Panda problem ('panda/<scene>/<number>', e.g. 'panda/cage/1'), "
-                   "the path of a JSON map file, or a grid map (.yaml, .map)")

@@ -6,7 +6,8 @@ import functools
 import re
 from pathlib import Path
 
-from ntq_jax.envs.env import Env, EnvError, make_env
+from ntq_jax.envs.env import Env, EnvError
+from ntq_jax.envs.make import make_env
 from ntq_jax.presets import PRESETS
 
 __all__ = ["env_slug", "resolve_envs"]

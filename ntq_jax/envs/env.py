@@ -227,8 +227,9 @@ class Env:
         answer is a JAX array in every case. Batches of every size run at the
         kernel's speed: the rows reach the compiled check in pieces of a few
         power-of-two sizes, read in place (:mod:`ntq_jax.robots.rows`; the
-        certified check in pieces of
-        :data:`~ntq_jax.robots.batch.CERTIFIED_CHUNK` rows, the one shape
+        certified check, costly to compile, in pieces of two sizes only:
+        :data:`~ntq_jax.robots.batch.CERTIFIED_PIECE` and
+        :data:`~ntq_jax.robots.batch.CERTIFIED_CHUNK` rows, the shape
         :func:`~ntq_jax.robots.batch.steer_to_pairs` uses too). A CPU JAX array
         or a float32 C-contiguous NumPy array is not copied; other dtypes and
         layouts are converted to float32 (round to nearest) first. For NumPy

@@ -100,6 +100,11 @@ STEER_CHUNK = 8192  # pairs per compiled call of steer_to_pairs (discretised che
 #: compile, so every caller shares this one shape per (robot, map, padding); a call
 #: checks a thousand motions, so the chunk's dispatch is a negligible share of it.
 CERTIFIED_CHUNK = 1024
+#: Pairs per compiled call of ``Env.steer_to(check="certified")`` on large batches: its
+#: work queue's fixed cost per call (the sweep's two phases run until the call's slowest
+#: motion is decided) is then shared by 16 times more motions than in a
+#: :data:`CERTIFIED_CHUNK` call; the second (and last) compiled shape of the check.
+CERTIFIED_PIECE = 16384
 CHECK_CHUNK = 2048  # states per compiled call of valid_states / distances
 
 
@@ -125,6 +130,17 @@ def _fixed(chunk: int, arrays) -> RowPlan:
     return plan if plan.bucket <= chunk else plan_rows(n, 0, chunk, chunk, chunk)
 
 
+def _certified(arrays) -> RowPlan:
+    """Pieces of :data:`CERTIFIED_PIECE`, then of :data:`CERTIFIED_CHUNK` rows, the rest
+    padded to ``CERTIFIED_CHUNK``: two compiled shapes of the costly certified program."""
+    n = arrays[0].shape[0]
+    head = aligned_head(arrays) if n > CERTIFIED_CHUNK else 0
+    plan = plan_rows(n, head, CERTIFIED_PIECE, CERTIFIED_CHUNK, CERTIFIED_CHUNK, two_sizes=True)
+    if plan.bucket > CERTIFIED_CHUNK:  # the head rows would overflow the edge: unaligned pieces
+        plan = plan_rows(n, 0, CERTIFIED_PIECE, CERTIFIED_CHUNK, CERTIFIED_CHUNK, two_sizes=True)
+    return plan
+
+
 def _flexible(arrays) -> RowPlan:
     """Pieces of :data:`~ntq_jax.robots.rows.PIECE_MIN` to ``PIECE_MAX`` rows and an edge
     padded by less than a quarter (a few compiled shapes per power of two)."""
@@ -141,12 +157,12 @@ def steer_rows(robot, world: World, a: np.ndarray, b: np.ndarray, padding: float
     as a JAX array, not waited for (see :func:`~ntq_jax.robots.rows.run_rows`).
 
     The discretised check runs in pieces of a few power-of-two sizes; the certified
-    check in pieces of :data:`CERTIFIED_CHUNK` (its one compiled shape, shared with
-    :func:`steer_to_pairs`). Padded rows are masked out: they cost no checks.
+    check in pieces of :data:`CERTIFIED_PIECE` and :data:`CERTIFIED_CHUNK` rows (its two
+    compiled shapes; the second shared with :func:`steer_to_pairs`). Padded rows are masked out: they cost no checks.
     ``whole``: ``a`` and ``b`` as the JAX arrays they are views of, if they are
     (see :func:`~ntq_jax.robots.rows.run_rows`).
     """
-    plan = _fixed(CERTIFIED_CHUNK, [a, b]) if check == "certified" else _flexible([a, b])
+    plan = _certified([a, b]) if check == "certified" else _flexible([a, b])
     return run_rows(lambda x, y, m: _steer_masked(robot, world, x, y, m, padding, check),
                     [a, b], plan, whole)
 

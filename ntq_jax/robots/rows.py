@@ -71,7 +71,7 @@ class RowPlan(NamedTuple):
 
 
 def plan_rows(n: int, head: int = 0, piece_max: int = PIECE_MAX, piece_min: int = PIECE_MIN,
-              min_bucket: int = MIN_BUCKET, period: int = 1) -> RowPlan:
+              min_bucket: int = MIN_BUCKET, period: int = 1, two_sizes: bool = False) -> RowPlan:
     """Splits ``n`` rows into in-place pieces from row ``head`` on, and an edge.
 
     Pieces (``piece_max`` and ``piece_min`` powers of two, or equal): as many of
@@ -83,6 +83,8 @@ def plan_rows(n: int, head: int = 0, piece_max: int = PIECE_MAX, piece_min: int 
     below. The rest (fewer than ``piece_min`` rows, and the ``head`` rows) is the
     edge, padded to :func:`~ntq_jax.batching.fine_bucket_size` (at least
     ``min_bucket``). A batch with fewer than ``head + piece_min`` rows is all edge.
+    ``two_sizes``: pieces of ``piece_max`` and then of ``piece_min`` rows only (no
+    sizes between, no overlap): two compiled shapes with ``min_bucket = piece_min``.
     """
     if n - head < piece_min:  # all edge (an empty batch: one bucket of padding, no rows)
         return RowPlan(n, 0, (), 0, fine_bucket_size(n, min_bucket))
@@ -90,6 +92,9 @@ def plan_rows(n: int, head: int = 0, piece_max: int = PIECE_MAX, piece_min: int 
     while n - lo >= piece_max:
         pieces.append((lo, piece_max))
         lo += piece_max
+    while two_sizes and n - lo >= piece_min:
+        pieces.append((lo, piece_min))
+        lo += piece_min
     while n - lo >= piece_min:
         r = n - lo
         up = 1 << (r - 1).bit_length()

@@ -1,8 +1,9 @@
 """scripts/reproduce.py: one map per resumable unit, compact summaries, seed runs on the same data.
 
 A tiny point/2 run (the sizes of tests/test_golden.py) with one extra training
-seed: the summaries' contents and fingerprints, the skip of a finished map, and
-REPRODUCTION.md regenerated from them (and flagged as not paper-size).
+seed: the summaries' contents and fingerprints, their per-query outcomes (every
+count recomputed from them), the skip of a finished map, and REPRODUCTION.md
+regenerated from them (and flagged as not paper-size).
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from ntq_jax.experiment import reproduction, summaries
+from ntq_jax.experiment import outcomes, reproduction, summaries
 
 from script_loader import load_script
 
@@ -53,10 +54,20 @@ def test_reproduce_one_map_with_a_training_seed(tmp_path, capsys):
     assert 0 < ds["D3"]["samples"] < ds["D2"]["samples"]
     assert ds["D3"]["states_per_path"] == ds["D2"]["states_per_path"] >= 2
     assert set(main["timings"]) == {"data", "train", "eval"}
-    # compact: no arrays
+    # compact: no arrays but the per-query outcomes, from which every count is recomputed
     files = [p for p in (results / "point" / "point_2").rglob("*") if p.is_file()]
-    assert not [p for p in files if p.suffix in (".npz", ".npy")]
+    assert sorted(p.name for p in files if p.suffix in (".npz", ".npy")) == ["outcomes.npz"] * 2
     assert sum(p.stat().st_size for p in files) < 400_000
+    assert main["outcomes"] == seed["outcomes"] == "outcomes.npz"
+    for d in (results / "point" / "point_2", results / "point" / "point_2" / "seeds" /
+              "train_seed_1"):
+        checked, bad = outcomes.recount(d)
+        assert bad == [] and checked > 14 * 10
+    got = outcomes.load(results / "point" / "point_2" / "outcomes.npz")
+    assert got["meta"]["queries_sha256"] == outcomes.load(
+        results / "point" / "point_2" / "seeds" / "train_seed_1" / "outcomes.npz"
+    )["meta"]["queries_sha256"]  # the seeds share their test queries
+    assert got[("PNet_3", "nontrivial", True)]["in_band"].shape == (16,)
     # the report: regenerated, current, and it says the sizes are not the paper's
     doc = results / "REPRODUCTION.md"
     assert doc.read_text() == reproduction.render(results)

@@ -14,7 +14,13 @@ and what proves where they came from, for one environment of a finished run
                          weights), datasets (per dataset the planned paths
                          used, samples written and mean states per data
                          path), timings (seconds of data / train / eval),
-                         finished, command
+                         finished, command, outcomes (its file's name, or
+                         null when it could not be written)
+    <dir>/outcomes.npz   every test query's outcome per model, query kind and
+                         steerTo (success bits, cost, cause; the reference's
+                         cost and status; the in-band mask), from which every
+                         count of the summary is recomputed
+                         (:mod:`ntq_jax.experiment.outcomes`)
     <dir>/tables.md, tables.tex, config.yaml   the run's report and exact config
     <dir>/figures/*.png  the success figure and this map's figures
 
@@ -25,6 +31,7 @@ and what proves where they came from, for one environment of a finished run
 from __future__ import annotations
 
 import json
+import sys
 import time
 from pathlib import Path
 
@@ -125,6 +132,15 @@ def write_summary(run: Path, env_name: str, env, out_dir: Path, *, command: str 
         "finished": time.strftime("%Y-%m-%dT%H:%M:%S"), "command": command,
     }
     out_dir.mkdir(parents=True, exist_ok=True)
+    from ntq_jax.experiment import outcomes
+    try:  # the per-query outcomes: a failure here must not lose the summary itself
+        outcomes.write(run, env_name, out_dir, env, summary["train_seed"])
+        summary["outcomes"] = outcomes.FILE
+    except (OSError, KeyError, ValueError, TypeError) as e:
+        print(f"warning: {env_name}: per-query outcomes not written ({type(e).__name__}: {e}); "
+              f"python -m ntq_jax.experiment.outcomes --pack {run} --env {env_name} "
+              f"--out {out_dir} writes them later", file=sys.stderr)
+        summary["outcomes"] = None
     for name in ("tables.md", "tables.tex", "config.yaml"):
         if (run / name).is_file():
             artifacts.write_text(out_dir / name, (run / name).read_text())

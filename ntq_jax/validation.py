@@ -26,8 +26,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["is_number", "number", "number_list", "number_rows", "short_repr",
-           "check_count", "check_probability", "check_real", "check_padding", "check_positive"]
+__all__ = ["is_number", "number", "number_list", "number_rows", "short_repr", "MAX_FLOAT32_MOVE",
+           "check_float32", "check_count", "check_probability", "check_real", "check_padding", "check_positive"]
 
 
 def short_repr(value: Any, limit: int = 60) -> str:
@@ -212,3 +212,43 @@ def check_padding(padding, name: str = "padding") -> float:
 def check_positive(name: str, value) -> float:
     """``value`` as a finite float > 0 (a resolution, a cell size, a spacing)."""
     return check_real(name, value)
+
+
+#: The largest move float32 rounding may give a map coordinate, as a fraction of the map's
+#: size (its bounds' largest side): 1 ppm, e.g. 0.02 mm on a 20 m map. Coordinates up to
+#: about 16 map sizes from the origin always pass (float32 keeps 24 bits).
+MAX_FLOAT32_MOVE = 1e-6
+
+
+def check_float32(rows: dict[str, Any]) -> None:
+    """ValueError unless float32 (the worlds' coordinates) holds every number of ``rows``
+    (key -> a map's rows, with ``"bounds"``): finite in float32 and moved by its rounding by
+    at most :data:`MAX_FLOAT32_MOVE` times the map's size. Values that are not arrays of
+    finite numbers are left to the full checks (they raise their own errors)."""
+    arrays = {}
+    with np.errstate(all="ignore"):
+        for key, value in rows.items():
+            try:
+                a = np.asarray(value, np.float64)
+            except (TypeError, ValueError, OverflowError):
+                continue
+            if a.dtype == np.float64 and a.size and np.isfinite(a).all():
+                arrays[key] = a
+        b = arrays.get("bounds")
+        ok = b is not None and b.ndim == 2 and b.shape[1] == 2
+        size = float(np.max(b[:, 1] - b[:, 0])) if ok else None
+        for key, a in arrays.items():
+            moved = np.abs(a.astype(np.float32).astype(np.float64) - a)
+            limit = MAX_FLOAT32_MOVE * size if size and size > 0 else np.inf
+            bad = np.argwhere(~(moved <= limit))
+            if not len(bad):
+                continue
+            at = tuple(bad[0])
+            where = key + "".join(f"[{i}]" for i in at)
+            if not np.isfinite(np.float32(a[at])):
+                raise ValueError(f"{where} is {a[at]:g}, beyond float32's range (about "
+                                 "+-3.4e38) of the world's coordinates; use smaller units")
+            raise ValueError(f"{where} is {float(a[at])!r}, which float32 (the world's coordinates) "
+                             f"stores as {float(np.float32(a[at]))!r}: moved by {moved[at]:.3g}, "
+                             f"more than {MAX_FLOAT32_MOVE:g} of the map's size {size:g}; put the "
+                             "map near the origin (subtract an offset from every coordinate)")

@@ -4,6 +4,7 @@ import json
 import math
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import jax
@@ -58,6 +59,32 @@ def test_user_map_from_json_file(tmp_path):
 def test_bad_maps_are_one_clear_error(spec, match):
     with pytest.raises(nj.EnvError, match=match):
         nj.Env.from_json(spec)
+
+
+@pytest.mark.parametrize("bounds, boxes, match", [
+    # beyond float32: was [0, inf] (a NumPy warning, then "no valid query" after 272 M draws)
+    ([[0, 1e39], [0, 10]], [], r"bounds\[0\]\[1\] is 1e\+39, beyond float32's range"),
+    # float32 spacing 8 at 1e8: the box would move by 2 (the bounds' top by 4)
+    ([[1e8, 1e8 + 20], [0, 20]], [[1e8 + 10, 5, 1, 1]], r"bounds\[0\]\[1\] .* moved by 4"),
+    ([[-1e6, 1e6], [0, 20]], [[1e6 - 10.3, 5, 1, 1]], None),  # 2 M wide: 0.03 moves pass
+    ([[0, 20], [0, 20]], [[5.123456789, 5, 1, 1]], None),
+])
+def test_coordinates_float32_cannot_hold_are_refused(bounds, boxes, match):
+    """The world keeps float32 coordinates: a JSON map whose numbers overflow float32, or
+    move by more than validation.MAX_FLOAT32_MOVE of the map's size when rounded, is one
+    EnvError naming the entry (a grid map's check is grid_maps.check_float32)."""
+    spec = {"robot": {"kind": "point"}, "bounds": bounds, "boxes": boxes}
+    if match is None:
+        nj.Env.from_json(spec)
+        return
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # refused before any overflow warning
+        with pytest.raises(nj.EnvError, match=match):
+            nj.Env.from_json(spec)
+    three = {"robot": {"kind": "serial_arm", "preset": "panda"},
+             "bounds": [bounds[0], bounds[1], [0, 20]], "spheres": [[b[0], b[1], 5, 1] for b in boxes]}
+    with pytest.raises(nj.EnvError, match=match):
+        nj.Env.from_json(three)
 
 
 def test_bad_names_and_files(tmp_path):

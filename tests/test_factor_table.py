@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 
+import pytest
+
 from ntq_jax.experiment import factor_table as F
 from ntq_jax.experiment import reproduction as R
 
@@ -34,6 +36,20 @@ def test_sign_of_needs_significance():
     assert F.sign_of(None) == "?"
 
 
+def test_q_values_are_benjamini_hochberg_over_the_whole_study(tmp_path):
+    """Every comparison of every cell gets its BH q over all of them; the verdicts use q."""
+    from ntq_jax.stats import benjamini_hochberg
+    _cell(tmp_path, "rigid/0", "shortcut", "ours", 0, -0.114, 2e-5)
+    _cell(tmp_path, "rigid/0", "bitstar", "ours", 0, +0.080, 0.03)
+    cells = F.load_cells(tmp_path)
+    rows = [r for c in cells for r in c["paired"]]
+    assert [r["q"] for r in rows] == pytest.approx(
+        list(benjamini_hochberg([r["mcnemar_p"] for r in rows])))
+    r = F._find(cells[0], "nontrivial", "all")  # bitstar: p 0.03, 8th of 12: q 0.03 x 12 / 8
+    assert r["mcnemar_p"] == 0.03 and r["q"] == pytest.approx(0.045)
+    assert F.sign_of(r) == "+" and F.sign_of({**r, "q": 0.06}) == "0"
+
+
 def test_section_lists_each_cell_and_the_verdicts_per_factor(tmp_path):
     assert F.section(tmp_path) == []  # no cell: no section
     _cell(tmp_path, "rigid/0", "shortcut", "ours", 0, -0.114, 2e-5)
@@ -48,7 +64,7 @@ def test_section_lists_each_cell_and_the_verdicts_per_factor(tmp_path):
     # sorted by map, data paths, budgets, seed; PNet_0 with / without steerTo
     assert [r.split(" | ")[1:4] for r in rows] == [["bitstar", "ours", "0"], ["bitstar", "ours", "1"],
                                                   ["shortcut", "ours", "0"]]
-    assert "| 0.500 / 0.060 | -0.114 [-0.164, -0.064] p=<0.001 |" in rows[2]
+    assert "| 0.500 / 0.060 | -0.114 [-0.164, -0.064] p=<0.001 q=<0.001 |" in rows[2]
     assert "- data paths = `bitstar`: rigid/0 +, rigid/0 seed 1 0" in text
     assert "- data paths = `shortcut`: rigid/0 -" in text
     assert "- test band = `in_band`: + 1, - 1, 0 1 cells" in text
@@ -78,6 +94,6 @@ def test_decomposition_splits_the_difference_into_gain_and_pruning(tmp_path):
     rows = [ln for ln in lines if ln.startswith("| point/0")]
     # PNet_0 0.5; PNet_2 0.5 + 0.3; PNet_3 0.5 - 0.06
     assert rows == ["| point/0 | shortcut | 0 | 3.37 | 0.58 | 0.500 | 0.800 | 0.440 | +0.300 "
-                    "| -0.360 | -0.060 |"]
+                    "| -0.360 | -0.060 | 0.010 | 0.024 |"]  # p, and q over the 12 p-values
     assert "\n".join(lines) in "\n".join(F.section(tmp_path))
     assert F.decomposition([]) == []

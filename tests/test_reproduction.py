@@ -178,125 +178,169 @@ def test_load_summaries_order(tmp_path):
 
 
 # ---------------------------------------------------------------------------
-# Claims
+# Claims (the seed-aware test, Holm, the verdict rule)
 # ---------------------------------------------------------------------------
 
 
-def test_claim_verdicts_on_paired_comparisons(tmp_path):
-    cases = {"point/0": (40, 10), "point/1": (10, 40), "point/2": (12, 10)}
-    for env, (a, b) in cases.items():
-        write_summary(tmp_path, make_summary(env, comparisons=[
-            _comp(env, "PNet_3", "PNet_0", "nontrivial", True, a, b)]))
-    cs = CL.claims(S.load_summaries(tmp_path))
-    text = "PNet_3 >= PNet_0 in success on non-trivial"
-    assert _find(cs, text, "point/0")["verdict"] == CL.HOLDS
-    assert _find(cs, text, "point/1")["verdict"] == CL.FAILS
-    assert _find(cs, text, "point/2")["verdict"] == CL.UNRESOLVED
-    assert _find(cs, text, "point/3")["verdict"] == CL.NOT_RUN
-    assert "McNemar p" in _find(cs, text, "point/0")["evidence"]
-    assert _find(cs, text, "point/0")["paper"] == "0.930 vs 0.894 (+0.036)"
-    # pooled over the task: not run until all four maps are there
-    assert _find(cs, text, "point, pooled")["verdict"] == CL.NOT_RUN
-
-
-def test_pooled_claim_sums_the_discordant_pairs(tmp_path):
-    for env, (a, b) in zip(PA.PAPER_TABLES["IV"]["envs"], [(20, 10), (15, 10), (15, 10)]):
-        write_summary(tmp_path, make_summary(env, comparisons=[
-            _comp(env, "PNet_3", "PNet_0", "nontrivial", True, a, b)]))
-    c = _find(CL.claims(S.load_summaries(tmp_path)), "PNet_3 >= PNet_0 in success on non-trivial",
-              "nlink, pooled")
-    assert "discordant 50 / 30 of 1500" in c["evidence"]
-    assert c["verdict"] == CL.verdict(20 / 1500, mcnemar_exact(50, 30)) == CL.HOLDS
+def write_seeds(root, env, per_seed, kind="nontrivial", steer=True, model="PNet_3",
+                baseline="PNet_0", successes=None):
+    """One summary per training seed of ``env``, each with the paired comparison
+    ``model - baseline`` given by its discordant pairs ``(only_a, only_b)``."""
+    for seed, (a, b) in enumerate(per_seed):
+        s = make_summary(env, successes, [_comp(env, model, baseline, kind, steer, a, b)],
+                         train_seed=seed)
+        write_summary(root, s, seed_dir=None if seed == 0 else seed)
 
 
 def test_verdict_rule():
-    assert CL.verdict(0.05, 0.01) == CL.HOLDS
-    assert CL.verdict(-0.05, 0.01) == CL.FAILS
-    assert CL.verdict(0.05, 0.2) == CL.UNRESOLVED
-    assert CL.verdict(-0.05, 0.01, sign=-1) == CL.HOLDS
-    assert CL.verdict(None, 0.01) == CL.NOT_RUN
+    assert CL.verdict(1, 0.01) == CL.HOLDS
+    assert CL.verdict(-1, 0.01) == CL.CONTRADICTED == CL.FAILS
+    assert CL.verdict(1, 0.2) == CL.UNRESOLVED
+    assert CL.verdict(1, 0.2, 0.01) == CL.MAGNITUDE  # the paper's size excluded
+    assert CL.verdict(1, 0.01, 0.01) == CL.HOLDS  # the sign first
+    assert CL.verdict(-1, 0.01, 0.01) == CL.CONTRADICTED
+    assert CL.verdict(1, 0.01, 0.01, magnitude_claim=True) == CL.CONTRADICTED
+    assert CL.verdict(0, None) == CL.NOT_RUN
+
+
+def test_claim_verdicts_with_training_seeds(tmp_path):
+    write_seeds(tmp_path, "point/0", [(120, 20), (110, 20), (125, 25)])  # +0.2 in every seed
+    write_seeds(tmp_path, "point/1", [(20, 120), (20, 110), (25, 125)])  # -0.2
+    write_seeds(tmp_path, "point/2", [(30, 28), (25, 30), (35, 28)])  # about 0
+    cs = CL.claims(S.load_summaries(tmp_path))
+    text = "PNet_3 >= PNet_0 in success on non-trivial"
+    c0 = _find(cs, text, "point/0")
+    assert c0["verdict"] == CL.HOLDS and c0["seeds"] == 3
+    assert c0["estimate"].estimate == pytest.approx((100 + 90 + 100) / 3 / K)
+    assert c0["effect"].startswith("+0.193 [") and ", 3 seeds, sd 0.012" in c0["effect"]
+    assert "per seed +0.200, +0.180, +0.200" in c0["evidence"]
+    assert c0["paper"] == "0.930 vs 0.894 (+0.036)"
+    assert _find(cs, text, "point/1")["verdict"] == CL.CONTRADICTED
+    assert _find(cs, text, "point/2")["verdict"] == CL.UNRESOLVED
+    assert _find(cs, text, "point/3")["verdict"] == CL.NOT_RUN
+    # pooled over the robot: not run until all four maps are there
+    assert _find(cs, text, "point, pooled")["verdict"] == CL.NOT_RUN
+    # Holm over every p-value the verdicts use (the lines' and the paper's size tests)
+    fam = [c["p"] for c in cs if c["p"] is not None] + [
+        c["p_paper"] for c in cs if c["p_paper"] is not None]
+    assert CL.family_size(cs) == len(fam)
+    assert all(c["p_holm"] >= c["p"] for c in cs if c["p"] is not None)
+    from ntq_jax.stats import holm
+    assert c0["p_holm"] == pytest.approx(holm(fam)[fam.index(c0["p"])])
+
+
+def test_a_null_effect_that_excludes_the_papers_size(tmp_path):
+    # rigid/0: the paper's PNet_3 - PNet_0 is +0.128; ours is about 0 in three seeds
+    write_seeds(tmp_path, "rigid/0", [(30, 30), (32, 30), (28, 30)])
+    c = _find(CL.claims(S.load_summaries(tmp_path)), "PNet_3 >= PNet_0 in success on non-trivial",
+              "rigid/0")
+    assert c["verdict"] == CL.MAGNITUDE and c["p_paper_holm"] < 0.05 and c["p_holm"] > 0.05
+    assert c["paper_effect"] == pytest.approx(0.128)
+
+
+def test_one_seed_maps_borrow_their_robots_spread(tmp_path):
+    write_seeds(tmp_path, "nlink/4", [(80, 30), (70, 40), (90, 30)])
+    write_seeds(tmp_path, "nlink/2", [(80, 30)])
+    write_seeds(tmp_path, "point/0", [(80, 30)])  # no point map with seeds: nothing to borrow
+    cs = CL.claims(S.load_summaries(tmp_path))
+    text = "PNet_3 >= PNet_0 in success on non-trivial"
+    c2, c4 = _find(cs, text, "nlink/2"), _find(cs, text, "nlink/4")
+    e2, e4 = c2["estimate"], c4["estimate"]
+    assert e2.borrowed and e2.seeds == 1 and "1 seed, sd borrowed" in c2["effect"]
+    # the borrowed variance is nlink/4's between-seed variance, with its 2 df
+    assert e2.seed_part == pytest.approx((e4.spread ** 2, 2))
+    p0 = _find(cs, text, "point/0")
+    assert p0["verdict"] == CL.UNRESOLVED and p0["p"] is None
+    assert "between-seed variance is unknown" in p0["evidence"]
+
+
+def test_pooled_claim_is_the_mean_of_the_maps(tmp_path):
+    for env, seeds in zip(PA.PAPER_TABLES["IV"]["envs"], [[(20, 10), (30, 10)], [(15, 10)],
+                                                          [(15, 10), (25, 10), (20, 10)]]):
+        write_seeds(tmp_path, env, seeds)
+    cs = CL.claims(S.load_summaries(tmp_path))
+    c = _find(cs, "PNet_3 >= PNet_0 in success on non-trivial", "nlink, pooled")
+    maps = [_find(cs, "PNet_3 >= PNet_0 in success on non-trivial", e)["estimate"]
+            for e in PA.PAPER_TABLES["IV"]["envs"]]
+    assert c["estimate"].estimate == pytest.approx(sum(m.estimate for m in maps) / 3)
+    assert c["estimate"].variance == pytest.approx(sum(m.variance for m in maps) / 9)
+    assert c["seeds"] == 6 and "mean diff +0.093; PNet_3 ahead in 3 of 3" in c["paper"]
 
 
 def test_without_steer_pnet3_worst(tmp_path):
     low = {("PNet_3", k, False): 150 for k in PA.KINDS}
     low.update({(m, k, False): 300 for m in ("PNet_0", "PNet_1", "PNet_2") for k in PA.KINDS})
-    write_summary(tmp_path, make_summary("rigid/0", low, [
-        _comp("rigid/0", "PNet_3", "PNet_0", "uniform", False, 10, 160)]))
+    write_seeds(tmp_path, "rigid/0", [(10, 160), (12, 158), (9, 161)], kind="uniform",
+                steer=False, successes=low)
     high = dict(low)
-    high[("PNet_3", "uniform", False)] = 400  # above PNet_1 and PNet_2 (Fisher)
-    write_summary(tmp_path, make_summary("rigid/1", high))
+    high[("PNet_3", "uniform", False)] = 400  # above PNet_1 and PNet_2 (unpaired rows)
+    write_seeds(tmp_path, "rigid/1", [(0, 0)] * 2, kind="nontrivial", steer=False,
+                successes=high)
     cs = CL.claims(S.load_summaries(tmp_path))
     c = _find(cs, "without steerTo PNet_3 is the worst", "rigid/0, uniform")
-    assert c["verdict"] == CL.HOLDS
-    assert "vs PNet_0 -0.300" in c["evidence"] and "McNemar" in c["evidence"]
-    assert "vs PNet_1" in c["evidence"] and "Fisher" in c["evidence"]
-    assert _find(cs, "without steerTo PNet_3 is the worst", "rigid/1, uniform")["verdict"] == CL.FAILS
-    assert _find(cs, "without steerTo PNet_3 is the worst", "rigid/2, uniform")["verdict"] == CL.NOT_RUN
-    # steerTo rows have 400 successes: every member falls without steerTo
+    assert c["verdict"] == CL.HOLDS  # below each of PNet_0 (paired), PNet_1, PNet_2 (rows)
+    assert "vs PNet_0 -0.299" in c["evidence"] and "vs PNet_1 -0.300" in c["evidence"]
+    assert _find(cs, "without steerTo PNet_3 is the worst",
+                 "rigid/1, uniform")["verdict"] == CL.CONTRADICTED
+    assert _find(cs, "without steerTo PNet_3 is the worst",
+                 "rigid/2, uniform")["verdict"] == CL.NOT_RUN
     assert _find(cs, "the success of every model falls", "rigid, PNet_0")["verdict"] == CL.NOT_RUN
 
 
-def test_success_falls_with_gamma(tmp_path):
-    # four point maps: the higher gamma_nt, the lower the success (both kinds)
-    for env, n in zip(PA.PAPER_TABLES["I"]["envs"], (480, 450, 420, 390)):
-        write_summary(tmp_path, make_summary(env, {(m, k, True): n for m in PA.MEMBERS
-                                                   for k in PA.KINDS}))
-    # three arms, success rising with gamma_nt: only 3 maps, too few to resolve
-    for env, n in zip(PA.PAPER_TABLES["IV"]["envs"], (300, 350, 400)):
-        write_summary(tmp_path, make_summary(env, {(m, k, True): n for m in PA.MEMBERS
-                                                   for k in PA.KINDS}))
+def test_success_falls_with_gamma_within_robots(tmp_path):
+    # every robot: the higher gamma_nt, the lower the success (both kinds)
+    for table in ("I", "II", "IV"):
+        for i, env in enumerate(PA.PAPER_TABLES[table]["envs"]):
+            n = 480 - 30 * sorted(PA.PAPER_TABLES[table]["envs"], key=GAMMA.get).index(env)
+            write_summary(tmp_path, make_summary(env, {(m, k, s): n for m in PA.MEMBERS
+                                                       for k in PA.KINDS for s in (True, False)}))
     cs = CL.claims(S.load_summaries(tmp_path))
     c = _find(cs, "success falls as gamma_nt rises (uniform", "point")
-    assert c["verdict"] == CL.HOLDS and "Kendall tau -1.00 over 4 maps" in c["evidence"]
-    c = _find(cs, "success falls as gamma_nt rises (uniform", "nlink")
-    assert c["verdict"] == CL.UNRESOLVED + " (too few maps: 3)"
+    assert c["effect"].startswith("Kendall tau -1.00 over 4 maps (4 maps: the smallest")
+    assert c["p"] == pytest.approx(2 / 24) and c["verdict"] == CL.UNRESOLVED
     c = _find(cs, "success falls as gamma_nt rises (non-trivial", "all 11 maps")
-    assert "over 7 maps" in c["evidence"] and c["table"] == "I, II, IV"
+    assert c["table"] == "I, II, IV" and "tau -1.00 within robots over 11 maps" in c["effect"]
+    assert c["p"] == pytest.approx(2 / (24 * 24 * 6)) and c["direction"] == 1
 
 
 def test_six_link_25_percent(tmp_path):
-    ok = make_summary("nlink/6", {("PNet_0", "nontrivial", True): 200,
-                                  ("PNet_3", "nontrivial", True): 250},
-                      [_comp("nlink/6", "PNet_3", "PNet_0", "nontrivial", True, 70, 20,
-                             ci=[0.05, 0.15])])
-    write_summary(tmp_path, ok)
+    big = {("PNet_0", "nontrivial", True): 200, ("PNet_3", "nontrivial", True): 250}
+    write_seeds(tmp_path, "nlink/6", [(70, 20), (72, 22), (68, 18)], successes=big)
     c = _find(CL.claims(S.load_summaries(tmp_path)), "PNet_3 about 25%", "nlink/6")
-    assert c["verdict"] == CL.HOLDS and "+25.0%" in c["evidence"]
-    assert c["paper"] == "0.644 vs 0.512 (+25.8%)"
-    small = make_summary("nlink/6", {("PNet_0", "nontrivial", True): 200,
-                                     ("PNet_3", "nontrivial", True): 210},
-                         [_comp("nlink/6", "PNet_3", "PNet_0", "nontrivial", True, 30, 20,
-                                ci=[-0.02, 0.06])])
-    write_summary(tmp_path, small)
+    assert c["verdict"] == CL.HOLDS and "+25.0% of our PNet_0 0.400" in c["evidence"]
+    assert c["paper"] == "0.644 vs 0.512 (+25.8%)" and c["magnitude_claim"]
+    small = {("PNet_0", "nontrivial", True): 200, ("PNet_3", "nontrivial", True): 210}
+    write_seeds(tmp_path, "nlink/6", [(30, 20), (31, 21), (29, 19)], successes=small)
     c = _find(CL.claims(S.load_summaries(tmp_path)), "PNet_3 about 25%", "nlink/6")
-    assert c["verdict"] == CL.FAILS  # the claimed +0.100 is outside [-0.02, 0.06]
+    assert c["verdict"] == CL.CONTRADICTED  # the claimed +0.100 is excluded
     assert c["evidence"].endswith("(our gain is smaller)")
 
 
 def test_point_over_90_percent(tmp_path):
-    write_summary(tmp_path, make_summary("point/0", {(m, k, True): 490 for m in PA.MEMBERS
-                                                     for k in PA.KINDS}))
-    write_summary(tmp_path, make_summary("point/1", {(m, k, True): 490 for m in PA.MEMBERS
-                                                     for k in PA.KINDS}
-                                         | {("PNet_2", "nontrivial", True): 400}))
-    write_summary(tmp_path, make_summary("point/2", {(m, k, True): 460 for m in PA.MEMBERS
-                                                     for k in PA.KINDS}))
+    def seeds(env, succ):
+        for seed in range(3):
+            write_summary(tmp_path, make_summary(env, succ, train_seed=seed),
+                          seed_dir=None if seed == 0 else seed)
+    seeds("point/0", {(m, k, True): 490 for m in PA.MEMBERS for k in PA.KINDS})
+    seeds("point/1", {(m, k, True): 490 for m in PA.MEMBERS for k in PA.KINDS}
+          | {("PNet_2", "nontrivial", True): 400})
+    seeds("point/2", {(m, k, True): 455 for m in PA.MEMBERS for k in PA.KINDS})
     cs = CL.claims(S.load_summaries(tmp_path))
     text = "every model succeeds on over 90%"
-    assert _find(cs, text, "point/0")["verdict"] == CL.HOLDS  # 0.98 - 0.04 > 0.9
-    assert _find(cs, text, "point/1")["verdict"] == CL.FAILS  # 0.80 + 0.04 < 0.9
-    assert _find(cs, text, "point/2")["verdict"] == CL.UNRESOLVED  # [0.88, 0.96]
+    assert _find(cs, text, "point/0")["verdict"] == CL.HOLDS  # 0.98 in every seed
+    c = _find(cs, text, "point/1")
+    assert c["verdict"] == CL.CONTRADICTED and c["effect"].startswith("PNet_2 non-trivial: 0.800")
+    assert _find(cs, text, "point/2")["verdict"] == CL.UNRESOLVED  # 0.91
 
 
 def test_nlink_gain_grows_with_links(tmp_path):
-    for env, (a, b) in zip(PA.PAPER_TABLES["IV"]["envs"], [(12, 10), (60, 10), (80, 10)]):
-        write_summary(tmp_path, make_summary(env, comparisons=[
-            _comp(env, "PNet_3", "PNet_0", "nontrivial", True, a, b)]))
+    for env, ab in zip(PA.PAPER_TABLES["IV"]["envs"], [(12, 10), (60, 10), (80, 10)]):
+        write_seeds(tmp_path, env, [ab, (ab[0] + 2, ab[1]), (ab[0] - 2, ab[1])])
     c = _find(CL.claims(S.load_summaries(tmp_path)), "PNet_3's gain over PNet_0", "nlink")
-    assert c["verdict"] == CL.HOLDS  # gains +0.004, +0.100, +0.140 with intervals +-0.04
+    assert c["verdict"] == CL.HOLDS  # gains +0.004, +0.100, +0.140
     assert "nlink/4 minus nlink/2 +0.096" in c["evidence"]
-    write_summary(tmp_path, make_summary("nlink/6", comparisons=[
-        _comp("nlink/6", "PNet_3", "PNet_0", "nontrivial", True, 15, 10)]))
+    assert c["effect"].startswith("nlink/4 minus nlink/2: +0.096")  # the weaker part decides
+    write_seeds(tmp_path, "nlink/6", [(15, 10), (17, 10), (13, 10)])
     c = _find(CL.claims(S.load_summaries(tmp_path)), "PNet_3's gain over PNet_0", "nlink")
     assert c["verdict"] == CL.UNRESOLVED  # 4 links: larger; 6 links: not resolvable
 
@@ -309,10 +353,22 @@ def test_cost_ratio_lower_for_rigid_and_six_links(tmp_path):
             r["cost_ratio"] = (0.95 if low else 1.03) + PA.MAPS.index(env) * 1e-3
         write_summary(tmp_path, s)
     c = _find(CL.claims(S.load_summaries(tmp_path)), "cost ratio lower", "rigid")
-    assert c["verdict"] == CL.HOLDS and "Mann-Whitney one-sided p 0.002" in c["evidence"]
+    assert c["p"] == pytest.approx(2 / 462) and c["direction"] == 1  # 5 of 11 maps lowest
+    assert "not the paper's BIT*" in c["scope"] and "rigid roadmap" in c["scope"]
     (tmp_path / "point" / "point_3" / "summary.json").unlink()
     c = _find(CL.claims(S.load_summaries(tmp_path)), "cost ratio lower", "rigid")
     assert c["verdict"] == CL.NOT_RUN and c["evidence"] == "10 of 11 maps run"
+
+
+def test_summary_page_heads_the_document(tmp_path):
+    write_seeds(tmp_path, "point/0", [(120, 20), (110, 20), (125, 25)])
+    text = R.render(tmp_path)
+    lines = text.splitlines()
+    assert lines[2] == "## Summary: does PNet_3 beat PNet_0?"
+    row = next(x for x in lines if x.startswith("| point | point/0 |"))
+    assert "| 3 | +0.036 | +0.193 [" in row and row.endswith("| **holds** |")
+    assert "| all | **pooled, 11 maps** |" in text
+    assert text.index("## Summary") < text.index("## Coverage") < text.index("## Claims")
 
 
 # ---------------------------------------------------------------------------
@@ -336,7 +392,8 @@ def test_seed_variance_mean_and_range(tmp_path):
     assert st[("PNet_0", "uniform")]["success_min"] == st[("PNet_0", "uniform")]["success_max"]
     text = R.render(tmp_path)
     assert "| PNet_3 | yes | non-trivial | 3 | 0.800 | [0.700, 0.900] |" in text
-    assert "nlink/4 3 of 3 (0, 1, 2)" in text and "rigid/0 0 of 3" in text
+    assert ("Training seeds per map (the same data; `seeds/train_seed_<k>`): "
+            "nlink/4 3 (0, 1, 2).") in text
     # the main tables use the main run only
     assert "| PNet_3 | 0.800 [0.760, 0.840] |" in text
 

@@ -10,11 +10,18 @@ cell's file has ``cell`` (``map``, ``data``, ``budget``, ``train_seed``) and
 ``mcnemar_p``. An optional hand-written ``<root>/CONCLUSION.md`` (the study's
 reading, with its numbers) is quoted at the end of the section.
 
+Multiplicity: the study holds about two thousand McNemar p-values (every cell,
+comparison, query kind, steerTo variant and band). :func:`load_cells` adds to
+each comparison its Benjamini-Hochberg q-value over all of them (``q``, the
+false-discovery rate; :func:`ntq_jax.stats.benjamini_hochberg`), shown beside
+the raw p, and the verdicts of the section use q.
+
 Functions (pure, data only):
 
-* :func:`load_cells` reads every cell, sorted by map, data paths, budgets, seed.
-* :func:`sign_of` is a comparison's verdict: ``+`` or ``-`` (its sign, McNemar
-  p < :data:`ALPHA`) or ``0`` (not resolvable at this size).
+* :func:`load_cells` reads every cell, sorted by map, data paths, budgets, seed,
+  with the q-values added.
+* :func:`sign_of` is a comparison's verdict: ``+`` or ``-`` (its sign, q (or,
+  without one, McNemar p) < :data:`ALPHA`) or ``0`` (not resolvable at this size).
 * :func:`section` is the Markdown section: one row per cell (PNet_3 - PNet_0
   with steerTo, on non-trivial queries in all three bands and on uniform
   queries), then per factor level the cells' verdicts on non-trivial queries,
@@ -31,6 +38,7 @@ from pathlib import Path
 
 from ntq_jax.experiment.claims import ALPHA
 from ntq_jax.experiment.formatting import fixed, num, p_value, signed
+from ntq_jax.stats import benjamini_hochberg
 
 __all__ = ["CONCLUSION", "load_cells", "sign_of", "decomposition", "section"]
 
@@ -39,7 +47,8 @@ BANDS = ("all", "in_band", "out_band")
 
 
 def load_cells(root) -> list[dict]:
-    """Every cell's ``paired.json`` under ``root`` (empty if there is none), in a fixed order."""
+    """Every cell's ``paired.json`` under ``root`` (empty if there is none), in a fixed order,
+    each comparison with its Benjamini-Hochberg ``q`` over every p-value of the study."""
     root = Path(root)
     if not root.is_dir():
         return []
@@ -50,8 +59,19 @@ def load_cells(root) -> list[dict]:
         if summary.is_file():  # the datasets' sizes (``datasets`` of the run's summary)
             cell["datasets"] = json.loads(summary.read_text(encoding="utf-8")).get("datasets")
         cells.append(cell)
-    return sorted(cells, key=lambda p: (p["cell"]["map"], p["cell"]["data"],
-                                        p["cell"]["budget"], p["cell"]["train_seed"]))
+    cells = sorted(cells, key=lambda p: (p["cell"]["map"], p["cell"]["data"],
+                                         p["cell"]["budget"], p["cell"]["train_seed"]))
+    add_q(cells)
+    return cells
+
+
+def add_q(cells: list[dict]) -> int:
+    """Adds ``q`` (Benjamini-Hochberg over every comparison of ``cells`` with a McNemar p)
+    to each such comparison; returns the family's size."""
+    rows = [r for c in cells for r in c["paired"] if num(r.get("mcnemar_p"))]
+    for r, q in zip(rows, benjamini_hochberg([r["mcnemar_p"] for r in rows])):
+        r["q"] = float(q)
+    return len(rows)
 
 
 def _find(cell: dict, kind: str, band: str, model: str = "PNet_3", steer: bool = True):
@@ -63,11 +83,11 @@ def _find(cell: dict, kind: str, band: str, model: str = "PNet_3", steer: bool =
 
 
 def sign_of(r) -> str:
-    """``+``/``-``: the difference's sign, significant at :data:`ALPHA` (McNemar); ``0``:
-    not resolvable; ``?``: no such comparison."""
+    """``+``/``-``: the difference's sign, significant at :data:`ALPHA` (its BH ``q``, or
+    McNemar's p when it has no q); ``0``: not resolvable; ``?``: no such comparison."""
     if not r or not num(r.get("success_diff")) or not num(r.get("mcnemar_p")):
         return "?"
-    if r["mcnemar_p"] >= ALPHA or r["success_diff"] == 0:
+    if r.get("q", r["mcnemar_p"]) >= ALPHA or r["success_diff"] == 0:
         return "0"
     return "+" if r["success_diff"] > 0 else "-"
 
@@ -76,13 +96,16 @@ def _diff(r) -> str:
     if not r or not num(r.get("success_diff")):
         return "-"
     lo, hi = r["success_diff_ci95"]
-    return f"{signed(r['success_diff'])} [{signed(lo)}, {signed(hi)}] p={p_value(r['mcnemar_p'])}"
+    q = f" q={p_value(r['q'])}" if num(r.get("q")) else ""
+    return (f"{signed(r['success_diff'])} [{signed(lo)}, {signed(hi)}] "
+            f"p={p_value(r['mcnemar_p'])}{q}")
 
 
 def _by_factor(cells: list[dict]) -> list[str]:
     """Per factor level: the maps' verdicts on non-trivial queries (all test queries)."""
     out = ["Verdicts of PNet_3 - PNet_0 on non-trivial queries with steerTo (`+`/`-`: "
-           f"significant at p < {ALPHA}, `0`: not resolvable), per factor level:", ""]
+           f"significant at q < {ALPHA}, Benjamini-Hochberg over every p-value of the study; "
+           "`0`: not resolvable), per factor level:", ""]
     levels = {}
     for c in cells:
         cell = c["cell"]
@@ -117,16 +140,20 @@ def decomposition(cells: list[dict]) -> list[str]:
                 if num(d3.get("samples")) and num(d2.get("samples")) and d2["samples"] else "-")
         rows.append(f"| {cell['map']} | {cell['data']} | {cell['train_seed']} | {spp} | {kept} | "
                     f"{fixed(p0)} | {fixed(p2)} | {fixed(p3)} | {signed(p2 - p0)} | "
-                    f"{signed(p3 - p2)} | {signed(p3 - p0)} |")
+                    f"{signed(p3 - p2)} | {signed(p3 - p0)} | {p_value(r3.get('mcnemar_p'))} | "
+                    f"{p_value(r3.get('q'))} |")
     if not rows:
         return []
     return ["Where PNet_3 - PNet_0 comes from (non-trivial queries with steerTo, the config's "
             "budgets): the gain from non-trivial queries (PNet_2 - PNet_0) plus the cost of "
             "includeData's pruning (PNet_3 - PNet_2, the same queries pruned). `states/path`: "
-            "mean states per D2 data path; `D3/D2`: the share of D2's samples pruning kept.", "",
+            "mean states per D2 data path; `D3/D2`: the share of D2's samples pruning kept; `p`: "
+            "McNemar's exact p of PNet_3 - PNet_0 (this training only); `q`: its "
+            "Benjamini-Hochberg q-value over every p-value of the factor study (the "
+            "false-discovery rate).", "",
             "| map | data paths | seed | states/path | D3/D2 | PNet_0 | PNet_2 | PNet_3 "
-            "| PNet_2 - PNet_0 | PNet_3 - PNet_2 | PNet_3 - PNet_0 |",
-            "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|", *rows, ""]
+            "| PNet_2 - PNet_0 | PNet_3 - PNet_2 | PNet_3 - PNet_0 | p | q |",
+            "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|", *rows, ""]
 
 
 def section(root, label: str = "results/factors") -> list[str]:
@@ -141,7 +168,11 @@ def section(root, label: str = "results/factors") -> list[str]:
            "planner's budgets (`ours`, `mpnet`, and Table III's variants `nosteer_*`) or the "
            "training seed; the test band splits the same test queries by whether both ends lie "
            "in the data padding's band. PNet_3 - PNet_0 success on the same test queries with "
-           "steerTo, with its 95 % Newcombe interval and McNemar's exact p.", "",
+           "steerTo, with its 95 % Newcombe interval, McNemar's exact p and its "
+           f"Benjamini-Hochberg q over all {add_q(cells)} p-values of the study (the "
+           "false-discovery rate; `results/factors/README.md` lists them all). These account for "
+           "the test queries of one training; the training seed's spread is in the seed cells "
+           "and, for the default cells, in the summary at the top.", "",
            "Columns: PNet_0's success on non-trivial queries with / without steerTo; the "
            "difference on non-trivial queries (all, in band, out of band), on non-trivial "
            "queries without steerTo (Table III), and on uniform queries.", "",

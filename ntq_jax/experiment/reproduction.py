@@ -13,8 +13,8 @@ the sentence of Section V it comes from).
 
 Input: ``scripts/reproduce.py`` runs the pipeline one map at a time at the paper's
 sizes and writes one folder per map, ``<root>/<task>/<map>/summary.json`` (task
-``point``, ``rigid`` or ``nlink``; map like ``point_0``), and for the
-seed-variance maps (:data:`SEED_MAPS`) the same schema under
+``point``, ``rigid`` or ``nlink``; map like ``point_0``), and for its other
+training seeds the same schema under
 ``<root>/<task>/<map>/seeds/train_seed_<k>/summary.json`` (same data, another
 training seed). A summary holds ``task``, ``env``, ``train_seed``, the resolved
 ``config``, the environment's data ``padding``, the result ``rows`` and paired
@@ -32,6 +32,10 @@ Functions (pure, data only; this module computes nothing with JAX):
   folder's train seed and the main run's dataset fingerprints (same data).
 * :func:`claims` checks the trend claims of the paper's Results section, each
   one line with a verdict and the numbers (see "Claims" and "Verdicts" below).
+* :func:`summary_page` is the document's first section: PNet_3 - PNet_0 on
+  non-trivial queries per map, per robot and over all maps, the paper's value
+  beside ours with the seed-aware interval, the spread over seeds, p, Holm's p
+  and the verdict.
 * :func:`seed_variance` and :func:`seed_variance_diffs`: mean and range over a
   map's training seeds of every row (success, cost ratio) and of every paired
   success difference (with how many seeds reach p < 0.05).
@@ -49,50 +53,37 @@ Command line: ``python scripts/reproduce.py --report-only [--results ROOT]`` wri
 document; ``--check`` with it writes nothing and exits 1 with a one-line message
 if the file on disk differs from what :func:`render` gives.
 
-Claims (the paper's words in quotes; "with steerTo" = Tables I, II, IV):
+Claims (the paper's words in quotes; "with steerTo" = Tables I, II, IV; what each
+is measured on, its test and its verdict: :mod:`ntq_jax.experiment.claims`):
 
 * "In most cases, PNet_2 and PNet_3 outperform PNet_0": PNet_3 >= PNet_0 on
-  non-trivial queries per map and pooled per task, PNet_2 and PNet_3 >= PNet_0
-  pooled per task over both kinds;
-* point: "all models perform well with a success rate of over 90%", per map
-  (holds if every 95% interval is above 0.9, does not hold if one is below);
+  non-trivial queries per map, per task and over all 11 maps, PNet_2 and
+  PNet_3 >= PNet_0 per task over both kinds;
+* point: "all models perform well with a success rate of over 90%", per map;
 * rigid: "The PNet_3 model has the highest success ratio in all cases except
   one (Environment 3, Non-trivial Query)", per map and kind;
 * n-link: "The success ratio over uniform queries is in the range of 0.9, 0.8
-  and 0.7 for the case of 2, 4 and 6-link" (tested as falling from 2 to 4 to 6
+  and 0.7 for the case of 2, 4 and 6-link" (as falling from 2 to 4 to 6
   links), "about a 25% increase in the success ratio over PNet_0 for the 6-link
-  (non-trivial queries) case" (holds if the paired 95% interval of our
-  difference contains 0.25 x our PNet_0 success and the difference is
-  significant, does not hold if the interval excludes it), and the gain on
-  4 and 6 links larger than on 2 links ("much more evident");
-* "The cost ratio is relatively lower for the rigid body and 6-link case":
-  one-sided exact Mann-Whitney test of the maps' mean cost ratios;
+  (non-trivial queries) case", and the gain on 4 and 6 links larger than on 2
+  links ("much more evident");
+* "The cost ratio is relatively lower for the rigid body and 6-link case" (ours
+  against our reference planners, the paper's against BIT*);
 * "The success ratio for all PNet models is naturally higher over uniform test
-  queries", per task and model (Fisher, pooled over maps);
+  queries", per task and model;
 * "The success ratio also generally has an inverse relation with gamma_nt",
-  per task, per query kind, and over all 11 maps;
+  per task, per query kind, and over all 11 maps within robots;
 * without steerTo (Table III): "the performance of PNet_3 is the worst" and
   "The PNet_0 model performs best on uniform queries in all environments" per
   map; "PNet_1 or PNet_2 show better performance over non-trivial queries in
-  some cases" (holds if one does, significantly); "The success ratio of all
-  PNet models is adversely affected", per model.
+  some cases"; "The success ratio of all PNet models is adversely affected",
+  per model.
 
-Verdicts (:func:`verdict`, level :data:`ALPHA` = 0.05): a claim that model A's
-success ratio is at least model B's *holds* if our difference A - B has the
-claimed sign and its p-value is below 0.05, *does not hold* if it has the
-opposite sign with p below 0.05, and is *not resolvable at this K_test*
-otherwise. The p-value is McNemar's exact test on the same test queries when the
-summary has that paired comparison, else Fisher's exact test of the two success
-counts (unpaired, conservative). A claim over a task pools the discordant pairs
-of its maps into one exact McNemar test (each discordant pair is a fair coin
-under the null hypothesis in every map, so the pooled count is exact too). A
-claim made of several comparisons (e.g. "PNet_3 is the worst" = below each of
-PNet_0..2) holds if every part holds and does not hold if any part does not
-hold. "Success falls as gamma_nt rises" uses Kendall's tau between our gamma_nt
-of the maps and their mean success over PNet_0..3, with the exact one-sided
-p-value; with fewer than 4 maps no ordering reaches p < 0.05 (3 maps: 1/6), so
-the claim is then not resolvable (too few maps). A claim whose maps are not run
-yet says so.
+Verdicts: the test (training seeds as a random effect), the multiplicity
+correction (Holm over every p-value a verdict uses) and the rule (holds,
+contradicted, the paper's magnitude excluded, unresolved) are written once, in
+:mod:`ntq_jax.experiment.claims`; the document opens with the one-page summary of
+the central claim (:func:`summary_page`) and ends with every claim's line.
 """
 
 from __future__ import annotations
@@ -101,15 +92,17 @@ from pathlib import Path
 
 from ntq_jax import artifacts
 from ntq_jax.experiment import factor_table
-from ntq_jax.experiment.claims import ALPHA, FAILS, HOLDS, NOT_RUN, UNRESOLVED, claims
+from ntq_jax.experiment import claims as CL
+from ntq_jax.experiment.claims import ALPHA, VERDICTS, claims
 from ntq_jax.experiment.formatting import (fixed, interval, kind_name, model_key, ms, num,
                                            p_value, signed)
-from ntq_jax.experiment.paper import (KINDS, MAPS, MEMBERS, PAPER, PAPER_TABLES, SEED_MAPS)
+from ntq_jax.experiment.paper import KINDS, MAPS, MEMBERS, PAPER, PAPER_TABLES
 from ntq_jax.experiment.summaries import (check_seed_runs, check_summary,
                                           is_seed_run, k_train_of, load_summaries, main_runs,
                                           run_cells)
 
-__all__ = ["DOC_NAME", "seed_variance", "seed_variance_diffs", "render", "write", "check"]
+__all__ = ["DOC_NAME", "seed_variance", "seed_variance_diffs", "summary_page", "render", "write",
+           "check"]
 
 DOC_NAME = "REPRODUCTION.md"
 
@@ -196,8 +189,10 @@ def _header(summaries, label: str = "results/paper") -> list[str]:
     out += [f"    {c}" for c in cmds] or ["    (no summary yet: `python scripts/reproduce.py ...`)"]
     out += ["", "Success ratio: successes / K_test, with its 95% Wilson interval. Cost ratio: "
             "neural cost / reference planner cost, mean over the queries both solve. Paired "
-            "differences are on the same test queries: model minus baseline, Newcombe's 95% "
-            "interval and McNemar's exact p.", "",
+            "differences in Tables I-IV are those of the main run (training seed 0) on the same "
+            "test queries: model minus baseline, Newcombe's 95% interval and McNemar's exact p, "
+            "which account for the test queries only, not for training; the verdicts (the "
+            "summary above and the claims at the end) use the seed-aware test instead.", "",
             "Test queries: every query sampled at padding 0 (the evaluation geometry), the "
             "population the headline tables use, since the paper's padding \"was propagated "
             "during the data generation step, and was relaxed during the final performance "
@@ -238,13 +233,14 @@ def _coverage(summaries) -> list[str]:
     if extra:
         out.append("Not maps of the paper (ignored): " + ", ".join(map(str, extra)) + ".")
     seeds = []
-    for env in SEED_MAPS:
+    for env in MAPS:
         ks = sorted({s.get("train_seed") for s in summaries if s.get("env") == env}, key=str)
-        seeds.append(f"{env} {len(ks)} of 3" + (f" ({', '.join(map(str, ks))})" if ks else ""))
+        if ks:
+            seeds.append(f"{env} {len(ks)} ({', '.join(map(str, ks))})")
     bad = [f"`{s['_path']}`: {'; '.join(p)}." for s in summaries
            if is_seed_run(s) and (p := check_summary(s))] + [
         f"{p}." for p in check_seed_runs(summaries)]
-    out += [f"Seed-variance runs (training seeds found): {'; '.join(seeds)}."]
+    out += [f"Training seeds per map (the same data; `seeds/train_seed_<k>`): {'; '.join(seeds)}."]
     if bad:
         out += ["Seed-run problems: " + " ".join(bad)]
     return out + [""]
@@ -373,8 +369,8 @@ def _seeds(summaries) -> list[str]:
     out = ["## Seed variance", "",
            "Same data, different training seeds (the main run and `seeds/train_seed_<k>`): mean "
            "and range [min, max] over the seeds found.", ""]
-    envs = [e for e in list(SEED_MAPS) + sorted({s.get("env") for s in summaries if is_seed_run(s)}
-                                                 - set(SEED_MAPS), key=str)]
+    with_seeds = {s.get("env") for s in summaries if is_seed_run(s)}
+    envs = [e for e in MAPS if e in with_seeds] + sorted(with_seeds - set(MAPS), key=str)
     for env in envs:
         stats = seed_variance(summaries, env)
         out += [f"### {env}", ""]
@@ -382,8 +378,7 @@ def _seeds(summaries) -> list[str]:
             out += ["Not run yet.", ""]
             continue
         seeds = sorted({str(k) for st in stats for k in st["seeds"]})
-        out += [f"Training seeds found: {', '.join(seeds)}" +
-                ("" if len(seeds) >= 3 else f" ({3 - len(seeds)} missing of 3)") + ".", "",
+        out += [f"Training seeds found: {', '.join(seeds)}.", "",
                 "| Model | steerTo | kind | seeds | success mean | range | cost ratio mean | range |",
                 "|---|---|---|---|---|---|---|---|"]
         for st in stats:
@@ -407,24 +402,85 @@ def _seeds(summaries) -> list[str]:
     return out
 
 
-def _claims_md(summaries) -> list[str]:
-    cs = claims(summaries)
-    counts = {v: sum(c["verdict"].startswith(v) for c in cs)
-              for v in (HOLDS, FAILS, UNRESOLVED, NOT_RUN)}
+def _verdict_counts(cs) -> str:
+    return ", ".join(f"{v} {sum(c['verdict'] == v for c in cs)}" for v in VERDICTS
+                     if v != CL.NOT_RUN or any(c["verdict"] == v for c in cs))
+
+
+def summary_page(cs) -> list[str]:
+    """The first section: the central claim per map, robot and over all maps (one screen)."""
+    rows = CL.headline(cs)
+    if not rows:
+        return []
+    out = ["## Summary: does PNet_3 beat PNet_0?", "",
+           "The paper's central claim: PNet_3 (trained on non-trivial queries, includeData's "
+           "pruning) solves more non-trivial test queries than PNet_0 (uniform queries). Ours: "
+           "PNet_3 - PNet_0 on the same 500 non-trivial test queries with steerTo, the mean over "
+           "a map's training seeds (the same data trained again), with the 95 % interval of the "
+           "seed-aware test (the training seed a random effect; a map with one seed borrows its "
+           "robot's between-seed variance), the standard deviation of the per-seed "
+           "differences, the p-value, the p-value Holm-adjusted over all "
+           f"{CL.family_size(cs)} tests of this page's verdicts, and the verdict. A pooled row is "
+           "the mean over its maps. Test, rule and coverage: the section \"Claims of the "
+           "paper\" and `seed_test_coverage.md`.", "",
+           "| robot | scope | seeds | paper | ours [95 %] | sd over seeds | p | Holm p | verdict |",
+           "|---|---|---:|---:|---|---:|---:|---:|---|"]
+    for c in rows:
+        e = c["estimate"]
+        robot = {t: spec["task"] for t, spec in PAPER_TABLES.items()}.get(c["table"], "all")
+        scope = c["scope"]
+        if "pooled" in scope:
+            n_maps = sum("pooled" not in x["scope"] and (robot == "all" or x["table"] == c["table"])
+                         for x in rows)
+            scope = f"**pooled, {n_maps} maps**"
+        if e is None:
+            out.append(f"| {robot} | {scope} | - | {signed(c['paper_effect'])} | not run | - | - "
+                       f"| - | {c['verdict']} |")
+            continue
+        lo, hi = e.ci()
+        sd = "borrowed" if e.borrowed and not num(e.spread) else fixed(e.spread)
+        out.append(f"| {robot} | {scope} | {e.seeds} | {signed(c['paper_effect'])} | "
+                   f"{signed(e.estimate)} [{signed(lo)}, {signed(hi)}] | {sd} | "
+                   f"{p_value(c['p'])} | {p_value(c['p_holm'])} | **{c['verdict']}** |")
+    out += ["", f"All {len(cs)} claim lines of the paper checked below: {_verdict_counts(cs)}.",
+            ""]
+    return out
+
+
+def _claims_md(cs) -> list[str]:
+    n = CL.family_size(cs)
     out = ["## Claims of the paper", "",
-           f"Rule (level {ALPHA}): a claim that A's success is at least B's holds if our "
-           "difference has the claimed sign with p < 0.05, does not hold if it has the opposite "
-           "sign with p < 0.05, and is not resolvable at this K_test otherwise. p: McNemar's "
-           "exact test on the same queries (pooled over a task's maps by summing the discordant "
-           "pairs), or Fisher's exact test when the samples differ or no paired comparison was "
-           "saved. A claim of several parts holds if all parts hold and does not hold if one "
-           "does not. Trends in gamma_nt: Kendall's tau with its exact one-sided p (4 or more "
-           "maps needed). Details in the docstring of `ntq_jax/reproduction.py`.", "",
-           "Verdicts: " + ", ".join(f"{v} {n}" for v, n in counts.items()) + ".", "",
-           "| Table | Claim | Scope | Verdict | Ours | Paper |", "|---|---|---|---|---|---|"]
+           "Each line: our effect with its 95 % interval over training seeds and test queries "
+           "(the training seed a random effect: the mean over a map's seeds, the between-seed "
+           "variance added to the query variance, Student's t; a map with one seed borrows the "
+           "between-seed variance of the same quantity from its robot's maps with several "
+           "seeds; a pooled line is the mean of its maps), the number of seeds, the standard "
+           "deviation of the per-seed values, the p-value and the p-value Holm-adjusted over "
+           f"all {n} tests the verdicts use (each line's test and, where the paper gives the "
+           "effect's size, the test of that size). The test's coverage by simulation: "
+           "`seed_test_coverage.md`. The method: `ntq_jax/stats.py`; the claims, their tests "
+           "and the rule: `ntq_jax/experiment/claims.py`.", "",
+           f"Rule (level {ALPHA}, on the Holm-adjusted p-values), in this order: "
+           "**contradicted** if our effect has the sign opposite to the claim's with p < 0.05 "
+           "(a claim about a magnitude: that magnitude's test p < 0.05); **holds** if it has the "
+           "claimed sign with p < 0.05; **paper's magnitude excluded** if neither and the test of "
+           "the paper's own effect has p < 0.05 (the paper's effect lies outside what our seeds "
+           "allow); **unresolved** otherwise. A claim of several parts (\"the best\", \"every "
+           "model\") takes its largest part p when every part has the claimed sign, and its "
+           "smallest opposite part p times the number of parts otherwise (\"in some cases\": the "
+           "smallest claimed-sign part p times the number of parts); the line shows the "
+           "deciding part. Trends over maps use the maps' means over seeds: Kendall's tau (over "
+           "several robots stratified by robot, since robots differ in level) and the exact "
+           "Mann-Whitney test, two-sided.", "",
+           "Verdicts: " + _verdict_counts(cs) + ".", "",
+           "| Table | Claim | Scope | Verdict | Ours [95 %], seeds, sd over seeds | p | Holm p | "
+           "Paper | Details |", "|---|---|---|---|---|---|---|---|---|"]
     for c in cs:
+        pp = ("" if c["p_paper"] is None else
+              f" (paper's size: p {p_value(c['p_paper'])}, Holm {p_value(c['p_paper_holm'])})")
         out.append(f"| {c['table']} | {c['claim']} | {c['scope']} | **{c['verdict']}** | "
-                   f"{c['evidence']} | {c['paper']} |")
+                   f"{c['effect']} | {p_value(c['p'])} | {p_value(c['p_holm'])} | "
+                   f"{c['paper']}{pp} | {c['evidence']} |")
     return out + [""]
 
 
@@ -437,10 +493,12 @@ def render(root, factors=None) -> str:
     """
     summaries = load_summaries(root)
     factors = Path(root).parent / "factors" if factors is None else Path(factors)
-    lines = (_header(summaries, _root_label(root)) + _coverage(summaries) + _tables(summaries)
+    cs = claims(summaries)
+    head = _header(summaries, _root_label(root))
+    lines = (head[:2] + summary_page(cs) + head[2:] + _coverage(summaries) + _tables(summaries)
              + factor_table.section(factors, _root_label(factors))
              + _datasets(summaries) + _times(summaries)
-             + _seeds(summaries) + _claims_md(summaries))
+             + _seeds(summaries) + _claims_md(cs))
     return "\n".join(lines).rstrip("\n") + "\n"
 
 

@@ -148,11 +148,53 @@ def check_ray_address(address: str, timeout: float = RAY_CONNECT_TIMEOUT) -> Non
         raise UsageError(f"--ray-address {given!r}: expected auto, <host>:<port> or "
                          f"ray://<host>:<port>; {fix}")
     try:
-        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout).close()
+        conn = socket.create_connection((host.strip("[]"), int(port)), timeout=timeout)
     except OSError as e:
         why = "timed out" if isinstance(e, TimeoutError) else (e.strerror or type(e).__name__)
         raise UsageError(f"--ray-address {given}: no Ray cluster answers at {host}:{port} "
                          f"({why} after at most {timeout:g} s); {fix}") from None
+    with conn:
+        why = None if _tls() else _not_grpc(conn, timeout)
+    if why:
+        raise UsageError(f"--ray-address {given}: {host}:{port} answers but is not a Ray "
+                         f"cluster's head ({why}); {fix}")
+
+
+#: HTTP/2's client connection preface and an empty SETTINGS frame (RFC 9113, 3.4)
+_H2_PREFACE = b"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n" + bytes([0, 0, 0, 4, 0, 0, 0, 0, 0])
+
+
+def _tls() -> bool:
+    """Whether Ray's gRPC connections use TLS here (``RAY_USE_TLS``): then not probed."""
+    return os.environ.get("RAY_USE_TLS", "0").strip().lower() in ("1", "true", "yes")
+
+
+def _not_grpc(conn: socket.socket, timeout: float) -> str | None:
+    """Why the server on ``conn`` is not a gRPC server (as a Ray head's GCS or Ray Client
+    server is), or None: a gRPC server answers the HTTP/2 preface with its SETTINGS frame
+    at once; anything else (an HTTP/1 answer, a closed connection, silence for ``timeout``
+    seconds) is not one. Bounded: at most ``timeout`` seconds."""
+    deadline = time.monotonic() + timeout
+    got, closed = b"", False
+    try:
+        conn.sendall(_H2_PREFACE)
+        while len(got) < 9 and not closed and time.monotonic() < deadline:
+            conn.settimeout(max(deadline - time.monotonic(), 0.01))
+            part = conn.recv(9 - len(got))
+            got, closed = got + part, not part
+    except TimeoutError:
+        pass
+    except (ConnectionResetError, BrokenPipeError):
+        closed = True
+    except OSError as e:
+        return f"the connection failed: {e.strerror or type(e).__name__}"
+    if len(got) == 9 and got[3] == 4:  # a frame header of type SETTINGS
+        return None
+    if not got:
+        return ("it closed the connection" if closed
+                else f"no answer to a gRPC connection within {timeout:g} s")
+    text = got.split(b"\r")[0].decode("ascii", "replace")
+    return f"it answered {text!r}, not gRPC" if text.isprintable() else "it does not speak gRPC"
 
 
 class RayExecutor:

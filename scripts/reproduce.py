@@ -67,6 +67,8 @@ def _one(cfg, name: str, env, run: Path, out: Path, *, args, command: str,
     if old is not None and old.get("config_hash") == cfg.hash():
         print(f"[{name}] summary up to date: {out / 'summary.json'}", flush=True)
         return
+    from ntq_jax.experiment.cli import executor_of
+    executor = executor_of(args, cfg)  # an unreachable Ray cluster: refused before any write
     run = prepare_run(cfg, run)
     if data_from is not None:  # the same data: hard links to the map's datasets
         from ntq_jax import artifacts
@@ -74,9 +76,8 @@ def _one(cfg, name: str, env, run: Path, out: Path, *, args, command: str,
         artifacts.link_tree(data_from / "data" / slug, run / "data" / slug)
     print(f"[{name}] run folder: {run}", flush=True)
     t0 = time.perf_counter()
-    from ntq_jax.experiment.cli import executor_of
     run_pipeline(cfg, run, progress=not args.no_progress, figures=not args.no_figures,
-                 executor=executor_of(args, cfg))
+                 executor=executor)
     path = write_summary(run, name, env, out, command=command)
     print(f"[{name}] done in {time.perf_counter() - t0:.0f} s; summary: {path}", flush=True)
 

@@ -283,3 +283,63 @@ def test_an_unreachable_ray_cluster_is_one_line_in_seconds_before_anything_is_wr
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("error:") and all(w in err[0] for w in words)
     assert not out.exists()
+
+
+def _serve(answer):
+    """A TCP server on 127.0.0.1 that answers each connection with ``answer(conn)``; its port."""
+    import socket
+    srv = socket.socket()
+    srv.bind(("127.0.0.1", 0))
+    srv.listen()
+
+    def loop():
+        while True:
+            conn, _ = srv.accept()
+            with conn:
+                answer(conn)
+
+    threading.Thread(target=loop, daemon=True).start()
+    return srv.getsockname()[1]
+
+
+def test_a_port_that_answers_but_is_not_ray_is_one_line_in_seconds(tmp_path, capsys, monkeypatch):
+    """An HTTP server at --ray-address hung ray.init for minutes (and a dropped connection
+    was a traceback after 27 s), leaving config.yaml and run.json behind: a Ray head is a
+    gRPC server, which answers HTTP/2's preface with its SETTINGS frame at once."""
+    pytest.importorskip("ray")
+    import http.server
+
+    from ntq_jax.errors import UsageError
+    from ntq_jax.executors import check_ray_address
+    class Quiet(http.server.SimpleHTTPRequestHandler):
+        def log_message(self, *args):
+            pass
+
+    http_server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), Quiet)
+    threading.Thread(target=http_server.serve_forever, daemon=True).start()
+    import train_all
+    out = tmp_path / "run"
+    t0 = time.perf_counter()
+    address = f"127.0.0.1:{http_server.server_address[1]}"
+    assert train_all.main(["--executor", "ray", "--ray-address", address, "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and address in err[0] and "not a Ray cluster's head" in err[0], err
+    assert time.perf_counter() - t0 < 30 and not out.exists()
+    import reproduce  # it made its run folder before the check
+    assert reproduce.main(["--config", "configs/point_small.yaml", "--env", "point/2",
+                           "--executor", "ray", "--ray-address", address, "--runs",
+                           str(tmp_path / "runs"), "--results", str(tmp_path / "res")]) == 2
+    assert "not a Ray cluster's head" in capsys.readouterr().err
+    assert not (tmp_path / "runs" / "point").exists()
+    http_server.shutdown()
+    for answer, words in ((lambda c: None, "closed the connection"),
+                          (lambda c: time.sleep(2), "no answer")):
+        with pytest.raises(UsageError, match=words):
+            check_ray_address(f"127.0.0.1:{_serve(answer)}", timeout=0.5)
+    settings = bytes([0, 0, 0, 4, 0, 0, 0, 0, 0])  # a gRPC server's first frame
+    check_ray_address(f"127.0.0.1:{_serve(lambda c: (c.sendall(settings), c.recv(64)))}")
+
+
+def test_a_ray_head_passes_the_address_check(ray_session):
+    from ntq_jax.executors import check_ray_address
+    check_ray_address(ray_session.get_runtime_context().gcs_address)

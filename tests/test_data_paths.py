@@ -163,6 +163,26 @@ def test_config_key_reaches_the_data_planner_and_the_fingerprint():
         config.load(None, ["planner.smooth_data=false", "planner.data_paths=raw"])
 
 
+def test_a_spacing_too_fine_for_the_map_is_refused_before_any_work(tmp_path, capsys):
+    """planner.data_paths=1.0e-9 failed only after planning (a 10.1 TiB allocation naming no
+    key) and 1.0e-4 made 133,000 waypoints per path: refused up front, naming the key, the
+    map and the smallest spacing allowed (data.limits.MAX_CROSSING_WAYPOINTS per crossing)."""
+    from script_loader import load_script
+
+    from ntq_jax import data
+    cfg = config.load(None, ["planner.data_paths=1.0e-9"])
+    with pytest.raises(ConfigError, match=r"planner\.data_paths 1e-09 for point/0: .* spacing >= "):
+        data.generate_datasets(make_env("point/0"), cfg, tmp_path / "d", env_name="point/0",
+                               progress=False, figure=False)
+    assert not (tmp_path / "d").exists()
+    argv = ["--set", "envs=[point/0]", "--set", "planner.data_paths=1.0e-4", "--out",
+            str(tmp_path / "run"), "--no-progress"]
+    assert load_script("train_all").main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "planner.data_paths 0.0001 for point/0" in err[0], err
+    assert not (tmp_path / "run").exists()
+
+
 def _record_script():
     from script_loader import load_script
     return load_script("record_paths")

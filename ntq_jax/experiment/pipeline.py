@@ -45,6 +45,7 @@ from ntq_jax import data as data_mod
 from ntq_jax import training
 from ntq_jax.envs import env_slug, resolve_envs
 from ntq_jax.data.format import ARRAY_SPECS, recorded_checksums
+from ntq_jax.data.limits import check_spacing
 from ntq_jax.envs import EnvError
 from ntq_jax.planners.options import unsupported_robot
 from ntq_jax.experiment.evaluate import evaluate_env, reference_plans, test_queries
@@ -218,7 +219,9 @@ def check_planners(cfg: C.Config, envs: dict) -> None:
     """Raises a :class:`PipelineError` when an environment's planner cannot plan for its robot
     (``planner.name`` or its ``per_env`` entry; the message names the key and the fix), or
     when a ``per_env`` entry names no environment at all (a typo would be ignored: an entry
-    for a map that is not in ``envs`` is kept, so one config serves each of its maps)."""
+    for a map that is not in ``envs`` is kept, so one config serves each of its maps); a
+    :class:`ConfigError` for a data-path spacing too fine for a map
+    (:func:`ntq_jax.data.limits.check_spacing`)."""
     for section in ("data", "planner"):
         for i, o in enumerate(getattr(cfg, section).per_env):
             if o.env in envs:
@@ -229,6 +232,7 @@ def check_planners(cfg: C.Config, envs: dict) -> None:
                 raise PipelineError(f"{section}.per_env[{i}].env {o.env!r} is not an "
                                     f"environment ({e}); the run's are {', '.join(envs)}") from None
     for name, env in envs.items():
+        check_spacing(env, cfg.planner.data_paths_for(name), name)
         planner = cfg.planner.name_for(name)
         why = unsupported_robot(planner, env)
         if why:

@@ -25,6 +25,23 @@ def test_defaults_are_the_papers_datasets():
     assert cfg.train.optimizer == "adagrad" and cfg.train.learning_rate == 0.01
 
 
+def test_numbers_without_a_dot_are_numbers_in_files_and_overrides(tmp_path):
+    """PyYAML (YAML 1.1) read 5e-2, 1e-9 and 1e9 as strings ("expected a finite number,
+    got '5e-2'"): configs and --set read them as numbers, whole ones for integer keys."""
+    f = tmp_path / "c.yaml"
+    f.write_text("planner:\n  data_paths: 5e-2\n  time_budget: 3e0\ndata:\n  gamma_queries: 1e5\n")
+    cfg = config.load(f, ["sampling.n_max=1e3", "data.prune_padding=+1E-1", "eval.k_test=2e2"])
+    assert cfg.planner.data_paths == 0.05 and cfg.planner.time_budget == 3.0
+    assert cfg.data.gamma_queries == 100000 and isinstance(cfg.data.gamma_queries, int)
+    assert cfg.sampling.n_max == 1000 and cfg.data.prune_padding == 0.1 and cfg.eval.k_test == 200
+    assert cfg.hash() == config.load(None, [
+        "planner.data_paths=0.05", "planner.time_budget=3.0", "data.gamma_queries=100000",
+        "sampling.n_max=1000", "data.prune_padding=0.1", "eval.k_test=200"]).hash()
+    with pytest.raises(ConfigError, match=r"data\.gamma_queries: expected an integer, got 1\.5"):
+        config.load(None, ["data.gamma_queries=1.5e0"])
+    assert config.load(None, ["out_dir='1e3'"]).out_dir == "1e3"  # quoted: a string
+
+
 def test_config_is_frozen_and_hash_is_stable():
     a, b = config.load(CONFIGS[0]), config.load(CONFIGS[0])
     assert a == b and a.hash() == b.hash()

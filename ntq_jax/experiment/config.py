@@ -10,7 +10,10 @@ raises one :class:`ConfigError` naming the key and the file, e.g.::
     ConfigError: configs/point.yaml: data.k_trian: unknown key; did you mean 'k_train'?
 
 Overrides use dotted keys with YAML values: ``--set data.k_train=100 --set
-eval.steer=[true,false]`` (see :func:`apply_overrides`).
+eval.steer=[true,false]`` (see :func:`apply_overrides`). Files and overrides read
+``5e-2``, ``1e-9`` and ``1e9`` as numbers (YAML 1.2, as other YAML readers do;
+PyYAML's YAML 1.1 needs a dot, ``5.0e-2``), and an integer key takes a whole
+number written so (``gamma_queries: 1e9``).
 """
 
 from __future__ import annotations
@@ -19,6 +22,7 @@ import dataclasses
 import difflib
 import json
 import math
+import re
 import types
 import typing
 from pathlib import Path
@@ -41,6 +45,22 @@ __all__ = ["Config", "ConfigError", "load", "from_dict", "apply_overrides", "Mod
            "TrainConfig", "SamplingConfig", "DatasetSpec", "DataEnvOverride", "DataConfig",
            "PlannerEnvOverride", "PlannerConfig", "EvalConfig", "PLANNERS", "DATA_PATH_MODES",
            "PRUNE_GAMMA", "ENSEMBLE_ROWS", "validate_mode"]
+
+
+class _Loader(yaml.SafeLoader):
+    """PyYAML's safe loader reading ``5e-2`` and ``1e9`` as numbers (see the module docstring)."""
+
+
+_Loader.yaml_implicit_resolvers = {k: list(v) for k, v in
+                                   yaml.SafeLoader.yaml_implicit_resolvers.items()}
+_Loader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?(?:[0-9][0-9_]*)(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"), list("-+0123456789"))
+
+
+def yaml_load(text: str):
+    """``text`` parsed as YAML by the configs' rules (``5e-2`` a number)."""
+    return yaml.load(text, Loader=_Loader)  # noqa: S506 - a SafeLoader subclass
 
 
 @dataclasses.dataclass(frozen=True)
@@ -162,6 +182,8 @@ def _coerce(value, tp, key: str):
             raise ConfigError(f"{key}: expected true or false, got {value!r}")
         return value
     if tp is int:
+        if isinstance(value, float) and value.is_integer() and abs(value) < 2 ** 63:
+            value = int(value)  # 1e9
         if isinstance(value, bool) or not isinstance(value, int):
             raise ConfigError(f"{key}: expected an integer, got {value!r}")
         return value
@@ -223,7 +245,7 @@ def apply_overrides(data: dict, overrides: list[str] | None) -> dict:
             raise ConfigError(f"override {ov!r}: expected KEY=VALUE, e.g. data.k_train=100")
         k, v = ov.split("=", 1)
         try:
-            value = yaml.safe_load(v)
+            value = yaml_load(v)
         except yaml.YAMLError as e:
             why = getattr(e, "problem", None) or type(e).__name__
             raise ConfigError(f"override {ov!r}: the value is not valid YAML ({why}); quote "
@@ -246,7 +268,7 @@ def load(path: str | Path | None = None, overrides: list[str] | None = None) -> 
         if not p.is_file():
             raise ConfigError(f"{where}: config file not found")
         try:
-            data = yaml.safe_load(p.read_text(encoding="utf-8")) or {}
+            data = yaml_load(p.read_text(encoding="utf-8")) or {}
         except UnicodeDecodeError:
             raise ConfigError(f"{where}: not a text (UTF-8) file; a config is YAML, e.g. "
                               "configs/point.yaml") from None

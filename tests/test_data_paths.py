@@ -183,6 +183,19 @@ def test_a_spacing_too_fine_for_the_map_is_refused_before_any_work(tmp_path, cap
     assert not (tmp_path / "run").exists()
 
 
+def test_a_roadmap_beyond_memory_is_refused_before_any_work(tmp_path):
+    """milestones: 1e12 ran 455 s, then blamed "free space is too small"."""
+    from ntq_jax import data
+    cfg = config.load(None, ["planner.name=roadmap", "planner.milestones=1e12"])
+    with pytest.raises(ConfigError, match=r"planner\.milestones 1,000,000,000,000 for rigid/0: "
+                                          r".* GB\) would not fit .* use at most "):
+        data.generate_datasets(make_env("rigid/0"), cfg, tmp_path / "d", env_name="rigid/0",
+                               progress=False, figure=False)
+    assert not (tmp_path / "d").exists()
+    from ntq_jax.data.limits import check_roadmap
+    check_roadmap(make_env("rigid/0"), {"milestones": 20_000, "k": None, "grow_rounds": 2}, "x")
+
+
 def _record_script():
     from script_loader import load_script
     return load_script("record_paths")

@@ -60,7 +60,7 @@ from ntq_jax.data.include import include_data, prune_probability, prune_rng
 from ntq_jax.planners.path_modes import shape_paths
 from ntq_jax.planners.jobs import PoolPlan, plan_pool, planner_options, resolve_planner
 from ntq_jax.data import records
-from ntq_jax.data.limits import check_spacing
+from ntq_jax.data.limits import check_roadmap, check_spacing
 from ntq_jax.data.pools import (Keys, Pools, mixing_bits, pool_index, pool_sizes, run_keys,
                                 sample_pools)
 from ntq_jax.progress import open_bar
@@ -129,6 +129,8 @@ def resolve_run(env, config, out_dir, env_name: str | None, planner) -> RunSpec:
     n_u, n_nt = pool_sizes(bits)
     mode = config.planner.data_paths_for(env_name)
     check_spacing(env, mode, env_name)  # before any work
+    if planner_name == "roadmap":
+        check_roadmap(env, options, env_name)
     source = dc.paths_from_for(env_name)
     record = None if source is None else records.provenance(source, {"U": n_u, "N": n_nt})
     fp = artifacts.fingerprint({

@@ -45,7 +45,8 @@ from ntq_jax import data as data_mod
 from ntq_jax import training
 from ntq_jax.envs import env_slug, resolve_envs
 from ntq_jax.data.format import ARRAY_SPECS, recorded_checksums
-from ntq_jax.data.limits import check_spacing
+from ntq_jax.data.limits import check_roadmap, check_spacing
+from ntq_jax.planners.jobs import planner_options
 from ntq_jax.envs import EnvError
 from ntq_jax.planners.options import unsupported_robot
 from ntq_jax.experiment.evaluate import evaluate_env, reference_plans, test_queries
@@ -234,6 +235,8 @@ def check_planners(cfg: C.Config, envs: dict) -> None:
     for name, env in envs.items():
         check_spacing(env, cfg.planner.data_paths_for(name), name)
         planner = cfg.planner.name_for(name)
+        if planner == "roadmap":
+            check_roadmap(env, planner_options(cfg, name, planner), name)
         why = unsupported_robot(planner, env)
         if why:
             key = ("planner.per_env" if any(o.env == name and o.name for o in cfg.planner.per_env)

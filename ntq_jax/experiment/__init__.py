@@ -8,8 +8,12 @@
 * :mod:`~ntq_jax.experiment.report` (+ :mod:`~ntq_jax.experiment.formatting`): tables
   and figures of a run;
 * :mod:`~ntq_jax.experiment.summaries`, :mod:`~ntq_jax.experiment.reproduction`
-  (+ :mod:`~ntq_jax.experiment.paper`, :mod:`~ntq_jax.experiment.claims`): committed
-  per-map summaries and ``REPRODUCTION.md``;
+  (+ :mod:`~ntq_jax.experiment.paper`, :mod:`~ntq_jax.experiment.verdict_tables`,
+  :mod:`~ntq_jax.experiment.seed_tables`): committed per-map summaries and
+  ``REPRODUCTION.md``;
+* :mod:`~ntq_jax.experiment.claims` (+ :mod:`~ntq_jax.experiment.quantities`,
+  :mod:`~ntq_jax.experiment.claim_lines`, :mod:`~ntq_jax.experiment.verdicts`): the
+  paper's claims, the training seed a random effect, Holm's correction and the verdicts;
 * :mod:`~ntq_jax.experiment.curve`: the data-efficiency curve;
 * :mod:`~ntq_jax.experiment.cli`: the scripts' shared options and one-line errors.
 

@@ -30,15 +30,18 @@ Functions (pure, data only; this module computes nothing with JAX):
   (K_train, K_test, padding, datasets D0..D3, fingerprints, timings, rows);
   empty when fine. :func:`check_seed_runs` checks that each seed run has its
   folder's train seed and the main run's dataset fingerprints (same data).
-* :func:`claims` checks the trend claims of the paper's Results section, each
-  one line with a verdict and the numbers (see "Claims" and "Verdicts" below).
+* :func:`ntq_jax.experiment.claims.claims` checks the trend claims of the paper's
+  Results section, each one line with a verdict and the numbers (see "Claims" and
+  "Verdicts" below).
 * :func:`summary_page` is the document's first section: PNet_3 - PNet_0 on
   non-trivial queries per map, per robot and over all maps, the paper's value
   beside ours with the seed-aware interval, the spread over seeds, p, Holm's p
-  and the verdict.
+  and the verdict (:mod:`ntq_jax.experiment.verdict_tables`, with the last
+  section, every claim's line).
 * :func:`seed_variance` and :func:`seed_variance_diffs`: mean and range over a
   map's training seeds of every row (success, cost ratio) and of every paired
-  success difference (with how many seeds reach p < 0.05).
+  success difference (with how many seeds reach p < 0.05)
+  (:mod:`ntq_jax.experiment.seed_tables`, with the section "Seed variance").
 * :func:`render` turns a root into the whole Markdown document: how it was
   made, coverage (which of the 11 maps and of Table III are present, which are
   missing), Tables I-IV (ours with the 95% interval next to the paper's; the
@@ -82,8 +85,10 @@ is measured on, its test and its verdict: :mod:`ntq_jax.experiment.claims`):
 Verdicts: the test (training seeds as a random effect), the multiplicity
 correction (Holm over every p-value a verdict uses) and the rule (holds,
 contradicted, the paper's magnitude excluded, unresolved) are written once, in
-:mod:`ntq_jax.experiment.claims`; the document opens with the one-page summary of
-the central claim (:func:`summary_page`) and ends with every claim's line.
+:mod:`ntq_jax.experiment.claims` (with :mod:`~ntq_jax.experiment.quantities`, the
+test, and :mod:`~ntq_jax.experiment.verdicts`, Holm and the rule); the document
+opens with the one-page summary of the central claim (:func:`summary_page`) and ends
+with every claim's line.
 """
 
 from __future__ import annotations
@@ -91,80 +96,21 @@ from __future__ import annotations
 from pathlib import Path
 
 from ntq_jax import artifacts
-from ntq_jax.experiment import factor_table
-from ntq_jax.experiment import claims as CL
-from ntq_jax.experiment.claims import ALPHA, VERDICTS, claims
+from ntq_jax.experiment import factor_table, seed_tables
+from ntq_jax.experiment.claims import claims
 from ntq_jax.experiment.formatting import (fixed, interval, kind_name, model_key, ms, num,
                                            p_value, signed)
 from ntq_jax.experiment.paper import KINDS, MAPS, MEMBERS, PAPER, PAPER_TABLES
+from ntq_jax.experiment.seed_tables import seed_variance, seed_variance_diffs
 from ntq_jax.experiment.summaries import (check_seed_runs, check_summary,
                                           is_seed_run, k_train_of, load_summaries, main_runs,
                                           run_cells)
+from ntq_jax.experiment.verdict_tables import claims_section, summary_page
 
 __all__ = ["DOC_NAME", "seed_variance", "seed_variance_diffs", "summary_page", "render", "write",
            "check"]
 
 DOC_NAME = "REPRODUCTION.md"
-
-
-def _seed_runs(summaries, env: str) -> list[dict]:
-    """The runs of ``env``, one per train seed (the main run first, as loaded)."""
-    runs, seen = [], set()
-    for s in summaries:
-        if s.get("env") == env and s.get("train_seed") not in seen:
-            seen.add(s.get("train_seed"))
-            runs.append(s)
-    return runs
-
-
-def seed_variance(summaries, env: str) -> list[dict]:
-    """Mean and range over the training seeds of ``env`` (main run and ``seeds/*``; one
-    summary per train seed, the main run first): one dict per (steerTo, model, kind) with
-    ``seeds``, ``success_mean``/``min``/``max`` and ``cost_mean``/``min``/``max``."""
-    runs = _seed_runs(summaries, env)
-    cells: dict = {}
-    for s in runs:
-        for r in s.get("rows", []):
-            cells.setdefault((not bool(r.get("steer", True)), model_key(r["model"]),
-                              KINDS.index(r["query_kind"]) if r["query_kind"] in KINDS else 9,
-                              r["model"], r["query_kind"], bool(r.get("steer", True))),
-                             []).append((s.get("train_seed"), r))
-    out = []
-    for key in sorted(cells):
-        got = cells[key]
-        sr = [r["success_ratio"] for _, r in got]
-        cr = [r["cost_ratio"] for _, r in got if num(r.get("cost_ratio"))]
-        out.append({"model": key[3], "query_kind": key[4], "steer": key[5],
-                    "seeds": sorted((k for k, _ in got), key=str),
-                    "success_mean": sum(sr) / len(sr), "success_min": min(sr),
-                    "success_max": max(sr),
-                    "cost_mean": sum(cr) / len(cr) if cr else None,
-                    "cost_min": min(cr) if cr else None, "cost_max": max(cr) if cr else None})
-    return out
-
-
-def seed_variance_diffs(summaries, env: str) -> list[dict]:
-    """Mean and range over the training seeds of ``env`` of every paired success difference
-    (model - baseline): one dict per (steerTo, model, baseline, kind) with ``seeds``,
-    ``diff_mean``/``min``/``max`` and ``significant`` (seeds with McNemar p < ALPHA)."""
-    cells: dict = {}
-    for s in _seed_runs(summaries, env):
-        for c in s.get("comparisons", []):
-            kind = c["query_kind"]
-            key = (not bool(c.get("steer", True)), model_key(c["model"]),
-                   KINDS.index(kind) if kind in KINDS else 9, c["model"], c["baseline"], kind,
-                   bool(c.get("steer", True)))
-            cells.setdefault(key, []).append((s.get("train_seed"), c))
-    out = []
-    for key in sorted(cells):
-        got = cells[key]
-        d = [c["success_diff"] for _, c in got]
-        out.append({"model": key[3], "baseline": key[4], "query_kind": key[5], "steer": key[6],
-                    "seeds": sorted((k for k, _ in got), key=str),
-                    "diff_mean": sum(d) / len(d), "diff_min": min(d), "diff_max": max(d),
-                    "significant": sum(num(c.get("mcnemar_p")) and c["mcnemar_p"] < ALPHA
-                                       for _, c in got)})
-    return out
 
 
 def _root_label(root) -> str:
@@ -365,125 +311,6 @@ def _times(summaries) -> list[str]:
     return out + [""]
 
 
-def _seeds(summaries) -> list[str]:
-    out = ["## Seed variance", "",
-           "Same data, different training seeds (the main run and `seeds/train_seed_<k>`): mean "
-           "and range [min, max] over the seeds found.", ""]
-    with_seeds = {s.get("env") for s in summaries if is_seed_run(s)}
-    envs = [e for e in MAPS if e in with_seeds] + sorted(with_seeds - set(MAPS), key=str)
-    for env in envs:
-        stats = seed_variance(summaries, env)
-        out += [f"### {env}", ""]
-        if not stats:
-            out += ["Not run yet.", ""]
-            continue
-        seeds = sorted({str(k) for st in stats for k in st["seeds"]})
-        out += [f"Training seeds found: {', '.join(seeds)}.", "",
-                "| Model | steerTo | kind | seeds | success mean | range | cost ratio mean | range |",
-                "|---|---|---|---|---|---|---|---|"]
-        for st in stats:
-            out.append(f"| {st['model']} | {'yes' if st['steer'] else 'no'} | "
-                       f"{kind_name(st['query_kind'])} | {len(st['seeds'])} | "
-                       f"{fixed(st['success_mean'])} | [{fixed(st['success_min'])}, "
-                       f"{fixed(st['success_max'])}] | {fixed(st['cost_mean'])} | "
-                       f"[{fixed(st['cost_min'])}, {fixed(st['cost_max'])}] |")
-        diffs = seed_variance_diffs(summaries, env)
-        if diffs:
-            out += ["", "Paired success differences over the seeds (an ensemble row's baseline is "
-                    "each seed's best member; another best member is another line):", "",
-                    "| Model | vs | steerTo | kind | seeds | diff mean | range | "
-                    "seeds with McNemar p < 0.05 |", "|---|---|---|---|---|---|---|---|"]
-            for d in diffs:
-                out.append(f"| {d['model']} | {d['baseline']} | {'yes' if d['steer'] else 'no'} | "
-                           f"{kind_name(d['query_kind'])} | {len(d['seeds'])} | "
-                           f"{signed(d['diff_mean'])} | [{signed(d['diff_min'])}, "
-                           f"{signed(d['diff_max'])}] | {d['significant']} |")
-        out.append("")
-    return out
-
-
-def _verdict_counts(cs) -> str:
-    return ", ".join(f"{v} {sum(c['verdict'] == v for c in cs)}" for v in VERDICTS
-                     if v != CL.NOT_RUN or any(c["verdict"] == v for c in cs))
-
-
-def summary_page(cs) -> list[str]:
-    """The first section: the central claim per map, robot and over all maps (one screen)."""
-    rows = CL.headline(cs)
-    if not rows:
-        return []
-    out = ["## Summary: does PNet_3 beat PNet_0?", "",
-           "The paper's central claim: PNet_3 (trained on non-trivial queries, includeData's "
-           "pruning) solves more non-trivial test queries than PNet_0 (uniform queries). Ours: "
-           "PNet_3 - PNet_0 on the same 500 non-trivial test queries with steerTo, the mean over "
-           "a map's training seeds (the same data trained again), with the 95 % interval of the "
-           "seed-aware test (the training seed a random effect; a map with one seed borrows its "
-           "robot's between-seed variance), the standard deviation of the per-seed "
-           "differences, the p-value, the p-value Holm-adjusted over all "
-           f"{CL.family_size(cs)} tests of this page's verdicts, and the verdict. A pooled row is "
-           "the mean over its maps. Test, rule and coverage: the section \"Claims of the "
-           "paper\" and `seed_test_coverage.md`.", "",
-           "| robot | scope | seeds | paper | ours [95 %] | sd over seeds | p | Holm p | verdict |",
-           "|---|---|---:|---:|---|---:|---:|---:|---|"]
-    for c in rows:
-        e = c["estimate"]
-        robot = {t: spec["task"] for t, spec in PAPER_TABLES.items()}.get(c["table"], "all")
-        scope = c["scope"]
-        if "pooled" in scope:
-            n_maps = sum("pooled" not in x["scope"] and (robot == "all" or x["table"] == c["table"])
-                         for x in rows)
-            scope = f"**pooled, {n_maps} maps**"
-        if e is None:
-            out.append(f"| {robot} | {scope} | - | {signed(c['paper_effect'])} | not run | - | - "
-                       f"| - | {c['verdict']} |")
-            continue
-        lo, hi = e.ci()
-        sd = "borrowed" if e.borrowed and not num(e.spread) else fixed(e.spread)
-        out.append(f"| {robot} | {scope} | {e.seeds} | {signed(c['paper_effect'])} | "
-                   f"{signed(e.estimate)} [{signed(lo)}, {signed(hi)}] | {sd} | "
-                   f"{p_value(c['p'])} | {p_value(c['p_holm'])} | **{c['verdict']}** |")
-    out += ["", f"All {len(cs)} claim lines of the paper checked below: {_verdict_counts(cs)}.",
-            ""]
-    return out
-
-
-def _claims_md(cs) -> list[str]:
-    n = CL.family_size(cs)
-    out = ["## Claims of the paper", "",
-           "Each line: our effect with its 95 % interval over training seeds and test queries "
-           "(the training seed a random effect: the mean over a map's seeds, the between-seed "
-           "variance added to the query variance, Student's t; a map with one seed borrows the "
-           "between-seed variance of the same quantity from its robot's maps with several "
-           "seeds; a pooled line is the mean of its maps), the number of seeds, the standard "
-           "deviation of the per-seed values, the p-value and the p-value Holm-adjusted over "
-           f"all {n} tests the verdicts use (each line's test and, where the paper gives the "
-           "effect's size, the test of that size). The test's coverage by simulation: "
-           "`seed_test_coverage.md`. The method: `ntq_jax/stats.py`; the claims, their tests "
-           "and the rule: `ntq_jax/experiment/claims.py`.", "",
-           f"Rule (level {ALPHA}, on the Holm-adjusted p-values), in this order: "
-           "**contradicted** if our effect has the sign opposite to the claim's with p < 0.05 "
-           "(a claim about a magnitude: that magnitude's test p < 0.05); **holds** if it has the "
-           "claimed sign with p < 0.05; **paper's magnitude excluded** if neither and the test of "
-           "the paper's own effect has p < 0.05 (the paper's effect lies outside what our seeds "
-           "allow); **unresolved** otherwise. A claim of several parts (\"the best\", \"every "
-           "model\") takes its largest part p when every part has the claimed sign, and its "
-           "smallest opposite part p times the number of parts otherwise (\"in some cases\": the "
-           "smallest claimed-sign part p times the number of parts); the line shows the "
-           "deciding part. Trends over maps use the maps' means over seeds: Kendall's tau (over "
-           "several robots stratified by robot, since robots differ in level) and the exact "
-           "Mann-Whitney test, two-sided.", "",
-           "Verdicts: " + _verdict_counts(cs) + ".", "",
-           "| Table | Claim | Scope | Verdict | Ours [95 %], seeds, sd over seeds | p | Holm p | "
-           "Paper | Details |", "|---|---|---|---|---|---|---|---|---|"]
-    for c in cs:
-        pp = ("" if c["p_paper"] is None else
-              f" (paper's size: p {p_value(c['p_paper'])}, Holm {p_value(c['p_paper_holm'])})")
-        out.append(f"| {c['table']} | {c['claim']} | {c['scope']} | **{c['verdict']}** | "
-                   f"{c['effect']} | {p_value(c['p'])} | {p_value(c['p_holm'])} | "
-                   f"{c['paper']}{pp} | {c['evidence']} |")
-    return out + [""]
-
-
 def render(root, factors=None) -> str:
     """The whole ``REPRODUCTION.md`` of the summaries under ``root`` (deterministic).
 
@@ -498,7 +325,7 @@ def render(root, factors=None) -> str:
     lines = (head[:2] + summary_page(cs) + head[2:] + _coverage(summaries) + _tables(summaries)
              + factor_table.section(factors, _root_label(factors))
              + _datasets(summaries) + _times(summaries)
-             + _seeds(summaries) + _claims_md(cs))
+             + seed_tables.section(summaries) + claims_section(cs))
     return "\n".join(lines).rstrip("\n") + "\n"
 
 

@@ -23,8 +23,8 @@ WALLS = {"name": "walls", "robot": {"kind": "point"}, "bounds": [[0, 10], [0, 10
 
 
 def _costs(robot, p, n):
-    return np.array([distances(robot, p[b, :n[b] - 1], p[b, 1:n[b]]).astype(np.float64).sum()
-                     for b in range(len(n))])
+    return np.array([distances(robot, p[b, :max(n[b] - 1, 0)], p[b, 1:n[b]]).astype(np.float64)
+                     .sum() for b in range(len(n))])
 
 
 def test_resampled_segments_never_exceed_the_spacing_and_keep_vertices_and_cost():

@@ -122,6 +122,14 @@ def _float_rows(x, dim: int) -> np.ndarray:
     return rows.reshape(-1, dim)
 
 
+def _float_pairs(a, b, dim: int) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_float_rows` of both ends of a batch of pairs, which must have the same rows."""
+    a, b = _float_rows(a, dim), _float_rows(b, dim)
+    if a.shape != b.shape:
+        raise ValueError(f"a and b must have the same shape, got {a.shape} and {b.shape}")
+    return a, b
+
+
 def _fixed(chunk: int, arrays) -> RowPlan:
     """Pieces of exactly ``chunk`` rows, the rest padded to ``chunk`` (one compiled shape;
     unaligned pieces when aligning them would leave more than ``chunk`` edge rows)."""
@@ -195,7 +203,7 @@ def steer_to_pairs(robot, world: World, a, b, padding: float,
     motion_check(robot, check)  # an unknown check fails here, before any work
     if chunk is None:
         chunk = CERTIFIED_CHUNK if check == "certified" else STEER_CHUNK
-    a, b = _float_rows(a, robot.dim), _float_rows(b, robot.dim)
+    a, b = _float_pairs(a, b, robot.dim)
     if a.shape[0] == 0:
         return np.zeros(0, bool)
     out = run_rows(lambda x, y, m: _steer_masked(robot, world, x, y, m, padding, check),
@@ -216,7 +224,7 @@ def valid_states(robot, world: World, states, padding: float,
 
 def distances(robot, a, b, chunk: int = CHECK_CHUNK) -> np.ndarray:
     """The cost metric over any number of ``(N, d)`` pairs (float32 kernel, host array)."""
-    a, b = _float_rows(a, robot.dim), _float_rows(b, robot.dim)
+    a, b = _float_pairs(a, b, robot.dim)
     if a.shape[0] == 0:
         return np.zeros(0, np.float32)
     out = run_rows(lambda x, y, m: distance_batch(robot, x, y), [a, b], _fixed(chunk, [a, b]))

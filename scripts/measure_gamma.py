@@ -8,11 +8,26 @@ throughput and peak memory.
 
     python scripts/measure_gamma.py --env point/3 --queries 100000000
     python scripts/measure_gamma.py --env my_map.json --queries 1e6 --padding 0.8 --json out.json
+    taskset -c 0 python scripts/measure_gamma.py --env panda/cage/1 --queries 1e5 \
+        --json results/panda_gamma/cage.json --skip-existing
 
 The default padding is 0, the evaluation geometry on which the paper reports
 gamma_nt; ``--padding`` measures another geometry (e.g. the data-generation one).
 
-After the first chunks the estimated time is printed; a run that would take
+A 3-D scene (``panda/<scene>/<number>``, a 3-D JSON) is measured over the world of
+that one problem: MotionBenchMaker's problems of a scene differ slightly (the objects
+move a little), so ``panda/cage/1`` and ``panda/cage/2`` have slightly different
+gamma_nt. Its motions are checked at the arm's resolution (1/32 rad: ~170 states on an
+average free 7-D motion), so it runs at thousands of queries per second, not millions,
+after about a minute of compilation (two programs: whole chunks, and the last chunk's
+prefix; the persistent compilation cache keeps them for the next run unless
+``--no-compile-cache``).
+
+``--skip-existing`` makes a series of runs resumable: when ``--json`` already holds
+a result of the same environment, queries, padding, seed and chunk, it is printed
+and nothing is measured.
+
+After the first chunks the estimated time of the streaming is printed; a run that would take
 longer than ``--max-hours`` (default 24) stops there with an error. Ctrl-C
 prints the estimate over the queries counted so far (with its interval) and
 exits with code 130; ``--json`` is then not written. Bad arguments, an unknown
@@ -23,7 +38,9 @@ without free space end in one ``error:`` line and exit code 2.
 from __future__ import annotations
 
 import argparse
+import json
 import math
+import os
 import sys
 import time
 from pathlib import Path
@@ -32,6 +49,10 @@ from ntq_jax.experiment.cli import UsageError, check_writable, run_cli, seed_arg
 
 MAX_QUERIES = 10**15  # ~80 days at the fastest measured rate (1.5e8 queries/s, point robot)
 INTERRUPTED = 130     # the shell's exit code for a process ended by SIGINT
+#: The default chunk of a 3-D arm (``ntq_jax.queries.default_chunk`` is 2**15): at a few
+#: thousand queries per second, 4096 candidates take about a second, so the bar moves
+#: steadily, at the rate of 2**15 (panda/box/1 on one core: 2,860 vs 2,430 queries/s).
+ARM3D_CHUNK = 4096
 
 
 class ScriptError(UsageError):
@@ -95,13 +116,27 @@ class _Eta:
 
     The rate is measured from the end of the first chunk (which includes the
     compilation) on; if the estimate exceeds ``max_hours`` it raises ScriptError,
-    which stops :func:`ntq_jax.queries.gamma_nt` before any more work.
+    which stops :func:`ntq_jax.queries.gamma_nt` before any more work. The estimate
+    is of the streaming only: the last chunk's prefix is counted by a second program,
+    compiled at the end (about a minute for a 3-D arm the first time).
     """
 
     def __init__(self, bar, total: int, max_hours: float):
         self.bar, self.total, self.max_hours = bar, total, max_hours
+        self.start = time.monotonic()
         self.first: tuple[float, int] | None = None
+        self.last: tuple[float, int] | None = None
         self.reported = False
+
+    def streaming(self) -> tuple[float | None, float | None]:
+        """``(seconds to the first chunk counted (compilation included), queries per second
+        after it)``; None where not measured (an estimate read off the first chunk)."""
+        if self.first is None:
+            return None, None
+        ahead = self.first[0] - self.start
+        if self.last is None or self.last[0] <= self.first[0]:
+            return ahead, None
+        return ahead, (self.last[1] - self.first[1]) / (self.last[0] - self.first[0])
 
     def __call__(self, done: int) -> None:
         self.bar.update(done - self.bar.n)
@@ -109,6 +144,8 @@ class _Eta:
         if self.first is None:
             self.first = (now, done)
             return
+        if done < self.total:  # the final call follows the last chunk's prefix (compiled apart)
+            self.last = (now, done)
         t0, d0 = self.first
         if self.reported or done >= self.total or now - t0 < 0.25 or done <= d0:
             return
@@ -130,6 +167,26 @@ def _peak_gib() -> float:
     return peak / (2**30 if sys.platform == "darwin" else 2**20)
 
 
+def _existing(path: Path, env: str, queries: int, padding: float, seed: int,
+              chunk: int | None) -> dict | None:
+    """The result in ``path`` if it is this measurement (else None: measure it)."""
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+    same = (isinstance(data, dict) and data.get("env") == env and data.get("queries") == queries
+            and data.get("padding") == padding and data.get("seed") == seed
+            and data.get("chunk") == chunk)
+    return data if same else None
+
+
+def _report_json(d: dict) -> None:
+    print(f"env {d['env']}  padding {d['padding']:g}  queries {d['queries']:,}  "
+          f"non-trivial {d['non_trivial']:,}")
+    print(f"gamma_nt = {d['gamma']:.6f}  95% CI [{d['ci95'][0]:.6f}, {d['ci95'][1]:.6f}]")
+    print(f"{d['seconds']:.2f} s  {d['queries_per_second']:,.0f} queries/s (when measured)")
+
+
 def _report(env, padding: float, est, file=None) -> None:
     lo, hi = est.ci95
     print(f"env {env.name}  padding {padding:g}  queries {est.queries:,}  "
@@ -143,7 +200,8 @@ def _report(env, padding: float, est, file=None) -> None:
 def _run(argv) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--env", default="point/0", help="preset name (point/0..3, rigid/0..3, "
-                    "nlink/2|4|6) or a JSON map file (default: point/0)")
+                    "nlink/2|4|6), a Panda problem (panda/<scene>/<number>, e.g. panda/cage/1) "
+                    "or a JSON map file (default: point/0)")
     ap.add_argument("--queries", type=_queries, default=10**7,
                     help=f"uniform valid queries to examine; accepts 1e9 (default: 1e7, at most "
                     f"{MAX_QUERIES:.0e})")
@@ -152,13 +210,21 @@ def _run(argv) -> int:
     ap.add_argument("--seed", type=seed_arg, default=0, help="PRNG seed, 0 .. 2**32-1")
     ap.add_argument("--chunk", type=_chunk, default=None,
                     help="candidate queries per compiled chunk (default: 4M point, 256k point on a "
-                    "map of more than 64 boxes, 32k others); memory grows with it, not with "
-                    "--queries")
+                    "map of more than 64 boxes, 4096 a 3-D arm, 32k others); memory grows with "
+                    "it, not with --queries")
     ap.add_argument("--max-hours", type=_hours, default=24.0,
                     help="stop at once if the time estimate exceeds this (default 24; inf: no limit)")
     ap.add_argument("--json", type=Path, default=None, help="also write the result as JSON")
+    ap.add_argument("--skip-existing", action="store_true",
+                    help="if --json already holds this measurement (same env, queries, padding, "
+                    "seed, chunk), print it and measure nothing")
     ap.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    ap.add_argument("--no-compile-cache", action="store_true",
+                    help="do not use JAX's persistent compilation cache (~/.cache/ntq_jax/jax; "
+                    "a 3-D arm's two programs take about a minute to compile)")
     args = ap.parse_args(argv)
+    if args.skip_existing and args.json is None:
+        raise ScriptError("--skip-existing needs --json (the file a finished run wrote)")
     if args.json is not None:
         check_writable(args.json, "--json")
 
@@ -167,13 +233,27 @@ def _run(argv) -> int:
 
     import ntq_jax as nj
     from ntq_jax import artifacts
+    from ntq_jax.geometry import World3D
+    from ntq_jax.queries import default_chunk
 
+    if not args.no_compile_cache:
+        artifacts.enable_compile_cache()
     env = nj.make_env(args.env)
+    three_d = isinstance(env.world, World3D)
+    chunk = args.chunk if args.chunk is not None else (
+        ARM3D_CHUNK if three_d else default_chunk(env.robot, env.world))
+    if args.skip_existing:
+        done = _existing(args.json, env.name, args.queries, args.padding, args.seed, chunk)
+        if done is not None:
+            print(f"{args.json} already holds this measurement; not measured again")
+            _report_json(done)
+            return 0
     bar = tqdm(total=args.queries, unit="q", unit_scale=True, disable=args.no_progress,
                desc=f"gamma_nt {env.name}", file=sys.stderr)
+    eta = _Eta(bar, args.queries, args.max_hours)
     try:
         est = env.gamma_nt(jax.random.key(args.seed), args.queries, padding=args.padding,
-                           chunk=args.chunk, progress=_Eta(bar, args.queries, args.max_hours))
+                           chunk=chunk, progress=eta)
     except KeyboardInterrupt as e:
         bar.close()
         partial = getattr(e, "estimate", None)
@@ -189,14 +269,27 @@ def _run(argv) -> int:
     finally:
         bar.close()
     _report(env, args.padding, est)
+    ahead, rate = eta.streaming()
+    if rate is not None:
+        print(f"streaming: {rate:,.0f} queries/s after the first chunk ({ahead:.1f} s to it, "
+              "compilation included)")
     if args.json:
         lo, hi = est.ci95
+        resolution = getattr(env.robot, "resolution", None)
         out = {"env": env.name, "padding": args.padding, "seed": args.seed,
                "queries": est.queries, "non_trivial": est.non_trivial, "gamma": est.gamma,
                "ci95": [lo, hi], "seconds": est.seconds,
                "queries_per_second": est.queries_per_second,
                "candidates": est.candidates,
-               "candidates_per_second": est.candidates_per_second}
+               "candidates_per_second": est.candidates_per_second,
+               "first_chunk_seconds": ahead, "streaming_queries_per_second": rate,
+               "chunk": chunk, "resolution": resolution,
+               "check": "exact" if resolution is None else "discretized",
+               "cpus": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None,
+               "version": nj.__version__}
+        if three_d:
+            out["world"] = ("the world of this one problem (the problems of a scene differ "
+                            "slightly)")
         artifacts.write_json(args.json, out)
     return 0
 

@@ -1,8 +1,10 @@
 """The 3-D scene figure (ntq_jax.scenes.viewer): every obstacle kind, states, a path, a
-collision, the atomic PNG, and its refusals. The tiny test arm keeps it quick."""
+collision, the atomic PNG, and its refusals; the scripts' 3-D options (export_env --png,
+measure_gamma on a 3-D JSON with --skip-existing). The tiny test arm keeps it quick."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -10,6 +12,7 @@ import pytest
 
 import ntq_jax as nj
 from ntq_jax.scenes import viewer
+from script_loader import load_script
 
 DATA = Path(__file__).resolve().parent / "data"
 
@@ -89,3 +92,30 @@ def test_scene_figure_refusals(env):
         viewer.draw_scene(env, labels=["only one"])
     with pytest.raises(ValueError, match="limits"):
         viewer.draw_scene(env, limits=[[0, 1]])
+
+
+def test_export_png_and_gamma_of_a_3d_json(env, tmp_path, capsys):
+    scene = tmp_path / "scene.json"
+    env.save_json(scene)
+    export = load_script("export_env", "_viewer_export_env")
+    png = tmp_path / "scene.png"
+    assert export.main([str(scene), "--png", str(png)]) == 0
+    assert png.read_bytes()[:4] == b"\x89PNG"
+    assert export.main(["point/0", "--png", str(tmp_path / "p.png")]) == 2
+    assert "planar" in capsys.readouterr().err and not (tmp_path / "p.png").exists()
+
+    gamma = load_script("measure_gamma", "_viewer_measure_gamma")
+    out = tmp_path / "gamma.json"
+    argv = ["--env", str(scene), "--queries", "200", "--json", str(out), "--no-progress"]
+    assert gamma.main(argv) == 0
+    first = json.loads(out.read_text())
+    assert first["queries"] == 200 and first["chunk"] == gamma.ARM3D_CHUNK
+    assert first["check"] == "discretized" and first["resolution"] == 1 / 32
+    assert "one problem" in first["world"]
+    capsys.readouterr()
+    stamp = out.stat().st_mtime_ns
+    assert gamma.main(argv + ["--skip-existing"]) == 0
+    assert "already holds this measurement" in capsys.readouterr().out
+    assert out.stat().st_mtime_ns == stamp  # not measured, not written again
+    assert gamma.main(argv[:3] + ["201"] + argv[4:] + ["--skip-existing"]) == 0
+    assert json.loads(out.read_text())["queries"] == 201  # another measurement: made

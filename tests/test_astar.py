@@ -3,6 +3,7 @@
 import math
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -304,3 +305,54 @@ def test_bad_input_is_rejected():
     np.testing.assert_allclose(np.asarray(cost), [9 * math.sqrt(2.0)], rtol=1e-6)
     with pytest.raises(ValueError, match="chunk_size"):
         A.astar_chunked(occ, np.zeros((1, 2), int), np.zeros((1, 2), int), chunk_size=0)
+
+
+def test_non_bool_and_empty_grids_are_refused():
+    """Issue 52 (rough edges 8-10): a non-bool grid is refused, not cast (a uint8 image with
+    255 = free used to become all occupied), an empty grid is one ValueError (it was a
+    ZeroDivisionError), and ``progress`` receives the 9 tables."""
+    q = np.zeros((1, 2), int)
+    image = np.full((6, 7), 255, np.uint8)
+    bad = {"uint8": image, "int64": np.zeros((6, 7), np.int64), "float32": np.full((6, 7), 0.2, np.float32),
+           "float64": np.full((6, 7), np.nan), "<U1": np.full((6, 7), "x")}
+    for dtype, occ in bad.items():
+        with pytest.raises(ValueError, match=rf"bool occupancy grid.*dtype {dtype}.*image < 128"):
+            prepare_grid(occ)
+        with pytest.raises(ValueError, match=rf"dtype {dtype}"):
+            A.astar(occ, q, q)
+    res = A.astar(image < 128, q, np.array([[5, 6]]))  # the documented fix plans on the free image
+    assert int(res.status[0]) == PlanStatus.SOLVED and np.isfinite(float(res.cost[0]))
+    for shape in [(0, 5), (5, 0), (0, 0)]:
+        with pytest.raises(ValueError, match="has no cell"):
+            A.astar(np.zeros(shape, bool), q, q)
+        with pytest.raises(ValueError, match="has no cell"):
+            A.astar_chunked(np.zeros(shape, bool), q, q)
+    empty = prepare_grid(np.zeros((1, 1), bool))._replace(occ=jnp.zeros((0, 5), bool))
+    with pytest.raises(ValueError, match="has no cell"):  # a hand-made GridGraph too
+        A.astar(empty, q, q)
+
+    calls = []
+
+    class Bar:
+        def __init__(self, **kw):
+            calls.append(("open", kw["total"], kw["unit"]))
+
+        def update(self, n=1):
+            calls.append(("update", n))
+
+        def set_postfix_str(self, s):
+            pass
+
+        def close(self):
+            calls.append(("close",))
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            self.close()
+
+    occ = np.zeros((8, 9), bool)
+    graph = prepare_grid(occ, progress=lambda **kw: Bar(**kw))
+    assert calls[0] == ("open", 9, "table") and calls.count(("update", 1)) == 9 and calls[-1] == ("close",)
+    np.testing.assert_array_equal(np.asarray(graph.jump), np.asarray(prepare_grid(occ).jump))

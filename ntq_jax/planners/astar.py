@@ -85,7 +85,7 @@ def default_max_path_len(shape) -> int:
 def default_lanes(shape, n: int) -> int:
     """Search lanes: about 6 MB of per-lane state, between 8 and 64, at most ``n``."""
     h, w = shape
-    return int(max(1, min(n, max(8, min(64, (6 << 20) // (4 * h * w))))))
+    return int(max(1, min(n, max(8, min(64, (6 << 20) // max(1, 4 * h * w))))))
 
 
 def _check_sizes(shape, n: int, max_path_len, max_waypoints, open_capacity) -> tuple[int, int]:
@@ -93,6 +93,9 @@ def _check_sizes(shape, n: int, max_path_len, max_waypoints, open_capacity) -> t
     if n > MAX_QUERIES_PER_CALL:
         raise ValueError(f"at most {MAX_QUERIES_PER_CALL} queries per astar call, got {n}: "
                          "use astar_chunked")
+    if min(shape) < 1:
+        raise ValueError(f"astar: the grid of shape {tuple(shape)} has no cell; pass a grid "
+                         "with at least 1 row and 1 column")
     if max(shape) > MAX_GRID_SIDE:
         raise ValueError(f"grid sides must be <= {MAX_GRID_SIDE}, got {shape}")
     max_len = int(max_path_len) if max_path_len is not None else default_max_path_len(shape)
@@ -109,8 +112,9 @@ def astar(occ, starts, goals, *, max_path_len: int | None = None, max_waypoints:
     """Solves a batch of grid shortest-path queries exactly (8-connected, no corner cutting).
 
     Args:
-        occ: ``(H, W)`` bool occupancy grid (True = occupied), or a
-            :class:`GridGraph` from :func:`prepare_grid` (faster for repeated calls).
+        occ: ``(H, W)`` bool occupancy grid (True = occupied; other dtypes are
+            refused, see :func:`prepare_grid`), or a :class:`GridGraph` from
+            :func:`prepare_grid` (faster for repeated calls).
         starts, goals: ``(N, 2)`` int cells ``(row, col)`` (``row`` indexes
             the first axis of ``occ``, the ``y`` cell).
         max_path_len: length ``L`` of the returned cell path buffer (default
@@ -129,8 +133,9 @@ def astar(occ, starts, goals, *, max_path_len: int | None = None, max_waypoints:
         program. ``occ`` must be concrete (the tables are built on the host).
 
     Raises:
-        ValueError: on bad shapes, ``N > MAX_QUERIES_PER_CALL`` (use
-            :func:`astar_chunked`) or a grid side above ``MAX_GRID_SIDE``.
+        ValueError: on bad shapes, a grid that is not bool or has no cell,
+            ``N > MAX_QUERIES_PER_CALL`` (use :func:`astar_chunked`) or a grid
+            side above ``MAX_GRID_SIDE``.
         TypeError: if ``occ`` is a traced grid (see :func:`prepare_grid`).
     """
     graph = occ if isinstance(occ, GridGraph) else prepare_grid(occ)  # host tables, no program

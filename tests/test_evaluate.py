@@ -257,3 +257,24 @@ def test_in_band_partitions_the_test_queries(tmp_path, cfg):
     # the non-trivial queries hug the obstacles: some have an endpoint in the band
     assert not M.in_band(env, q["nontrivial"]).all()
     assert M.in_band(env, q["uniform"]).any()
+
+
+def test_timings_are_kept_apart(tmp_path):
+    """Issue 52 (rough edge 13): two runs that differ only in wall-clock times write the same
+    bytes of results.csv, tables.md and tables.tex; the times are in timings.csv."""
+    rows = [_row("point/0", f"PNet_{m}", kind, True, 40) for m in range(2) for kind in QUERY_KINDS]
+    slow = [{**r, "seconds_per_query": 7.5, "compile_seconds": 30.25,
+             "reference_seconds_per_query": 0.125} for r in rows]
+    a, b = tmp_path / "a", tmp_path / "b"
+    for run, rs in ((a, rows), (b, slow)):
+        run.mkdir()
+        out = R.write_report(run, rs, figures=False)
+        assert out["timings.csv"] == run / "timings.csv"
+    for name in ("results.csv", "tables.md", "tables.tex"):
+        assert (a / name).read_bytes() == (b / name).read_bytes(), name
+    assert "ms / query" not in (a / "tables.md").read_text()
+    assert not set(R.TIMING_FIELDS) & set((a / "results.csv").read_text().splitlines()[0].split(","))
+    lines = (b / "timings.csv").read_text().strip().splitlines()
+    assert lines[0].split(",") == R.TIMING_CSV_FIELDS and len(lines) == 1 + len(rows)
+    assert lines[1] == "point,point/0,PNet_0,uniform,True,7.5,30.25,0.125"
+    assert (a / "timings.csv").read_bytes() != (b / "timings.csv").read_bytes()

@@ -13,7 +13,7 @@ A run folder holds::
     models/<env>/                  training output, ensemble/ (ntq_jax.training)
     eval/<env>/                    test queries, reference paths
     paths/<env>/<model>_<kind>[_nosteer].npz   every planned path
-    results.json, results.csv, tables.md, tables.tex, figures/*.png
+    results.json, results.csv, tables.md, tables.tex, timings.csv, figures/*.png
 
 Every stage resumes: a rerun verifies the datasets against their checksums
 (rewriting only a damaged one), resumes training from its last checkpoint,
@@ -65,11 +65,12 @@ DEFAULT = yaml.safe_load(
 
 #: What a run folder may hold (``--overwrite`` deletes only folders made of these).
 RUN_ENTRIES = frozenset({".lock", "config.yaml", "run.json", "data", "models", "eval", "paths",
-                         "results.json", "results.csv", "tables.md", "tables.tex", "figures"})
+                         "results.json", "results.csv", "tables.md", "tables.tex", "timings.csv",
+                         "figures"})
 #: Every file a run writes, as a pattern of its path in the run folder (``<env>``: one
 #: folder name): what ``--overwrite`` may delete. Anything else stops it.
 RUN_FILES = re.compile("|".join(f"(?:{p})" for p in (
-    r"(config\.yaml|run\.json|results\.json|results\.csv|tables\.md|tables\.tex|\.lock)",
+    r"(config\.yaml|run\.json|results\.json|results\.csv|tables\.md|tables\.tex|timings\.csv|\.lock)",
     r"figures/[^/]+\.png",
     r"data/[^/]+/(env\.json|config\.yaml|figure\.png)",
     rf"data/[^/]+/D\d+/(({'|'.join(ARRAY_SPECS)})\.npy|meta\.json)",

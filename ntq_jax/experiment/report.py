@@ -7,9 +7,15 @@ then the ensemble rows PNet_ens, PNet_best-of-4 and PNet_cascade when evaluated;
 uniform and non-trivial columns; success ratio and cost ratio), one block per
 environment with gamma_nt in its heading; the Markdown adds the 95% intervals,
 and a detail table with the cost ratio to the exact optimum (point robots),
-timings, failures, and the success of the in-band and out-of-band test queries
+failures, and the success of the in-band and out-of-band test queries
 apart (both endpoints valid at the environment's data padding, or not; see
 :func:`ntq_jax.experiment.evaluate.band_metrics`); the CSV has one line per row.
+
+Wall-clock times (:data:`TIMING_FIELDS`: seconds per query, compile seconds,
+the reference planner's seconds per query) are kept apart, in
+``timings.csv`` (:func:`timings_csv`, one line per row with the row's key), so
+two identical runs write byte-identical ``results.csv``, ``tables.md`` and
+``tables.tex``; ``results.json`` keeps every field of the rows, times included.
 
 Paired comparisons (:func:`comparisons`, statistics in :mod:`ntq_jax.stats`):
 every model is tested on the same queries, so models are compared query by
@@ -24,7 +30,7 @@ the single member with the highest success in that cell). They are a table after
 columns of ``results.csv`` (a row's first comparison as the model).
 
 :func:`write_report` writes, into the run folder (atomically), ``results.json``
-(rows plus run metadata), ``results.csv``, ``tables.md``, ``tables.tex`` and the
+(rows plus run metadata), ``results.csv``, ``tables.md``, ``tables.tex``, ``timings.csv`` and the
 figures of :mod:`ntq_jax.plotting`: ``figures/success_ratio[_nosteer].png``,
 ``figures/examples_<env>.png`` and ``figures/queries_<env>.png``.
 """
@@ -48,12 +54,15 @@ TITLES = {"point": "Point robot planning", "rigid": "Rigid body planning",
           "nlink": "n-link manipulator planning"}
 CSV_FIELDS = ["task", "env", "model", "query_kind", "steer", "k_test", "successes",
               "success_ratio", "success_ci95_lo", "success_ci95_hi", "cost_ratio", "cost_ratio_n",
-              "cost_ratio_opt", "seconds_per_query", "compile_seconds",
-              "reference_seconds_per_query", "failures_no_path", "failures_infeasible",
+              "cost_ratio_opt", "failures_no_path", "failures_infeasible",
               "failures_invalid_query", "reference_failed", "reference_planner", "data_planner",
               "gamma_nt", "band_padding", "n_in_band", "n_out_band", "success_in_band",
               "success_in_band_ci95_lo", "success_in_band_ci95_hi", "success_out_band",
               "success_out_band_ci95_lo", "success_out_band_ci95_hi", "paths_file"]
+#: the wall-clock fields of a row: in timings.csv, not in results.csv or tables.md
+TIMING_FIELDS = ["seconds_per_query", "compile_seconds", "reference_seconds_per_query"]
+#: the columns of timings.csv: a row's key, then its times
+TIMING_CSV_FIELDS = ["task", "env", "model", "query_kind", "steer"] + TIMING_FIELDS
 # a row's first paired comparison (as the model; see comparisons()), after CSV_FIELDS
 COMPARISON_CSV_FIELDS = ["vs_model", "vs_only_model", "vs_only_baseline", "vs_success_diff",
                          "vs_success_diff_ci95_lo", "vs_success_diff_ci95_hi", "vs_mcnemar_p",
@@ -278,9 +287,9 @@ def tables_md(rows, comparisons: list[dict] | None = None) -> str:
             band = any_row.get("band_padding")
             out += [(f"Detail. In band: test queries with both endpoints valid at the "
                      f"environment's data padding ({fixed(band, 2)}); out of band: the others."), "",
-                    "| Model | kind | cost ratio to optimum | ms / query | compile s | no path | "
+                    "| Model | kind | cost ratio to optimum | no path | "
                     "infeasible | invalid | reference failed | in band | success in band | "
-                    "success out of band |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+                    "success out of band |", "|---|---|---|---|---|---|---|---|---|---|"]
             for m in _models(block):
                 for kind in QUERY_KINDS:
                     r = block.get((m, kind))
@@ -288,7 +297,6 @@ def tables_md(rows, comparisons: list[dict] | None = None) -> str:
                         continue
                     fl = r["failures"]
                     out.append(f"| {m} | {kind} | {fixed(r.get('cost_ratio_opt'))} | "
-                               f"{r['seconds_per_query'] * 1e3:.2f} | {r['compile_seconds']:.1f} | "
                                f"{fl.get('no_path', 0)} | {fl.get('infeasible', 0)} | "
                                f"{fl.get('invalid_query', 0)} | {r['reference_failed']} | "
                                + " | ".join(_band_cells(r)) + " |")
@@ -396,13 +404,23 @@ def results_csv(rows, comparisons: list[dict] | None = None) -> str:
     return buf.getvalue()
 
 
+def timings_csv(rows) -> str:
+    """The wall-clock times of the rows (:data:`TIMING_CSV_FIELDS`), one CSV line per row."""
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=TIMING_CSV_FIELDS, extrasaction="ignore")
+    w.writeheader()
+    for r in rows:
+        w.writerow(r)
+    return buf.getvalue()
+
+
 # ---------------------------------------------------------------------------
 # Everything
 # ---------------------------------------------------------------------------
 
 def write_report(run_dir, rows: list[dict], envs: dict | None = None, meta: dict | None = None,
                  figures: bool = True, pairs=DEFAULT_PAIRS) -> dict:
-    """Writes results.json/csv, tables.md/tex and the figures; returns their paths.
+    """Writes results.json/csv, tables.md/tex, timings.csv and the figures; returns their paths.
 
     Args:
         run_dir: the run folder.
@@ -414,7 +432,7 @@ def write_report(run_dir, rows: list[dict], envs: dict | None = None, meta: dict
     """
     run_dir = Path(run_dir)
     out = {name: run_dir / name
-           for name in ("results.json", "results.csv", "tables.md", "tables.tex")}
+           for name in ("results.json", "results.csv", "tables.md", "tables.tex", "timings.csv")}
     comps = comparisons(run_dir, rows, pairs)
     artifacts.write_json(out["results.json"],
                          {"meta": meta or {}, "rows": rows, "comparisons": comps}, indent=1,
@@ -422,6 +440,7 @@ def write_report(run_dir, rows: list[dict], envs: dict | None = None, meta: dict
     artifacts.write_text(out["results.csv"], results_csv(rows, comps))
     artifacts.write_text(out["tables.md"], tables_md(rows, comps))
     artifacts.write_text(out["tables.tex"], tables_tex(rows, comps))
+    artifacts.write_text(out["timings.csv"], timings_csv(rows))
     if figures:
         out.update(_figures(run_dir, rows, envs or {}))
     return out

@@ -45,3 +45,9 @@ def test_the_tutorial_notebook_runs(tmp_path):
     for figure in ("datasets.png", "one_query.png"):
         assert (tmp_path / "tutorial_run" / figure).stat().st_size > 1000
     assert "gamma_nt = " in out.stdout and "PNet_3: solved" in out.stdout
+    # issue 52: a member that finished early is not printed as a NaN loss; the figures are
+    # shown (their paths in plain Python); the closing command names the map's real path
+    assert "PNet_0: validation loss " in out.stdout and "nan" not in out.stdout.lower()
+    assert str(tmp_path / "tutorial_run" / "one_query.png") in out.stdout or \
+        "tutorial_run/one_query.png" in out.stdout
+    assert f"envs=[{(tmp_path / 'tutorial_run' / 'two_rooms.json').resolve()}]" in out.stdout

@@ -172,6 +172,8 @@ def host_rows(x) -> np.ndarray | None:
         return None
     if x.dtype == np.float32 and x.dtype.isnative and x.flags.c_contiguous:
         return x
+    if x.ndim == 0 or x.size == 0:  # nothing to cast in chunks (and no rows to reshape)
+        return np.ascontiguousarray(x, np.float32)
     out = _aligned_empty(x.shape)
     flat_in, flat_out = x.reshape(x.shape[0], -1), out.reshape(x.shape[0], -1)
     for lo in range(0, x.shape[0], _CAST_CHUNK_ROWS):  # chunks stay in cache

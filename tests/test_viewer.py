@@ -111,7 +111,7 @@ def test_export_png_and_gamma_of_a_3d_json(env, tmp_path, capsys):
     first = json.loads(out.read_text())
     assert first["queries"] == 200 and first["chunk"] == gamma.ARM3D_CHUNK
     assert first["check"] == "discretized" and first["resolution"] == 1 / 32
-    assert "one problem" in first["world"]
+    assert "this one problem" in first["world"]
     capsys.readouterr()
     stamp = out.stat().st_mtime_ns
     assert gamma.main(argv + ["--skip-existing"]) == 0

@@ -355,19 +355,7 @@ class Env:
             return Env._from_grid_json(spec, where, base_dir)
         if _is_3d(spec):
             return Env._from_json_3d(spec, where)
-        unknown = sorted(set(spec) - _JSON_KEYS)
-        if unknown:
-            raise EnvError(f"{where}: unknown key(s) {unknown}; allowed: {sorted(_JSON_KEYS)}")
-        for key in ("robot", "bounds"):
-            if key not in spec:
-                raise EnvError(f"{where}: missing required key {key!r}")
-        name = spec.get("name", "custom")
-        if not isinstance(name, str) or not name:
-            raise EnvError(f"{where}: name must be a non-empty string, got {validation.short_repr(name)}")
-        try:
-            robot = robot_from_json(spec["robot"], where=f"{where}: robot")
-        except (TypeError, ValueError) as e:
-            raise EnvError(str(e)) from None
+        name, robot = _name_and_robot(spec, where, _JSON_KEYS, "allowed")
         try:
             validation.check_float32({k: spec.get(k, []) for k in ("bounds", "boxes", "discs")})
             world = World.create(spec["bounds"], spec.get("boxes", []), spec.get("discs", []))
@@ -380,20 +368,7 @@ class Env:
     @staticmethod
     def _from_json_3d(spec: dict[str, Any], where: str) -> "Env":
         """The 3-D form (see the module docstring)."""
-        unknown = sorted(set(spec) - _JSON3D_KEYS)
-        if unknown:
-            raise EnvError(f"{where}: unknown key(s) {unknown}; a 3-D environment allows "
-                           f"{sorted(_JSON3D_KEYS)}")
-        for key in ("robot", "bounds"):
-            if key not in spec:
-                raise EnvError(f"{where}: missing required key {key!r}")
-        name = spec.get("name", "custom")
-        if not isinstance(name, str) or not name:
-            raise EnvError(f"{where}: name must be a non-empty string, got {validation.short_repr(name)}")
-        try:
-            robot = robot_from_json(spec["robot"], where=f"{where}: robot")
-        except (TypeError, ValueError) as e:
-            raise EnvError(str(e)) from None
+        name, robot = _name_and_robot(spec, where, _JSON3D_KEYS, "a 3-D environment allows")
         if robot.kind != "serial_arm":
             raise EnvError(f"{where}: a 3-D world (spheres, cuboids, capsules, 3 bounds rows) "
                            f"needs a 3-D robot (kind 'serial_arm'), got {robot.kind!r}")
@@ -444,6 +419,24 @@ class Env:
 #: The smallest compiled batch size: smaller batches are padded to it
 #: (:data:`ntq_jax.robots.rows.MIN_BUCKET`).
 BUCKET_MIN_ROWS = MIN_BUCKET
+
+
+def _name_and_robot(spec: dict, where: str, keys: set, allowed: str) -> tuple[str, Robot]:
+    """The keys checked against ``keys`` (``allowed``: how the error names them), and the
+    ``name`` and ``robot`` of an environment JSON; one :class:`EnvError` line otherwise."""
+    unknown = sorted(set(spec) - keys)
+    if unknown:
+        raise EnvError(f"{where}: unknown key(s) {unknown}; {allowed}: {sorted(keys)}")
+    for key in ("robot", "bounds"):
+        if key not in spec:
+            raise EnvError(f"{where}: missing required key {key!r}")
+    name = spec.get("name", "custom")
+    if not isinstance(name, str) or not name:
+        raise EnvError(f"{where}: name must be a non-empty string, got {validation.short_repr(name)}")
+    try:
+        return name, robot_from_json(spec["robot"], where=f"{where}: robot")
+    except (TypeError, ValueError) as e:
+        raise EnvError(str(e)) from None
 
 
 def _is_3d(spec: dict) -> bool:

@@ -83,7 +83,9 @@ def _check(public, bare, x_args, bare_args, n: int, what: str):
     assert got.shape == want.shape and np.sum(got != want) <= n // 5_000_000, what
     bound = 1.25 if n >= 1 << 20 else 6.0
     ratio = _ratio(lambda: public(*x_args), lambda: bare(*bare_args))
-    if ratio > bound:  # one more round before failing: a burst on the shared machine
+    for _ in range(2):  # up to two more rounds before failing: bursts on the shared machine
+        if ratio <= bound:
+            break
         ratio = min(ratio, _ratio(lambda: public(*x_args), lambda: bare(*bare_args)))
     assert ratio <= bound, f"{what}: public / bare = {ratio:.2f} > {bound}"
 

@@ -119,18 +119,16 @@ def aligned_period(x: np.ndarray) -> int:
 
 def aligned_head(arrays: Sequence[np.ndarray]) -> int:
     """The first row ``k < HOST_HEAD`` at which every array's data lies on a
-    :data:`HOST_ALIGN` boundary; else the first array's; else 0 (the other
-    arrays' pieces are then copied by the jitted call, answers unchanged)."""
+    :data:`HOST_ALIGN` boundary; else 0: some array's pieces are then copied by the
+    jitted call whatever the start (as a bare call copies it), and starting at row 0
+    keeps the pieces as few as the batch size allows (answers unchanged)."""
     n = arrays[0].shape[0]
     ks = range(min(HOST_HEAD, n))
 
     def aligned(x, k):
         return (x.ctypes.data + k * x.strides[0]) % HOST_ALIGN == 0
 
-    k = next((k for k in ks if all(aligned(x, k) for x in arrays)), None)
-    if k is None:
-        k = next((k for k in ks if aligned(arrays[0], k)), 0)
-    return k
+    return next((k for k in ks if all(aligned(x, k) for x in arrays)), 0)
 
 
 def _aligned_empty(shape: tuple[int, ...], dtype=np.float32) -> np.ndarray:

@@ -203,7 +203,8 @@ def _report(env, padding: float, est, file=None) -> None:
           f"{_peak_gib():.2f} GiB", file=file)
 
 
-def _run(argv) -> int:
+def _parser() -> argparse.ArgumentParser:
+    """The command line's options."""
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--env", default="point/0", help="preset name (point/0..3, rigid/0..3, "
                     "nlink/2|4|6), a Panda problem (panda/<scene>/<number>, e.g. panda/cage/1) "
@@ -228,7 +229,11 @@ def _run(argv) -> int:
     ap.add_argument("--no-compile-cache", action="store_true",
                     help="do not use JAX's persistent compilation cache (~/.cache/ntq_jax/jax; "
                     "a 3-D arm's two programs take about a minute to compile)")
-    args = ap.parse_args(argv)
+    return ap
+
+
+def _run(argv) -> int:
+    args = _parser().parse_args(argv)
     if args.skip_existing and args.json is None:
         raise ScriptError("--skip-existing needs --json (the file a finished run wrote)")
     if args.json is not None:
@@ -284,24 +289,31 @@ def _run(argv) -> int:
     print(f"cpu time {cpu:.1f} s, {est.queries / max(cpu, 1e-9):,.0f} queries per cpu-second "
           "(compilation included; on a shared core the wall-clock rate is lower)")
     if args.json:
-        lo, hi = est.ci95
-        resolution = getattr(env.robot, "resolution", None)
-        out = {"env": env.name, "padding": args.padding, "seed": args.seed,
-               "queries": est.queries, "non_trivial": est.non_trivial, "gamma": est.gamma,
-               "ci95": [lo, hi], "seconds": est.seconds,
-               "queries_per_second": est.queries_per_second,
-               "candidates": est.candidates,
-               "candidates_per_second": est.candidates_per_second,
-               "cpu_seconds": cpu, "first_chunk_seconds": ahead, "streaming_queries_per_second": rate,
-               "chunk": chunk, "resolution": resolution,
-               "check": "exact" if resolution is None else "discretized",
-               "cpus": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None,
-               "version": nj.__version__}
-        if three_d:
-            out["world"] = ("the world of this one problem (the problems of a scene place it "
-                            "differently, and their gamma_nt differ)")
-        artifacts.write_json(args.json, out)
+        artifacts.write_json(args.json, _result_json(env, args, est, chunk, cpu, ahead, rate,
+                                                     three_d))
     return 0
+
+
+def _result_json(env, args, est, chunk: int, cpu: float, ahead, rate, three_d: bool) -> dict:
+    """What ``--json`` writes: the estimate, its interval, rates and the settings."""
+    import ntq_jax as nj
+    lo, hi = est.ci95
+    resolution = getattr(env.robot, "resolution", None)
+    out = {"env": env.name, "padding": args.padding, "seed": args.seed,
+           "queries": est.queries, "non_trivial": est.non_trivial, "gamma": est.gamma,
+           "ci95": [lo, hi], "seconds": est.seconds,
+           "queries_per_second": est.queries_per_second,
+           "candidates": est.candidates,
+           "candidates_per_second": est.candidates_per_second,
+           "cpu_seconds": cpu, "first_chunk_seconds": ahead, "streaming_queries_per_second": rate,
+           "chunk": chunk, "resolution": resolution,
+           "check": "exact" if resolution is None else "discretized",
+           "cpus": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None,
+           "version": nj.__version__}
+    if three_d:
+        out["world"] = ("the world of this one problem (the problems of a scene place it "
+                        "differently, and their gamma_nt differ)")
+    return out
 
 
 def main(argv=None) -> int:

@@ -272,25 +272,7 @@ def draw_scene(env, states=None, path=None, ax=None, *, labels: Sequence[str] | 
                          "arm of collision spheres; draw a planar map with "
                          "ntq_jax.plotting.draw_map")
     d = robot.dim
-    default_labels = None
-    if states is None:
-        if path is not None:
-            p = _states(path, d, "path")
-            states, default_labels = p[[0, -1]], ["start", "goal"]
-        elif getattr(env, "query", None) is not None:
-            states, default_labels = np.asarray(env.query, np.float64), ["start", "goal"]
-        else:
-            states = np.zeros((0, d))
-    states = (np.zeros((0, d)) if np.asarray(states).size == 0
-              else _states(states, d, "states"))
-    if labels is None:
-        labels = default_labels or [f"state {i}" for i in range(len(states))]
-    if len(labels) != len(states):
-        raise ValueError(f"labels: {len(labels)} for {len(states)} states")
-    path = None if path is None else _states(path, d, "path")
-    ghosts = np.zeros((0, d))
-    if path is not None and len(path) > 1 and path_states > 2:
-        ghosts = _along(path, path_states)[1:-1]
+    states, labels, path, ghosts = _drawn_states(env, d, states, path, labels, path_states)
     box = None if limits is None else _limits(limits, world)
 
     plt = _plt()
@@ -313,28 +295,9 @@ def draw_scene(env, states=None, path=None, ax=None, *, labels: Sequence[str] | 
     arm_quads = unit[None] * radii[:, None, None, None]  # (S, F, 4, 3)
 
     drawn = np.concatenate([ghosts, states]) if len(ghosts) + len(states) else np.zeros((0, d))
-    touching = np.zeros(len(drawn), int)  # spheres touching an obstacle, per drawn state
     with bar:
-        if len(drawn):
-            centres, clear = _arm_kernel(robot)(np.asarray(drawn, np.float32), world,
-                                                float(env.padding))
-            centres, clear = np.asarray(centres, np.float64), np.asarray(clear)
-            for i in range(len(drawn)):
-                ghost = i < len(ghosts)
-                if ghost:  # fades in towards the goal
-                    alpha = 0.12 + 0.23 * (i + 1) / (len(ghosts) + 1)
-                    base = to_rgba(PATH_COLOR, alpha)
-                else:
-                    base = to_rgba(STATE_COLORS[(i - len(ghosts)) % len(STATE_COLORS)], 0.9)
-                q = (arm_quads + centres[i][:, None, None, :]).reshape(-1, 4, 3)
-                rgba = np.tile(base, (len(radii), arm_quads.shape[1], 1))
-                if mark_collisions:
-                    hit = clear[i] <= 0
-                    touching[i] = int(hit.sum())
-                    rgba[hit] = to_rgba(COLLISION_COLOR, max(base[3], 0.6))
-                quads.append(q)
-                colors.append(rgba.reshape(-1, 4))
-                bar.update(1)
+        touching = _arm_faces(env, drawn, len(ghosts), arm_quads, mark_collisions, quads, colors,
+                              bar)
     faces = np.concatenate(quads)
     face_colors = _shade(faces, np.concatenate(colors))
     coll = Poly3DCollection(faces, facecolors=face_colors, edgecolors="none", linewidths=0,
@@ -359,17 +322,80 @@ def draw_scene(env, states=None, path=None, ax=None, *, labels: Sequence[str] | 
             f"an obstacle: {touching[len(ghosts):].tolist()} in the {len(states)} states, "
             f"{touching[:len(ghosts)].tolist()} in the {len(ghosts)} path states")
 
-    _equal_axes(ax, np.concatenate(points) if box is None else box)
-    elev, azim = auto_view(world) if view is None else view
-    ax.view_init(elev=elev, azim=azim)
+    _finish_axes(ax, np.concatenate(points) if box is None else box,
+                 auto_view(world) if view is None else view,
+                 getattr(env, "name", "") if title is None else title, handles if legend else None)
+    return fig
+
+
+def _arm_faces(env, drawn: np.ndarray, n_ghosts: int, arm_quads: np.ndarray,
+               mark_collisions: bool, quads: list, colors: list, bar) -> np.ndarray:
+    """Appends the arm's sphere faces at each ``drawn`` state (the first ``n_ghosts`` faded
+    path states, then the states in their colours) to ``quads`` and their colours to
+    ``colors``; returns the number of spheres touching an obstacle per drawn state."""
+    from matplotlib.colors import to_rgba
+
+    touching = np.zeros(len(drawn), int)
+    if not len(drawn):
+        return touching
+    centres, clear = _arm_kernel(env.robot)(np.asarray(drawn, np.float32), env.world,
+                                            float(env.padding))
+    centres, clear = np.asarray(centres, np.float64), np.asarray(clear)
+    for i in range(len(drawn)):
+        if i < n_ghosts:  # fades in towards the goal
+            base = to_rgba(PATH_COLOR, 0.12 + 0.23 * (i + 1) / (n_ghosts + 1))
+        else:
+            base = to_rgba(STATE_COLORS[(i - n_ghosts) % len(STATE_COLORS)], 0.9)
+        q = (arm_quads + centres[i][:, None, None, :]).reshape(-1, 4, 3)
+        rgba = np.tile(base, (arm_quads.shape[0], arm_quads.shape[1], 1))
+        if mark_collisions:
+            hit = clear[i] <= 0
+            touching[i] = int(hit.sum())
+            rgba[hit] = to_rgba(COLLISION_COLOR, max(base[3], 0.6))
+        quads.append(q)
+        colors.append(rgba.reshape(-1, 4))
+        bar.update(1)
+    return touching
+
+
+def _drawn_states(env, d: int, states, path, labels, path_states: int):
+    """``(states, labels, path, ghosts)`` of :func:`draw_scene` from its arguments: the
+    states (default: the path's ends, else ``env.query``), one label each, the checked
+    path and the ``path_states - 2`` faded states spread along it."""
+    default_labels = None
+    if states is None:
+        if path is not None:
+            p = _states(path, d, "path")
+            states, default_labels = p[[0, -1]], ["start", "goal"]
+        elif getattr(env, "query", None) is not None:
+            states, default_labels = np.asarray(env.query, np.float64), ["start", "goal"]
+        else:
+            states = np.zeros((0, d))
+    states = (np.zeros((0, d)) if np.asarray(states).size == 0
+              else _states(states, d, "states"))
+    if labels is None:
+        labels = default_labels or [f"state {i}" for i in range(len(states))]
+    if len(labels) != len(states):
+        raise ValueError(f"labels: {len(labels)} for {len(states)} states")
+    path = None if path is None else _states(path, d, "path")
+    ghosts = np.zeros((0, d))
+    if path is not None and len(path) > 1 and path_states > 2:
+        ghosts = _along(path, path_states)[1:-1]
+    return states, labels, path, ghosts
+
+
+def _finish_axes(ax, points: np.ndarray, view: tuple[float, float], title: str, handles):
+    """Equal metric axes around ``points``, the view ``(elevation, azimuth)``, labels in
+    metres, the title and (unless ``handles`` is None) the legend."""
+    _equal_axes(ax, points)
+    ax.view_init(elev=view[0], azim=view[1])
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.zaxis.set_rotate_label(False)  # else it reads "(m) z" from some views
     ax.set_zlabel("z (m)", rotation=90)
-    ax.set_title(getattr(env, "name", "") if title is None else title)
-    if legend:
+    ax.set_title(title)
+    if handles is not None:
         ax.legend(handles=handles, loc="upper left", fontsize=8, framealpha=0.85)
-    return fig
 
 
 def _limits(limits, world) -> np.ndarray:

@@ -46,7 +46,15 @@ from ntq_jax.robots.base import _longest_first
 
 Array = jax.Array
 
-CERT_LANES = 512  # lanes of the work queue's first phase
+CERT_LANES = 512  # lanes of the work queue's first phase (at most; see CERT_LANE_BYTES)
+#: Bytes of per-part clearances (``points x parts x lanes`` float32) that the lanes of
+#: either phase may hold per iteration: robots with many parts run fewer lanes (a power of
+#: two, at least :data:`CERT_MIN_LANES`), so each iteration's clearances stay in the core's
+#: cache. The Panda's 749 parts: 4 lanes in the first phase and 2 in the second, ~10x the
+#: motions per CPU second of 512 and 32 lanes (12 MB and 3 MB per iteration); the rigid body
+#: and the planar arms keep 512 and 32.
+CERT_LANE_BYTES = 1 << 17
+CERT_MIN_LANES = 2
 CERT_POINTS = 8  # configurations each lane evaluates per iteration
 CERT_GROWTH = 1.5  # initial step of the sweep: CERT_GROWTH * c(front) / D (see certified_steer_to_batch)
 CERT_PHASE_STEPS = 48  # iterations per motion in the wide first phase
@@ -123,14 +131,24 @@ def certified_steer_to_batch(robot, a: Array, b: Array, world: World, padding: f
     hard = ok & ~easy
     sweep = _Sweep(robot, part_clearances, a, b, world, padding, cb, dist, points, margin)
     g0 = jnp.full((num,), growth, a.dtype)
+    lanes = min(lanes, cache_lanes(ca.shape[0], points))
     free, left, lo, clo, g = sweep.run(hard, jnp.zeros((num,), a.dtype), ca, g0, True,
                                        min(lanes, num), phase_steps)
     tail_steps = (max_evals - phase_steps * points) // tail_points
     if tail_steps > 0:
         tail = _Sweep(robot, part_clearances, a, b, world, padding, cb, dist, tail_points, margin)
-        free2, left, _, _, _ = tail.run(left, lo, clo, g, False, min(tail_lanes, num), tail_steps)
+        tail_lanes = min(tail_lanes, cache_lanes(ca.shape[0], tail_points), num)
+        free2, left, _, _, _ = tail.run(left, lo, clo, g, False, tail_lanes, tail_steps)
         free = free | free2
     return easy | free
+
+
+def cache_lanes(parts: int, points: int) -> int:
+    """The most lanes (a power of two >= :data:`CERT_MIN_LANES`) whose ``points x parts``
+    float32 clearances fit in :data:`CERT_LANE_BYTES`. Lanes only schedule the motions
+    (each motion's sweep is its own), so the answers do not depend on them."""
+    fit = max(1, CERT_LANE_BYTES // (4 * parts * points))
+    return max(CERT_MIN_LANES, 1 << (fit.bit_length() - 1))
 
 
 class _Sweep:

@@ -7,7 +7,7 @@
 Per map: the roadmap of ``plan(env, q, "roadmap")`` (``--milestones``, default
 20,000; k by PRM*'s rule; roadmap seed 0), the benchmark's non-trivial queries
 (``env.sample_queries(key(0), n, p_nt=1)``, as ``bench_roadmap.py``) and their
-checked end edges (``roadmap._query_edges``, timed once: the motion checks the
+checked end edges (``roadmap_ends.query_edges``, timed once: the motion checks the
 search starts from). Then, in this process, on the same graph and queries, with
 ``--threads`` threads each:
 
@@ -81,6 +81,7 @@ def bench_map(name: str, args) -> None:
     import ntq_jax
     from ntq_jax.planners import graph_search as G
     from ntq_jax.planners import roadmap as R
+    from ntq_jax.planners import roadmap_ends as RE
 
     env = ntq_jax.make_env(name)
     padding = env.resolve_padding(None)
@@ -92,7 +93,8 @@ def bench_map(name: str, args) -> None:
     q, _ = env.sample_queries(jax.random.key(0), args.queries, p_nt=1.0)
     q = np.asarray(q, np.float32)
     t0 = time.perf_counter()
-    qe = R._query_edges(env.robot, env.world, rm, q, k, padding, "discretized")
+    index = R.MetricIndex(env.robot, env.world, rm.milestones)
+    qe = RE.query_edges(env.robot, env.world, rm, index, q, k, padding, "discretized").edges
     t_edges = time.perf_counter() - t0
     n = len(rm.milestones)
     metric = G.heuristic_metric(env.robot)

@@ -17,6 +17,7 @@ from scipy.sparse.csgraph import dijkstra
 import ntq_jax as nj
 from ntq_jax.planners import graph_search as G
 from ntq_jax.planners import roadmap as R
+from ntq_jax.planners import roadmap_ends as RE
 from ntq_jax.robots.batch import distances
 
 
@@ -162,8 +163,9 @@ def test_roadmap_search_cost_equals_dijkstra(name):
                        roadmap_seed=0)
     q, _ = env.sample_queries(jax.random.key(0), 60, p_nt=0.7)
     q = np.asarray(q, np.float32)
-    qe = R._query_edges(env.robot, env.world, rm, q, R.prm_star_k(1500, env.dim), padding,
-                        "discretized")
+    index = R.MetricIndex(env.robot, env.world, rm.milestones)
+    qe = RE.query_edges(env.robot, env.world, rm, index, q, R.prm_star_k(1500, env.dim), padding,
+                        "discretized").edges
     got, _ = _check(len(rm.milestones), rm.edges, rm.costs, rm.milestones, q[:, 1], qe,
                     G.heuristic_metric(env.robot))
     assert np.isfinite(got).mean() > 0.8

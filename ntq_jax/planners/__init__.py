@@ -8,6 +8,7 @@ Usage::
     res = ntq_jax.plan(env, queries, "visgraph", padding=0)  # exact point-robot optimum
     res = ntq_jax.plan(env, queries, "bitstar", time_budget=2.0, workers=2)
     res = ntq_jax.plan(env, queries, "roadmap", milestones=20_000)  # any robot, many queries
+    res = ntq_jax.plan(panda, panda.query[None], "bitree", check="certified")  # one query a map
 
 Every planner takes ``queries`` ``(K, 2, d)`` (start, goal) and returns a
 :class:`PlanResult` with, per query, a NaN-padded path (start first and goal
@@ -50,7 +51,25 @@ Planners
     environment and settings (cached in memory, and on disk with ``cache_dir``),
     A* per query (the robot's metric to the goal as heuristic), shortcutting.
     Options: ``milestones`` (default 20,000), ``k`` (default PRM*'s rule),
-    ``grow_rounds``, ``roadmap_seed``, ``cache_dir``.
+    ``grow_rounds``, ``roadmap_seed``, ``cache_dir``, ``attach``, ``edge_check``,
+    ``end_rounds``; a 3-D serial arm (the Panda) has its own defaults
+    (``roadmap.ARM_DEFAULTS``: 4,000 milestones, k 10, discretised edges with only
+    the final segments checked by ``check``, e.g. certified).
+``"bitree"`` (any robot; one query per map, e.g. MotionBenchMaker's problems)
+    :func:`ntq_jax.planners.bitree.plan_bitree`: a batched bidirectional tree
+    (RRT-Connect-like) and its shortcut in one compiled program per query, retried
+    with the next key when the trees do not meet or the path fails ``check``.
+    Options: ``batch``, ``step``, ``capacity``, ``iterations``, ``attempts``,
+    ``path_cap``, ``split``.
+``"rrtconnect"`` (point robot, n-link arm, serial arm; OMPL in this process)
+    :func:`ntq_jax.planners.ompl_rrtconnect.plan_rrtconnect`: OMPL's RRT-Connect
+    and path simplification on the package's JAX validity and discretised motion
+    checks, one compiled call per callback: the in-CI peer for the Panda. Options:
+    ``time_budget``, ``simplify``, ``range_``, ``ompl_log_level``.
+``"vamp"`` (the Panda; needs ``vamp``, built from source)
+    :func:`ntq_jax.planners.vamp_bridge.plan_vamp`: VAMP's RRT-Connect and
+    simplification, its paths verified by the package. Options: ``simplify``,
+    ``sampler``.
 
 Register your own with :func:`register_planner`. Measurements: BENCHMARKS.md
 ("Classical planners").

@@ -54,16 +54,18 @@ class HeuristicMetric(NamedTuple):
 def heuristic_metric(robot) -> HeuristicMetric:
     """The robot's cost metric as a :class:`HeuristicMetric`.
 
-    Point robot and n-link arm: the Euclidean distance of the states. Rigid
-    body: ``||dxy|| + angle_weight * |wrapped dtheta|``. Any other robot: the
-    zero metric (admissible for every robot; the search is then Dijkstra).
+    Point robot, n-link arm and 3-D serial arm: the Euclidean distance of the states
+    (the serial arm's joint distance). Rigid body: ``||dxy|| + angle_weight * |wrapped
+    dtheta|``. Any other robot: the zero metric (admissible for every robot; the search
+    is then Dijkstra).
     """
     from ntq_jax.robots.nlink import NLinkArm
     from ntq_jax.robots.point import PointRobot
     from ntq_jax.robots.rigid_body import RigidBody
+    from ntq_jax.robots.serial_arm import SerialArm
 
     d = int(robot.dim)
-    if isinstance(robot, (PointRobot, NLinkArm)):
+    if isinstance(robot, (PointRobot, NLinkArm, SerialArm)):
         return HeuristicMetric(np.ones(d), np.zeros(d, bool), np.zeros(d, np.int64))
     if isinstance(robot, RigidBody):
         return HeuristicMetric(np.array([1.0, 1.0, float(robot.angle_weight)]),

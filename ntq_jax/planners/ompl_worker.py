@@ -59,14 +59,17 @@ def _set_ompl_log_level(ou, level: str) -> None:
 
 
 class OmplProblem:
-    """BIT* on one environment, padding and budget; :meth:`solve` plans one query.
+    """BIT* (or RRT-Connect) on one environment, padding and budget; :meth:`solve` plans one query.
 
     Usable in-process too (it imports ``ompl`` when constructed), e.g. to
     benchmark; :func:`ntq_jax.planners.ompl_bridge.plan_bitstar` runs it in
-    worker processes.
+    worker processes, :func:`ntq_jax.planners.ompl_rrtconnect.plan_rrtconnect` in
+    its own process with the package's JAX kernels.
 
     Args:
-        checker: the :class:`NumpyChecker` of the environment at the planning padding.
+        checker: the :class:`NumpyChecker` of the environment at the planning padding,
+            or a :class:`~ntq_jax.planners.ompl_checker_jax.JaxChecker` (a robot with a
+            real-vector space: ``checker.bounds`` ``(d, 2)`` is the box).
         time_budget: seconds of ``solve`` per query. BIT* keeps improving its
             solution for the whole budget unless ``stop_on_first``; either way it
             returns at once when its solution is provably optimal (a 2-state path).
@@ -75,10 +78,19 @@ class OmplProblem:
             ``"ompl"`` (OMPL's discrete motion validator calling the Python state
             callback at ``robot.resolution``; for comparisons only).
         log_level: OMPL's log level (``"error"``, ``"warn"``, ``"info"``, ...).
+        planner: ``"bitstar"`` (default) or ``"rrtconnect"`` (OMPL's RRT-Connect: it
+            returns at its first solution).
+        simplify: simplify a found path with OMPL's ``PathSimplifier.simplifyMax``
+            (vertex reduction, shortcuts, B-spline smoothing; every new motion checked
+            by the same motion validator) before it is returned.
+        range_: RRT-Connect's longest extension (None: OMPL's default, a fifth of
+            the space's extent).
     """
 
     def __init__(self, checker: NumpyChecker, time_budget: float, stop_on_first: bool = False,
-                 motion_validator: str = "python", log_level: str = "error"):
+                 motion_validator: str = "python", log_level: str = "error",
+                 planner: str = "bitstar", simplify: bool = False,
+                 range_: float | None = None):
         import ompl.base as ob
         import ompl.geometric as og
         import ompl.util as ou
@@ -86,6 +98,9 @@ class OmplProblem:
         if motion_validator not in ("python", "ompl"):
             raise ValueError("motion_validator must be 'python' or 'ompl', "
                              f"got {motion_validator!r}")
+        if planner not in ("bitstar", "rrtconnect"):
+            raise ValueError(f"planner must be 'bitstar' or 'rrtconnect', got {planner!r}")
+        self.planner, self.simplify, self.range = planner, bool(simplify), range_
         self.ob, self.og, self.ou = ob, og, ou
         _set_ompl_log_level(ou, log_level)
         self._log_level = log_level
@@ -143,6 +158,9 @@ class OmplProblem:
             if checker.kind == "nlink":  # the kernel's float32 bound, so queries at +-pi are inside
                 bnd.setLow(i, -PI32)
                 bnd.setHigh(i, PI32)
+            elif checker.kind == "serial_arm":  # the joint limits, as float32 (the kernel's)
+                bnd.setLow(i, float(np.float32(checker.bounds[i, 0])))
+                bnd.setHigh(i, float(np.float32(checker.bounds[i, 1])))
             else:
                 bnd.setLow(i, float(checker.bounds[i, 0]))
                 bnd.setHigh(i, float(checker.bounds[i, 1]))
@@ -180,12 +198,14 @@ class OmplProblem:
     def solve(self, start, goal, seed: int | None = None) -> dict[str, Any]:
         """Plans one query. Returns a dict: ``outcome`` (a :class:`BridgeOutcome` value),
         ``path`` ((L, d) float64, exactly ``start`` first and ``goal`` last, or None),
-        ``planner_cost`` (BIT*'s own path length), ``solve_time``, ``n_valid``/``n_motion``
-        (Python callbacks in this query) and ``n_edges`` (motions BIT* checked)."""
+        ``planner_cost`` (the planner's own path length, after simplification when
+        ``simplify``), ``solve_time``, ``simplify_time``, ``n_valid``/``n_motion``
+        (Python callbacks in this query) and ``n_edges`` (motions the planner checked)."""
         start = np.asarray(start, np.float64)
         goal = np.asarray(goal, np.float64)
         out = {"outcome": int(BridgeOutcome.NOT_FOUND), "path": None, "planner_cost": math.inf,
-               "solve_time": 0.0, "n_valid": 0, "n_motion": 0, "n_edges": 0}
+               "solve_time": 0.0, "simplify_time": 0.0, "n_valid": 0, "n_motion": 0,
+               "n_edges": 0}
         if not (self.checker.is_valid(start) and self.checker.is_valid(goal)):
             out["outcome"] = int(BridgeOutcome.BAD_QUERY)
             return out
@@ -196,6 +216,10 @@ class OmplProblem:
         t0 = time.perf_counter()
         ss.solve(self.time_budget)
         out["solve_time"] = time.perf_counter() - t0
+        if self.simplify and ss.haveExactSolutionPath():
+            t1 = time.perf_counter()
+            self.og.PathSimplifier(si).simplifyMax(ss.getSolutionPath())
+            out["simplify_time"] = time.perf_counter() - t1
         out["n_valid"] = self.n_valid - n_valid0
         out["n_motion"] = self.n_motion - n_motion0
         # edges checked by BIT* (OMPL counts them only in its own motion validators)
@@ -238,9 +262,14 @@ class OmplProblem:
         self._put(g, goal)
         ss.setStartAndGoalStates(s, g)
         ss.setOptimizationObjective(ob.PathLengthOptimizationObjective(si))
-        planner = og.BITstar(si)
-        if self.stop_on_first:
-            planner.setStopOnSolnImprovement(True)
+        if self.planner == "rrtconnect":
+            planner = og.RRTConnect(si)
+            if self.range is not None:
+                planner.setRange(float(self.range))
+        else:
+            planner = og.BITstar(si)
+            if self.stop_on_first:
+                planner.setStopOnSolnImprovement(True)
         ss.setPlanner(planner)
         return ss, si, mv, (planner, s, g)
 

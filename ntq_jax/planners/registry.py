@@ -1,6 +1,7 @@
 """The planner registry behind :func:`ntq_jax.planners.plan`: names to planner functions.
 
-The built-in planners (``"astar"``, ``"visgraph"``, ``"bitstar"``, ``"roadmap"``) are
+The built-in planners (``"astar"``, ``"visgraph"``, ``"bitstar"``, ``"roadmap"``,
+``"bitree"``, ``"rrtconnect"``, ``"vamp"``) are
 registered when this module is imported; :func:`register_planner` adds a user's own.
 See :mod:`ntq_jax.planners` for each planner and its options.
 """
@@ -9,7 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ntq_jax.planners import astar, ompl_bridge, roadmap, visgraph
+from ntq_jax.planners import (astar, bitree, ompl_bridge, ompl_rrtconnect, roadmap, vamp_bridge,
+                              visgraph)
 from ntq_jax.planners.options import check_option_names
 from ntq_jax.validation import check_count
 from ntq_jax.types import PlannerFn, PlanResult
@@ -80,3 +82,6 @@ register_planner("astar", astar.plan_astar)
 register_planner("visgraph", visgraph.plan_visgraph)
 register_planner("bitstar", ompl_bridge.plan_bitstar)
 register_planner("roadmap", roadmap.plan_roadmap)
+register_planner("bitree", bitree.plan_bitree)
+register_planner("rrtconnect", ompl_rrtconnect.plan_rrtconnect)
+register_planner("vamp", vamp_bridge.plan_vamp)

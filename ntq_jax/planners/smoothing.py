@@ -20,8 +20,9 @@ not report such a path as solved.
 Vectorisation: :func:`shortcut_paths` (the host entry point every planner uses)
 runs the rule in rounds: each round checks, for every path not yet at its goal,
 the connections from its current waypoint to all its later waypoints, the
-connections of all paths in one call of :func:`ntq_jax.robots.batch.steer_to_pairs`
-(the motion check's one shared compiled program), so shortcutting adds no
+connections of all paths in one call of :func:`ntq_jax.planners.verify.motions_free`
+(the planners' batched check, whose compiled programs every planner and the path
+verification share), so shortcutting adds no
 program of its own. :func:`shortcut_batch` is the traceable core for jitted
 callers (the neural planner): the same rule in one ``lax.while_loop`` over a
 batch of ``B`` NaN-padded paths ``(B, L, d)``, each iteration checking ``B * L``
@@ -37,7 +38,8 @@ import numpy as np
 from jax import lax
 
 from ntq_jax.geometry import KERNEL_COMPILER_OPTIONS, World
-from ntq_jax.robots.batch import steer_to_cm, steer_to_pairs
+from ntq_jax.planners.verify import motions_free
+from ntq_jax.robots.batch import steer_to_cm
 
 Array = jax.Array
 
@@ -106,16 +108,16 @@ shortcut.__doc__ = shortcut_batch.__doc__
 
 
 def shortcut_paths(robot, world: World, paths, lengths, padding: float, *,
-                   chunk_size: int = SHORTCUT_GROUP, check: str = "discretized"
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                   chunk_size: int = SHORTCUT_GROUP, check: str = "discretized",
+                   return_index: bool = False) -> tuple[np.ndarray, ...]:
     """Shortcuts a batch of NaN-padded paths (greedy farthest-visible rule), any batch size.
 
     The same rule and the same waypoints as :func:`shortcut_batch`, driven from the
     host: in each round, every path not yet at its goal checks the connections
     from its current waypoint to all its later waypoints, and the connections of
-    all paths of a group go through :func:`ntq_jax.robots.batch.steer_to_pairs`
-    together (its one compiled program per robot, map, padding and check, shared
-    with every other caller), so shortcutting compiles nothing of its own. A
+    all paths of a group go through :func:`ntq_jax.planners.verify.motions_free`
+    together (its compiled program per robot, map, padding and check, shared with
+    the path verification), so shortcutting compiles nothing of its own. A
     round's answers are exactly those of the check the traced core makes.
 
     Args:
@@ -127,10 +129,16 @@ def shortcut_paths(robot, world: World, paths, lengths, padding: float, *,
             ``chunk_size * L`` connections at once); the answers do not depend on it.
         check: the motion check (see :func:`ntq_jax.robots.batch.motion_check`).
 
+        return_index: also return ``index (B, L') int32``, the input waypoint each kept
+            waypoint is (-1 after the path's end): what a caller needs to put back
+            the waypoints a shortcut skipped (:func:`ntq_jax.planners.verify.finalize`'s
+            ``fallback``).
+
     Returns:
         ``(paths (B, L', d) float32 NaN-padded, lengths (B,) int32, ok (B,) bool)``
         with ``L' <= L`` the longest smoothed path (at least 2 when B > 0); ``ok``
-        is False where an input connection was blocked (see the module docstring).
+        is False where an input connection was blocked (see the module docstring);
+        and ``index`` with ``return_index``.
     """
     d = robot.dim
     p = np.asarray(paths, np.float32)
@@ -140,7 +148,8 @@ def shortcut_paths(robot, world: World, paths, lengths, padding: float, *,
                          f"and {n_in.shape}")
     bsz = p.shape[0]
     if bsz == 0:
-        return np.zeros((0, 2, d), np.float32), np.zeros(0, np.int32), np.zeros(0, bool)
+        out = np.zeros((0, 2, d), np.float32), np.zeros(0, np.int32), np.zeros(0, bool)
+        return out + (np.zeros((0, 2), np.int32),) if return_index else out
     chunk = int(chunk_size)
     if chunk < 1:
         raise ValueError(f"chunk_size must be >= 1, got {chunk_size}")
@@ -158,7 +167,10 @@ def shortcut_paths(robot, world: World, paths, lengths, padding: float, *,
     if take.shape[1] < width:
         take = np.pad(take, ((0, 0), (0, width - take.shape[1])))
     out = np.take_along_axis(p, take[:, :, None], axis=1) if p.shape[1] else np.zeros((bsz, width, d), np.float32)
-    out = np.where((cols[None, :] < n_out[:, None])[:, :, None], out, np.float32(np.nan))
+    inside = cols[None, :] < n_out[:, None]
+    out = np.where(inside[:, :, None], out, np.float32(np.nan))
+    if return_index:
+        return out.astype(np.float32), n_out, ok, np.where(inside, take, -1).astype(np.int32)
     return out.astype(np.float32), n_out, ok
 
 
@@ -172,8 +184,8 @@ def _greedy_rounds(robot, world, p, n_in, rows, keep, n_out, ok, padding, check)
         count = n_in[r] - 1 - c  # the later waypoints of each live path
         owner = np.repeat(np.arange(len(r)), count)
         j = c[owner] + 1 + (np.arange(owner.size) - np.repeat(np.cumsum(count) - count, count))
-        vis = steer_to_pairs(robot, world, p[r[owner], c[owner]], p[r[owner], j], padding,
-                             check=check)
+        vis = motions_free(robot, world, p[r[owner], c[owner]], p[r[owner], j], padding,
+                           check=check)
         far = np.full(len(r), -1, np.int64)
         np.maximum.at(far, owner[vis], j[vis])
         seen = far > c

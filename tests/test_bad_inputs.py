@@ -678,7 +678,7 @@ def test_api_query_arguments_accept_numpy_ints(point_env):
     ("bitstar", {"time_budget": 0}, ValueError, r"bitstar: time_budget must be a finite number > 0"),
     ("bitstar", {"chunk_size": 0}, ValueError, r"bitstar: chunk_size must be an int >= 1, got 0"),
     ("bitstar", {"stop_on_first": "yes"}, TypeError, r"bitstar: stop_on_first must be True or False"),
-    ("nope", {}, ValueError, r"unknown planner 'nope'; available: astar, bitstar, roadmap, visgraph"),
+    ("nope", {}, ValueError, r"unknown planner 'nope'; available: astar, .*bitstar, roadmap, .*visgraph"),
     ("astar", {"seed": 1.5}, TypeError, r"seed must be an int >= 0"),
 ], ids=lambda v: v if isinstance(v, str) else None)
 def test_api_plan_options(point_env, planner, options, exc, message):
@@ -704,6 +704,44 @@ def test_api_plan_astar_smallest_grid_plans(point_env):
     q, _ = point_env.sample_queries(KEY, 2)
     res = nj.plan(point_env, q, "astar", resolution=10)
     assert res.info["grid_shape"] == (2, 2) and res.status.shape == (2,)
+
+
+def test_api_roadmap_beyond_memory_is_refused_before_any_work(point_env, monkeypatch):
+    """issue 52, rough edge 2: ``milestones=10**12`` ran 455 s, then blamed "free space is
+    too small"; now one ValueError naming the option, the bytes and the fix, before any
+    roadmap is built, also when only the growth rounds' doublings would not fit."""
+    import re
+
+    from ntq_jax.planners import options
+    from ntq_jax.planners import roadmap as R
+
+    def built(*args, **kwargs):
+        raise AssertionError("roadmap built")
+
+    monkeypatch.setattr(R, "roadmap_for", built)  # the check must come before any roadmap
+    q, _ = point_env.sample_queries(KEY, 2)
+    with pytest.raises(ValueError) as err:  # this machine's own available memory
+        nj.plan(point_env, q, "roadmap", milestones=10**12)
+    msg = str(err.value)
+    assert "\n" not in msg and msg.startswith("roadmap: milestones 1,000,000,000,000 would need"), msg
+    assert re.search(r"at least [\d,]+ bytes .* of memory available; use milestones <= ", msg), msg
+    # the default settings (2 growth rounds) pass with 1 GB: about 0.3 GB in 7-D with k 30
+    options.roadmap_memory_option("roadmap", R.DEFAULT_MILESTONES, 7, 30, grow_rounds=2,
+                                  available=10**9)
+
+    m, k = 10**6, 10  # memory for exactly this roadmap's first round
+    monkeypatch.setattr(options, "available_memory", lambda: options.roadmap_bytes(m, 2, k))
+    with pytest.raises(AssertionError, match="roadmap built"):  # round 0 fits: work starts
+        nj.plan(point_env, q, "roadmap", milestones=m, k=k, grow_rounds=0)
+    with pytest.raises(ValueError, match=r"roadmap: milestones 1,000,000 .* after 1 growth round "
+                                         r"\(2,000,000 states\).* or fewer grow_rounds$") as err:
+        nj.plan(point_env, q, "roadmap", milestones=m, k=k, grow_rounds=1)
+    most = int(re.search(r"use milestones <= ([\d,]+)", str(err.value))[1].replace(",", ""))
+    assert m // 3 < most < m  # the advice fits, one more does not
+    with pytest.raises(AssertionError, match="roadmap built"):
+        nj.plan(point_env, q, "roadmap", milestones=most, k=k, grow_rounds=1)
+    with pytest.raises(ValueError, match=f"milestones {most + 1:,} would need"):
+        nj.plan(point_env, q, "roadmap", milestones=most + 1, k=k, grow_rounds=1)
 
 
 BITSTAR_SCRIPT = """\

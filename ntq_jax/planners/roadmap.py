@@ -45,7 +45,8 @@ from ntq_jax import artifacts
 from ntq_jax.geometry import World
 from ntq_jax.planners.env_cache import EnvCache
 from ntq_jax.planners.graph_search import heuristic_metric, search_graph, shortest_paths
-from ntq_jax.planners.options import bool_option, int_option, motion_check_option
+from ntq_jax.planners.options import (bool_option, int_option, motion_check_option,
+                                     roadmap_memory_option)
 from ntq_jax.planners.roadmap_ends import query_edges
 from ntq_jax.planners.smoothing import SHORTCUT_GROUP, shortcut_paths
 from ntq_jax.planners.verify import finalize, motions_free, valid_queries
@@ -340,9 +341,10 @@ def plan_roadmap(env, queries, *, padding: float | None = None, seed: int = 0,
     q = np.asarray(queries, np.float32)
     t0 = time.perf_counter()
     nq, d = q.shape[0], q.shape[2]
+    opts["k"] = prm_star_k(opts["milestones"], d) if k is None else int(k)
+    roadmap_memory_option("roadmap", opts["milestones"], d, opts["k"], opts["grow_rounds"])
     status = np.full(nq, PlanStatus.NO_PATH, np.int8)
     status[~valid_queries(env, q, padding)] = PlanStatus.INVALID
-    opts["k"] = prm_star_k(opts["milestones"], d) if k is None else int(k)
     info: dict = {"planner": "roadmap", "milestones": opts["milestones"], "k": opts["k"],
                   "attach": opts["attach"], "edge_check": opts["edge_check"],
                   "end_rounds": opts["end_rounds"], "rounds": 0, "build_time": 0.0,

@@ -68,9 +68,11 @@ CONNECT_PIECES = 1
 #: ``batch`` extensions per iteration, ``step`` the longest extension (VAMP's and OMPL's
 #: RRT-Connect range for the Panda: 1 rad), ``capacity`` nodes per tree, ``iterations``
 #: per attempt, ``attempts`` per query, ``path_cap`` waypoints of a raw path, ``split``
-#: parts per segment before each of the two shortcut passes.
+#: parts per segment before each of the two shortcut passes. ``attempts`` 12: on
+#: MotionBenchMaker's 699 valid problems (certified), 4 attempts solved 684 and 12 solved
+#: 693; 601 of the 693 needed one attempt, so the extra ones cost only the hard problems.
 BITREE_DEFAULTS = {"batch": 16, "step": 1.0, "capacity": 1024, "iterations": 128,
-                   "attempts": 4, "path_cap": 64, "split": 4}
+                   "attempts": 12, "path_cap": 64, "split": 4}
 
 
 def _nearest(tree: jax.Array, count: jax.Array, x: jax.Array) -> jax.Array:

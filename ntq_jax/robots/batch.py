@@ -149,13 +149,16 @@ def _certified(arrays) -> RowPlan:
     return plan
 
 
-def _flexible(arrays) -> RowPlan:
-    """Pieces of :data:`~ntq_jax.robots.rows.PIECE_MIN` to ``PIECE_MAX`` rows and an edge
-    padded by less than a quarter (a few compiled shapes per power of two)."""
+def _flexible(arrays, robot=None) -> RowPlan:
+    """Pieces of :data:`~ntq_jax.robots.rows.PIECE_MIN` to ``PIECE_MAX`` rows (or the
+    robot's ``row_piece_max``, when it has one and it is smaller) and an edge padded by
+    less than a quarter (a few compiled shapes per power of two)."""
     n = arrays[0].shape[0]
+    top = min(rows.PIECE_MAX, getattr(robot, "row_piece_max", rows.PIECE_MAX))
+    top = max(rows.PIECE_MIN, top)
     if n < rows.PIECE_MIN:
-        return plan_rows(n, 0, rows.PIECE_MAX, rows.PIECE_MIN)
-    return plan_rows(n, aligned_head(arrays), rows.PIECE_MAX, rows.PIECE_MIN,
+        return plan_rows(n, 0, top, rows.PIECE_MIN)
+    return plan_rows(n, aligned_head(arrays), top, rows.PIECE_MIN,
                      period=aligned_period(arrays[0]))
 
 
@@ -170,7 +173,7 @@ def steer_rows(robot, world: World, a: np.ndarray, b: np.ndarray, padding: float
     ``whole``: ``a`` and ``b`` as the JAX arrays they are views of, if they are
     (see :func:`~ntq_jax.robots.rows.run_rows`).
     """
-    plan = _certified([a, b]) if check == "certified" else _flexible([a, b])
+    plan = _certified([a, b]) if check == "certified" else _flexible([a, b], robot)
     return run_rows(lambda x, y, m: _steer_masked(robot, world, x, y, m, padding, check),
                     [a, b], plan, whole)
 
@@ -179,14 +182,14 @@ def valid_rows(robot, world: World, states: np.ndarray, padding: float,
                whole: tuple[Array] | None = None) -> Array:
     """``is_valid`` of host ``(N, d)`` float32 states as a JAX array (as :func:`steer_rows`)."""
     return run_rows(lambda x, m: is_valid_batch(robot, world, x, padding), [states],
-                    _flexible([states]), whole)
+                    _flexible([states], robot), whole)
 
 
 def distance_rows(robot, a: np.ndarray, b: np.ndarray,
                   whole: tuple[Array, Array] | None = None) -> Array:
     """The cost metric of host ``(N, d)`` float32 pairs as a JAX array (as :func:`steer_rows`)."""
-    return run_rows(lambda x, y, m: distance_batch(robot, x, y), [a, b], _flexible([a, b]),
-                    whole)
+    return run_rows(lambda x, y, m: distance_batch(robot, x, y), [a, b],
+                    _flexible([a, b], robot), whole)
 
 
 def steer_to_pairs(robot, world: World, a, b, padding: float,

@@ -445,3 +445,22 @@ def test_parser_refusals_of_arguments_and_srdf(tmp_path):
             call()
         msg = str(e.value)
         assert fragment in msg and "\n" not in msg and "fix:" in msg, msg
+
+
+def test_interpolated_states_stay_within_the_joint_limits(panda):
+    """float32 ``a + 1 (b - a)`` can land an ulp beyond ``b``: a motion to a state on a
+    joint limit must not be blocked by the limit check of its own last state."""
+    lo, hi = np.asarray(panda.lower, np.float32), np.asarray(panda.upper, np.float32)
+    rng = np.random.default_rng(0)
+    a = (lo + rng.random((2000, 7)) * (hi - lo)).astype(np.float32)
+    b = a.copy()
+    j = np.arange(2000) % 7
+    b[np.arange(2000), j] = np.where(np.arange(2000) % 2, hi[j], lo[j])
+    plain = a + np.float32(1.0) * (b - a)
+    assert ((plain < lo) | (plain > hi)).any()  # the rounding this guards against happens
+    t = jnp.linspace(0.0, 1.0, 33)
+    states = jax.vmap(lambda x, y: jax.vmap(lambda s: panda.interpolate(x, y, s))(t))(a, b)
+    states = np.asarray(states)
+    assert ((states >= lo) & (states <= hi)).all()
+    np.testing.assert_allclose(states[:, -1], b, atol=1e-6)
+    np.testing.assert_array_equal(states[:, 0], a)

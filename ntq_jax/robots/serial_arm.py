@@ -196,7 +196,10 @@ class SerialArm(DiscretizedSteering, CertifiedSteering):
         return math.sqrt(sum((hi - lo) ** 2 for lo, hi in zip(self.lower, self.upper)))
 
     def interpolate(self, a: Array, b: Array, t: Array) -> Array:
-        return a + t * (b - a)
+        """``a + t (b - a)``, kept in the box spanned by ``a`` and ``b``: float32 rounding
+        could put it a few ulp outside (``a + 1 (b - a)`` beyond ``b``), and a motion to
+        a state on a joint limit would then be blocked by the limit check."""
+        return jnp.clip(a + t * (b - a), jnp.minimum(a, b), jnp.maximum(a, b))
 
     def distance(self, a: Array, b: Array) -> Array:
         return jnp.sqrt(jnp.sum((b - a) ** 2))

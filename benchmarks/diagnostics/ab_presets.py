@@ -2,7 +2,7 @@
 """Presets before/after: ``bench_steer.py`` on two checkouts, alternating, medians side by side.
 
     git archive <base-commit> | tar -x -C /tmp/base      # the previous commit, untouched
-    python benchmarks/ab_presets.py --base /tmp/base --rounds 3 -- --quick --only certified
+    python benchmarks/diagnostics/ab_presets.py --base /tmp/base --rounds 3 -- --quick --only certified
 
 Each round runs ``benchmarks/bench_steer.py <args>`` once with ``ntq_jax`` imported
 from ``--base`` and once from ``--head`` (default: this checkout), alternating
@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-HERE = Path(__file__).resolve().parent
+HERE = Path(__file__).resolve().parent.parent  # benchmarks/, where bench_steer.py is
 
 
 def run(src: Path, args: list[str]) -> list[dict]:

@@ -5,10 +5,12 @@ For random normalised inputs, the variance of the expected output over inputs (w
 network can learn from) against the variance over dropout masks for one input (noise
 the training loss sees), per architecture; and the activation scale per layer.
 
-    python benchmarks/pnet_signal.py
+    python benchmarks/diagnostics/pnet_signal.py
 """
 
 from __future__ import annotations
+
+import argparse
 
 import jax
 import jax.numpy as jnp
@@ -22,7 +24,9 @@ NETS = (("MPNet's released, dropout after 10 layers", MPNET, 10),
         ("ours (512-...-64), dropout after 2 layers", (512, 512, 256, 256, 128, 64), 2))
 
 
-def main() -> None:
+def main(argv=None) -> None:
+    argparse.ArgumentParser(description=__doc__,
+                            formatter_class=argparse.RawDescriptionHelpFormatter).parse_args(argv)
     env = make_env("point/0")
     x = jax.random.uniform(jax.random.key(1), (256, 2 * env.dim), minval=-1, maxval=1)
     for name, hidden, layers in NETS:

@@ -5,7 +5,7 @@ Reads a finished run folder (``python scripts/train_all.py ... --set
 eval.motion_check=discretized``) and re-checks every saved success
 (``paths/<env>/PNet_<m>_<kind>[_nosteer].npz``) and every reference path
 (``eval/<env>/reference.npz``) with both motion checks at padding 0
-(:func:`ntq_jax.experiment.evaluate.recheck_paths`, :func:`ntq_jax.planners.verify.check_paths`),
+(:func:`ntq_jax.experiment.metrics.recheck_paths`, :func:`ntq_jax.planners.verify.check_paths`),
 and counts how many of the rejected ones a dense check (the robot's own
 ``is_valid`` at ``resolution / 100`` steps along the rejected segments) finds
 in collision: the rest pass too close to an obstacle to be proven (within the
@@ -13,7 +13,7 @@ certified check's margin) or the sweep gave up on them.
 Prints one row per (environment, model, query kind, steerTo) and writes them as
 JSON with ``--json``::
 
-    python benchmarks/recheck_motion_checks.py --run runs/rigid_disc --json rigid.json
+    python benchmarks/diagnostics/recheck_motion_checks.py --run runs/rigid_disc --json rigid.json
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ import yaml
 import ntq_jax as nj
 from ntq_jax import artifacts
 from ntq_jax.envs import env_slug
-from ntq_jax.experiment.evaluate import recheck_paths
+from ntq_jax.experiment.metrics import recheck_paths
 from ntq_jax.planners.verify import check_paths
 from ntq_jax.robots.batch import distances, steer_to_pairs, valid_states
 from ntq_jax.types import PlanStatus

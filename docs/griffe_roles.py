@@ -103,6 +103,19 @@ def fix_raises(text: str) -> str:
     return "\n".join(out)
 
 
+def comment_docstring(obj: griffe.Object) -> str | None:
+    """The ``#:`` comment lines right above an attribute without a docstring (the Sphinx
+    convention the package's constants are documented with), or None."""
+    if not obj.is_attribute or obj.docstring is not None or not obj.lineno:
+        return None
+    lines = obj.module.lines
+    i, found = obj.lineno - 2, []
+    while 0 <= i < len(lines) and lines[i].lstrip().startswith("#:"):
+        found.append(lines[i].lstrip()[2:].strip())
+        i -= 1
+    return "\n".join(reversed(found)) or None
+
+
 def _walk(obj: griffe.Object):
     yield obj
     for member in list(obj.members.values()):
@@ -117,6 +130,10 @@ class SphinxRoles(griffe.Extension):
         if pkg.name != ROOT:
             return
         objects = list(_walk(pkg))
+        for obj in objects:
+            text = comment_docstring(obj)
+            if text is not None:
+                obj.docstring = griffe.Docstring(text, parent=obj)
         for obj in objects:
             if obj.docstring is not None and ":" in obj.docstring.value:
                 obj.docstring.value = fix_raises(rewrite(obj.docstring.value, pkg, obj))

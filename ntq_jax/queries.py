@@ -39,7 +39,13 @@ from ntq_jax.stats import wilson_interval
 
 Array = jax.Array
 
-UNIFORM, NON_TRIVIAL, NT_EXHAUSTED = 0, 1, 2
+#: Query kind: a query drawn uniformly (its straight motion may be free).
+UNIFORM = 0
+#: Query kind: a non-trivial query (valid ends, the straight motion between them blocked).
+NON_TRIVIAL = 1
+#: Query kind: asked for non-trivial, but ``n_max`` draws were all trivial; the sampler
+#: returns the last (trivial) draw.
+NT_EXHAUSTED = 2
 
 STATE_BLOCK = 8192  # candidate states drawn per block (fixed: results do not depend on n)
 QUERY_BLOCK = 4096  # candidate queries checked per block by the non-trivial sampler

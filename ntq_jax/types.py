@@ -43,6 +43,7 @@ class PlanCause(enum.IntEnum):
 CAUSE_RANK = {PlanCause.SUCCESS: 0, PlanCause.INFEASIBLE: 1, PlanCause.NO_PATH: 2,
               PlanCause.INVALID_QUERY: 3}
 
+#: :class:`PlanStatus` -> its lower-case name (``"solved"``, ``"no_path"``, ...).
 STATUS_NAMES = {s: s.name.lower() for s in PlanStatus}
 CAUSE_NAMES = {c: c.name.lower() for c in PlanCause}
 

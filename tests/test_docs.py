@@ -3,8 +3,12 @@ tutorial notebook runs from top to bottom (at its tiny size)."""
 
 from __future__ import annotations
 
+import collections
+import importlib
 import json
 import os
+import pkgutil
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -23,6 +27,37 @@ def test_the_docs_build_with_warnings_as_errors(tmp_path):
     assert out.returncode == 0, out.stderr[-4000:]
     assert (tmp_path / "site" / "api" / "core" / "index.html").exists()
     assert "make_env" in (tmp_path / "site" / "api" / "core" / "index.html").read_text()
+    html = "".join(p.read_text() for p in (tmp_path / "site").rglob("*.html"))
+    roles = re.findall(r":(?:func|class|mod|data|meth|attr|obj|exc):`[^`]*`", html)
+    assert not roles, roles[:10]  # Sphinx roles reach the page as links or code, never raw
+    headings = collections.Counter(re.findall(
+        r'id="(ntq_jax\.[A-Za-z0-9_.]+)"[^>]*class="doc doc-heading"', html))
+    counts = {f"{mod}.{name}": _documented(headings, mod, name) for mod, name in _public_names()}
+    assert len(counts) > 100
+    assert not {k: n for k, n in counts.items() if n != 1}  # every public name exactly once
+
+
+def _public_names():
+    """``(subpackage, name)`` for every name in the ``__all__`` of ``ntq_jax`` and of each
+    of its subpackages (``__version__`` aside)."""
+    import ntq_jax
+
+    mods = ["ntq_jax"] + [f"ntq_jax.{m.name}" for m in pkgutil.iter_modules(ntq_jax.__path__)
+                          if m.ispkg]
+    for mod in mods:
+        for name in getattr(importlib.import_module(mod), "__all__", ()):
+            if not name.startswith("__"):
+                yield mod, name
+
+
+def _documented(headings: collections.Counter, mod: str, name: str) -> int:
+    """How many reference entries document ``mod.name``: those at the path it is defined
+    under (functions and classes), else any entry of that name (constants)."""
+    obj = getattr(importlib.import_module(mod), name)
+    where = getattr(obj, "__module__", None)
+    if callable(obj) and isinstance(where, str) and where.startswith("ntq_jax"):
+        return headings[f"{where}.{obj.__qualname__}"]
+    return sum(n for path, n in headings.items() if path.endswith(f".{name}"))
 
 
 def test_every_guide_page_is_in_the_navigation():

@@ -39,10 +39,12 @@ __all__ = ["FORMAT", "FORMAT_VERSION", "ARRAY_SPECS", "Dataset", "DatasetError",
            "dataset_problem", "damaged_datasets", "is_complete", "write_dataset", "load_dataset",
            "load_datasets", "plot_environment"]
 
+#: The ``format`` field of a dataset's ``meta.json``.
 FORMAT = "ntq_jax.dataset"
+#: The version of the dataset layout (``meta.json`` ``format_version``).
 FORMAT_VERSION = 1
 
-# name -> (dtype, ndim)
+#: The arrays of a dataset file: name -> (dtype, ndim).
 ARRAY_SPECS: dict[str, tuple[np.dtype, int]] = {
     "inputs": (np.dtype(np.float32), 2),
     "targets": (np.dtype(np.float32), 2),

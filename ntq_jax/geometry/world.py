@@ -82,4 +82,5 @@ class World:
 
 
 def as_sequence_of_floats(x) -> Sequence[float]:
+    """``x`` (any array-like) flattened to a list of Python floats."""
     return [float(v) for v in np.asarray(x).ravel()]

@@ -2,9 +2,12 @@
 
 * the core (every module of ``ntq_jax`` outside ``ntq_jax.experiment``) never
   imports the experiment layer;
-* no module of ``ntq_jax``, ``scripts`` or ``benchmarks`` is over 500 lines, and no
-  function of theirs has over 60 lines of code (docstring, blank and comment
-  lines aside);
+* a module holds one concept: over 500 lines is a warning (look for a second
+  concept to split out; never pack statements or trim docstrings to stay under it),
+  over 800 a failure, for ``ntq_jax``, ``scripts`` and ``benchmarks``;
+* no function of theirs has over 60 statements (every statement of its body,
+  nested ones included, its docstring aside): statements, not lines, so packing
+  two onto one line gains nothing;
 * no script or benchmark edits ``sys.path`` (they run against the installed package).
 * the suite hands its files to the xdist workers heaviest first.
 """
@@ -13,14 +16,16 @@ from __future__ import annotations
 
 import ast
 import re
+import warnings
 from pathlib import Path
 
 import pytest
 
 REPO = Path(__file__).resolve().parent.parent
 PACKAGE = REPO / "ntq_jax"
-MAX_MODULE_LINES = 500
-MAX_FUNCTION_LINES = 60
+SOFT_MODULE_LINES = 500
+MAX_MODULE_LINES = 800
+MAX_FUNCTION_STATEMENTS = 60
 
 
 def _files(*folders: str) -> list[Path]:
@@ -38,16 +43,13 @@ def _imported(tree: ast.AST) -> set[str]:
     return out
 
 
-def _code_lines(fn: ast.AST, lines: list[str]) -> int:
+def _statements(fn: ast.AST) -> int:
+    """The statements of a function's body, nested ones included, its docstring aside."""
     body = fn.body
     first = body[0]
-    if (isinstance(first, ast.Expr) and isinstance(first.value, ast.Constant)
-            and isinstance(first.value.value, str)):
-        if len(body) == 1:
-            return 0
-        first = body[1]
-    text = lines[first.lineno - 1: fn.end_lineno]
-    return sum(1 for t in text if t.strip() and not t.strip().startswith("#"))
+    doc = (isinstance(first, ast.Expr) and isinstance(first.value, ast.Constant)
+           and isinstance(first.value.value, str))
+    return sum(1 for node in ast.walk(fn) if isinstance(node, ast.stmt) and node is not fn) - doc
 
 
 def test_the_core_never_imports_the_experiment_layer():
@@ -69,23 +71,30 @@ def test_the_layers_are_where_the_docs_say():
 
 
 @pytest.mark.parametrize("folder", ["ntq_jax", "scripts", "benchmarks"])
-def test_no_module_is_over_500_lines(folder):
-    big = [f"{f.relative_to(REPO)}: {n} lines" for f in _files(folder)
-           if (n := len(f.read_text(encoding="utf-8").splitlines())) > MAX_MODULE_LINES]
+def test_no_module_is_over_800_lines(folder):
+    sizes = {f"{f.relative_to(REPO)}": len(f.read_text(encoding="utf-8").splitlines())
+             for f in _files(folder)}
+    for name, n in sizes.items():
+        if SOFT_MODULE_LINES < n <= MAX_MODULE_LINES:
+            warnings.warn(f"{name}: {n} lines: does it hold a second concept to split out?")
+    big = [f"{name}: {n} lines" for name, n in sizes.items() if n > MAX_MODULE_LINES]
     assert not big, "\n".join(big)
 
 
 @pytest.mark.parametrize("folder", ["ntq_jax", "scripts", "benchmarks"])
-def test_no_function_is_over_60_lines_of_code(folder):
+def test_no_function_is_over_60_statements(folder):
     long = []
     for f in _files(folder):
-        text = f.read_text(encoding="utf-8")
-        lines = text.splitlines()
-        for node in ast.walk(ast.parse(text)):
+        for node in ast.walk(ast.parse(f.read_text(encoding="utf-8"))):
             if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
-                if (n := _code_lines(node, lines)) > MAX_FUNCTION_LINES:
-                    long.append(f"{f.relative_to(REPO)}:{node.lineno} {node.name}: {n} lines")
+                if (n := _statements(node)) > MAX_FUNCTION_STATEMENTS:
+                    long.append(f"{f.relative_to(REPO)}:{node.lineno} {node.name}: {n} statements")
     assert not long, "\n".join(long)
+
+
+def test_statements_not_lines_are_counted():
+    packed = ast.parse("def f():\n    \"\"\"Doc.\"\"\"\n    a = 1; b = 2\n    if a:\n        c = 3\n")
+    assert _statements(packed.body[0]) == 4  # two on one line, the if and the one inside it
 
 
 @pytest.mark.parametrize("folder", ["scripts", "benchmarks"])

@@ -90,7 +90,7 @@ class Ends(NamedTuple):
 
 def query_edges(robot, world, rm, index, q: np.ndarray, k: int, padding: float,
                  check: str, attach: int | None = None, end_rounds: int = 0,
-                 seed: int = 0, reach: int = 0, direct: bool = True) -> _Ends:
+                 seed: int = 0, reach: int = 0, direct: bool = True) -> Ends:
     """The checked edges of the queries' ends: each start to the nearest ``k``
     milestones it reaches, the nearest ``k`` milestones that reach its goal to the
     goal (``attach``, ``reach``: lazily, see :func:`attach_ends`), and (``direct``) the start

@@ -138,3 +138,25 @@ def test_a_damaged_cell_is_pending_redone_first_and_stops_a_report_with_one_line
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and str(results / cells[3].key / "summary.json") in err[0], err
     assert f"--cell {cells[3].key}" in err[0] and not (results / "README.md").exists()
+
+
+def test_report_shows_each_p_with_its_benjamini_hochberg_q(tmp_path):
+    """The main table of README.md: every comparison's McNemar p and its BH q over the study."""
+    import json
+
+    from ntq_jax.experiment import factor_table as F
+
+    fs = _script()
+    for data, p in (("shortcut", 2e-5), ("bitstar", 0.03)):
+        folder = tmp_path / "rigid_0" / data / "ours"
+        folder.mkdir(parents=True)
+        rows = [{"model": "PNet_3", "baseline": "PNet_0", "query_kind": "nontrivial",
+                 "steer": True, "band": b, "n": 100, "success": 0.6, "baseline_success": 0.5,
+                 "success_diff": 0.1, "success_diff_ci95": [0.05, 0.15], "mcnemar_p": p}
+                for b in F.BANDS]
+        cell = {"map": "rigid/0", "data": data, "budget": "ours", "train_seed": 0}
+        (folder / "paired.json").write_text(json.dumps({"cell": cell, "sets": [], "paired": rows}))
+    text = fs.report(tmp_path).read_text()
+    row = next(line for line in text.splitlines() if line.startswith("| rigid/0 | bitstar |"))
+    assert row.count("p=0.030 q=0.030 (n=100)") == 3  # 3 of 6 comparisons at p 0.03: q = 0.03
+    assert "Benjamini-Hochberg q" in text

@@ -40,7 +40,7 @@ from ntq_jax.experiment.claims import ALPHA
 from ntq_jax.experiment.formatting import fixed, num, p_value, signed
 from ntq_jax.stats import benjamini_hochberg
 
-__all__ = ["CONCLUSION", "load_cells", "sign_of", "decomposition", "section"]
+__all__ = ["CONCLUSION", "load_cells", "sign_of", "diff_text", "decomposition", "section"]
 
 CONCLUSION = "CONCLUSION.md"
 BANDS = ("all", "in_band", "out_band")
@@ -92,7 +92,9 @@ def sign_of(r) -> str:
     return "+" if r["success_diff"] > 0 else "-"
 
 
-def _diff(r) -> str:
+def diff_text(r) -> str:
+    """``+0.096 [+0.054, +0.139] p=1.4e-05 q=0.0003``: a comparison's difference, its 95 %
+    interval, McNemar's p and (when it has one) its Benjamini-Hochberg q; ``-`` if none."""
     if not r or not num(r.get("success_diff")):
         return "-"
     lo, hi = r["success_diff_ci95"]
@@ -183,10 +185,10 @@ def section(root, label: str = "results/factors") -> list[str]:
         cell = c["cell"]
         base = [_find(c, "nontrivial", "all", steer=s) for s in (True, False)]
         base = " / ".join(fixed(r["baseline_success"]) if r else "-" for r in base)
-        nt = [_diff(_find(c, "nontrivial", b)) for b in BANDS]
-        nt.append(_diff(_find(c, "nontrivial", "all", steer=False)))
+        nt = [diff_text(_find(c, "nontrivial", b)) for b in BANDS]
+        nt.append(diff_text(_find(c, "nontrivial", "all", steer=False)))
         out.append(f"| {cell['map']} | {cell['data']} | {cell['budget']} | {cell['train_seed']} | "
-                   f"{base} | " + " | ".join(nt) + f" | {_diff(_find(c, 'uniform', 'all'))} |")
+                   f"{base} | " + " | ".join(nt) + f" | {diff_text(_find(c, 'uniform', 'all'))} |")
     out += [""] + _by_factor(cells) + decomposition(cells)
     conclusion = Path(root) / CONCLUSION
     if conclusion.is_file():

@@ -26,7 +26,8 @@ import numpy as np
 from jax.tree_util import Partial
 
 from ntq_jax.planners.smoothing import shortcut_batch
-from ntq_jax.robots.batch import is_valid_cm, steer_to_cm
+from ntq_jax.neural_motions import segments as _segments, steer as _steer
+from ntq_jax.robots.batch import is_valid_cm
 
 Array = jax.Array
 
@@ -223,12 +224,6 @@ def propose(robot, world, pnet, key, cur: Array, tgt: Array, live: Array, paddin
 # Building blocks (inside jit)
 # ---------------------------------------------------------------------------
 
-def _steer(robot, world, a: Array, b: Array, padding: float, mask: Array,
-           check: str = "discretized") -> Array:
-    """``(M, d), (M, d) -> (M,)`` via the package's batched motion check; unmasked = False."""
-    return steer_to_cm(robot, world, a.T, b.T, padding, mask, check=check)
-
-
 def _rows(x: Array, idx: Array) -> Array:
     """``x[n, idx[n]]`` for ``x (N, L, d)``, ``idx (N,)``."""
     return jnp.take_along_axis(x, idx[:, None, None], axis=1)[:, 0]
@@ -244,16 +239,6 @@ def _join(a: Array, na: Array, b: Array, nb: Array, length: int) -> tuple[Array,
     out = jnp.where((t < na[:, None])[..., None], ga,
                     jnp.where((t < (na + nb)[:, None])[..., None], gb, jnp.nan))
     return out, na + nb
-
-
-def _segments(robot, world, p: Array, n: Array, padding: float, mask: Array,
-              check: str = "discretized"):
-    """Per-segment freedom ``(N, L-1)`` and the segment mask (existing segments of masked rows)."""
-    num, length, d = p.shape
-    seg = (jnp.arange(length - 1)[None, :] < (n - 1)[:, None]) & mask[:, None]
-    free = _steer(robot, world, p[:, :-1].reshape(-1, d), p[:, 1:].reshape(-1, d), padding,
-                  seg.reshape(-1), check).reshape(num, length - 1)
-    return free, seg
 
 
 def contract(robot, world, p: Array, n: Array, padding: float, mask: Array):

@@ -11,11 +11,14 @@
 
 Maps are drawn by :func:`draw_map` from the environment JSON: obstacles dark,
 their padding light (optional); for the arm, the workspace with the arm along
-a path (:func:`draw_arm`) or the joint space.
+a path (:func:`draw_arm`) or the joint space. A 3-D scene (the serial arm, e.g. the
+Panda) is drawn by :func:`ntq_jax.scenes.viewer.draw_scene`, with the hand's trace
+along each path (:func:`hand_trace`); its queries in joint space.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from pathlib import Path
 from typing import Sequence
@@ -26,7 +29,7 @@ import numpy as np
 from ntq_jax import artifacts
 from ntq_jax.types import QUERY_KINDS, PlanStatus
 
-__all__ = ["draw_map", "draw_arm", "dataset_figure", "curves_figure", "success_figure",
+__all__ = ["draw_map", "draw_arm", "is_scene", "hand_trace", "dataset_figure", "curves_figure", "success_figure",
            "examples_figure", "queries_figure", "query_figure", "learning_curve_figure"]
 
 #: maps with more boxes are drawn as one image of at most IMAGE_PIXELS a side, not one patch
@@ -34,6 +37,9 @@ __all__ = ["draw_map", "draw_arm", "dataset_figure", "curves_figure", "success_f
 IMAGE_MAP_BOXES = 2000
 IMAGE_PIXELS = 1600
 KIND_TITLE = {"uniform": "Uniform Query", "nontrivial": "Non-trivial Query"}
+#: robots whose maps are drawn in joint space (joints 1 and 2): the planar arm and the 3-D
+#: serial arm (whose workspace is drawn in 3-D by :func:`_scene_axes`)
+JOINT_SPACE_KINDS = ("nlink", "serial_arm")
 
 
 def _plt():
@@ -67,10 +73,13 @@ def draw_map(ax, spec: dict, padded: bool = False, joint_space: bool | None = No
     ``[-pi, pi]^2`` axes of joints 1 and 2 instead (no obstacles there).
     """
     if joint_space is None:
-        joint_space = spec["robot"]["kind"] == "nlink"
+        joint_space = spec["robot"]["kind"] in JOINT_SPACE_KINDS
     if joint_space:
         _joint_axes(ax)
         return
+    if len(spec["bounds"]) != 2:
+        raise ValueError(f"{spec.get('name')!r}: draw_map draws a planar map; a 3-D scene is "
+                         "drawn by ntq_jax.scenes.viewer.draw_scene")
     from matplotlib.patches import Circle, FancyBboxPatch, Rectangle
 
     pad = float(spec.get("padding", 0.0))
@@ -121,15 +130,60 @@ def draw_arm(ax, env, path: np.ndarray):
         ax.plot(pts[:, 0], pts[:, 1], "-o", color=c, ms=2, lw=1.5, alpha=0.9)
 
 
+def is_scene(env) -> bool:
+    """Whether ``env`` is a 3-D scene with an arm (drawn by :mod:`ntq_jax.scenes.viewer`)."""
+    from ntq_jax.geometry import World3D
+    return isinstance(env.world, World3D)
+
+
+@functools.lru_cache(maxsize=8)
+def _tip_jit(robot):
+    return jax.jit(jax.vmap(lambda q: robot.tip_pose(q)[:3, 3]))
+
+
+def hand_trace(env, path: np.ndarray, per_segment: int = 8) -> np.ndarray:
+    """``(m, 3)``: the hand (the tip link's origin) of a 3-D arm along the joint-space
+    polyline ``path`` (``per_segment`` states per segment, its ends included)."""
+    p = np.asarray(path, np.float32)
+    if len(p) < 2:
+        return np.asarray(_tip_jit(env.robot)(p), np.float64)
+    t = np.linspace(0.0, 1.0, per_segment, endpoint=False, dtype=np.float32)[None, :, None]
+    dense = (p[:-1, None] + t * (p[1:, None] - p[:-1, None])).reshape(-1, p.shape[1])
+    return np.asarray(_tip_jit(env.robot)(np.concatenate([dense, p[-1:]])), np.float64)
+
+
+def _scene_panel(ax, env, states, title: str, path=None) -> None:
+    """The obstacles of a 3-D scene and its arm at ``states`` (and along ``path``) on ``ax``."""
+    from ntq_jax.scenes import viewer
+    viewer.draw_scene(env, states=np.asarray(states, np.float64), path=path, ax=ax,
+                      labels=["start", "goal"], title=title, legend=False, limits="bounds",
+                      resolution=12, arm_resolution=6)
+
+
+def _workspace_panel(ax, env, spec: dict, d) -> None:
+    """The first panel of :func:`dataset_figure` for an arm: one solved path of ``d``."""
+    solved = len(d.path_lengths) > 0
+    p = np.asarray(d.paths[0, :int(d.path_lengths[0])]) if solved else None
+    title = f"{spec.get('name')}: workspace, one solved path"
+    if is_scene(env):
+        _scene_panel(ax, env, env.query if p is None else p[[0, -1]], title,
+                     None if p is None else p)
+        return
+    draw_map(ax, spec, padded=True, joint_space=False)
+    if p is not None:
+        draw_arm(ax, env, p)
+    ax.set_title(title)
+
+
 def dataset_figure(env, datasets: Sequence, out: Path, n_points: int = 400, n_paths: int = 6
                    ) -> Path:
     """PNG of the map with the start/goal distributions of D0 and D2 and a few solved paths.
 
     Point robot and rigid body: (x, y) of starts (green) and goals (blue) and
     paths (magenta) over the obstacles (dark) and their padding (light). Arm:
-    the workspace with the arm along a solved path, and the configuration space
-    (joints 1 and 2; for the 2-link arm this is the whole C-space, with the
-    colliding configurations shaded).
+    the workspace with the arm along a solved path (in 3-D for a 3-D scene), and the
+    configuration space (joints 1 and 2; for the 2-link arm this is the whole
+    C-space, with the colliding configurations shaded).
 
     Args:
         env: the :class:`ntq_jax.Env`.
@@ -142,17 +196,14 @@ def dataset_figure(env, datasets: Sequence, out: Path, n_points: int = 400, n_pa
     picks = [0, min(2, len(ds) - 1)]
     picks = [(i, f"D{i}: p_nt={ds[i].meta['p_nt']}" + (", pruned" if ds[i].meta["prune"] else ""))
              for i in picks]
-    arm = spec["robot"]["kind"] == "nlink"
+    arm = spec["robot"]["kind"] in JOINT_SPACE_KINDS
     rng = np.random.default_rng(0)
     ncol = len(picks) + (1 if arm else 0)
-    fig, axes = plt.subplots(1, ncol, figsize=(5 * ncol, 5), squeeze=False)
-    axes = axes[0]
+    fig = plt.figure(figsize=(5 * ncol, 5))
+    axes = [fig.add_subplot(1, ncol, j + 1, projection="3d" if j == 0 and is_scene(env)
+                            else None) for j in range(ncol)]
     if arm:
-        draw_map(axes[0], spec, padded=True, joint_space=False)
-        d = ds[picks[-1][0]]
-        if len(d.path_lengths):
-            draw_arm(axes[0], env, np.asarray(d.paths[0, :int(d.path_lengths[0])]))
-        axes[0].set_title(f"{spec.get('name')}: workspace, one solved path")
+        _workspace_panel(axes[0], env, spec, ds[picks[-1][0]])
         axes = axes[1:]
     for (i, title), ax in zip(picks, axes):
         d = ds[i]
@@ -281,26 +332,41 @@ def examples_figure(env, reference: dict | None, saved: dict, path: Path,
     ref = reference
     plt = _plt()
     pick = np.flatnonzero(ref["nontrivial_status"] == PlanStatus.SOLVED)[:n_examples]
-    ej = env.to_json()
-    fig, axes = plt.subplots(1, max(len(pick), 1), figsize=(3.6 * max(len(pick), 1), 3.8))
-    axes = np.atleast_1d(axes)
+    ej, scene = env.to_json(), is_scene(env)
+    n, size = max(len(pick), 1), (4.6 if scene else 3.6)
+    fig = plt.figure(figsize=(size * n, size + 0.2))
+    axes = [fig.add_subplot(1, n, j + 1, projection="3d" if scene else None) for j in range(n)]
     colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     for ax, i in zip(axes, pick):
-        draw_map(ax, ej)
         rp = ref["nontrivial_paths"][i, : ref["nontrivial_lengths"][i]]
-        ax.plot(rp[:, 0], rp[:, 1], "k--", lw=2, label=f"reference ({ref['nontrivial_costs'][i]:.2f})")
+        title = f"{env.name}: non-trivial query {i}"
+        if scene:  # the hand's trace along each path, the arm at the start and the goal
+            _scene_panel(ax, env, rp[[0, -1]], title)
+        else:
+            draw_map(ax, ej)
+            ax.set_title(title, fontsize=9)
+        _path_line(ax, env, scene, rp, color="k", ls="--", lw=2,
+                   label=f"reference ({ref['nontrivial_costs'][i]:.2f})")
         for j, (m, z) in enumerate(saved.items()):
-            p = z["paths"][i, : z["lengths"][i]]
             good = bool(z["success"][i])
-            lab = f"{m} ({z['costs'][i]:.2f})" if good else f"{m} (failed)"
-            ax.plot(p[:, 0], p[:, 1], "-" if good else ":", color=colors[j % len(colors)], lw=1.3,
-                    marker=".", ms=4, label=lab)
-        s, g = ref["nontrivial_paths"][i, 0], rp[-1]
-        ax.plot(*s[:2], "o", color="green", ms=7)
-        ax.plot(*g[:2], "*", color="blue", ms=10)
+            _path_line(ax, env, scene, z["paths"][i, : z["lengths"][i]],
+                       ls="-" if good else ":", color=colors[j % len(colors)], lw=1.3,
+                       **({} if scene else {"marker": ".", "ms": 4}),
+                       label=f"{m} ({z['costs'][i]:.2f})" if good else f"{m} (failed)")
+        if not scene:
+            ax.plot(*rp[0, :2], "o", color="green", ms=7)
+            ax.plot(*rp[-1, :2], "*", color="blue", ms=10)
         ax.legend(fontsize=6, loc="best")
-        ax.set_title(f"{env.name}: non-trivial query {i}", fontsize=9)
     return _save(fig, path, bbox_inches="tight")
+
+
+def _path_line(ax, env, scene: bool, p: np.ndarray, **kw) -> None:
+    """A path on a map (its first two coordinates) or, in a 3-D scene, the hand's trace
+    along it (:func:`hand_trace`)."""
+    if scene:
+        ax.plot(*hand_trace(env, p).T, **kw)
+    else:
+        ax.plot(p[:, 0], p[:, 1], **kw)
 
 
 def queries_figure(env, queries: dict | None, path: Path) -> Path | None:

@@ -174,12 +174,19 @@ def estimate_gamma(env, key: jax.Array, n: int, padding: float, cache: Path) -> 
 
 def estimate_gammas(env, key: jax.Array, data_config, padding: float, work: Path
                     ) -> tuple[dict, dict, float]:
-    """``(gamma_nt at padding, gamma_nt at 0 or none, seconds)`` (``data.gamma_eval``)."""
+    """``(gamma_nt at padding, gamma_nt at 0 or none, seconds)`` (``data.gamma_eval``).
+
+    At ``padding`` 0 (e.g. the Panda's scenes) the data geometry is the evaluation
+    geometry, and the one estimate serves as both."""
     t0 = time.perf_counter()
     n = data_config.gamma_queries
     g_data = estimate_gamma(env, jax.random.fold_in(key, 0), n, padding, work / "gamma_data.json")
-    g_eval = (estimate_gamma(env, jax.random.fold_in(key, 1), n, 0.0, work / "gamma_eval.json")
-              if data_config.gamma_eval else dict(_NO_GAMMA))
+    if not data_config.gamma_eval:
+        g_eval = dict(_NO_GAMMA)
+    elif float(padding) == 0.0:
+        g_eval = dict(g_data)
+    else:
+        g_eval = estimate_gamma(env, jax.random.fold_in(key, 1), n, 0.0, work / "gamma_eval.json")
     return g_data, g_eval, time.perf_counter() - t0
 
 

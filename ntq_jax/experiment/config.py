@@ -47,6 +47,10 @@ __all__ = ["Config", "ConfigError", "load", "from_dict", "apply_overrides", "Mod
            "PRUNE_GAMMA", "ENSEMBLE_ROWS", "validate_mode"]
 
 
+#: the values of ``task`` (the run folder's name; ``panda``: the 7-DoF arm in 3-D scenes)
+TASKS = ("point", "rigid", "nlink", "panda")
+
+
 class _Loader(yaml.SafeLoader):
     """PyYAML's safe loader reading ``5e-2`` and ``1e9`` as numbers (see the module docstring)."""
 
@@ -68,7 +72,7 @@ class Config:
     """A whole experiment: environments, then every stage of the pipeline.
 
     Attributes:
-        task: ``point``, ``rigid`` or ``nlink`` (names the run folder; the robot,
+        task: ``point``, ``rigid``, ``nlink`` or ``panda`` (names the run folder; the robot,
             and so the table a map's rows go to, comes from each environment, so
             one config may mix robots).
         envs: preset names or JSON map paths.
@@ -109,8 +113,8 @@ class Config:
                f"must be local or ray (or null: local), got {self.executor!r}")
         _check(self.ray_address is None or bool(self.ray_address.strip()), f"{pre}ray_address",
                "must be auto, <host>:<port> or null (start a local Ray instance)")
-        _check(self.task in ("point", "rigid", "nlink"), f"{pre}task",
-               f"must be point, rigid or nlink; got {self.task!r}")
+        _check(self.task in TASKS, f"{pre}task",
+               f"must be point, rigid, nlink or panda; got {self.task!r}")
         _check(len(self.envs) >= 1, f"{pre}envs", "must list at least one environment")
         _check(self.seed >= 0, f"{pre}seed", f"must be >= 0, got {self.seed}")
         for f in dataclasses.fields(self):

@@ -142,6 +142,27 @@ def test_queries(env, cfg, slug: str, out_dir: Path) -> dict[str, np.ndarray]:
     return {k: got[k] for k in QUERY_KINDS}
 
 
+def reuse_roadmaps(source, out_dir: Path) -> int:
+    """Copies the roadmaps the data planner built (``<source>/roadmap_*.npz``, e.g. a
+    dataset folder's ``roadmap/``) into the reference's roadmap folder
+    ``<out_dir>/roadmap``; returns how many were copied.
+
+    A roadmap file is named and checked by the fingerprint of its map, robot, padding
+    and settings (:func:`ntq_jax.planners.roadmap.roadmap_for`), so the reference
+    planner uses a copied one only where it would build the same roadmap (the data
+    and evaluation paddings equal, as on the Panda's scenes, padding 0) and builds
+    its own otherwise. Files already there are kept."""
+    if source is None or not Path(source).is_dir():
+        return 0
+    dest = Path(out_dir) / "roadmap"
+    copied = 0
+    for f in sorted(Path(source).glob("roadmap_*.npz")):
+        if not (dest / f.name).exists():
+            artifacts.write_bytes(dest / f.name, f.read_bytes())
+            copied += 1
+    return copied
+
+
 def reference_plans(env, cfg, env_name: str, slug: str, queries: dict, out_dir: Path,
                     planner: Callable | None = None, executor=None) -> dict:
     """Reference (and, for point robots, optimum) costs and paths on padding 0, cached.
@@ -410,6 +431,8 @@ def evaluate_env(env, ensemble, cfg, run_dir, *, env_name: str, data_env_dir=Non
     slug = env_slug(env_name, env)
     run_dir = Path(run_dir)
     out_dir = run_dir / "eval" / slug if eval_dir is None else Path(eval_dir)
+    if data_env_dir is not None and planner is None:
+        reuse_roadmaps(Path(data_env_dir) / "roadmap", out_dir)
     pnets = list(ensemble) if isinstance(ensemble, (list, tuple)) else member_pnets(ensemble)
     members = list(range(len(pnets)) if members is None else members)
     queries = test_queries(env, cfg, slug, out_dir)

@@ -49,7 +49,8 @@ from ntq_jax.data.limits import check_roadmap, check_spacing
 from ntq_jax.planners.jobs import planner_options
 from ntq_jax.envs import EnvError
 from ntq_jax.planners.options import unsupported_robot
-from ntq_jax.experiment.evaluate import evaluate_env, reference_plans, test_queries
+from ntq_jax.experiment.evaluate import (evaluate_env, reference_plans, reuse_roadmaps,
+                                         test_queries)
 from ntq_jax.experiment.report import write_report
 from ntq_jax.version import __version__
 
@@ -280,6 +281,7 @@ def _host_stage(cfg: C.Config, run: Path, name: str, env, *, progress, figures: 
     if executor is not None and executor.name != "local":
         slug = env_slug(name, env)
         out_dir = run / "eval" / slug
+        reuse_roadmaps(Path(summary["env_dir"]) / "roadmap", out_dir)
         reference_plans(env, cfg, name, slug, test_queries(env, cfg, slug, out_dir), out_dir,
                         None, executor)
     return summary, time.perf_counter() - t0

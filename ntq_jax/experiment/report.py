@@ -51,7 +51,7 @@ from ntq_jax.presets import PAPER_GAMMA
 from ntq_jax.types import QUERY_KINDS
 
 TITLES = {"point": "Point robot planning", "rigid": "Rigid body planning",
-          "nlink": "n-link manipulator planning"}
+          "nlink": "n-link manipulator planning", "serial_arm": "Serial arm (3-D) planning"}
 CSV_FIELDS = ["task", "env", "model", "query_kind", "steer", "k_test", "successes",
               "success_ratio", "success_ci95_lo", "success_ci95_hi", "cost_ratio", "cost_ratio_n",
               "cost_ratio_opt", "failures_no_path", "failures_infeasible",

@@ -62,6 +62,15 @@ def test_ompl_rrtconnect_peer_on_two_problems():
         _assert_paths(env, env.query[None], res, "discretized")
 
 
+@pytest.mark.skipif(importlib.util.find_spec("ompl") is None, reason="needs ompl")
+def test_bitstar_runs_in_process_on_the_serial_arm(box):
+    q = box.query[None]
+    res = nj.plan(box, q, "bitstar", time_budget=0.5)  # the arm's "bitstar" is "bitstar_jax"
+    assert res.solved[0], res.info
+    assert res.info["planner"] == "bitstar_jax" and res.info["n_motion_per_query"][0] > 0
+    _assert_paths(box, q, res, "discretized")
+
+
 def test_finalize_fallback_puts_back_what_a_failed_shortcut_skipped():
     env = nj.make_env("point/0")
     lo, hi = (np.asarray(v) for v in env.robot.config_bounds(env.world))

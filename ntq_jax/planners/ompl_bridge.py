@@ -8,7 +8,10 @@ processes; BIT*'s raw paths are then verified, and their costs computed, by the
 one path checker, :func:`ntq_jax.planners.verify.finalize`. The bridge's own
 per-query :class:`BridgeOutcome` (kept in ``info["bitstar_status"]``) maps to
 :class:`ntq_jax.types.PlanStatus` once, in :data:`PLAN_STATUS`. An unsolvable,
-invalid or crashing query is a status, never an exception.
+invalid or crashing query is a status, never an exception. A 3-D serial arm (the
+Panda), whose geometry exists only in JAX, is handed to the in-process route
+:func:`ntq_jax.planners.ompl_rrtconnect.plan_bitstar_jax` (the same BIT* on the JAX
+checks); the planar robots' route does not change.
 
 Workers are started with ``spawn`` (never fork: the parent has JAX and its
 threads loaded) WITHOUT importing the caller's ``__main__`` module (see
@@ -86,7 +89,8 @@ def plan_bitstar(env, queries, *, padding: float | None = None, seed: int = 0,
     """Solves a batch of queries with OMPL's BIT* in parallel worker processes.
 
     Args:
-        env: an :class:`ntq_jax.Env` with a rigid-body, n-link-arm or point robot.
+        env: an :class:`ntq_jax.Env` with a rigid-body, n-link-arm or point robot (a
+            serial arm: see below).
         queries: ``(N, 2, d)`` start and goal states.
         padding: clearance of the planning geometry (None: the environment's).
         seed: base seed; query ``i`` uses ``query_seeds(seed, N)[i]``.
@@ -122,10 +126,21 @@ def plan_bitstar(env, queries, *, padding: float | None = None, seed: int = 0,
         ``startup_time`` (slowest worker's seconds to get ready), ``n_valid_calls``
         and ``n_motion_calls`` (Python callbacks, summed) and ``wall_time``.
 
+    A 3-D serial arm (the Panda) has no NumPy geometry for the workers: its queries
+    go to :func:`ntq_jax.planners.ompl_rrtconnect.plan_bitstar_jax` (the same BIT*,
+    in this process, on the package's JAX checks; ``workers``, ``chunk_size``,
+    ``hang_timeout``, ``startup_timeout`` and ``keep_workers`` do not apply there and
+    are ignored), whose ``info`` it returns.
+
     Raises:
         TypeError, ValueError: malformed arguments (the message names the option);
             ImportError: ``ompl`` is not installed.
     """
+    if getattr(env.robot, "kind", None) == "serial_arm":  # no NumPy geometry: JAX, in process
+        from ntq_jax.planners.ompl_rrtconnect import plan_bitstar_jax
+        return plan_bitstar_jax(env, queries, padding=padding, seed=seed,
+                                time_budget=time_budget, stop_on_first=stop_on_first,
+                                check=check, ompl_log_level=ompl_log_level)
     t_wall = time.perf_counter()
     q = _check_arguments(env, queries, time_budget, ompl_log_level)
     workers = int_option("bitstar", "workers", workers, 0) or (os.cpu_count() or 1)

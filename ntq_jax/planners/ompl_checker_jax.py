@@ -14,8 +14,9 @@ the very kernels every other planner uses, one compiled call per callback:
 Each is one compiled program per robot, padding and obstacle counts (the world is an
 argument, so every problem of a MotionBenchMaker scene shares it), called on a
 ``(d,)`` float32 array (~50 us and ~70 us of CPU per call for the Panda), so a
-planner in the same process (:func:`ntq_jax.planners.ompl_rrtconnect.plan_rrtconnect`)
-sees exactly the package's geometry. Not picklable: JAX programs stay in their process.
+planner in the same process (:func:`ntq_jax.planners.ompl_rrtconnect.plan_rrtconnect`,
+:func:`~ntq_jax.planners.ompl_rrtconnect.plan_bitstar_jax`) sees exactly the package's
+geometry. Not picklable: JAX programs stay in their process.
 """
 
 from __future__ import annotations
@@ -48,7 +49,8 @@ class JaxChecker:
 
     The interface :class:`ntq_jax.planners.ompl_worker.OmplProblem` reads: ``kind``,
     ``dim``, ``bounds`` (``(d, 2)``: the configuration box, the serial arm's joint
-    limits), ``resolution``, :meth:`is_valid`, :meth:`steer_to` and :meth:`distance`.
+    limits), ``resolution``, :meth:`is_valid`, :meth:`steer_to` and :meth:`distance`;
+    :meth:`compile` compiles both programs ahead of a timed solve.
 
     Args:
         env: the environment (a robot with a real-vector configuration space: the
@@ -70,6 +72,13 @@ class JaxChecker:
         self._robot, self._world = robot, world
         self.n_valid = 0
         self.n_motion = 0
+
+    def compile(self, q) -> None:
+        """Compiles both programs (a state and a motion at ``q``) without counting the
+        calls, so that no planner's time budget pays for the compilation."""
+        q = np.asarray(q, np.float32)
+        bool(_valid_one(self._robot, self._world, q, self.padding))
+        bool(_steer_one(self._robot, self._world, q, q, self.padding))
 
     def is_valid(self, q) -> bool:
         """Whether state ``q`` (``d`` numbers) is valid at the padding."""

@@ -63,8 +63,9 @@ class OmplProblem:
 
     Usable in-process too (it imports ``ompl`` when constructed), e.g. to
     benchmark; :func:`ntq_jax.planners.ompl_bridge.plan_bitstar` runs it in
-    worker processes, :func:`ntq_jax.planners.ompl_rrtconnect.plan_rrtconnect` in
-    its own process with the package's JAX kernels.
+    worker processes, :func:`ntq_jax.planners.ompl_rrtconnect.plan_rrtconnect` and
+    :func:`~ntq_jax.planners.ompl_rrtconnect.plan_bitstar_jax` in their own process
+    with the package's JAX kernels.
 
     Args:
         checker: the :class:`NumpyChecker` of the environment at the planning padding,

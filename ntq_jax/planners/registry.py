@@ -1,7 +1,7 @@
 """The planner registry behind :func:`ntq_jax.planners.plan`: names to planner functions.
 
 The built-in planners (``"astar"``, ``"visgraph"``, ``"bitstar"``, ``"roadmap"``,
-``"bitree"``, ``"rrtconnect"``, ``"vamp"``) are
+``"bitree"``, ``"rrtconnect"``, ``"bitstar_jax"``, ``"vamp"``) are
 registered when this module is imported; :func:`register_planner` adds a user's own.
 See :mod:`ntq_jax.planners` for each planner and its options.
 """
@@ -84,4 +84,5 @@ register_planner("bitstar", ompl_bridge.plan_bitstar)
 register_planner("roadmap", roadmap.plan_roadmap)
 register_planner("bitree", bitree.plan_bitree)
 register_planner("rrtconnect", ompl_rrtconnect.plan_rrtconnect)
+register_planner("bitstar_jax", ompl_rrtconnect.plan_bitstar_jax)
 register_planner("vamp", vamp_bridge.plan_vamp)

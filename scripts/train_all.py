@@ -28,6 +28,10 @@ config (another config, or no valid run.json) is refused: pass another
 ``--out``, or ``--overwrite`` to delete it and start over. Expected errors
 (a bad config, environment, run folder, dataset or checkpoint) are one
 ``error:`` line with the fix, exit code 2.
+
+The run ends with a headline per map (each PNet's success ratio on uniform and
+non-trivial test queries, PNet_3 - PNet_0 with its interval) and the paths of
+``tables.md`` and the figures; ``--full-tables`` prints every table as well.
 """
 
 from __future__ import annotations
@@ -37,6 +41,7 @@ import sys
 import time
 
 from ntq_jax.experiment.cli import add_run_options, executor_of, run_cli, start_run
+from ntq_jax.experiment.headline import headline
 from ntq_jax.experiment.pipeline import load_config, prepare_run, run_pipeline
 
 
@@ -54,6 +59,9 @@ def _main(argv) -> int:
                     help="delete --out first when it is not a run of this config (another "
                          "config, or run.json missing or corrupt) and start over; only a folder "
                          "holding nothing but a run's files is deleted")
+    ap.add_argument("--full-tables", action="store_true",
+                    help="also print every table of tables.md (the end of a run prints a "
+                         "headline per map and where the tables and figures are)")
     add_run_options(ap, set_example="eval.k_test=100", figures_help="skip the PNG figures",
                     cpu_devices_help="JAX CPU devices to create (one per core): the four PNets "
                     "train on separate cores (speed: BENCHMARKS.md); results then differ from a "
@@ -68,7 +76,9 @@ def _main(argv) -> int:
     out = run_pipeline(cfg, run, progress=not args.no_progress, figures=not args.no_figures,
                        executor=executor)
     print()
-    print((run / "tables.md").read_text())
+    if args.full_tables:
+        print((run / "tables.md").read_text())
+    print("\n".join(headline(run)))
     print(f"done in {time.perf_counter() - t0:.0f} s; run folder: {run}")
     for k, v in out.items():
         print(f"  {k}: {v}")

@@ -321,3 +321,6 @@ def test_a_full_disk_during_train_all_is_one_line_and_the_run_resumes(run_copy, 
     monkeypatch.setattr(artifacts, "replace", real)
     assert _script("train_all").main(argv) == 0
     assert (run_copy / "results.json").is_file()
+    out = capsys.readouterr().out  # the end of a run: a headline per map, not every table
+    assert "PNet_3 - PNet_0, non-trivial: " in out and f"{run_copy / 'tables.md'}" in out
+    assert "| PNet_0 |" not in out

@@ -231,3 +231,21 @@ def test_report_has_paired_comparisons(run):
     diff = f"{c['success_diff']:.3f} [{c['success_diff_ci95'][0]:.3f}, "
     assert any("$\\mathsf{PNet}_3$ & $\\mathsf{PNet}_0$ & non-trivial & " + diff in ln
                for ln in lines)
+
+
+def test_headline_reads_each_maps_success_and_the_gap_from_results_json(run):
+    from ntq_jax.experiment.headline import headline
+
+    res = json.loads((run / "results.json").read_text())
+    lines = headline(run)
+    text = "\n".join(lines)
+    for env in {r["env"] for r in res["rows"]}:
+        assert f"{env}: success ratio with steerTo" in text
+    r = next(r for r in res["rows"] if r["model"] == "PNet_3" and r["query_kind"] == "nontrivial")
+    row = next(line for line in lines if line.strip().startswith("PNet_3 "))
+    assert row.split()[-1] == f"{r['success_ratio']:.3f}"  # the non-trivial column
+    c = next(c for c in res["comparisons"] if c["model"] == "PNet_3"
+             and c["baseline"] == "PNet_0" and c["query_kind"] == "nontrivial")
+    assert f"PNet_3 - PNet_0, non-trivial: {c['success_diff']:+.3f}" in text
+    assert lines[-1].startswith("full tables:") or lines[-1].startswith("figures:")
+    assert headline(run / "missing") == []

@@ -65,7 +65,9 @@ def generate(args, cfg, out: Path, t_import: float) -> dict:
     env = make_env(args.env)
     shutil.rmtree(out / env_slug(args.env, env), ignore_errors=True)
     t0 = time.perf_counter()
-    s = data.generate_datasets(env, cfg, out, env_name=args.env, progress=args.progress)
+    from ntq_jax.experiment import config as C
+    s = data.generate_datasets(env, C.data_options(cfg, args.env), out, env_name=args.env,
+                               progress=args.progress)
     wall = time.perf_counter() - t0
     report = {
         "env": args.env, "planner": cfg.planner.name, "k_train": args.k,

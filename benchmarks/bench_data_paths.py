@@ -115,7 +115,8 @@ def main(argv=None) -> int:
     if args.limit:
         q, bp, bl, bs, bc = (a[:args.limit] for a in (q, bp, bl, bs, bc))
     planner = cfg.planner.name_for(name)
-    opts = {k: v for k, v in planner_options(cfg, name, planner).items() if k != "smooth"}
+    opts = {k: v for k, v in planner_options(C.planner_settings(cfg, name), planner).items()
+            if k != "smooth"}
     raw, cut, seconds = plan_both_modes(env, q, planner, opts, pad)
     both = (bs == 0) & raw.solved & cut.solved
     n = int(both.sum())

@@ -48,7 +48,7 @@ def bench_env(run: Path, env_name: str, repeats: int) -> list[dict]:
     slug = env_slug(env_name, env)
     cfg = C.load(run / "config.yaml", [])
     pnets = member_pnets(load_ensemble(run / "models" / slug))
-    opts = NP.PlannerOptions.from_config(cfg.eval, steer=True)
+    opts = C.neural_options(cfg.eval, steer=True)
     val = run / "paths" / slug / "validation.npz"
     order = ([int(m) for m in np.load(val)["order"]] if val.is_file()
              else list(range(len(pnets))))

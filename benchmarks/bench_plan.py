@@ -71,6 +71,14 @@ def planner_at(rev: str):
             sys.modules["ntq_jax.neural_steps"] = current
 
 
+def _options(mod, cfg):
+    """The evaluation's planner options for ``mod`` (a tree before issue 51 maps them itself)."""
+    if hasattr(mod.PlannerOptions, "from_config"):
+        return mod.PlannerOptions.from_config(cfg.eval, steer=True)
+    from ntq_jax.experiment import config as C
+    return C.neural_options(cfg.eval, steer=True)
+
+
 def against(env, pnet, q, key, cfg, other, repeats: int) -> dict:
     """Median batched seconds (compile excluded) of this planner and ``other``, interleaved."""
     import jax
@@ -80,10 +88,10 @@ def against(env, pnet, q, key, cfg, other, repeats: int) -> dict:
 
     times = {"current": [], "other": []}
     for mod in (current, other):  # compile both first
-        mod.plan_batch(env, pnet, q, key, mod.PlannerOptions.from_config(cfg.eval, steer=True))
+        mod.plan_batch(env, pnet, q, key, _options(mod, cfg))
     for r in range(repeats):
         for name, mod in (("current", current), ("other", other)):
-            opts = mod.PlannerOptions.from_config(cfg.eval, steer=True)
+            opts = _options(mod, cfg)
             t0 = time.perf_counter()
             res = mod.plan_batch(env, pnet, q, jax.random.fold_in(key, r), opts)
             times[name].append(time.perf_counter() - t0 - res.compile_seconds)
@@ -100,7 +108,7 @@ def bench(env_name: str, *, queries: int, loop_queries: int, run=None, model: in
     from ntq_jax import make_env, models
     from ntq_jax.envs import env_slug
     from ntq_jax.models import member_pnets
-    from ntq_jax.neural_planner import PlannerOptions, plan_batch
+    from ntq_jax.neural_planner import plan_batch
 
     env = make_env(env_name)
     if run is not None:
@@ -114,7 +122,7 @@ def bench(env_name: str, *, queries: int, loop_queries: int, run=None, model: in
         ens = models.init_ensemble(spec, seed, num_members=model + 1)
         source = f"untrained PNet (hidden {list(hidden)})"
     pnet = member_pnets(ens)[model]
-    opts = PlannerOptions.from_config(cfg.eval, steer=True)
+    opts = C.neural_options(cfg.eval, steer=True)
     key = jax.random.key(seed)
     qu, _ = env.sample_queries(jax.random.fold_in(key, 1), queries // 2, 0.0, padding=0.0)
     qn, _ = env.sample_queries(jax.random.fold_in(key, 2), queries - queries // 2, 1.0, padding=0.0)

@@ -48,7 +48,7 @@ env = make_env(env_name)
 slug = env_slug(env_name, env)
 cfg = C.load(run / "config.yaml", [])
 pnets = member_pnets(load_ensemble(run / "models" / slug))
-opts = NP.PlannerOptions.from_config(cfg.eval, steer=True)
+opts = C.neural_options(cfg.eval, steer=True)
 queries = np.load(run / "eval" / slug / "queries.npz")
 key = jax.random.key(0)
 

@@ -244,8 +244,9 @@ def data_generation() -> tuple[list[dict], dict]:
         ["--env", DATA_ENV, "--k", str(DATA_K), "--gamma-queries", "100000"]))
     with tempfile.TemporaryDirectory(prefix="ntq_smoke_") as out:
         t0 = time.perf_counter()
-        s = data.generate_datasets(nj.make_env(DATA_ENV), cfg, out, env_name=DATA_ENV,
-                                   progress=False, figure=False)
+        from ntq_jax.experiment import config as C
+        s = data.generate_datasets(nj.make_env(DATA_ENV), C.data_options(cfg, DATA_ENV), out,
+                                   env_name=DATA_ENV, progress=False, figure=False)
         secs = time.perf_counter() - t0
     stages = ", ".join(f"{k} {s['timings'][k]:.1f}" for k in ("sample", "plan", "gamma"))
     return [_row(f"6. data generation D0..D3 ({DATA_ENV}, K = {DATA_K})", secs, "s",

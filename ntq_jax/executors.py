@@ -46,7 +46,7 @@ import warnings
 from typing import Any, Callable, Iterable, Iterator, Protocol, Sequence
 
 __all__ = ["EXECUTORS", "Executor", "LocalExecutor", "RayExecutor", "make_executor",
-           "executor_from_config", "worker_env", "RAY_MISSING"]
+           "worker_env", "RAY_MISSING"]
 
 EXECUTORS = ("local", "ray")
 _INIT_LOCK = threading.Lock()  # threads of one driver share one Ray connection
@@ -333,13 +333,6 @@ def make_executor(name: str | None = "local", address: str | None = None, **kwar
     if name == "ray":
         return RayExecutor(address, **kwargs)
     raise ValueError(f"executor must be one of {', '.join(EXECUTORS)}, got {name!r}")
-
-
-def executor_from_config(cfg, name: str | None = None, address: str | None = None) -> Executor:
-    """The executor of ``cfg.executor`` / ``cfg.ray_address``, ``name``/``address`` overriding."""
-    name = name or getattr(cfg, "executor", None) or "local"
-    address = address if address is not None else getattr(cfg, "ray_address", None)
-    return make_executor(name, address)
 
 
 def run_all(executor: Executor, fn: Callable, items: Iterable[tuple]) -> list:

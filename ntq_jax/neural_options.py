@@ -120,16 +120,6 @@ class PlannerOptions:
         only where a stage does not look share its compiled program."""
         return type(self)(**{f: getattr(self, f) for f in STAGE_FIELDS[stage]})
 
-    @staticmethod
-    def from_config(ev, steer: bool | None = None) -> "PlannerOptions":
-        """Options from an :class:`ntq_jax.experiment.config.EvalConfig` (``steer`` overrides its first entry)."""
-        return PlannerOptions(
-            n_plan=ev.n_plan, steer=ev.steer[0] if steer is None else bool(steer),
-            delta=ev.delta, delta_norm=ev.delta_norm or "robot",
-            nosteer_check=True if ev.nosteer_check is None else ev.nosteer_check,
-            replan_rounds=ev.replan_rounds, replan_steps=ev.replan_steps,
-            bidirectional=ev.bidirectional, eval_check=ev.motion_check)
-
 
 @dataclasses.dataclass(frozen=True)
 class NeuralPlanResult:

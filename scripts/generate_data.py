@@ -67,7 +67,7 @@ def _main(argv) -> int:
     executor = executor_of(args, cfg)
 
     def one(name):
-        return data.generate_datasets(made[name], cfg, out, env_name=name,
+        return data.generate_datasets(made[name], C.data_options(cfg, name), out, env_name=name,
                                       progress=not args.no_progress, figure=not args.no_figures,
                                       executor=executor)
 

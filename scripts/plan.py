@@ -83,7 +83,8 @@ def plan_one(run, model: int, start, goal, *, env_name=None, steer: bool = True,
     import numpy as np
 
     from ntq_jax.models import member_pnets
-    from ntq_jax.neural_planner import PlannerOptions, plan_batch
+    from ntq_jax.experiment import config as C
+    from ntq_jax.neural_planner import plan_batch
     from ntq_jax.training import CheckpointError, load_ensemble
 
     run = Path(run)
@@ -101,7 +102,7 @@ def plan_one(run, model: int, start, goal, *, env_name=None, steer: bool = True,
         raise PlanError(str(e)) from None
     if not 0 <= model < ens.num_members:
         raise PlanError(f"--model must be in 0..{ens.num_members - 1}, got {model}")
-    opts = PlannerOptions.from_config(cfg.eval, steer=steer)
+    opts = C.neural_options(cfg.eval, steer=steer)
     res = plan_batch(env, member_pnets(ens)[model], np.stack([s, g])[None],
                      jax.random.key(seed), opts)
     _draw(env, res, s, g, model, png)

@@ -100,7 +100,8 @@ def _main(argv) -> int:
     cfg = C.load(args.config, overrides)
     env = make_env(args.env)
     out = Path(args.out)
-    run = resolve_run(env, cfg, Path(cfg.out_dir) / "data", args.env, None)  # roadmap cache there
+    run = resolve_run(env, C.data_options(cfg, args.env), Path(cfg.out_dir) / "data", args.env,
+                      None)  # roadmap cache there
     meta = {"env": args.env, "config": args.config, "overrides": overrides,
             "planner": run.planner_name, "options": run.options, "padding": run.padding,
             "seed": cfg.seed, "pools": {"U": run.n_u, "N": run.n_nt},

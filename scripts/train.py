@@ -48,7 +48,7 @@ def _main(argv) -> int:
     args = ap.parse_args(argv)
     start_run(args)  # --cpu-devices checked and applied before any JAX operation
 
-    from ntq_jax.experiment.config import load
+    from ntq_jax.experiment.config import load, train_args
 
     cfg = load(args.config, args.set)
     if not (args.data / "env.json").is_file():
@@ -63,8 +63,8 @@ def _main(argv) -> int:
     print(f"training {cfg.model.hidden} PNets on {args.data} -> {out} "
           f"({len(jax.devices())} {jax.default_backend()} device(s))", file=sys.stderr)
     t0 = time.perf_counter()
-    ens, hist = T.train_from_folder(args.data, cfg, out, progress=not args.no_progress,
-                                    shard=False if args.no_shard else None)
+    ens, hist = T.train_from_folder(args.data, out, progress=not args.no_progress,
+                                    shard=False if args.no_shard else None, **train_args(cfg))
     dt = time.perf_counter() - t0
     last = {}
     for m in range(hist.train_loss.shape[1]):

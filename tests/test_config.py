@@ -133,14 +133,14 @@ def test_smooth_data_reaches_the_data_planner_only():
 
     cfg = load_config(None, [])
     assert "smooth_data" not in cfg.to_dict()["planner"]
-    assert "smooth" not in planner_options(cfg, "point/0")
+    assert "smooth" not in planner_options(config.planner_settings(cfg, "point/0"))
     # the embedded default resamples rigid/0's (shortcut) roadmap paths: data_paths 0.6
-    assert planner_options(cfg, "rigid/0")["smooth"] is True
+    assert planner_options(config.planner_settings(cfg, "rigid/0"))["smooth"] is True
     raw = load_config(None, ["planner.smooth_data=false", "planner.per_env=[]"])
     assert raw.hash() != cfg.hash()
-    assert planner_options(raw, "rigid/0")["smooth"] is False
-    assert planner_options(raw, "point/0")["smooth"] is False
-    assert "smooth" not in planner_options(raw, "rigid/0", evaluation=True)
+    assert planner_options(config.planner_settings(raw, "rigid/0"))["smooth"] is False
+    assert planner_options(config.planner_settings(raw, "point/0"))["smooth"] is False
+    assert "smooth" not in planner_options(config.planner_settings(raw, "rigid/0"), evaluation=True)
     with pytest.raises(ConfigError, match=r"planner\.smooth_data"):
         load_config(None, ["planner.smooth_data=maybe"])
     # the option changes the paths: raw grid paths keep their many cell centres
@@ -148,7 +148,7 @@ def test_smooth_data_reaches_the_data_planner_only():
     rng = np.random.default_rng(0)
     lo, hi = np.asarray(env.world.bounds)[:, 0], np.asarray(env.world.bounds)[:, 1]
     q = rng.uniform(lo, hi, (40, 2, 2)).astype(np.float32)
-    kw = planner_options(raw, "point/0")
+    kw = planner_options(config.planner_settings(raw, "point/0"))
     smooth = plan(env, q, "astar", padding=env.padding, resolution=kw["resolution"])
     rough = plan(env, q, "astar", padding=env.padding, **kw)
     both = (smooth.lengths >= 2) & (rough.lengths >= 2)
@@ -171,3 +171,24 @@ def test_the_embedded_default_is_one_yaml_shipped_with_the_package():
     assert "default.yaml" in pyproject["tool"]["setuptools"]["package-data"]["ntq_jax.experiment"]
     cfg = pipeline.load_config(None, [])
     assert cfg.planner.name_for("rigid/0") == "roadmap" and cfg.data.k_train == 600
+
+
+def test_the_config_maps_onto_the_cores_options():
+    """Issue 51: the core's option dataclasses default to what a config without keys
+    says, and a config's per-env settings reach them."""
+    from ntq_jax.data import DataOptions
+    from ntq_jax.models import ModelConfig
+    from ntq_jax.neural_options import PlannerOptions
+    from ntq_jax.training import TrainConfig
+
+    base = config.load(None)
+    assert config.data_options(base, "point/0") == DataOptions()
+    assert config.neural_options(base.eval) == PlannerOptions()
+    args = config.train_args(base)
+    assert (args["model"], args["train"], args["seed"]) == (ModelConfig(), TrainConfig(), 0)
+    cfg = config.load(None, ["seed=3", "data.per_env=[{env: point/1, k_train: 7}]",
+                             "planner.per_env=[{env: point/1, name: visgraph}]"])
+    o = config.data_options(cfg, "point/1")
+    assert (o.seed, o.k_train, o.planner.name, o.planner.roadmap_seed) == (3, 7, "visgraph", 3)
+    assert o.recorded() == cfg.to_dict() and o.recorded_hash() == cfg.hash()
+    assert config.data_options(cfg, "point/0").k_train == cfg.data.k_train

@@ -42,7 +42,8 @@ def small_config(**data_overrides) -> C.Config:
 def point_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("data")
     env = make_env("point/0")
-    summary = data.generate_datasets(env, small_config(), out, env_name="point/0",
+    summary = data.generate_datasets(env, C.data_options(small_config(), "point/0"),
+                                     out, env_name="point/0",
                                      planner="visgraph", progress=False)
     ds = data.load_datasets(out / "point_0")
     return env, out / "point_0", summary, ds
@@ -260,7 +261,8 @@ def test_obstacle_free_map_gives_an_empty_valid_d3(tmp_path):
                          "bounds": [[0, 10], [0, 10]], "padding": 0.5})
     cfg = C.load(None, ["data.k_train=12", "data.gamma_queries=1000", "sampling.n_max=20"])
     with pytest.warns(RuntimeWarning, match="pruning removed every segment"):
-        s = data.generate_datasets(env, cfg, tmp_path, planner=straight_line, progress=False,
+        s = data.generate_datasets(env, C.data_options(cfg, env.name),
+                                   tmp_path, planner=straight_line, progress=False,
                                    figure=False)
     assert s["datasets"]["D3"]["samples"] == 0
     d0, d1, d2, d3 = data.load_datasets(s["env_dir"])  # <out>/empty-<content hash>
@@ -284,7 +286,8 @@ def test_a_custom_planners_paths_are_verified_and_bad_ones_recorded_unsolved(tmp
         return res
 
     with pytest.warns(RuntimeWarning, match="failed the independent check"):
-        s = data.generate_datasets(env, cfg, tmp_path, planner=keep, progress=False, figure=False)
+        s = data.generate_datasets(env, C.data_options(cfg, env.name),
+                                   tmp_path, planner=keep, progress=False, figure=False)
     for res, paths, status in returned:  # the planner's arrays are not modified
         assert np.array_equal(res.paths, paths) and np.array_equal(res.status, status)
     for d in data.load_datasets(s["env_dir"]):  # <out>/wall-<content hash>
@@ -360,7 +363,8 @@ _CHILD = textwrap.dedent("""
 
     cfg = C.load(None, ["data.k_train=40", f"data.chunk={sys.argv[2]}",
                         "data.gamma_queries=20000", "data.gamma_eval=false"])
-    s = data.generate_datasets(make_env("point/0"), cfg, sys.argv[1], env_name="point/0",
+    s = data.generate_datasets(make_env("point/0"), C.data_options(cfg, "point/0"),
+                               sys.argv[1], env_name="point/0",
                                planner=slow_visgraph, progress=False, figure=False)
     print("SUMMARY" + json.dumps({k: s[k] for k in ("reused_queries", "skipped")}))
 """)
@@ -400,14 +404,16 @@ def test_kill9_resume_is_byte_identical_to_an_uninterrupted_run(tmp_path):
 
     cfg5 = C.load(None, ["data.k_train=40", "data.chunk=5", "data.gamma_queries=20000",
                          "data.gamma_eval=false"])
-    summary = data.generate_datasets(make_env("point/0"), cfg5, killed, env_name="point/0",
+    summary = data.generate_datasets(make_env("point/0"), C.data_options(cfg5, "point/0"),
+                                     killed, env_name="point/0",
                                      planner=slow_visgraph, progress=False, figure=False)
     assert summary["reused_queries"] == 8 * done and not summary["skipped"]
     assert sum(calls) == summary["planned_queries"] - 8 * done  # nothing planned twice
     # an uninterrupted run in this process, chunk size 13
     cfg = C.load(None, ["data.k_train=40", "data.chunk=13", "data.gamma_queries=20000",
                         "data.gamma_eval=false"])
-    data.generate_datasets(make_env("point/0"), cfg, tmp_path / "clean", env_name="point/0",
+    data.generate_datasets(make_env("point/0"), C.data_options(cfg, "point/0"),
+                           tmp_path / "clean", env_name="point/0",
                            planner=slow_visgraph, progress=False, figure=False)
     a, b = _arrays(killed / "point_0"), _arrays(tmp_path / "clean" / "point_0")
     assert len(a) == 4 * 8 and a.keys() == b.keys()
@@ -418,7 +424,8 @@ def test_kill9_resume_is_byte_identical_to_an_uninterrupted_run(tmp_path):
         mb = json.loads((tmp_path / "clean" / "point_0" / nm / "meta.json").read_text())
         assert ma["stats"] == mb["stats"] and ma["arrays"] == mb["arrays"]
     # a rerun of a complete output does nothing
-    again = data.generate_datasets(make_env("point/0"), cfg, tmp_path / "clean",
+    again = data.generate_datasets(make_env("point/0"), C.data_options(cfg, "point/0"),
+                                   tmp_path / "clean",
                                    env_name="point/0", planner=slow_visgraph, progress=False,
                                    figure=False)
     assert again["skipped"]
@@ -455,7 +462,8 @@ def test_custom_dataset_specs_share_pools_by_prefix(tmp_path):
     cfg = C.load(None, ["data.k_train=50", "data.chunk=64", "data.gamma_queries=20000",
                         "data.gamma_eval=false",
                         "data.datasets=[{p_nt: 0.3}, {p_nt: 0.3, prune: true}, {p_nt: 0.8}]"])
-    s = data.generate_datasets(env, cfg, tmp_path, planner="visgraph", progress=False,
+    s = data.generate_datasets(env, C.data_options(cfg, env.name),
+                               tmp_path, planner="visgraph", progress=False,
                                figure=False)
     a, b, c = data.load_datasets(tmp_path / "point_0")
     assert b.meta["sharing"]["same_queries_as"] == ["D0"]

@@ -137,17 +137,20 @@ def test_config_key_reaches_the_data_planner_and_the_fingerprint():
 
     base = config.load(None, [])
     assert "data_paths" not in base.to_dict()["planner"]
-    assert planner_options(base, "rigid/0", "roadmap").get("smooth") is None
+    base_rigid = config.planner_settings(base, "rigid/0")
+    assert planner_options(base_rigid, "roadmap").get("smooth") is None
     for mode, smooth in (("raw", False), ("shortcut", True), (0.4, True)):
         cfg = config.load(None, [f"planner.data_paths={mode}"])
         assert cfg.planner.data_paths_for("rigid/0") == mode
-        assert planner_options(cfg, "rigid/0", "roadmap")["smooth"] is smooth
-        assert "smooth" not in planner_options(cfg, "rigid/0", "bitstar")
-        assert "smooth" not in planner_options(cfg, "rigid/0", "roadmap", evaluation=True)
+        rigid = config.planner_settings(cfg, "rigid/0")
+        assert planner_options(rigid, "roadmap")["smooth"] is smooth
+        assert "smooth" not in planner_options(rigid, "bitstar")
+        assert "smooth" not in planner_options(rigid, "roadmap", evaluation=True)
         assert cfg.hash() != base.hash()
     env = make_env("point/0")
-    fps = {resolve_run(env, config.load(None, [f"planner.data_paths={m}"]), "/tmp/x",
-                       "point/0", None).fingerprint for m in ("raw", "shortcut", 0.4, 0.5)}
+    opts = [config.data_options(config.load(None, [f"planner.data_paths={m}"]), "point/0")
+            for m in ("raw", "shortcut", 0.4, 0.5)]
+    fps = {resolve_run(env, o, "/tmp/x", "point/0", None).fingerprint for o in opts}
     assert len(fps) == 4
     # per environment, and the earlier spelling smooth_data
     cfg = config.load(None, ["planner.per_env=[{env: rigid/0, data_paths: 0.3}]"])
@@ -172,7 +175,8 @@ def test_a_spacing_too_fine_for_the_map_is_refused_before_any_work(tmp_path, cap
     from ntq_jax import data
     cfg = config.load(None, ["planner.data_paths=1.0e-9"])
     with pytest.raises(ConfigError, match=r"planner\.data_paths 1e-09 for point/0: .* spacing >= "):
-        data.generate_datasets(make_env("point/0"), cfg, tmp_path / "d", env_name="point/0",
+        data.generate_datasets(make_env("point/0"), config.data_options(cfg, "point/0"),
+                               tmp_path / "d", env_name="point/0",
                                progress=False, figure=False)
     assert not (tmp_path / "d").exists()
     argv = ["--set", "envs=[point/0]", "--set", "planner.data_paths=1.0e-4", "--out",
@@ -189,7 +193,8 @@ def test_a_roadmap_beyond_memory_is_refused_before_any_work(tmp_path):
     cfg = config.load(None, ["planner.name=roadmap", "planner.milestones=1e12"])
     with pytest.raises(ConfigError, match=r"planner\.milestones 1,000,000,000,000 for rigid/0: "
                                           r".* GB\) would not fit .* use at most "):
-        data.generate_datasets(make_env("rigid/0"), cfg, tmp_path / "d", env_name="rigid/0",
+        data.generate_datasets(make_env("rigid/0"), config.data_options(cfg, "rigid/0"),
+                               tmp_path / "d", env_name="rigid/0",
                                progress=False, figure=False)
     assert not (tmp_path / "d").exists()
     from ntq_jax.data.limits import check_roadmap
@@ -215,13 +220,15 @@ def test_datasets_rebuild_from_a_record_without_planning(tmp_path, monkeypatch):
     assert sorted(p.name for p in (rec / "N").iterdir())[0] == "plan_000000000_000000005.npz"
     env = make_env("point/2")
     plain = config.load("configs/point_small.yaml", sets)
-    data.generate_datasets(env, plain, tmp_path / "planned", env_name="point/2",
+    data.generate_datasets(env, config.data_options(plain, "point/2"),
+                           tmp_path / "planned", env_name="point/2",
                            progress=False, figure=False)
     written = []
     monkeypatch.setattr(planning, "chunk_written", written.append)
     cfg = config.load("configs/point_small.yaml",
                       sets + [f"data.per_env=[{{env: point/2, paths_from: '{rec}'}}]"])
-    out = data.generate_datasets(env, cfg, tmp_path / "replayed", env_name="point/2",
+    out = data.generate_datasets(env, config.data_options(cfg, "point/2"),
+                                 tmp_path / "replayed", env_name="point/2",
                                  progress=False, figure=False)
     assert written == [] and out["reused_queries"] == out["planned_queries"] == 24
     for ds in ("D0", "D1", "D2", "D3"):
@@ -232,12 +239,14 @@ def test_datasets_rebuild_from_a_record_without_planning(tmp_path, monkeypatch):
     other = config.load("configs/point_small.yaml", sets + [
         "seed=1", f"data.per_env=[{{env: point/2, paths_from: '{rec}'}}]"])
     with pytest.raises(ValueError, match="with seed 0, not point/2 at 0.8 with seed 1"):
-        data.generate_datasets(env, other, tmp_path / "other", env_name="point/2",
+        data.generate_datasets(env, config.data_options(other, "point/2"),
+                               tmp_path / "other", env_name="point/2",
                                progress=False, figure=False)
     with pytest.raises(ValueError, match="records point/2"):
-        data.generate_datasets(make_env("point/1"), config.load(
-            "configs/point_small.yaml", sets + [f"data.per_env=[{{env: point/1, paths_from: '{rec}'}}]"]),
-            tmp_path / "p1", env_name="point/1", progress=False, figure=False)
+        p1 = config.load("configs/point_small.yaml",
+                         sets + [f"data.per_env=[{{env: point/1, paths_from: '{rec}'}}]"])
+        data.generate_datasets(make_env("point/1"), config.data_options(p1, "point/1"),
+                               tmp_path / "p1", env_name="point/1", progress=False, figure=False)
 
 
 def test_the_committed_bitstar_record_reverifies():

@@ -175,9 +175,9 @@ def test_killed_worker_is_retried_with_identical_output(ray_session, local_run, 
 
     def run():
         try:
-            out["summary"] = data.generate_datasets(make_env(ENV), _cfg("data.chunk=2"), tmp_path,
-                                                    env_name=ENV, progress=False, figure=False,
-                                                    executor=ex)
+            opts = C.data_options(_cfg("data.chunk=2"), ENV)
+            out["summary"] = data.generate_datasets(make_env(ENV), opts, tmp_path, env_name=ENV,
+                                                    progress=False, figure=False, executor=ex)
         except BaseException as e:  # noqa: BLE001 (reported below)
             out["error"] = e
 
@@ -217,12 +217,14 @@ def test_local_run_interrupted_then_resumed_with_ray(ray_session, local_run, tmp
 
     monkeypatch.setattr(planning, "chunk_written", stop_after_three)
     with pytest.raises(KeyboardInterrupt):
-        data.generate_datasets(make_env(ENV), _cfg(), tmp_path, env_name=ENV, progress=False,
+        data.generate_datasets(make_env(ENV), C.data_options(_cfg(), ENV),
+                               tmp_path, env_name=ENV, progress=False,
                                figure=False, executor=LocalExecutor())
     assert not (tmp_path / "point_2" / "D0" / "meta.json").exists()
     first = list(written)
     monkeypatch.setattr(planning, "chunk_written", written.append)
-    s = data.generate_datasets(make_env(ENV), _cfg("executor=ray"), tmp_path, env_name=ENV,
+    s = data.generate_datasets(make_env(ENV), C.data_options(_cfg("executor=ray"), ENV),
+                               tmp_path, env_name=ENV,
                                progress=False, figure=False, executor=RayExecutor())
     assert s["reused_queries"] == 30 and not s["skipped"]
     assert len(written) == len(set(written)) == 8 and set(first) <= set(written[:3])

@@ -213,7 +213,8 @@ def _run_all(tmp: Path, run: Path | None = None) -> tuple[dict, dict[str, np.nda
         cfg = load_config(None, TINY)
         run_pipeline(cfg, prepare_run(cfg, run), progress=False, log=lambda _: None)
     cfg = config.load(None, ARM)
-    data.generate_datasets(make_env("nlink/2"), cfg, tmp / "arm", env_name="nlink/2",
+    data.generate_datasets(make_env("nlink/2"), config.data_options(cfg, "nlink/2"),
+                           tmp / "arm", env_name="nlink/2",
                            progress=False, figure=False)
     params = trained_params(run / "models" / "point_2")
     rows = _numbers(json.loads((run / "results.json").read_text())["rows"])
@@ -411,16 +412,18 @@ def simulate(tmp: Path) -> dict:
     from ntq_jax.experiment.pipeline import load_config
 
     cfg = load_config(None, TINY)
-    data.generate_datasets(make_env("point/2"), cfg, tmp / "data", env_name="point/2",
+    data.generate_datasets(make_env("point/2"), config.data_options(cfg, "point/2"),
+                           tmp / "data", env_name="point/2",
                            progress=False, figure=False)
-    data.generate_datasets(make_env("nlink/2"), config.load(None, ARM), tmp / "arm",
-                           env_name="nlink/2", progress=False, figure=False)
+    arm = config.data_options(config.load(None, ARM), "nlink/2")
+    data.generate_datasets(make_env("nlink/2"), arm, tmp / "arm", env_name="nlink/2",
+                           progress=False, figure=False)
     golden, reference = json.loads(GOLDEN.read_text()), _load_reference()
     cls = golden["params_class"]
 
     def check(tag: str) -> dict:
-        training.train_from_folder(tmp / "data" / "point_2", cfg, tmp / f"models_{tag}",
-                                   progress=False)
+        training.train_from_folder(tmp / "data" / "point_2", tmp / f"models_{tag}",
+                                   progress=False, **config.train_args(cfg))
         params = trained_params(tmp / f"models_{tag}")
         got = {"pipeline": _datasets(tmp / "data"), "arm": _datasets(tmp / "arm")}
         return {"datasets_differ": _diff(got, golden["portable"][cls]["datasets"], "portable"),

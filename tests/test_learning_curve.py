@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from ntq_jax import data, make_env
+from ntq_jax.experiment import config as C
 from ntq_jax.experiment.curve import prefix_dataset, run_curve
 from ntq_jax.experiment.pipeline import load_config
 
@@ -69,7 +70,8 @@ def test_sizes_are_prefixes_and_equal_a_run_at_that_size(curve, tmp_path):
         np.testing.assert_array_equal(s["targets"], d.targets[:n])
     # a run with data.k_train=20 writes exactly these datasets
     direct_cfg = load_config(None, TINY + ["data.k_train=20"])
-    summ = data.generate_datasets(make_env("point/2"), direct_cfg, tmp_path / "d20",
+    summ = data.generate_datasets(make_env("point/2"), C.data_options(direct_cfg, "point/2"),
+                                  tmp_path / "d20",
                                   env_name="point/2", progress=False, figure=False)
     for s, d in zip(small, data.load_datasets(summ["env_dir"])):
         for name in ("inputs", "targets", "path_index", "path_lengths", "queries",

@@ -292,10 +292,10 @@ def test_without_steer_to_the_papers_goal_test_and_unchecked_paths():
     assert not shapely_free("wall", loose.path(0))  # through the wall, as the option says
     # from the config (null: ours, left out of the hash)
     cfg = config.load(None, ["eval.delta_norm=l2", "eval.nosteer_check=false"])
-    o = PlannerOptions.from_config(cfg.eval, steer=False)
+    o = config.neural_options(cfg.eval, steer=False)
     assert (o.delta_norm, o.nosteer_check) == ("l2", False)
     base = config.load(None, [])
-    o = PlannerOptions.from_config(base.eval, steer=False)
+    o = config.neural_options(base.eval, steer=False)
     assert (o.delta_norm, o.nosteer_check) == ("robot", True)
     assert "delta_norm" not in base.to_dict()["eval"] and cfg.hash() != base.hash()
     with pytest.raises(ValueError, match="delta_norm"):
@@ -330,7 +330,7 @@ def test_without_steer_to_replan_runs_lines_10_to_14():
     _, near = run("straight", STAY, [[[1, 1], [1.5, 1.5]]], opts=nosteer("replan"))
     assert np.all(near.success) and np.all(near.lengths == 2) and np.all(near.pnet_calls == 0)
     cfg = config.load(None, ["eval.nosteer_check=replan"])
-    assert PlannerOptions.from_config(cfg.eval, steer=False).nosteer_check == "replan"
+    assert config.neural_options(cfg.eval, steer=False).nosteer_check == "replan"
 
 
 def test_without_steer_to_states_checks_the_waypoints_only():
@@ -355,7 +355,7 @@ def test_without_steer_to_states_checks_the_waypoints_only():
     assert not np.asarray(make("wall").is_valid(inside.path(0))).all()
     assert inside.cause[0] == PlanCause.INFEASIBLE and not inside.success[0]
     cfg = config.load(None, ["eval.nosteer_check=states"])
-    assert PlannerOptions.from_config(cfg.eval, steer=False).nosteer_check == "states"
+    assert config.neural_options(cfg.eval, steer=False).nosteer_check == "states"
     with pytest.raises(config.ConfigError, match="nosteer_check"):
         config.load(None, ["eval.nosteer_check=segments"])
     with pytest.raises(ValueError, match="nosteer_check"):

@@ -35,7 +35,8 @@ def _config(chunk=64, seed=0):
 
 def _generate(out, **kw):
     env = make_env("point/2")
-    data.generate_datasets(env, _config(**kw), out, env_name="point/2", progress=False,
+    data.generate_datasets(env, C.data_options(_config(**kw), "point/2"),
+                           out, env_name="point/2", progress=False,
                            figure=False)
     return env, data.load_datasets(out / "point_2")
 

@@ -138,7 +138,8 @@ def _cfg(rec, *extra):
 
 def _generate(rec, out):
     from ntq_jax import data
-    return data.generate_datasets(make_env("point/2"), _cfg(rec), out, env_name="point/2",
+    return data.generate_datasets(make_env("point/2"), config.data_options(_cfg(rec), "point/2"),
+                                  out, env_name="point/2",
                                   progress=False, figure=False)
 
 

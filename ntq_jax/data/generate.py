@@ -3,9 +3,8 @@
 Usage::
 
     from ntq_jax import data, make_env
-    from ntq_jax.experiment import config
-    cfg = config.load("configs/point_small.yaml")
-    summary = data.generate_datasets(make_env("point/0"), cfg, "runs/data", env_name="point/0")
+    opts = data.DataOptions(k_train=400, chunk=200, gamma_queries=200_000)
+    summary = data.generate_datasets(make_env("point/0"), opts, "runs/data")
     d0, d1, d2, d3 = data.load_datasets("runs/data/point_0")
 
 Shared planning: the datasets draw their queries from two pools, each planned
@@ -32,8 +31,8 @@ a rerun checks every array against the checksums in its ``meta.json``
 left untouched, otherwise the pools are planned again and only the damaged
 datasets are rewritten (an intact dataset is rewritten too if the planner does
 not reproduce it bit for bit, so the set stays consistent). ``<env_dir>/config.yaml``
-records the resolved config, so the advice of every dataset error is an exact
-command. Stage timings: BENCHMARKS.md (``benchmarks/bench_data.py``).
+records the resolved config (``DataOptions.record``), so the advice of every dataset
+error is an exact command. Stage timings: BENCHMARKS.md (``benchmarks/bench_data.py``).
 """
 
 from __future__ import annotations
@@ -59,6 +58,7 @@ from ntq_jax.envs import env_slug
 from ntq_jax.data.include import include_data, prune_probability, prune_rng
 from ntq_jax.planners.path_modes import shape_paths
 from ntq_jax.planners.jobs import PoolPlan, plan_pool, planner_options, resolve_planner
+from ntq_jax.data.options import DataOptions
 from ntq_jax.data import records
 from ntq_jax.data.limits import check_roadmap, check_spacing
 from ntq_jax.data.pools import (Keys, Pools, mixing_bits, pool_index, pool_sizes, run_keys,
@@ -87,7 +87,7 @@ class RunSpec(NamedTuple):
     slug: str
     env_dir: Path
     names: list[str]     # D0, D1, ...
-    specs: list          # config.data.datasets
+    specs: list          # options.datasets
     k: int               # queries per dataset
     padding: float       # the data-generation geometry
     prune_padding: float
@@ -110,33 +110,33 @@ class RunSpec(NamedTuple):
         return pool_sizes(self.bits)[1]
 
 
-def resolve_run(env, config, out_dir, env_name: str | None, planner) -> RunSpec:
+def resolve_run(env, opts: DataOptions, out_dir, env_name: str | None, planner) -> RunSpec:
     """The :class:`RunSpec` of ``generate_datasets``' arguments (paddings resolved here)."""
     env_name = env_name or env.name
     slug = env_slug(env_name, env)
-    dc = config.data
+    dc = opts
     specs = list(dc.datasets)
-    k = dc.k_train_for(env_name)
+    k = dc.k_train
     pad, prune_pad = env.resolve_padding(None), env.resolve_padding(dc.prune_padding)
-    planner = config.planner.name_for(env_name) if planner is None else planner
+    planner = opts.planner.name if planner is None else planner
     custom = callable(planner)
     options = (dict(getattr(planner, "options", {}) or {}) if custom
-               else planner_options(config, env_name, str(planner)))
+               else planner_options(opts.planner, str(planner)))
     plan_fn, planner_name = resolve_planner(planner, options,
                                             cache_dir=Path(out_dir) / slug / "roadmap")
-    keys = run_keys(config.seed, slug)
+    keys = run_keys(opts.seed, slug)
     bits = [mixing_bits(keys.mix, k, s.p_nt) for s in specs]
     n_u, n_nt = pool_sizes(bits)
-    mode = config.planner.data_paths_for(env_name)
+    mode = opts.planner.data_paths
     check_spacing(env, mode, env_name)  # before any work
     if planner_name == "roadmap":
         check_roadmap(env, options, env_name)
-    source = dc.paths_from_for(env_name)
+    source = dc.paths_from
     record = None if source is None else records.provenance(source, {"U": n_u, "N": n_nt})
     fp = artifacts.fingerprint({
-        "format": FORMAT_VERSION, "env": env.to_json(), "env_name": env_name, "seed": config.seed,
+        "format": FORMAT_VERSION, "env": env.to_json(), "env_name": env_name, "seed": opts.seed,
         "pad": pad, "prune_pad": prune_pad, "planner": planner_name, "options": options,
-        "n_max": config.sampling.n_max, "n_u": n_u, "n_nt": n_nt, "k": k,
+        "n_max": opts.n_max, "n_u": n_u, "n_nt": n_nt, "k": k,
         "datasets": [[s.p_nt, s.prune] for s in specs],
         "gamma_queries": dc.gamma_queries, "gamma_eval": dc.gamma_eval,
         # only when set: the fingerprints of runs with the planners' default paths stay
@@ -172,16 +172,16 @@ def estimate_gamma(env, key: jax.Array, n: int, padding: float, cache: Path) -> 
     return out
 
 
-def estimate_gammas(env, key: jax.Array, data_config, padding: float, work: Path
+def estimate_gammas(env, key: jax.Array, opts: DataOptions, padding: float, work: Path
                     ) -> tuple[dict, dict, float]:
     """``(gamma_nt at padding, gamma_nt at 0 or none, seconds)`` (``data.gamma_eval``).
 
     At ``padding`` 0 (e.g. the Panda's scenes) the data geometry is the evaluation
     geometry, and the one estimate serves as both."""
     t0 = time.perf_counter()
-    n = data_config.gamma_queries
+    n = opts.gamma_queries
     g_data = estimate_gamma(env, jax.random.fold_in(key, 0), n, padding, work / "gamma_data.json")
-    if not data_config.gamma_eval:
+    if not opts.gamma_eval:
         g_eval = dict(_NO_GAMMA)
     elif float(padding) == 0.0:
         g_eval = dict(g_data)
@@ -194,7 +194,7 @@ def resolve_prune(spec, g_data: dict, env_name: str, name: str) -> float:
     """The drop probability of a free sample for ``spec.prune`` (``gamma``: ``g_data``'s estimate)."""
     if spec.prune == "keep_last":  # Alg. 4's pruning; include_data keeps the last steps
         return 1.0
-    if isinstance(spec.prune, str):  # "gamma" (validated by the config)
+    if isinstance(spec.prune, str):  # "gamma"
         g = g_data.get("gamma")
         if g is None:
             raise ValueError(
@@ -275,18 +275,18 @@ def sharing(run: RunSpec, j: int) -> dict:
             "same_queries_as": [run.names[i] for i in range(j) if np.array_equal(run.bits[i], b)]}
 
 
-def common_meta(env, config, run: RunSpec, g_data: dict, g_eval: dict) -> dict:
+def common_meta(env, opts: DataOptions, run: RunSpec, g_data: dict, g_eval: dict) -> dict:
     """The ``meta.json`` entries every dataset of the run shares."""
     return {
         "format": FORMAT, "format_version": FORMAT_VERSION, "env": env.name,
-        "env_name": run.env_name, "env_slug": run.slug, "seed": config.seed, "k_train": run.k,
+        "env_name": run.env_name, "env_slug": run.slug, "seed": opts.seed, "k_train": run.k,
         "padding": run.padding, "prune_padding": run.prune_padding,
         "planner": {"name": run.planner_name, "options": run.options,
                     **({} if run.data_paths is None else {"data_paths": run.data_paths}),
                     # where the recorded paths come from (the planner above plans the rest)
                     **({} if run.record is None else {"paths_from": run.record})},
-        "sampling": {"n_max": config.sampling.n_max}, "gamma_nt": g_data, "gamma_nt_eval": g_eval,
-        "package_version": __version__, "config_hash": config.hash(),
+        "sampling": {"n_max": opts.n_max}, "gamma_nt": g_data, "gamma_nt_eval": g_eval,
+        "package_version": __version__, "config_hash": opts.recorded_hash(),
         "fingerprint": run.fingerprint, "query_kind_values": _QUERY_KINDS,
     }
 
@@ -308,13 +308,13 @@ def _warn_rejected(run: RunSpec, planned: PoolPlan, recorded: int = 0) -> None:
                       "they are recorded as unsolved", RuntimeWarning, stacklevel=3)
 
 
-def _open_work(env, config, run: RunSpec) -> Path:
+def _open_work(env, opts: DataOptions, run: RunSpec) -> Path:
     """Creates ``<env_dir>/.work/<fingerprint>/``; writes ``env.json`` and ``config.yaml``."""
     work = run.env_dir / ".work" / run.fingerprint
     work.mkdir(parents=True, exist_ok=True)
     artifacts.clean_tmp(work)
     env.save_json(run.env_dir / "env.json")
-    text = yaml.safe_dump(config.to_dict(), sort_keys=False)
+    text = yaml.safe_dump(opts.recorded(), sort_keys=False)
     cfg_file = run.env_dir / CONFIG_FILE
     if not cfg_file.is_file() or cfg_file.read_text() != text:
         artifacts.write_text(cfg_file, text)
@@ -352,7 +352,7 @@ def _timed(timings: dict, stage: str):
 # The orchestrator
 # ---------------------------------------------------------------------------
 
-def _write_datasets(env, config, run, pools, planned, blocked, gammas, bad: dict,
+def _write_datasets(env, opts, run, pools, planned, blocked, gammas, bad: dict,
                     timings: dict, progress) -> tuple[dict[str, dict], list[str]]:
     """includeData (Alg. 4) for every dataset of ``run``, each written with its metadata.
 
@@ -360,7 +360,7 @@ def _write_datasets(env, config, run, pools, planned, blocked, gammas, bad: dict
     Returns ``(statistics per dataset, names of the datasets written now)``.
     """
     g_data, g_eval = gammas
-    common = common_meta(env, config, run, g_data, g_eval)
+    common = common_meta(env, opts, run, g_data, g_eval)
     summary: dict[str, dict] = {}
     rewritten: list[str] = []
     with open_bar(progress, desc=f"{run.slug}: includeData + write", total=len(run.specs),
@@ -373,12 +373,12 @@ def _write_datasets(env, config, run, pools, planned, blocked, gammas, bad: dict
                 prune = spec.prune if isinstance(spec.prune, bool) else p_prune
                 arrays = dataset_arrays(env, pools, planned.result, idx, prune,
                                         run.prune_padding,
-                                        rng=prune_rng(config.seed, run.slug, name),
+                                        rng=prune_rng(opts.seed, run.slug, name),
                                         keep_last=spec.prune == "keep_last")
             with _timed(timings, "write"):
                 stats = dataset_stats(arrays, idx, planned, blocked, p_prune > 0, g_data, g_eval)
                 warns = dataset_warnings(run.env_name, name, stats, p_prune > 0,
-                                         config.sampling.n_max)
+                                         opts.n_max)
                 if name in bad or not _unchanged(run.env_dir / name, arrays):
                     write_dataset(run.env_dir / name, arrays, dict(
                         common, name=name, p_nt=spec.p_nt, prune=spec.prune,
@@ -390,9 +390,10 @@ def _write_datasets(env, config, run, pools, planned, blocked, gammas, bad: dict
     return summary, rewritten
 
 
-def generate_datasets(env, config, out_dir, *, env_name: str | None = None, planner=None,
-                      progress=True, figure: bool = True, executor=None) -> dict:
-    """Generates D0..D3 (``config.data.datasets``) for one environment (Alg. 2 + 4).
+def generate_datasets(env, options: DataOptions | None, out_dir, *,
+                      env_name: str | None = None, planner=None, progress=True,
+                      figure: bool = True, executor=None) -> dict:
+    """Generates D0..D3 (``options.datasets``) for one environment (Alg. 2 + 4).
 
     Writes ``<out_dir>/<env_slug>/env.json``, ``D<i>/`` (:mod:`ntq_jax.data.format`)
     and ``figure.png``. Resumable: a rerun after an interruption reuses the
@@ -400,11 +401,11 @@ def generate_datasets(env, config, out_dir, *, env_name: str | None = None, plan
 
     Args:
         env: the :class:`ntq_jax.Env` (its padding is the data-generation geometry).
-        config: a :class:`ntq_jax.experiment.config.Config` (``seed``, ``sampling``, ``data``, ``planner``).
+        options: the :class:`~ntq_jax.data.options.DataOptions` of this environment
+            (None: the defaults, the paper's).
         out_dir: the output root.
-        env_name: the name listed in ``config.envs`` (for per-env overrides and
-            the folder name); default ``env.name``.
-        planner: ``None`` (``config.planner.name_for(env_name)``), a planner name, or a callable
+        env_name: the environment's name in messages and the folder name; default ``env.name``.
+        planner: ``None`` (``options.planner.name``), a planner name, or a callable
             ``(env, queries (K, 2, d), *, padding, seed) -> PlanResult`` (its
             results are verified with :func:`ntq_jax.planners.verify.finalize`).
         progress: progress bars per stage (:func:`ntq_jax.progress.open_bar`; True = tqdm).
@@ -422,33 +423,34 @@ def generate_datasets(env, config, out_dir, *, env_name: str | None = None, plan
         written now), ``fingerprint`` and (unless skipped) ``planned_queries``.
     """
     t_all = time.perf_counter()
-    run = resolve_run(env, config, out_dir, env_name, planner)
+    opts = DataOptions() if options is None else options
+    run = resolve_run(env, opts, out_dir, env_name, planner)
     bad = damaged_datasets(run.env_dir, run.names, run.fingerprint)
     if not bad:
         return _already_complete(run, figure)
     damaged = {nm: why for nm, why in bad.items() if (run.env_dir / nm / "meta.json").exists()}
-    work = _open_work(env, config, run)
+    work = _open_work(env, opts, run)
     timings: dict[str, float] = {}
 
     # 1. the query pools U and N
     with _timed(timings, "sample"):
         pools = sample_pools(env, run.keys, run.n_u, run.n_nt, run.padding,
-                             config.sampling.n_max, progress, f"{run.slug}: sample queries")
+                             opts.n_max, progress, f"{run.slug}: sample queries")
 
     recorded = 0  # recorded paths the verification rejected
     if run.record is not None:  # checked and verified before plan_pool reuses them
         recorded = records.seed_work(work, run.record["record"], pools.queries, pools.n_u, env,
-                                     env_name=run.env_name, seed=config.seed,
+                                     env_name=run.env_name, seed=opts.seed,
                                      padding=run.padding)[1]
 
     with ThreadPoolExecutor(1, thread_name_prefix="ntq_jax-gamma") as gamma_thread:
         # 2. gamma_nt of the map, in the background while the planner runs
-        gammas = gamma_thread.submit(estimate_gammas, env, run.keys.gamma, config.data,
+        gammas = gamma_thread.submit(estimate_gammas, env, run.keys.gamma, opts,
                                      run.padding, work)
         # 3. planning (chunked, resumable, verified) and the blocked-ness of every query
         with _timed(timings, "plan"):
             planned = plan_pool(env, pools.queries, run.plan_fn, verify=run.verify,
-                                padding=run.padding, seed=config.seed, chunk=config.data.chunk,
+                                padding=run.padding, seed=opts.seed, chunk=opts.chunk,
                                 work=work, progress=progress,
                                 desc=f"{run.slug}: plan ({run.planner_name})", executor=executor)
         _warn_rejected(run, planned, recorded)
@@ -466,7 +468,7 @@ def generate_datasets(env, config, out_dir, *, env_name: str | None = None, plan
             bar.update(1)
 
     # 4. includeData per dataset, written with its metadata (meta.json last)
-    summary, rewritten = _write_datasets(env, config, run, pools, planned, blocked,
+    summary, rewritten = _write_datasets(env, opts, run, pools, planned, blocked,
                                          (g_data, g_eval), bad, timings, progress)
 
     # 5. the figure; the datasets are complete: drop every work folder

@@ -160,11 +160,12 @@ def add_executor_options(ap) -> None:
 
 def executor_of(args, cfg):
     """The executor of ``cfg`` with :func:`add_executor_options`' options overriding it."""
-    from ntq_jax.executors import executor_from_config
+    from ntq_jax.executors import make_executor
     name = getattr(args, "executor", None) or cfg.executor or "local"
-    if getattr(args, "ray_address", None) and name != "ray":
+    address = getattr(args, "ray_address", None)
+    if address and name != "ray":
         raise UsageError("--ray-address needs --executor ray (or executor: ray in the config)")
-    return executor_from_config(cfg, name, getattr(args, "ray_address", None))
+    return make_executor(name, address if address is not None else cfg.ray_address)
 
 
 def start_run(args) -> None:

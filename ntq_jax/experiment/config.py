@@ -32,7 +32,10 @@ import yaml
 
 from ntq_jax import artifacts
 from ntq_jax.errors import ConfigError, check_config as _check
+from ntq_jax.data.options import DataOptions, DatasetSpec as CoreDatasetSpec
 from ntq_jax.models import ModelConfig
+from ntq_jax.neural_options import PlannerOptions
+from ntq_jax.planners.jobs import PlannerSettings
 from ntq_jax.training.config import TrainConfig
 from ntq_jax.experiment.sections import (DATA_PATH_MODES, ENSEMBLE_ROWS, PLANNERS, PRUNE_GAMMA,
                                          DataConfig, DataEnvOverride, DatasetSpec, EvalConfig,
@@ -44,7 +47,8 @@ from ntq_jax.experiment.sections import (DATA_PATH_MODES, ENSEMBLE_ROWS, PLANNER
 __all__ = ["Config", "ConfigError", "load", "from_dict", "apply_overrides", "ModelConfig",
            "TrainConfig", "SamplingConfig", "DatasetSpec", "DataEnvOverride", "DataConfig",
            "PlannerEnvOverride", "PlannerConfig", "EvalConfig", "PLANNERS", "DATA_PATH_MODES",
-           "PRUNE_GAMMA", "ENSEMBLE_ROWS", "validate_mode"]
+           "PRUNE_GAMMA", "ENSEMBLE_ROWS", "validate_mode", "planner_settings", "data_options",
+           "train_args", "neural_options"]
 
 
 #: the values of ``task`` (the run folder's name; ``panda``: the 7-DoF arm in 3-D scenes)
@@ -281,3 +285,50 @@ def load(path: str | Path | None = None, overrides: list[str] | None = None) -> 
     if overrides:
         where += " (with overrides " + ", ".join(overrides) + ")"
     return from_dict(apply_overrides(data, overrides), where)
+
+
+# ---------------------------------------------------------------------------
+# The core's options of a Config
+# ---------------------------------------------------------------------------
+
+def planner_settings(cfg: Config, env_name: str) -> PlannerSettings:
+    """``cfg``'s planner settings for environment ``env_name`` (its ``per_env`` overrides
+    applied; the roadmap's seed is the run's, the motion check the evaluation's)."""
+    pc = cfg.planner
+    return PlannerSettings(
+        name=pc.name_for(env_name), resolution=pc.resolution, milestones=pc.milestones,
+        neighbors=pc.neighbors, grow_rounds=pc.grow_rounds, roadmap_seed=cfg.seed,
+        time_budget=pc.time_budget_for(env_name),
+        eval_time_budget=pc.eval_time_budget_for(env_name), workers=pc.workers,
+        data_paths=pc.data_paths_for(env_name), motion_check=cfg.eval.motion_check)
+
+
+def data_options(cfg: Config, env_name: str) -> DataOptions:
+    """The :class:`~ntq_jax.data.DataOptions` of ``cfg`` for environment ``env_name``
+    (``seed``, ``sampling``, ``data`` and ``planner``, per-env overrides applied);
+    the datasets record the whole resolved config and its :meth:`Config.hash`."""
+    dc = cfg.data
+    return DataOptions(
+        seed=cfg.seed, k_train=dc.k_train_for(env_name),
+        datasets=tuple(CoreDatasetSpec(s.p_nt, s.prune) for s in dc.datasets),
+        n_max=cfg.sampling.n_max, prune_padding=dc.prune_padding, chunk=dc.chunk,
+        gamma_queries=dc.gamma_queries, gamma_eval=dc.gamma_eval,
+        paths_from=dc.paths_from_for(env_name), planner=planner_settings(cfg, env_name),
+        record=cfg.to_dict(), record_hash=cfg.hash())
+
+
+def train_args(cfg: Config) -> dict:
+    """The keyword arguments of :func:`ntq_jax.training.train_from_folder` for ``cfg``
+    (``model``, ``train``, ``seed``; the checkpoints record the whole resolved config)."""
+    return {"model": cfg.model, "train": cfg.train, "seed": cfg.seed, "record": cfg.to_dict()}
+
+
+def neural_options(ev: EvalConfig, steer: bool | None = None) -> PlannerOptions:
+    """The neural planner's :class:`~ntq_jax.neural_options.PlannerOptions` of ``ev``
+    (``steer`` overrides its first entry)."""
+    return PlannerOptions(
+        n_plan=ev.n_plan, steer=ev.steer[0] if steer is None else bool(steer),
+        delta=ev.delta, delta_norm=ev.delta_norm or "robot",
+        nosteer_check=True if ev.nosteer_check is None else ev.nosteer_check,
+        replan_rounds=ev.replan_rounds, replan_steps=ev.replan_steps,
+        bidirectional=ev.bidirectional, eval_check=ev.motion_check)

@@ -271,8 +271,9 @@ def run_curve(cfg: C.Config, env_name: str, sizes: Sequence[int], out: str | Pat
     gen_cfg = size_config(cfg, env_name, sizes[-1])
     log(f"[{env_name}] data: {sizes[-1]} queries x {len(cfg.data.datasets)} datasets "
         f"({cfg.planner.name_for(env_name)}), generated once for sizes {sizes}")
-    summary = data_mod.generate_datasets(env, gen_cfg, out / "data", env_name=env_name,
-                                         progress=progress, figure=False, executor=executor)
+    summary = data_mod.generate_datasets(env, C.data_options(gen_cfg, env_name), out / "data",
+                                         env_name=env_name, progress=progress, figure=False,
+                                         executor=executor)
     data_dir = Path(summary["env_dir"])
     datasets = data_mod.load_datasets(data_dir)
     names = data_mod.dataset_names(len(datasets))

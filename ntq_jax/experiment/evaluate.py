@@ -75,6 +75,7 @@ from ntq_jax.envs import env_slug
 from ntq_jax.planners.jobs import plan_pool, planner_options, resolve_planner
 from ntq_jax.planners import plan, visgraph
 from ntq_jax.models import member_pnets
+from ntq_jax.experiment import config as C
 from ntq_jax.experiment.metrics import band_metrics, best_of, in_band, metrics
 from ntq_jax.types import (QUERY_KINDS, TASK_OF_ROBOT)
 
@@ -215,7 +216,8 @@ def _run_reference(env, q, cfg, env_name, planner, out_dir: Path, executor=None,
     if planner is not None:
         return planner(env, q, padding=0.0, seed=cfg.seed)
     name = cfg.planner.name_for(env_name)
-    run, _ = resolve_planner(name, planner_options(cfg, env_name, name, evaluation=True),
+    settings = C.planner_settings(cfg, env_name)
+    run, _ = resolve_planner(name, planner_options(settings, name, evaluation=True),
                              cache_dir=Path(out_dir) / "roadmap")
     if executor is None or executor.name == "local":
         return run(env, q, padding=0.0, seed=cfg.seed)
@@ -286,7 +288,7 @@ def _plan_cell(ctx: _EnvEval, pnet, m: int | str, kind: str, steer, order=None) 
     cfg, q = ctx.cfg, ctx.queries[kind]
     key = jax.random.fold_in(jax.random.fold_in(jax.random.key(cfg.seed), EVAL_TAG + 2),
                              _tag(f"{ctx.slug}/{m}/{kind}/{steer}"))
-    opts = NP.PlannerOptions.from_config(cfg.eval, steer=steer)
+    opts = C.neural_options(cfg.eval, steer=steer)
     if m == CASCADE:
         res = NP.plan_cascade(ctx.env, pnet, q, key, opts, order=order, chunk=cfg.eval.chunk)
     else:
@@ -360,7 +362,7 @@ def validation_order(ctx: _EnvEval, pnets: list, steer) -> list[int]:
         qpad = ctx.env.resolve_padding(cfg.eval.query_padding)
         q, _ = ctx.env.sample_queries(jax.random.fold_in(key, 0), cfg.eval.k_test, 1.0,
                                       padding=qpad, n_max=cfg.sampling.n_max)
-        opts = NP.PlannerOptions.from_config(cfg.eval, steer=steer)
+        opts = C.neural_options(cfg.eval, steer=steer)
         res = [NP.plan_batch(ctx.env, p, np.asarray(q, np.float32),
                              jax.random.fold_in(key, 1 + m), opts, chunk=cfg.eval.chunk)
                for m, p in enumerate(pnets)]

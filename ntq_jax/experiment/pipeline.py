@@ -238,7 +238,7 @@ def check_planners(cfg: C.Config, envs: dict) -> None:
         check_spacing(env, cfg.planner.data_paths_for(name), name)
         planner = cfg.planner.name_for(name)
         if planner == "roadmap":
-            check_roadmap(env, planner_options(cfg, name, planner), name)
+            check_roadmap(env, planner_options(C.planner_settings(cfg, name), planner), name)
         why = unsupported_robot(planner, env)
         if why:
             key = ("planner.per_env" if any(o.env == name and o.name for o in cfg.planner.per_env)
@@ -276,8 +276,9 @@ def _host_stage(cfg: C.Config, run: Path, name: str, env, *, progress, figures: 
     t0 = time.perf_counter()
     log(f"[{name}] data: {cfg.data.k_train_for(name)} queries x {len(cfg.data.datasets)} "
         f"datasets ({cfg.planner.name_for(name)})")
-    summary = data_mod.generate_datasets(env, cfg, run / "data", env_name=name,
-                                         progress=progress, figure=figures, executor=executor)
+    summary = data_mod.generate_datasets(env, C.data_options(cfg, name), run / "data",
+                                         env_name=name, progress=progress, figure=figures,
+                                         executor=executor)
     if executor is not None and executor.name != "local":
         slug = env_slug(name, env)
         out_dir = run / "eval" / slug
@@ -322,7 +323,7 @@ def _run_env(cfg: C.Config, run: Path, name: str, env, *, progress, figures: boo
         log(f"[{name}] train: complete, loading {model_dir / 'ensemble'}")
     else:
         log(f"[{name}] train: {len(cfg.data.datasets)} PNets, {cfg.train.epochs} epochs")
-        training.train_from_folder(data_dir, cfg, model_dir, progress=progress)
+        training.train_from_folder(data_dir, model_dir, progress=progress, **C.train_args(cfg))
     ens = training.load_ensemble(model_dir)
     t2 = time.perf_counter()
     _mark(run, f"train/{slug}", seconds=round(t2 - t1, 1), data=digest)

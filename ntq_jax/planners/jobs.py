@@ -1,6 +1,6 @@
 """Planning a query pool: the run's planner, in resumable chunks on disk.
 
-The planner runs over the pool in chunks of ``config.data.chunk`` queries; each
+The planner runs over the pool in chunks of ``chunk`` queries; each
 chunk's verified :class:`ntq_jax.types.PlanResult` is written atomically with
 the queries it solved to ``<work>/plan_<start>_<stop>.npz``. A rerun reuses
 every completed chunk whose queries match (whatever the chunk size was then)
@@ -16,9 +16,10 @@ user's planner callable is verified here, once, by
 
 from __future__ import annotations
 
+import dataclasses
 import re
 from pathlib import Path
-from typing import Callable, NamedTuple, Optional
+from typing import Callable, NamedTuple, Optional, Union
 
 import numpy as np
 
@@ -29,40 +30,72 @@ from ntq_jax.planners.verify import finalize
 from ntq_jax.progress import open_bar
 from ntq_jax.types import PlanResult, PlanStatus
 
-__all__ = ["planner_options", "resolve_planner", "NamedPlanner", "PoolPlan", "chunk_ranges",
-           "plan_chunk", "plan_pool", "seed_from_record"]
+__all__ = ["PlannerSettings", "planner_options", "resolve_planner", "NamedPlanner", "PoolPlan",
+           "chunk_ranges", "plan_chunk", "plan_pool", "seed_from_record"]
 
 _CHUNK_FILE = re.compile(r"plan_(\d+)_(\d+)\.npz")
 _CHUNK_KEYS = ("queries", "paths", "lengths", "costs", "status", "rejected")
 
 
-def planner_options(config, env_name: str, name: str | None = None, *,
+@dataclasses.dataclass(frozen=True)
+class PlannerSettings:
+    """One environment's settings of the classical planners (the defaults are the paper's).
+
+    Attributes:
+        name: the planner, ``astar``, ``visgraph``, ``bitstar`` or ``roadmap``.
+        resolution: grid resolution of A* (workspace units per cell).
+        milestones: roadmap size (``roadmap``; doubled on each growth round).
+        neighbors: roadmap neighbours per milestone (None: PRM*'s rule).
+        grow_rounds: roadmap growth rounds for unconnected queries.
+        roadmap_seed: the roadmap's sampling seed.
+        time_budget: BIT* seconds per query during data generation.
+        eval_time_budget: BIT* seconds per query at evaluation.
+        workers: BIT* worker processes (0 = number of cores).
+        data_paths: the data planner's output before includeData
+            (:mod:`ntq_jax.planners.path_modes`; None: the planner's default).
+        motion_check: the evaluation's motion check (``certified`` or ``discretized``),
+            used with ``evaluation=True``.
+    """
+
+    name: str = "astar"
+    resolution: float = 0.1
+    milestones: int = 20_000
+    neighbors: Optional[int] = None
+    grow_rounds: int = 2
+    roadmap_seed: int = 0
+    time_budget: float = 3.0
+    eval_time_budget: float = 2.0
+    workers: int = 0
+    data_paths: Union[float, str, None] = None
+    motion_check: str = "certified"
+
+
+def planner_options(settings: PlannerSettings, name: str | None = None, *,
                     evaluation: bool = False) -> dict:
     """The keyword options passed to ``ntq_jax.planners.plan`` for planner ``name``.
 
-    ``name`` defaults to the environment's planner (``config.planner.name_for(env_name)``);
-    ``evaluation`` picks BIT*'s
+    ``name`` defaults to ``settings.name``; ``evaluation`` picks BIT*'s
     evaluation budget instead of the data-generation one, and the evaluation's
-    motion check (``config.eval.motion_check``) for the planner's checks and the
+    motion check (``settings.motion_check``) for the planner's checks and the
     verification of its paths. Data generation keeps the planners' default, the
     discretised check (the paper's), at the data padding, and passes the
-    ``smooth`` option of ``planner.data_paths`` (when set) to ``astar`` and
+    ``smooth`` option of ``settings.data_paths`` (when set) to ``astar`` and
     ``roadmap`` (:func:`ntq_jax.planners.path_modes.planner_smooth`).
     """
-    pc = config.planner
-    name = name or pc.name_for(env_name)
-    extra = {"check": config.eval.motion_check} if evaluation else {}
-    smooth = None if evaluation else planner_smooth(pc.data_paths_for(env_name), name)
+    ps = settings
+    name = name or ps.name
+    extra = {"check": ps.motion_check} if evaluation else {}
+    smooth = None if evaluation else planner_smooth(ps.data_paths, name)
     if smooth is not None:
         extra["smooth"] = smooth
     if name == "astar":
-        return {"resolution": pc.resolution, **extra}
+        return {"resolution": ps.resolution, **extra}
     if name == "bitstar":
-        budget = pc.eval_time_budget_for(env_name) if evaluation else pc.time_budget_for(env_name)
-        return {"time_budget": budget, "workers": pc.workers, **extra}
+        budget = ps.eval_time_budget if evaluation else ps.time_budget
+        return {"time_budget": budget, "workers": ps.workers, **extra}
     if name == "roadmap":
-        return {"milestones": pc.milestones, "k": pc.neighbors, "grow_rounds": pc.grow_rounds,
-                "roadmap_seed": config.seed, **extra}
+        return {"milestones": ps.milestones, "k": ps.neighbors, "grow_rounds": ps.grow_rounds,
+                "roadmap_seed": ps.roadmap_seed, **extra}
     return extra
 
 

@@ -300,18 +300,29 @@ def train_ensemble(datasets: Sequence[Any], env, model_cfg: ModelConfig, train_c
     return result, History.from_records(records, len(ids))
 
 
-def train_from_folder(env_dir: str | os.PathLike, cfg, out_dir: str | os.PathLike, *,
-                      progress: Progress = True, shard: bool | None = None):
+def train_from_folder(env_dir: str | os.PathLike, out_dir: str | os.PathLike, *,
+                      model: ModelConfig | None = None, train: TrainConfig | None = None,
+                      seed: int = 0, progress: Progress = True, shard: bool | None = None,
+                      record: dict | None = None):
     """Trains the ensemble on ``<env_dir>/D0..D3`` (written by :mod:`ntq_jax.data`).
 
     Args:
         env_dir: folder holding ``env.json`` and the dataset folders.
-        cfg: the resolved :class:`ntq_jax.experiment.config.Config` (model, train, seed).
         out_dir: output folder (checkpoints, curves, ``ensemble/``, ``config.json``).
+        model: the PNets' widths and dropout (None: :class:`~ntq_jax.models.ModelConfig`'s
+            defaults, the paper's).
+        train: epochs, batch size, optimizer, ... (None: :class:`TrainConfig`'s defaults).
+        seed: the run's seed; training uses ``train.seed`` when set
+            (:meth:`TrainConfig.seed_for`).
+        record: what ``config.json`` and every checkpoint's metadata record (a plain
+            dict; None: the model and train settings and the seed). The experiment
+            layer passes its whole resolved config.
 
     Returns:
         ``(ensemble, history)`` of :func:`train_ensemble`.
     """
+    model = ModelConfig() if model is None else model
+    train = TrainConfig() if train is None else train
     env_dir = Path(env_dir)
     env = make_env(env_dir / "env.json")
     datasets = data.load_datasets(env_dir)
@@ -323,9 +334,11 @@ def train_from_folder(env_dir: str | os.PathLike, cfg, out_dir: str | os.PathLik
                                f"D{i} from data.datasets (or use a map where it has samples)")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    artifacts.write_text(out / "config.json", json.dumps(cfg.to_dict(), indent=1))
-    return train_ensemble(datasets, env, cfg.model, cfg.train, seed=cfg.train.seed_for(cfg.seed),
-                          ckpt_dir=out,
+    if record is None:
+        record = json.loads(json.dumps({"model": dataclasses.asdict(model),
+                                        "train": dataclasses.asdict(train), "seed": seed}))
+    artifacts.write_text(out / "config.json", json.dumps(record, indent=1))
+    return train_ensemble(datasets, env, model, train, seed=train.seed_for(seed), ckpt_dir=out,
                           progress=progress, labels=[f"D{i}" for i in range(len(datasets))],
-                          shard=shard, resolved_config=cfg.to_dict())
+                          shard=shard, resolved_config=record)
 

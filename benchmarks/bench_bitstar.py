@@ -26,7 +26,6 @@ import sys
 import time
 
 
-
 def _nontrivial_queries(env, n, seed):
     import jax
     import numpy as np
@@ -52,15 +51,25 @@ def _per_call_us(fn, args, repeat=3):
 
 
 def parse_args(argv):
-    ap = argparse.ArgumentParser(description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("--env", default="rigid/0", help="preset or JSON map (default rigid/0)")
     ap.add_argument("--queries", type=int, default=8, help="number of queries (default 8)")
     ap.add_argument("--budget", type=float, default=1.0, help="seconds per query (default 1)")
-    ap.add_argument("--workers", type=int, nargs="+", default=[1, 2],
-                    help="worker counts to compare (default 1 2)")
-    ap.add_argument("--callback-queries", type=int, default=3,
-                    help="queries for the in-process callback comparison (default 3)")
+    ap.add_argument(
+        "--workers",
+        type=int,
+        nargs="+",
+        default=[1, 2],
+        help="worker counts to compare (default 1 2)",
+    )
+    ap.add_argument(
+        "--callback-queries",
+        type=int,
+        default=3,
+        help="queries for the in-process callback comparison (default 3)",
+    )
     ap.add_argument("--seed", type=int, default=0)
     return ap.parse_args(argv)
 
@@ -71,17 +80,22 @@ def throughput(env, q, args) -> None:
     from ntq_jax.types import PlanStatus
 
     print("\n## Throughput (plan_bitstar, spawn workers)\n")
-    print("| workers | solved | wall s | worker start s | mean solve s | queries/s |"
-          " queries/s w/o start | mean cost |")
+    print(
+        "| workers | solved | wall s | worker start s | mean solve s | queries/s |"
+        " queries/s w/o start | mean cost |"
+    )
     print("|---|---|---|---|---|---|---|---|")
     for w in args.workers:
         res = plan_bitstar(env, q, time_budget=args.budget, workers=w, seed=args.seed)
         wall, start = res.info["wall_time"], res.info["startup_time"]
         ok = res.status == PlanStatus.SOLVED
-        print(f"| {w} | {ok.sum()}/{len(q)} | {wall:.2f} | {start:.2f} | "
-              f"{res.info['solve_times'].mean():.3f} | {len(q) / wall:.2f} | "
-              f"{len(q) / max(wall - start, 1e-9):.2f} | "
-              f"{res.costs[ok].mean() if ok.any() else float('nan'):.3f} |", flush=True)
+        print(
+            f"| {w} | {ok.sum()}/{len(q)} | {wall:.2f} | {start:.2f} | "
+            f"{res.info['solve_times'].mean():.3f} | {len(q) / wall:.2f} | "
+            f"{len(q) / max(wall - start, 1e-9):.2f} | "
+            f"{res.costs[ok].mean() if ok.any() else float('nan'):.3f} |",
+            flush=True,
+        )
 
 
 def callbacks(env, q, args):
@@ -94,8 +108,10 @@ def callbacks(env, q, args):
     checker = NumpyChecker.from_env(env)
     seeds = query_seeds(args.seed, len(q))
     k = min(args.callback_queries, len(q))
-    print("| motion validator | validity calls/s | motion calls/s | Python callbacks/s |"
-          " edges checked/s | callbacks per edge | mean cost |")
+    print(
+        "| motion validator | validity calls/s | motion calls/s | Python callbacks/s |"
+        " edges checked/s | callbacks per edge | mean cost |"
+    )
     print("|---|---|---|---|---|---|---|")
     for mv in ("python", "ompl"):
         prob = OmplProblem(checker, args.budget, motion_validator=mv)
@@ -108,11 +124,17 @@ def callbacks(env, q, args):
             costs.append(r["planner_cost"])
         t = tot["solve_time"]
         calls = tot["n_valid"] + tot["n_motion"]
-        name = "Python steer_to MotionValidator" if mv == "python" else \
-            "OMPL DiscreteMotionValidator + Python isValid"
-        print(f"| {name} | {tot['n_valid'] / t:,.0f} | {tot['n_motion'] / t:,.0f} | "
-              f"{calls / t:,.0f} | {tot['n_edges'] / t:,.0f} | "
-              f"{calls / max(tot['n_edges'], 1):.1f} | {statistics.mean(costs):.3f} |", flush=True)
+        name = (
+            "Python steer_to MotionValidator"
+            if mv == "python"
+            else "OMPL DiscreteMotionValidator + Python isValid"
+        )
+        print(
+            f"| {name} | {tot['n_valid'] / t:,.0f} | {tot['n_motion'] / t:,.0f} | "
+            f"{calls / t:,.0f} | {tot['n_edges'] / t:,.0f} | "
+            f"{calls / max(tot['n_edges'], 1):.1f} | {statistics.mean(costs):.3f} |",
+            flush=True,
+        )
     return checker
 
 
@@ -132,10 +154,13 @@ def per_call(env, checker) -> None:
     np_steer = _per_call_us(checker.steer_to, pairs)
     print("| check | NumPy checker | jitted JAX, one call per item | ratio |")
     print("|---|---|---|---|")
-    print(f"| one state (is_valid) | {np_valid:.1f} | {jax_valid:.1f} | "
-          f"{jax_valid / np_valid:.0f}x |")
-    print(f"| one edge (steer_to, random valid pairs) | {np_steer:.1f} | {jax_steer:.1f} | "
-          f"{jax_steer / np_steer:.0f}x |")
+    print(
+        f"| one state (is_valid) | {np_valid:.1f} | {jax_valid:.1f} | {jax_valid / np_valid:.0f}x |"
+    )
+    print(
+        f"| one edge (steer_to, random valid pairs) | {np_steer:.1f} | {jax_steer:.1f} | "
+        f"{jax_steer / np_steer:.0f}x |"
+    )
 
 
 def main(argv=None) -> int:
@@ -146,8 +171,10 @@ def main(argv=None) -> int:
 
     env = ntq_jax.make_env(args.env)
     q = _nontrivial_queries(env, args.queries, args.seed)
-    print(f"# BIT* bridge on {env.name}: {len(q)} non-trivial queries, {args.budget:g} s budget "
-          f"per query (full budget, best solution kept)")
+    print(
+        f"# BIT* bridge on {env.name}: {len(q)} non-trivial queries, {args.budget:g} s budget "
+        f"per query (full budget, best solution kept)"
+    )
 
     # warm-up: compiles the parent's jitted checks (start/goal validity, path check) once
     plan_bitstar(env, q[:1], time_budget=0.05, workers=1, stop_on_first=True)

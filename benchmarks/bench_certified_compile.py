@@ -70,8 +70,14 @@ def measure(checkout: Path, env: str, check: str) -> dict:
     """One fresh process in ``checkout`` (its ``ntq_jax`` first on the path)."""
     environ = dict(os.environ, PYTHONPATH=str(checkout), JAX_PLATFORMS="cpu")
     environ.pop("JAX_COMPILATION_CACHE_DIR", None)  # no persistent cache: a cold compile
-    out = subprocess.run([sys.executable, "-c", CHILD, env, check], env=environ, cwd=checkout,
-                         capture_output=True, text=True, check=True)
+    out = subprocess.run(
+        [sys.executable, "-c", CHILD, env, check],
+        env=environ,
+        cwd=checkout,
+        capture_output=True,
+        text=True,
+        check=True,
+    )
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
@@ -79,10 +85,16 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--base", type=Path, required=True, help="checkout to compare against")
     ap.add_argument("--head", type=Path, default=ROOT, help="checkout measured (default: this)")
-    ap.add_argument("--env", action="append", default=None, help="map (repeatable; default rigid/0)")
+    ap.add_argument(
+        "--env", action="append", default=None, help="map (repeatable; default rigid/0)"
+    )
     ap.add_argument("--repeats", type=int, default=2)
-    ap.add_argument("--check", choices=("certified", "discretized"), default="certified",
-                    help="the motion check measured")
+    ap.add_argument(
+        "--check",
+        choices=("certified", "discretized"),
+        default="certified",
+        help="the motion check measured",
+    )
     args = ap.parse_args()
     keys = ("trace", "lower", "compile", "hlo_mb", "run")
     for env in args.env or ["rigid/0"]:
@@ -90,15 +102,24 @@ def main() -> None:
         for _ in range(args.repeats):
             for side in ("base", "head"):
                 got[side].append(measure(getattr(args, side), env, args.check))
-        med = {s: {k: statistics.median(r[k] for r in rows) for k in keys} for s, rows in got.items()}
+        med = {
+            s: {k: statistics.median(r[k] for r in rows) for k in keys} for s, rows in got.items()
+        }
         same = {r["hash"] for r in got["base"] + got["head"]}
-        print(f"{env}: " + ", ".join(
-            f"{k} {med['base'][k]:.2f} -> {med['head'][k]:.2f} ({med['head'][k] / med['base'][k]:.2f}x)"
-            for k in keys))
+        print(
+            f"{env}: "
+            + ", ".join(
+                f"{k} {med['base'][k]:.2f} -> {med['head'][k]:.2f} ({med['head'][k] / med['base'][k]:.2f}x)"
+                for k in keys
+            )
+        )
         total = {s: sum(med[s][k] for k in ("trace", "lower", "compile")) for s in med}
-        print(f"{env}: trace+lower+compile CPU s {total['base']:.1f} -> {total['head']:.1f} "
-              f"({total['head'] / total['base']:.2f}x); answers identical: {len(same) == 1} "
-              f"(free fraction {got['head'][0]['free']:.4f})", flush=True)
+        print(
+            f"{env}: trace+lower+compile CPU s {total['base']:.1f} -> {total['head']:.1f} "
+            f"({total['head'] / total['base']:.2f}x); answers identical: {len(same) == 1} "
+            f"(free fraction {got['head'][0]['free']:.4f})",
+            flush=True,
+        )
 
 
 if __name__ == "__main__":

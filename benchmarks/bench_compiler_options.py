@@ -56,7 +56,10 @@ def compare(env, check: str, options: dict, reps: int) -> dict:
     a = _uniform_block(env.robot, env.world, jax.random.key(1), n)
     b = _uniform_block(env.robot, env.world, jax.random.key(2), n)
     calls, compile_s, answers = {}, {}, {}
-    for label, opts in (("base", KERNEL_COMPILER_OPTIONS), ("cand", {**KERNEL_COMPILER_OPTIONS, **options})):
+    for label, opts in (
+        ("base", KERNEL_COMPILER_OPTIONS),
+        ("cand", {**KERNEL_COMPILER_OPTIONS, **options}),
+    ):
         lowered = jax.jit(kernel(env, check), compiler_options=opts).lower(env.world, a, b)
         t = time.process_time()
         compiled = lowered.compile()
@@ -64,15 +67,25 @@ def compare(env, check: str, options: dict, reps: int) -> dict:
         calls[label] = lambda c=compiled: c(env.world, a, b)
         answers[label] = np.asarray(calls[label]())
     run = interleaved(calls, reps)
-    return {"compile": compile_s, "run": run,
-            "equal": bool(np.array_equal(answers["base"], answers["cand"]))}
+    return {
+        "compile": compile_s,
+        "run": run,
+        "equal": bool(np.array_equal(answers["base"], answers["cand"])),
+    }
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--env", action="append", help="preset maps (default: point/3, rigid/0, nlink/6)")
-    ap.add_argument("--option", action="append", required=True, type=parse_option,
-                    help="name=value, an XLA compile option of the candidate (repeatable)")
+    ap.add_argument(
+        "--env", action="append", help="preset maps (default: point/3, rigid/0, nlink/6)"
+    )
+    ap.add_argument(
+        "--option",
+        action="append",
+        required=True,
+        type=parse_option,
+        help="name=value, an XLA compile option of the candidate (repeatable)",
+    )
     ap.add_argument("--kernel", action="append", choices=sorted(KERNELS))
     ap.add_argument("--reps", type=int, default=15)
     args = ap.parse_args()
@@ -85,9 +98,12 @@ def main() -> None:
         for check in args.kernel or list(KERNELS):
             r = compare(env, check, options, args.reps)
             c, t = r["compile"], r["run"]
-            print(f"| {name} | {check} | {c['base']:.2f} -> {c['cand']:.2f} | {c['cand'] / c['base']:.2f}x "
-                  f"| {t['base'] * 1e3:.2f} -> {t['cand'] * 1e3:.2f} | {t['cand'] / t['base']:.2f}x "
-                  f"| {'identical' if r['equal'] else 'DIFFER'} |", flush=True)
+            print(
+                f"| {name} | {check} | {c['base']:.2f} -> {c['cand']:.2f} | {c['cand'] / c['base']:.2f}x "
+                f"| {t['base'] * 1e3:.2f} -> {t['cand'] * 1e3:.2f} | {t['cand'] / t['base']:.2f}x "
+                f"| {'identical' if r['equal'] else 'DIFFER'} |",
+                flush=True,
+            )
 
 
 if __name__ == "__main__":

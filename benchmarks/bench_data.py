@@ -26,7 +26,6 @@ import time
 from pathlib import Path
 
 
-
 def parse_args(argv):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--env", default="point/0")
@@ -66,23 +65,45 @@ def generate(args, cfg, out: Path, t_import: float) -> dict:
     shutil.rmtree(out / env_slug(args.env, env), ignore_errors=True)
     t0 = time.perf_counter()
     from ntq_jax.experiment import config as C
-    s = data.generate_datasets(env, C.data_options(cfg, args.env), out, env_name=args.env,
-                               progress=args.progress)
+
+    s = data.generate_datasets(
+        env, C.data_options(cfg, args.env), out, env_name=args.env, progress=args.progress
+    )
     wall = time.perf_counter() - t0
     report = {
-        "env": args.env, "planner": cfg.planner.name, "k_train": args.k,
-        "chunk": cfg.data.chunk, "gamma_queries": cfg.data.gamma_queries,
-        "planned_queries": s["planned_queries"], "import_s": round(t_import, 2),
-        "generate_s": round(wall, 2), "wall_incl_import_s": round(wall + t_import, 2),
+        "env": args.env,
+        "planner": cfg.planner.name,
+        "k_train": args.k,
+        "chunk": cfg.data.chunk,
+        "gamma_queries": cfg.data.gamma_queries,
+        "planned_queries": s["planned_queries"],
+        "import_s": round(t_import, 2),
+        "generate_s": round(wall, 2),
+        "wall_incl_import_s": round(wall + t_import, 2),
         "stages_s": {k: round(v, 2) for k, v in s["timings"].items()},
-        "datasets": {k: {f: v[f] for f in ("queries", "solved", "samples", "fraction_pruned",
-                                           "mean_waypoints", "blocked_fraction")}
-                     for k, v in s["datasets"].items()},
-        "gamma_nt": s["datasets"]["D0"]["gamma_nt"], "cpus": os.cpu_count(),
-        "jax_devices": jax.device_count(), "out": str(out),
+        "datasets": {
+            k: {
+                f: v[f]
+                for f in (
+                    "queries",
+                    "solved",
+                    "samples",
+                    "fraction_pruned",
+                    "mean_waypoints",
+                    "blocked_fraction",
+                )
+            }
+            for k, v in s["datasets"].items()
+        },
+        "gamma_nt": s["datasets"]["D0"]["gamma_nt"],
+        "cpus": os.cpu_count(),
+        "jax_devices": jax.device_count(),
+        "out": str(out),
     }
-    print(f"{args.env}: D0..D3 with K = {args.k} ({s['planned_queries']} planned queries, "
-          f"planner {cfg.planner.name}) in {wall:.1f} s (+ {t_import:.1f} s imports)")
+    print(
+        f"{args.env}: D0..D3 with K = {args.k} ({s['planned_queries']} planned queries, "
+        f"planner {cfg.planner.name}) in {wall:.1f} s (+ {t_import:.1f} s imports)"
+    )
     for k, v in s["timings"].items():
         print(f"  {k:8s} {v:7.2f} s")
     for k, v in report["datasets"].items():
@@ -94,10 +115,10 @@ def rigid_projection() -> dict:
     """Samples rigid/0's query pools at the paper's size and projects BIT*'s wall time."""
     import jax
 
-    from ntq_jax.experiment import config as C
     from ntq_jax import data, make_env
     from ntq_jax import queries as Q
     from ntq_jax.data.pools import pool_sizes
+    from ntq_jax.experiment import config as C
 
     rcfg = C.load("configs/rigid.yaml")
     renv = make_env("rigid/0")
@@ -106,18 +127,25 @@ def rigid_projection() -> dict:
     bits = [data.mixing_bits(k_mix, kr, sp.p_nt) for sp in rcfg.data.datasets]
     n_pool = sum(pool_sizes(bits))
     t0 = time.perf_counter()
-    Q.sample_nontrivial_queries(renv.robot, renv.world, jax.random.PRNGKey(0), kr,
-                                renv.padding, rcfg.sampling.n_max)
+    Q.sample_nontrivial_queries(
+        renv.robot, renv.world, jax.random.PRNGKey(0), kr, renv.padding, rcfg.sampling.n_max
+    )
     t_nt = time.perf_counter() - t0
     budget = rcfg.planner.time_budget_for("rigid/0")
     workers = rcfg.planner.workers or os.cpu_count()
     proj = n_pool * budget / workers
-    print(f"rigid/0 at paper size: {n_pool} pooled queries (instead of {kr * len(bits)}) x "
-          f"{budget} s BIT* / {workers} workers = {proj / 3600:.2f} h projected "
-          f"(non-trivial sampling of {kr} queries: {t_nt:.1f} s)")
+    print(
+        f"rigid/0 at paper size: {n_pool} pooled queries (instead of {kr * len(bits)}) x "
+        f"{budget} s BIT* / {workers} workers = {proj / 3600:.2f} h projected "
+        f"(non-trivial sampling of {kr} queries: {t_nt:.1f} s)"
+    )
     return {
-        "env": "rigid/0", "k_train": kr, "pooled_queries": n_pool,
-        "unshared_queries": kr * len(bits), "time_budget_s": budget, "workers": workers,
+        "env": "rigid/0",
+        "k_train": kr,
+        "pooled_queries": n_pool,
+        "unshared_queries": kr * len(bits),
+        "time_budget_s": budget,
+        "workers": workers,
         "projected_bitstar_h": round(proj / 3600, 2),
         "projected_unshared_h": round(kr * len(bits) * budget / workers / 3600, 2),
         "nontrivial_sampling_s": round(t_nt, 2),
@@ -130,9 +158,10 @@ def main(argv=None) -> int:
     t_start = time.perf_counter()
     import jax  # noqa: F401  (the imports are timed here; the stages reuse them)
 
-    from ntq_jax.experiment import config as C  # noqa: F401
     from ntq_jax import data, make_env  # noqa: F401
     from ntq_jax.envs import env_slug  # noqa: F401
+    from ntq_jax.experiment import config as C  # noqa: F401
+
     t_import = time.perf_counter() - t_start
 
     cfg = load_config(args)

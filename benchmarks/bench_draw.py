@@ -26,8 +26,7 @@ def main() -> None:
     args = ap.parse_args()
     g = grid_maps.OccupancyGrid(grid_maps.maze_grid(args.size, 1, 0), 1.0)
     boxes = grid_maps.cover_boxes(g)
-    spec = {"robot": {"kind": "point"}, "bounds": g.bounds, "boxes": boxes.tolist(),
-            "padding": 0.3}
+    spec = {"robot": {"kind": "point"}, "bounds": g.bounds, "boxes": boxes.tolist(), "padding": 0.3}
     seconds = {}
     for label, threshold in (("patches", 10**12), ("image", plotting.IMAGE_MAP_BOXES)):
         plotting.IMAGE_MAP_BOXES = threshold
@@ -37,8 +36,10 @@ def main() -> None:
         fig.savefig(f"/tmp/bench_draw_{label}.png", dpi=100)
         plt.close(fig)
         seconds[label] = time.perf_counter() - t0
-    print(f"{len(boxes)} boxes: patches {seconds['patches']:.1f} s, image {seconds['image']:.1f} s, "
-          f"ratio {seconds['patches'] / seconds['image']:.1f}x")
+    print(
+        f"{len(boxes)} boxes: patches {seconds['patches']:.1f} s, image {seconds['image']:.1f} s, "
+        f"ratio {seconds['patches'] / seconds['image']:.1f}x"
+    )
 
 
 if __name__ == "__main__":

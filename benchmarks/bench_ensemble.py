@@ -32,15 +32,14 @@ import sys
 from pathlib import Path
 
 
-
 def bench_env(run: Path, env_name: str, repeats: int) -> list[dict]:
     import jax
     import numpy as np
 
-    from ntq_jax.experiment import config as C
     from ntq_jax import make_env
     from ntq_jax import neural_planner as NP
     from ntq_jax.envs import env_slug
+    from ntq_jax.experiment import config as C
     from ntq_jax.models import member_pnets
     from ntq_jax.training import load_ensemble
 
@@ -50,12 +49,13 @@ def bench_env(run: Path, env_name: str, repeats: int) -> list[dict]:
     pnets = member_pnets(load_ensemble(run / "models" / slug))
     opts = C.neural_options(cfg.eval, steer=True)
     val = run / "paths" / slug / "validation.npz"
-    order = ([int(m) for m in np.load(val)["order"]] if val.is_file()
-             else list(range(len(pnets))))
+    order = [int(m) for m in np.load(val)["order"]] if val.is_file() else list(range(len(pnets)))
     queries = np.load(run / "eval" / slug / "queries.npz")
     key = jax.random.key(0)
-    planners = {f"member {m}": (lambda q, p=p: NP.plan_batch(env, p, q, key, opts))
-                for m, p in enumerate(pnets)}
+    planners = {
+        f"member {m}": (lambda q, p=p: NP.plan_batch(env, p, q, key, opts))
+        for m, p in enumerate(pnets)
+    }
     planners["ens"] = lambda q: NP.plan_batch(env, pnets, q, key, opts)
     planners["members"] = lambda q: NP.plan_members(env, pnets, q, key, opts)[0]
     planners["cascade"] = lambda q: NP.plan_cascade(env, pnets, q, key, opts, order=order)
@@ -73,28 +73,44 @@ def bench_env(run: Path, env_name: str, repeats: int) -> list[dict]:
                 success[name] = float(r.success.mean())
         med = {name: statistics.median(t) for name, t in times.items()}
         one = statistics.mean(med[f"member {m}"] for m in range(len(pnets)))
-        row = {"env": env_name, "kind": kind, "queries": len(q), "order": order,
-               "seconds": med, "ratio_to_one_member": {n: t / one for n, t in med.items()},
-               "success": success}
+        row = {
+            "env": env_name,
+            "kind": kind,
+            "queries": len(q),
+            "order": order,
+            "seconds": med,
+            "ratio_to_one_member": {n: t / one for n, t in med.items()},
+            "success": success,
+        }
         out.append(row)
-        print(f"{env_name} {kind:10s} K={len(q)}: one member {one:.3f} s; "
-              + ", ".join(f"{n} {med[n]:.3f} s ({med[n] / one:.2f}x)"
-                          for n in ("ens", "members", "cascade"))
-              + f"; cascade order {order}", flush=True)
+        print(
+            f"{env_name} {kind:10s} K={len(q)}: one member {one:.3f} s; "
+            + ", ".join(
+                f"{n} {med[n]:.3f} s ({med[n] / one:.2f}x)" for n in ("ens", "members", "cascade")
+            )
+            + f"; cascade order {order}",
+            flush=True,
+        )
     return out
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("--run", required=True, help="a run folder of scripts/train_all.py")
-    ap.add_argument("--env", action="append", default=None,
-                    help="environment(s) (default: every environment of the run)")
+    ap.add_argument(
+        "--env",
+        action="append",
+        default=None,
+        help="environment(s) (default: every environment of the run)",
+    )
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--json", default=None, help="also write the results to this JSON file")
     args = ap.parse_args(argv)
     run = Path(args.run)
     from ntq_jax.experiment import config as C
+
     envs = args.env or list(C.load(run / "config.yaml", []).envs)
     out = [r for name in envs for r in bench_env(run, name, args.repeats)]
     if args.json:

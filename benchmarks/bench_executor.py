@@ -66,8 +66,18 @@ def _run(env, pool, executor, planner, chunk: int, seed: int) -> tuple[float, li
     work = Path(tempfile.mkdtemp(prefix="bench_executor-"))
     try:
         t0 = time.perf_counter()
-        out = plan_pool(env, pool, planner, verify=False, padding=env.padding, seed=seed,
-                        chunk=chunk, work=work, progress=False, executor=executor)
+        out = plan_pool(
+            env,
+            pool,
+            planner,
+            verify=False,
+            padding=env.padding,
+            seed=seed,
+            chunk=chunk,
+            work=work,
+            progress=False,
+            executor=executor,
+        )
         wall = time.perf_counter() - t0
         assert len(list(work.glob("plan_*.npz"))) == -(-len(pool) // chunk)
         return wall, out
@@ -76,8 +86,9 @@ def _run(env, pool, executor, planner, chunk: int, seed: int) -> tuple[float, li
 
 
 def parse_args(argv):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("--env", default="rigid/0")
     ap.add_argument("--queries", type=int, default=40)
     ap.add_argument("--budget", type=float, default=0.5, help="BIT* seconds per query")
@@ -97,8 +108,12 @@ def start_ray(args):
     from ntq_jax.executors import RayExecutor
 
     t0 = time.perf_counter()
-    ray.init(num_cpus=args.cpus, include_dashboard=False, configure_logging=False,
-             runtime_env={"env_vars": {"JAX_PLATFORMS": "cpu"}})
+    ray.init(
+        num_cpus=args.cpus,
+        include_dashboard=False,
+        configure_logging=False,
+        runtime_env={"env_vars": {"JAX_PLATFORMS": "cpu"}},
+    )
     ray_init = time.perf_counter() - t0
     rex = RayExecutor()
     t0 = time.perf_counter()
@@ -130,8 +145,13 @@ def alternating_runs(args, env, pool, planner, local, rex) -> dict:
                 busy.append(sum(rex.task_seconds) / (args.cpus * wall))
         rows[kind].append(wall)
         print(f"{kind:9s} {wall:7.2f} s   load {loads[kind][-1]:.2f}", flush=True)
-    return {"rows": rows, "loads": loads, "chunk_seconds": chunk_seconds,
-            "latencies": latencies, "busy": busy}
+    return {
+        "rows": rows,
+        "loads": loads,
+        "chunk_seconds": chunk_seconds,
+        "latencies": latencies,
+        "busy": busy,
+    }
 
 
 def noop_latency(rex) -> tuple[list[float], list[float]]:
@@ -153,9 +173,16 @@ def figures(args, argv, runs: dict, rt, start, ray_init, warm_workers) -> dict:
     ideal = args.queries * args.budget / args.cpus
     return {
         "command": "python benchmarks/bench_executor.py " + " ".join(argv or sys.argv[1:]),
-        "env": args.env, "queries": args.queries, "budget": args.budget, "chunk": args.chunk,
-        "workers_local": args.workers, "ray_cpus": args.cpus, "repeats": args.repeats,
-        "walls": rows, "load_1min": runs["loads"], "median_wall": med,
+        "env": args.env,
+        "queries": args.queries,
+        "budget": args.budget,
+        "chunk": args.chunk,
+        "workers_local": args.workers,
+        "ray_cpus": args.cpus,
+        "repeats": args.repeats,
+        "walls": rows,
+        "load_1min": runs["loads"],
+        "median_wall": med,
         "ray_minus_local_fraction": (med["ray"] - med["local"]) / med["ray"],
         "ray_minus_local_1call_fraction": (med["ray"] - med["local_1call"]) / med["ray"],
         # the share of the ray run's CPU-slots time not spent inside a chunk (scheduling,
@@ -164,7 +191,8 @@ def figures(args, argv, runs: dict, rt, start, ray_init, warm_workers) -> dict:
         "ray_overhead_fractions": [1.0 - b for b in busy],
         "chunk_submit_to_start_s": runs["latencies"],
         "ideal_wall": ideal,
-        "ray_init_seconds": ray_init, "ray_warm_workers_seconds": warm_workers,
+        "ray_init_seconds": ray_init,
+        "ray_warm_workers_seconds": warm_workers,
         "chunk_seconds_median": statistics.median(chunk_seconds),
         "chunk_seconds": chunk_seconds,
         "noop_submit_to_start_ms_median": 1e3 * statistics.median(start),
@@ -181,13 +209,12 @@ def main(argv=None) -> int:
     import ray
 
     from ntq_jax import make_env
-    from ntq_jax.planners.jobs import resolve_planner
     from ntq_jax.executors import LocalExecutor
+    from ntq_jax.planners.jobs import resolve_planner
 
     env = make_env(args.env)
     pool = _queries(env, args.queries, args.seed)
-    planner, _ = resolve_planner("bitstar", {"time_budget": args.budget,
-                                             "workers": args.workers})
+    planner, _ = resolve_planner("bitstar", {"time_budget": args.budget, "workers": args.workers})
     local = LocalExecutor()
     rex, ray_init, warm_workers = start_ray(args)
     runs = alternating_runs(args, env, pool, planner, local, rex)

@@ -54,8 +54,7 @@ def dijkstra_search(n, rm, qe, threads: int):
     graph = coo_matrix((w, (src, dst)), shape=(n + 2 * nq,) * 2).tocsr()
 
     def solve(rows):
-        dist, pred = dijkstra(graph, directed=True, indices=start[rows],
-                              return_predecessors=True)
+        dist, pred = dijkstra(graph, directed=True, indices=start[rows], return_predecessors=True)
         d = dist[np.arange(len(rows)), goal[rows]]
         seqs = []
         for r, i in enumerate(rows):
@@ -78,6 +77,7 @@ def dijkstra_search(n, rm, qe, threads: int):
 def bench_map(name: str, args) -> None:
     import jax
     import numpy as np
+
     import ntq_jax
     from ntq_jax.planners import graph_search as G
     from ntq_jax.planners import roadmap as R
@@ -87,8 +87,9 @@ def bench_map(name: str, args) -> None:
     padding = env.resolve_padding(None)
     k = R.prm_star_k(args.milestones, env.dim)
     t0 = time.perf_counter()
-    rm = R.roadmap_for(env, padding, milestones=args.milestones, k=k, roadmap_seed=0,
-                       cache_dir=args.cache_dir)
+    rm = R.roadmap_for(
+        env, padding, milestones=args.milestones, k=k, roadmap_seed=0, cache_dir=args.cache_dir
+    )
     t_build = time.perf_counter() - t0
     q, _ = env.sample_queries(jax.random.key(0), args.queries, p_nt=1.0)
     q = np.asarray(q, np.float32)
@@ -107,31 +108,44 @@ def bench_map(name: str, args) -> None:
         return G.shortest_paths(graph, q[:, 1], qe, metric, threads=args.threads)
 
     old, new = dijkstra_search(n, rm, qe, args.threads), astar()
-    med = interleaved({"dijkstra": lambda: dijkstra_search(n, rm, qe, args.threads),
-                       "astar": astar}, args.reps)
+    med = interleaved(
+        {"dijkstra": lambda: dijkstra_search(n, rm, qe, args.threads), "astar": astar}, args.reps
+    )
     ok_old, ok_new = np.isfinite(old[0]), np.isfinite(new[0])
     both = ok_old & ok_new
     rel = np.abs(new[0][both] - old[0][both]) / old[0][both]
-    same = sum(a is not None and b is not None and np.array_equal(a, b)
-               for a, b in zip(old[1], new[1]))
+    same = sum(
+        a is not None and b is not None and np.array_equal(a, b) for a, b in zip(old[1], new[1])
+    )
     nq = len(q)
-    print(f"{name}: {n} milestones, {len(rm.edges)} edges, k {k}; roadmap {t_build:.1f} s; "
-          f"{nq} queries, end edges {1e3 * t_edges / nq:.2f} ms/query; A*'s graph (once per "
-          f"roadmap) {1e3 * t_graph:.0f} ms", flush=True)
-    print(f"  search ms/query: dijkstra {1e3 * med['dijkstra'] / nq:.3f}, "
-          f"astar {1e3 * med['astar'] / nq:.3f}, ratio {med['dijkstra'] / med['astar']:.1f}x "
-          f"(cores used {interleaved.cores['dijkstra']:.2f} / {interleaved.cores['astar']:.2f}; "
-          f"threads {args.threads})", flush=True)
-    print(f"  agreement: solved {ok_old.sum()} / {ok_new.sum()} (same set: "
-          f"{bool(np.array_equal(ok_old, ok_new))}), max relative cost difference "
-          f"{rel.max(initial=0.0):.2e}, identical paths {same} of {both.sum()}", flush=True)
+    print(
+        f"{name}: {n} milestones, {len(rm.edges)} edges, k {k}; roadmap {t_build:.1f} s; "
+        f"{nq} queries, end edges {1e3 * t_edges / nq:.2f} ms/query; A*'s graph (once per "
+        f"roadmap) {1e3 * t_graph:.0f} ms",
+        flush=True,
+    )
+    print(
+        f"  search ms/query: dijkstra {1e3 * med['dijkstra'] / nq:.3f}, "
+        f"astar {1e3 * med['astar'] / nq:.3f}, ratio {med['dijkstra'] / med['astar']:.1f}x "
+        f"(cores used {interleaved.cores['dijkstra']:.2f} / {interleaved.cores['astar']:.2f}; "
+        f"threads {args.threads})",
+        flush=True,
+    )
+    print(
+        f"  agreement: solved {ok_old.sum()} / {ok_new.sum()} (same set: "
+        f"{bool(np.array_equal(ok_old, ok_new))}), max relative cost difference "
+        f"{rel.max(initial=0.0):.2e}, identical paths {same} of {both.sum()}",
+        flush=True,
+    )
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--env", action="append", default=None,
-                    help="preset, repeatable (default rigid/0 nlink/6)")
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    ap.add_argument(
+        "--env", action="append", default=None, help="preset, repeatable (default rigid/0 nlink/6)"
+    )
     ap.add_argument("--milestones", type=int, default=20_000)
     ap.add_argument("--queries", type=int, default=500)
     ap.add_argument("--reps", type=int, default=3)

@@ -37,13 +37,19 @@ import time
 from pathlib import Path
 
 import numpy as np
-
-from common import interleaved, load_json, loadavg, machine
 import panda_reference as ref
+from common import interleaved, load_json, loadavg, machine
 
 ROOT = Path(__file__).resolve().parent.parent
-SCENES = ("bookshelf_small", "bookshelf_tall", "bookshelf_thin", "box", "cage", "table_pick",
-          "table_under_pick")
+SCENES = (
+    "bookshelf_small",
+    "bookshelf_tall",
+    "bookshelf_thin",
+    "box",
+    "cage",
+    "table_pick",
+    "table_under_pick",
+)
 #: VAMP's stated figures (Thomason, Kingston, Kavraki, "Motions in Microseconds via
 #: Vectorized Sampling-Based Planning", ICRA 2024, as quoted in issue 48): 44-59 ns per
 #: checked Panda state on one core of this kind of machine, ~2e7 states per second.
@@ -66,6 +72,7 @@ def _fresh(path: Path, key: dict, force: bool) -> dict | None:
 # check
 # ---------------------------------------------------------------------------
 
+
 def check_scene(scene: str, args) -> dict:
     import ntq_jax as nj
 
@@ -77,57 +84,97 @@ def check_scene(scene: str, args) -> dict:
     a, b, kind = ref.sample_motions(env, args.seed + 1, args.motions)
     certified = ref.compare_certified(env, a, b, kind)
     c2, t2 = time.process_time(), time.perf_counter()
-    return {"validity": validity, "certified": certified, "padding": env.padding,
-            "obstacles": {k: int(getattr(env.world, k).shape[0])
-                          for k in ("spheres", "cuboids", "capsules")},
-            "seconds": {"validity_wall": round(t1 - t0, 1), "validity_cpu": round(c1 - c0, 1),
-                        "certified_wall": round(t2 - t1, 1), "certified_cpu": round(c2 - c1, 1)}}
+    return {
+        "validity": validity,
+        "certified": certified,
+        "padding": env.padding,
+        "obstacles": {
+            k: int(getattr(env.world, k).shape[0]) for k in ("spheres", "cuboids", "capsules")
+        },
+        "seconds": {
+            "validity_wall": round(t1 - t0, 1),
+            "validity_cpu": round(c1 - c0, 1),
+            "certified_wall": round(t2 - t1, 1),
+            "certified_cpu": round(c2 - c1, 1),
+        },
+    }
 
 
 def must_be_zero(rec: dict) -> dict:
     """The counts that must be 0: disagreements outside the band, certified false frees."""
     v, c = rec["validity"], rec["certified"]["all"]
-    return {"validity_disagree": v["valid"]["disagree"],
-            "obstacle_disagree": v["obstacle_free"]["disagree"],
-            "self_disagree": v["self_free"]["disagree"],
-            "certified_false_free": c["certified_false_free"]}
+    return {
+        "validity_disagree": v["valid"]["disagree"],
+        "obstacle_disagree": v["obstacle_free"]["disagree"],
+        "self_disagree": v["self_free"]["disagree"],
+        "certified_false_free": c["certified_false_free"],
+    }
 
 
 def run_check(args) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    key = {"configs": args.configs, "motions": args.motions, "seed": args.seed,
-           "band": ref.BAND, "near": ref.NEAR, "dense_step": ref.DENSE_STEP}
+    key = {
+        "configs": args.configs,
+        "motions": args.motions,
+        "seed": args.seed,
+        "band": ref.BAND,
+        "near": ref.NEAR,
+        "dense_step": ref.DENSE_STEP,
+    }
     rows = {}
     for scene in args.scene or SCENES:
         path = out / f"check_{scene}.json"
         rec = _fresh(path, key, args.force)
         if rec is None:
-            print(f"{scene}: checking {args.configs} configurations, {args.motions} motions",
-                  flush=True)
-            rec = {"key": key, "scene": scene, "problem": 1, **check_scene(scene, args),
-                   "machine": machine(), "loadavg": loadavg()}
+            print(
+                f"{scene}: checking {args.configs} configurations, {args.motions} motions",
+                flush=True,
+            )
+            rec = {
+                "key": key,
+                "scene": scene,
+                "problem": 1,
+                **check_scene(scene, args),
+                "machine": machine(),
+                "loadavg": loadavg(),
+            }
             _write(path, rec)
         rows[scene] = rec
         v, c = rec["validity"], rec["certified"]["all"]
-        print(f"{scene:17s} valid {v['valid']['reference_true']:6d}/{v['configs']} "
-              f"disagree {must_be_zero(rec)} in-band {v['valid']['in_band']} | certified free "
-              f"{c['certified_free']}/{c['motions']} dense free {c['dense_free']} "
-              f"conservative {c['certified_blocked_dense_free']} | discretized false free "
-              f"{c['discretized_false_free']}", flush=True)
+        print(
+            f"{scene:17s} valid {v['valid']['reference_true']:6d}/{v['configs']} "
+            f"disagree {must_be_zero(rec)} in-band {v['valid']['in_band']} | certified free "
+            f"{c['certified_free']}/{c['motions']} dense free {c['dense_free']} "
+            f"conservative {c['certified_blocked_dense_free']} | discretized false free "
+            f"{c['discretized_false_free']}",
+            flush=True,
+        )
     if not args.scene:
-        total = {k: sum(must_be_zero(r)[k] for r in rows.values()) for k in must_be_zero(
-            next(iter(rows.values())))}
-        _write(out / "check_summary.json", {
-            "key": key, "scenes": list(rows), "must_be_zero": total,
-            "per_scene": {s: {**must_be_zero(r), "configs": r["validity"]["configs"],
-                              "motions": r["certified"]["motions"],
-                              "in_band": r["validity"]["valid"]["in_band"],
-                              "certified_free": r["certified"]["all"]["certified_free"],
-                              "dense_free": r["certified"]["all"]["dense_free"],
-                              "discretized_false_free":
-                                  r["certified"]["all"]["discretized_false_free"]}
-                          for s, r in rows.items()}})
+        total = {
+            k: sum(must_be_zero(r)[k] for r in rows.values())
+            for k in must_be_zero(next(iter(rows.values())))
+        }
+        _write(
+            out / "check_summary.json",
+            {
+                "key": key,
+                "scenes": list(rows),
+                "must_be_zero": total,
+                "per_scene": {
+                    s: {
+                        **must_be_zero(r),
+                        "configs": r["validity"]["configs"],
+                        "motions": r["certified"]["motions"],
+                        "in_band": r["validity"]["valid"]["in_band"],
+                        "certified_free": r["certified"]["all"]["certified_free"],
+                        "dense_free": r["certified"]["all"]["dense_free"],
+                        "discretized_false_free": r["certified"]["all"]["discretized_false_free"],
+                    }
+                    for s, r in rows.items()
+                },
+            },
+        )
         print("must be zero:", total)
         return int(any(total.values()))
     return int(any(any(must_be_zero(r).values()) for r in rows.values()))
@@ -136,6 +183,7 @@ def run_check(args) -> int:
 # ---------------------------------------------------------------------------
 # speed
 # ---------------------------------------------------------------------------
+
 
 def speed_motions(env, seed: int, n: int) -> dict:
     """``{"pair": (a, b), "short": (a, b)}``, ``n`` motions each (see the module docstring)."""
@@ -148,6 +196,7 @@ def speed_motions(env, seed: int, n: int) -> dict:
 def checked_states(env, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per motion: the states the discretised check must look at, and whether it is free."""
     import jax.numpy as jnp
+
     from ntq_jax.robots.base import _check_index
 
     res = env.robot.resolution
@@ -169,8 +218,8 @@ def _rate(n: float, wall: float, cpu: float) -> dict:
 
 
 def time_scene(scene: str, args) -> dict:
-    import jax
     import jax.numpy as jnp
+
     import ntq_jax as nj
 
     env = nj.make_env(f"panda/{scene}/1")
@@ -186,16 +235,22 @@ def time_scene(scene: str, args) -> dict:
         cases[f"certified_{kind}"] = lambda ja=ja, jb=jb: env.steer_to(ja, jb, check="certified")
         cases[f"discretized_{kind}"] = lambda ja=ja, jb=jb: env.steer_to(ja, jb)
         cases[f"discretized_{kind}_free"] = lambda fa=fa, fb=fb: env.steer_to(fa, fb)
-        work.update({f"certified_{kind}": len(a), f"discretized_{kind}": len(a),
-                     f"discretized_{kind}_free": int(free.sum()),
-                     f"states_{kind}": int(states.sum()), f"states_{kind}_free": int(states[free].sum())})
+        work.update(
+            {
+                f"certified_{kind}": len(a),
+                f"discretized_{kind}": len(a),
+                f"discretized_{kind}_free": int(free.sum()),
+                f"states_{kind}": int(states.sum()),
+                f"states_{kind}_free": int(states[free].sum()),
+            }
+        )
     med = interleaved(cases, args.reps)
     cores = interleaved.cores
     out = {"work": work, "seconds": med, "cores": cores, "rates": {}}
     for name, sec in med.items():
         out["rates"][name] = _rate(work[name], sec, sec * cores[name])
         if name.startswith("discretized"):
-            skey = "states" + name[len("discretized"):]
+            skey = "states" + name[len("discretized") :]
             out["rates"][name + "_states"] = _rate(work[skey], sec, sec * cores[name])
     out["certified_compile_cpu_s"] = compile_cpu(env)
     return out
@@ -205,12 +260,15 @@ def compile_cpu(env) -> float:
     """CPU seconds to trace, lower and compile the certified program of one chunk."""
     import jax
     import jax.numpy as jnp
+
     from ntq_jax.geometry import KERNEL_COMPILER_OPTIONS
     from ntq_jax.robots.batch import CERTIFIED_CHUNK, steer_to_cm
 
     robot, pad = env.robot, env.padding
-    fn = jax.jit(lambda w, x, y: steer_to_cm(robot, w, x, y, pad, check="certified"),
-                 compiler_options=KERNEL_COMPILER_OPTIONS)
+    fn = jax.jit(
+        lambda w, x, y: steer_to_cm(robot, w, x, y, pad, check="certified"),
+        compiler_options=KERNEL_COMPILER_OPTIONS,
+    )
     x = jnp.zeros((robot.dim, CERTIFIED_CHUNK), jnp.float32)
     c0 = time.process_time()
     fn.trace(env.world, x, x).lower().compile()
@@ -221,37 +279,59 @@ def _speed_line(scene: str, r: dict) -> str:
     rt = r["rates"]
     ns = 1e9 / rt["discretized_pair_free_states"]["per_cpu_s"]
     vamp = " / ".join(f"{ns / v:.1f}x" for v in VAMP_NS_PER_STATE)
-    return (f"{scene:17s} is_valid {rt['is_valid']['per_cpu_s']:.3g}/cpu-s "
-            f"({rt['is_valid']['per_s_wall']:.3g}/s wall) | certified pair "
-            f"{rt['certified_pair']['per_cpu_s']:.3g} short {rt['certified_short']['per_cpu_s']:.3g}"
-            f" motions/cpu-s | discretized pair {rt['discretized_pair']['per_cpu_s']:.3g} "
-            f"motions/cpu-s, free states {rt['discretized_pair_free_states']['per_cpu_s']:.3g}"
-            f"/cpu-s = {ns:.0f} ns/state ({vamp} VAMP's 44/59 ns) | certified compile "
-            f"{r['certified_compile_cpu_s']} cpu-s")
+    return (
+        f"{scene:17s} is_valid {rt['is_valid']['per_cpu_s']:.3g}/cpu-s "
+        f"({rt['is_valid']['per_s_wall']:.3g}/s wall) | certified pair "
+        f"{rt['certified_pair']['per_cpu_s']:.3g} short {rt['certified_short']['per_cpu_s']:.3g}"
+        f" motions/cpu-s | discretized pair {rt['discretized_pair']['per_cpu_s']:.3g} "
+        f"motions/cpu-s, free states {rt['discretized_pair_free_states']['per_cpu_s']:.3g}"
+        f"/cpu-s = {ns:.0f} ns/state ({vamp} VAMP's 44/59 ns) | certified compile "
+        f"{r['certified_compile_cpu_s']} cpu-s"
+    )
 
 
 def run_speed(args) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    key = {"states": args.states, "speed_motions": args.speed_motions, "reps": args.reps,
-           "seed": args.seed}
+    key = {
+        "states": args.states,
+        "speed_motions": args.speed_motions,
+        "reps": args.reps,
+        "seed": args.seed,
+    }
     rows = {}
     for scene in args.scene or SCENES:
         path = out / f"speed_{scene}.json"
         rec = _fresh(path, key, args.force)
         if rec is None:
-            rec = {"key": key, "scene": scene, **time_scene(scene, args), "machine": machine(),
-                   "loadavg": loadavg(), "vamp_ns_per_state_quoted": VAMP_NS_PER_STATE,
-                   "goals": GOALS}
+            rec = {
+                "key": key,
+                "scene": scene,
+                **time_scene(scene, args),
+                "machine": machine(),
+                "loadavg": loadavg(),
+                "vamp_ns_per_state_quoted": VAMP_NS_PER_STATE,
+                "goals": GOALS,
+            }
             _write(path, rec)
         rows[scene] = rec
         print(_speed_line(scene, rec), flush=True)
     if not args.scene:
-        _write(out / "speed_summary.json", {
-            "key": key, "goals": GOALS, "vamp_ns_per_state_quoted": VAMP_NS_PER_STATE,
-            "per_cpu_s": {s: {k: round(v["per_cpu_s"]) for k, v in r["rates"].items()}
-                          for s, r in rows.items()},
-            "certified_compile_cpu_s": {s: r["certified_compile_cpu_s"] for s, r in rows.items()}})
+        _write(
+            out / "speed_summary.json",
+            {
+                "key": key,
+                "goals": GOALS,
+                "vamp_ns_per_state_quoted": VAMP_NS_PER_STATE,
+                "per_cpu_s": {
+                    s: {k: round(v["per_cpu_s"]) for k, v in r["rates"].items()}
+                    for s, r in rows.items()
+                },
+                "certified_compile_cpu_s": {
+                    s: r["certified_compile_cpu_s"] for s, r in rows.items()
+                },
+            },
+        )
     return 0
 
 

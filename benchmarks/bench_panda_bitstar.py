@@ -40,9 +40,14 @@ def parse_args(argv):
     ap.add_argument("--time-budget", type=float, default=6.0, help="seconds of BIT* per query")
     ap.add_argument("--seed", type=int, default=0, help="query sample and OMPL seeds")
     ap.add_argument("--out", required=True, help="the record's folder")
-    ap.add_argument("--profile", type=int, default=0, metavar="K",
-                    help="instead of recording: time BIT*'s callbacks on the first K queries "
-                         "and write <out>/callback_profile.json")
+    ap.add_argument(
+        "--profile",
+        type=int,
+        default=0,
+        metavar="K",
+        help="instead of recording: time BIT*'s callbacks on the first K queries "
+        "and write <out>/callback_profile.json",
+    )
     return ap.parse_args(argv)
 
 
@@ -66,6 +71,7 @@ def profile_callbacks(env, queries, budget, seed, out: Path) -> dict:
                 return originals[name](self, *args)
             finally:
                 spent[name] += time.perf_counter() - t
+
         return call
 
     for k in spent:
@@ -79,14 +85,18 @@ def profile_callbacks(env, queries, budget, seed, out: Path) -> dict:
             setattr(JaxChecker, k, fn)
     info, k = res.info, len(queries)
     solve = float(info["solve_times"].sum())
-    prof = {"queries": k, "time_budget": budget, "solve_seconds_per_query": solve / k,
-            "states_checked_per_query": float(info["n_valid_per_query"].mean()),
-            "motions_checked_per_query": float(info["n_motion_per_query"].mean()),
-            "is_valid_seconds_per_query": spent["is_valid"] / k,
-            "steer_to_seconds_per_query": spent["steer_to"] / k,
-            "us_per_state_call": 1e6 * spent["is_valid"] / max(info["n_valid_calls"], 1),
-            "us_per_motion_call": 1e6 * spent["steer_to"] / max(info["n_motion_calls"], 1),
-            "callback_share_of_solve": sum(spent.values()) / solve}
+    prof = {
+        "queries": k,
+        "time_budget": budget,
+        "solve_seconds_per_query": solve / k,
+        "states_checked_per_query": float(info["n_valid_per_query"].mean()),
+        "motions_checked_per_query": float(info["n_motion_per_query"].mean()),
+        "is_valid_seconds_per_query": spent["is_valid"] / k,
+        "steer_to_seconds_per_query": spent["steer_to"] / k,
+        "us_per_state_call": 1e6 * spent["is_valid"] / max(info["n_valid_calls"], 1),
+        "us_per_motion_call": 1e6 * spent["steer_to"] / max(info["n_motion_calls"], 1),
+        "callback_share_of_solve": sum(spent.values()) / solve,
+    }
     artifacts.write_json(out / "callback_profile.json", prof)
     print(json.dumps(prof, indent=1))
     return prof
@@ -99,8 +109,10 @@ def check_meta(out: Path, meta: dict) -> None:
         old = json.loads(path.read_text())
         diff = [k for k in meta if old.get(k) != meta[k]]
         if diff:
-            raise SystemExit(f"error: {out} was recorded with other {', '.join(diff)}: "
-                             f"{ {k: old.get(k) for k in diff} }")
+            raise SystemExit(
+                f"error: {out} was recorded with other {', '.join(diff)}: "
+                f"{ {k: old.get(k) for k in diff} }"
+            )
 
 
 def record_chunk(env, queries, lo, hi, budget, seed, folder: Path) -> None:
@@ -111,15 +123,25 @@ def record_chunk(env, queries, lo, hi, budget, seed, folder: Path) -> None:
     res = plan(env, queries[lo:hi], PLANNER, seed=seed + lo, time_budget=budget)
     info = res.info
     rejected = (info["ompl_status"] == 0) & ~res.solved  # BIT*'s path failed our check
-    artifacts.save_npz(folder / f"plan_{lo:09d}_{hi:09d}.npz", queries=queries[lo:hi],
-                       paths=res.paths, lengths=res.lengths, costs=res.costs,
-                       status=res.status, rejected=rejected,
-                       n_valid=info["n_valid_per_query"], n_motion=info["n_motion_per_query"],
-                       solve_times=info["solve_times"])
-    print(f"rows {lo}-{hi}: solved {int(res.solved.sum())}/{hi - lo}, states/path "
-          f"{res.lengths[res.solved].mean():.2f}, motions/query "
-          f"{info['n_motion_per_query'].mean():.0f}, states checked/query "
-          f"{info['n_valid_per_query'].mean():.0f}", flush=True)
+    artifacts.save_npz(
+        folder / f"plan_{lo:09d}_{hi:09d}.npz",
+        queries=queries[lo:hi],
+        paths=res.paths,
+        lengths=res.lengths,
+        costs=res.costs,
+        status=res.status,
+        rejected=rejected,
+        n_valid=info["n_valid_per_query"],
+        n_motion=info["n_motion_per_query"],
+        solve_times=info["solve_times"],
+    )
+    print(
+        f"rows {lo}-{hi}: solved {int(res.solved.sum())}/{hi - lo}, states/path "
+        f"{res.lengths[res.solved].mean():.2f}, motions/query "
+        f"{info['n_motion_per_query'].mean():.0f}, states checked/query "
+        f"{info['n_valid_per_query'].mean():.0f}",
+        flush=True,
+    )
 
 
 def main(argv=None) -> int:
@@ -133,12 +155,19 @@ def main(argv=None) -> int:
     if args.profile:
         q, _ = env.sample_queries(jax.random.key(args.seed), args.n, p_nt=1.0)
         out.mkdir(parents=True, exist_ok=True)
-        profile_callbacks(env, np.asarray(q, np.float32)[:args.profile], args.time_budget,
-                          args.seed, out)
+        profile_callbacks(
+            env, np.asarray(q, np.float32)[: args.profile], args.time_budget, args.seed, out
+        )
         return 0
-    meta = {"env": args.env, "planner": PLANNER, "options": {"time_budget": args.time_budget},
-            "padding": float(env.padding), "seed": args.seed, "n": args.n,
-            "queries": f"env.sample_queries(jax.random.key({args.seed}), {args.n}, p_nt=1.0)"}
+    meta = {
+        "env": args.env,
+        "planner": PLANNER,
+        "options": {"time_budget": args.time_budget},
+        "padding": float(env.padding),
+        "seed": args.seed,
+        "n": args.n,
+        "queries": f"env.sample_queries(jax.random.key({args.seed}), {args.n}, p_nt=1.0)",
+    }
     check_meta(out, meta)
     folder = out / "N"
     folder.mkdir(parents=True, exist_ok=True)

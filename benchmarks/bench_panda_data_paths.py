@@ -33,9 +33,14 @@ from bench_data_paths import density_row, load_record, print_table
 
 def parse_args(argv):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--record", required=True, help="folder of a Panda BIT* record (record.json, N/)")
-    ap.add_argument("--spacings", default="0.4,0.6,0.8,1.0,1.2,1.4,1.5,1.6,2.0",
-                    help="resampling spacings of the shortcut paths, radians")
+    ap.add_argument(
+        "--record", required=True, help="folder of a Panda BIT* record (record.json, N/)"
+    )
+    ap.add_argument(
+        "--spacings",
+        default="0.4,0.6,0.8,1.0,1.2,1.4,1.5,1.6,2.0",
+        help="resampling spacings of the shortcut paths, radians",
+    )
     ap.add_argument("--cache", default="runs/roadmap_cache", help="the roadmap's cache folder")
     ap.add_argument("--out", default="results/data_paths/panda")
     return ap.parse_args(argv)
@@ -44,14 +49,19 @@ def parse_args(argv):
 def bitstar_checks(folder: Path) -> dict:
     """What BIT* checked per query in its budget (states, motions) and its solve seconds."""
     files = sorted((folder / "N").glob("plan_*_*.npz"))
-    parts = {k: np.concatenate([np.load(f)[k] for f in files])
-             for k in ("n_valid", "n_motion", "solve_times", "status")}
-    out = {"queries": len(parts["status"]),
-           "solved": int((parts["status"] == 0).sum())}
+    parts = {
+        k: np.concatenate([np.load(f)[k] for f in files])
+        for k in ("n_valid", "n_motion", "solve_times", "status")
+    }
+    out = {"queries": len(parts["status"]), "solved": int((parts["status"] == 0).sum())}
     for k in ("n_valid", "n_motion", "solve_times"):
         v = parts[k].astype(np.float64)
-        out[k] = {"mean": float(v.mean()), "median": float(np.median(v)),
-                  "min": float(v.min()), "max": float(v.max())}
+        out[k] = {
+            "mean": float(v.mean()),
+            "median": float(np.median(v)),
+            "min": float(v.min()),
+            "max": float(v.max()),
+        }
     return out
 
 
@@ -59,8 +69,11 @@ def matching_spacing(rows: list, bit_mean: float) -> dict:
     """The resampled row whose mean states per path is nearest BIT*'s."""
     res = [r for r in rows if r["mode"].startswith("resampled ")]
     best = min(res, key=lambda r: abs(r["mean_states"] - bit_mean))
-    return {"spacing": float(best["mode"].split()[1]), "mean_states": best["mean_states"],
-            "ratio_to_bitstar": best["ratio_to_bitstar"]}
+    return {
+        "spacing": float(best["mode"].split()[1]),
+        "mean_states": best["mean_states"],
+        "ratio_to_bitstar": best["ratio_to_bitstar"],
+    }
 
 
 def main(argv=None) -> int:
@@ -85,28 +98,42 @@ def main(argv=None) -> int:
     bit_len, bit_cost = bl[both].astype(np.float64), bc[both]
     seg = bit_cost / np.maximum(bit_len - 1, 1)
     row = functools.partial(density_row, env, pad, both, (bit_len, bit_cost))
-    rows = [row("bitstar", bp, bl, bc), row("raw", raw.paths, raw.lengths, raw.costs),
-            row("shortcut", cut.paths, cut.lengths, cut.costs)]
+    rows = [
+        row("bitstar", bp, bl, bc),
+        row("raw", raw.paths, raw.lengths, raw.costs),
+        row("shortcut", cut.paths, cut.lengths, cut.costs),
+    ]
     for s in (float(x) for x in args.spacings.split(",") if x.strip()):
         res, _ = shape_paths(env, cut, s, "roadmap", pad)
         rows.append(row(f"resampled {s:g}", res.paths, res.lengths, res.costs))
-    out = {"env": name, "record": str(record), "planner": "roadmap",
-           "options": dict(ARM_DEFAULTS, grow_rounds=2, roadmap_seed=0), "padding": pad,
-           "queries": len(q), "solved_by_both": int(both.sum()),
-           "bitstar_solved": int((bs == 0).sum()), "roadmap_solved": int(cut.solved.sum()),
-           "bitstar_time_budget": meta["options"]["time_budget"],
-           "bitstar_checks": bitstar_checks(record),
-           "bitstar_mean_segment": float(seg.mean()), "bitstar_median_segment": float(np.median(seg)),
-           "planner_seconds": seconds, "rows": rows}
+    out = {
+        "env": name,
+        "record": str(record),
+        "planner": "roadmap",
+        "options": dict(ARM_DEFAULTS, grow_rounds=2, roadmap_seed=0),
+        "padding": pad,
+        "queries": len(q),
+        "solved_by_both": int(both.sum()),
+        "bitstar_solved": int((bs == 0).sum()),
+        "roadmap_solved": int(cut.solved.sum()),
+        "bitstar_time_budget": meta["options"]["time_budget"],
+        "bitstar_checks": bitstar_checks(record),
+        "bitstar_mean_segment": float(seg.mean()),
+        "bitstar_median_segment": float(np.median(seg)),
+        "planner_seconds": seconds,
+        "rows": rows,
+    }
     out["matching_spacing"] = matching_spacing(rows, rows[0]["mean_states"])
     dest = Path(args.out) / f"density_{env_slug(name, env)}.json"
     dest.parent.mkdir(parents=True, exist_ok=True)
     dest.write_text(json.dumps(out, indent=1) + "\n")
     print_table(out, "roadmap", seg, dest)
     c = out["bitstar_checks"]
-    print(f"BIT* per query: {c['n_valid']['mean']:.0f} states and {c['n_motion']['mean']:.0f} "
-          f"motions checked (means), {c['solve_times']['mean']:.2f} s; spacing nearest BIT*'s "
-          f"states/path: {out['matching_spacing']}")
+    print(
+        f"BIT* per query: {c['n_valid']['mean']:.0f} states and {c['n_motion']['mean']:.0f} "
+        f"motions checked (means), {c['solve_times']['mean']:.2f} s; spacing nearest BIT*'s "
+        f"states/path: {out['matching_spacing']}"
+    )
     return 0
 
 

@@ -49,7 +49,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-
 from common import finite_or_none, loadavg, machine, percentile
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -76,8 +75,13 @@ def _stats(xs) -> dict:
     xs = [x for x in xs if x is not None]
     if not xs:
         return {"n": 0}
-    return {"n": len(xs), "median": _round(np.median(xs)), "p90": _round(percentile(xs, 90)),
-            "mean": _round(np.mean(xs)), "max": _round(max(xs))}
+    return {
+        "n": len(xs),
+        "median": _round(np.median(xs)),
+        "p90": _round(percentile(xs, 90)),
+        "mean": _round(np.mean(xs)),
+        "max": _round(max(xs)),
+    }
 
 
 def _write(path: Path, data: dict) -> None:
@@ -97,16 +101,21 @@ def _plain(x):
 
 
 def _info(info: dict) -> dict:
-    return {k: (_round(v) if isinstance(v, float) else v) for k, v in info.items()
-            if not isinstance(v, np.ndarray) or v.size <= 64}
+    return {
+        k: (_round(v) if isinstance(v, float) else v)
+        for k, v in info.items()
+        if not isinstance(v, np.ndarray) or v.size <= 64
+    }
 
 
 # ---------------------------------------------------------------------------
 # pool
 # ---------------------------------------------------------------------------
 
+
 def stage_pool(args) -> None:
     import jax
+
     import ntq_jax as nj
     from ntq_jax.types import STATUS_NAMES
 
@@ -114,8 +123,10 @@ def stage_pool(args) -> None:
     with Clock() as c:
         q, kind = env.sample_queries(jax.random.key(0), args.queries, p_nt=0.5)
     sampling = {"wall": _round(c.wall, 2), "cpu": _round(c.cpu, 2)}
-    print(f"{args.env}: {args.queries} queries sampled in {c.wall:.1f} s ({c.cpu:.1f} cpu-s)",
-          flush=True)
+    print(
+        f"{args.env}: {args.queries} queries sampled in {c.wall:.1f} s ({c.cpu:.1f} cpu-s)",
+        flush=True,
+    )
     runs = []
     for r in range(args.runs):
         fresh = nj.make_env(args.env)  # a new Env: its roadmap is built again
@@ -123,31 +134,53 @@ def stage_pool(args) -> None:
         with Clock() as c:
             res = nj.plan(fresh, q, "roadmap", check=args.check)
         nt = kind == 1
-        run = {"run": r, "wall": _round(c.wall, 2), "cpu": _round(c.cpu, 2),
-               "load_before": load0, "load_after": loadavg(),
-               "solved": _round(res.solved.mean()), "solved_nt": _round(res.solved[nt].mean()),
-               "solved_uniform": _round(res.solved[~nt].mean()),
-               "status": {STATUS_NAMES[s]: int((res.status == s).sum())
-                          for s in np.unique(res.status)},
-               "cost_median": _round(np.median(res.costs[res.solved])),
-               "waypoints_median": _round(np.median(res.lengths[res.solved])),
-               "info": _info(res.info)}
+        run = {
+            "run": r,
+            "wall": _round(c.wall, 2),
+            "cpu": _round(c.cpu, 2),
+            "load_before": load0,
+            "load_after": loadavg(),
+            "solved": _round(res.solved.mean()),
+            "solved_nt": _round(res.solved[nt].mean()),
+            "solved_uniform": _round(res.solved[~nt].mean()),
+            "status": {
+                STATUS_NAMES[s]: int((res.status == s).sum()) for s in np.unique(res.status)
+            },
+            "cost_median": _round(np.median(res.costs[res.solved])),
+            "waypoints_median": _round(np.median(res.lengths[res.solved])),
+            "info": _info(res.info),
+        }
         runs.append(run)
-        print(f"  run {r}: {c.wall:.1f} s wall, {c.cpu:.1f} cpu-s; solved {run['solved']:.4f} "
-              f"(non-trivial {run['solved_nt']:.4f}); {run['status']}", flush=True)
+        print(
+            f"  run {r}: {c.wall:.1f} s wall, {c.cpu:.1f} cpu-s; solved {run['solved']:.4f} "
+            f"(non-trivial {run['solved_nt']:.4f}); {run['status']}",
+            flush=True,
+        )
     slug = args.env.replace("/", "_")
-    _write(Path(args.out) / f"pool_{slug}.json", {
-        "stage": "pool", "env": args.env, "queries": args.queries, "p_nt": 0.5,
-        "check": args.check, "sampling": sampling, "runs": runs,
-        "command": " ".join(sys.argv), "machine": machine()})
+    _write(
+        Path(args.out) / f"pool_{slug}.json",
+        {
+            "stage": "pool",
+            "env": args.env,
+            "queries": args.queries,
+            "p_nt": 0.5,
+            "check": args.check,
+            "sampling": sampling,
+            "runs": runs,
+            "command": " ".join(sys.argv),
+            "machine": machine(),
+        },
+    )
 
 
 # ---------------------------------------------------------------------------
 # mbm
 # ---------------------------------------------------------------------------
 
+
 def _problems(args):
     from ntq_jax.scenes import mbm
+
     scenes = args.scenes or list(mbm.SCENES)
     lo, hi = (int(x) for x in args.numbers.split("-"))
     return [(s, n) for s in scenes for n in range(lo, hi + 1) if (n - lo) % args.every == 0]
@@ -155,6 +188,7 @@ def _problems(args):
 
 def _plan_problem(planner: str, name: str, check: str, options: dict):
     import ntq_jax as nj
+
     env = nj.make_env(name)
     with Clock() as c:
         res = nj.plan(env, env.query[None], planner, check=check, **options)
@@ -171,19 +205,39 @@ def stage_mbm(args) -> None:
         env, res, c = _plan_problem(args.planner, name, args.check, options)
         first = scene not in seen  # the scene's first problem compiles its programs
         seen.add(scene)
-        row = {"scene": scene, "number": number, "first": first,
-               "status": STATUS_NAMES[int(res.status[0])], "cost": finite_or_none(res.costs[0]),
-               "waypoints": int(res.lengths[0]), "wall": _round(c.wall), "cpu": _round(c.cpu)}
+        row = {
+            "scene": scene,
+            "number": number,
+            "first": first,
+            "status": STATUS_NAMES[int(res.status[0])],
+            "cost": finite_or_none(res.costs[0]),
+            "waypoints": int(res.lengths[0]),
+            "wall": _round(c.wall),
+            "cpu": _round(c.cpu),
+        }
         for k in ("attempts", "iterations"):
             if k in res.info:
                 row[k] = int(np.asarray(res.info[k])[0])
         rows.append(row)
-        print(f"  {name}: {row['status']} cost {row['cost']} wall {c.wall * 1e3:.1f} ms "
-              f"cpu {c.cpu * 1e3:.1f} ms{' (first: compiles)' if first else ''}", flush=True)
-    _write(Path(args.out) / f"mbm_{args.planner}.json", {
-        "stage": "mbm", "planner": args.planner, "check": args.check, "options": options,
-        "summary": _mbm_summary(rows), "problems": rows, "command": " ".join(sys.argv),
-        "load_after": loadavg(), "machine": machine()})
+        print(
+            f"  {name}: {row['status']} cost {row['cost']} wall {c.wall * 1e3:.1f} ms "
+            f"cpu {c.cpu * 1e3:.1f} ms{' (first: compiles)' if first else ''}",
+            flush=True,
+        )
+    _write(
+        Path(args.out) / f"mbm_{args.planner}.json",
+        {
+            "stage": "mbm",
+            "planner": args.planner,
+            "check": args.check,
+            "options": options,
+            "summary": _mbm_summary(rows),
+            "problems": rows,
+            "command": " ".join(sys.argv),
+            "load_after": loadavg(),
+            "machine": machine(),
+        },
+    )
 
 
 def _mbm_summary(rows: list[dict]) -> dict:
@@ -194,18 +248,24 @@ def _mbm_summary(rows: list[dict]) -> dict:
         v = [r for r in valid if r["scene"] == s]
         by_scene[s] = {"problems": len(v), "solved": sum(r["status"] == "solved" for r in v)}
     solved = sum(r["status"] == "solved" for r in valid)
-    return {"problems": len(rows), "invalid": len(rows) - len(valid), "valid": len(valid),
-            "solved": solved, "success": _round(solved / max(1, len(valid))),
-            "wall_s_excluding_first": _stats([r["wall"] for r in warm]),
-            "cpu_s_excluding_first": _stats([r["cpu"] for r in warm]),
-            "first_of_scene_wall_s": _stats([r["wall"] for r in valid if r["first"]]),
-            "cost": _stats([r["cost"] for r in valid if r["status"] == "solved"]),
-            "by_scene": by_scene}
+    return {
+        "problems": len(rows),
+        "invalid": len(rows) - len(valid),
+        "valid": len(valid),
+        "solved": solved,
+        "success": _round(solved / max(1, len(valid))),
+        "wall_s_excluding_first": _stats([r["wall"] for r in warm]),
+        "cpu_s_excluding_first": _stats([r["cpu"] for r in warm]),
+        "first_of_scene_wall_s": _stats([r["wall"] for r in valid if r["first"]]),
+        "cost": _stats([r["cost"] for r in valid if r["status"] == "solved"]),
+        "by_scene": by_scene,
+    }
 
 
 # ---------------------------------------------------------------------------
 # compare
 # ---------------------------------------------------------------------------
+
 
 def stage_compare(args) -> None:
     from ntq_jax.planners.verify import check_paths
@@ -226,20 +286,39 @@ def stage_compare(args) -> None:
         seen.add(scene)
         for label, (planner, check, opts) in planners.items():
             env, res, c = _plan_problem(planner, name, check, opts)
-            r = {"status": STATUS_NAMES[int(res.status[0])], "cost": finite_or_none(res.costs[0]),
-                 "waypoints": int(res.lengths[0]), "wall": _round(c.wall), "cpu": _round(c.cpu)}
+            r = {
+                "status": STATUS_NAMES[int(res.status[0])],
+                "cost": finite_or_none(res.costs[0]),
+                "waypoints": int(res.lengths[0]),
+                "wall": _round(c.wall),
+                "cpu": _round(c.cpu),
+            }
             if check != "certified" and res.solved[0]:  # does its path pass the certified check?
                 ok, _ = check_paths(env, res.paths, res.lengths, env.padding, "certified")
                 r["certified"] = bool(ok[0])
             row[label] = r
         rows.append(row)
-        print(f"  {name}: " + "; ".join(f"{k} {v['status']} {v['cost']} {v['cpu'] * 1e3:.0f} ms"
-                                        for k, v in row.items() if isinstance(v, dict)),
-              flush=True)
-    _write(Path(args.out) / "compare.json", {
-        "stage": "compare", "planners": {k: [p, c, o] for k, (p, c, o) in planners.items()},
-        "summary": _compare_summary(rows, list(planners)), "problems": rows,
-        "command": " ".join(sys.argv), "load_after": loadavg(), "machine": machine()})
+        print(
+            f"  {name}: "
+            + "; ".join(
+                f"{k} {v['status']} {v['cost']} {v['cpu'] * 1e3:.0f} ms"
+                for k, v in row.items()
+                if isinstance(v, dict)
+            ),
+            flush=True,
+        )
+    _write(
+        Path(args.out) / "compare.json",
+        {
+            "stage": "compare",
+            "planners": {k: [p, c, o] for k, (p, c, o) in planners.items()},
+            "summary": _compare_summary(rows, list(planners)),
+            "problems": rows,
+            "command": " ".join(sys.argv),
+            "load_after": loadavg(),
+            "machine": machine(),
+        },
+    )
 
 
 def _compare_summary(rows: list[dict], labels: list[str]) -> dict:
@@ -247,17 +326,24 @@ def _compare_summary(rows: list[dict], labels: list[str]) -> dict:
     warm = [r for r in rows if not r["first"]]
     for k in labels:
         valid = [r for r in rows if r[k]["status"] != "invalid"]
-        s = {"problems": len(valid), "solved": sum(r[k]["status"] == "solved" for r in valid),
-             "cpu_s_excluding_first": _stats([r[k]["cpu"] for r in warm]),
-             "wall_s_excluding_first": _stats([r[k]["wall"] for r in warm])}
+        s = {
+            "problems": len(valid),
+            "solved": sum(r[k]["status"] == "solved" for r in valid),
+            "cpu_s_excluding_first": _stats([r[k]["cpu"] for r in warm]),
+            "wall_s_excluding_first": _stats([r[k]["wall"] for r in warm]),
+        }
         if any("certified" in r[k] for r in valid):
             s["solved_and_certified"] = sum(bool(r[k].get("certified")) for r in valid)
         if k != "rrtconnect" and "rrtconnect" in labels:
-            both = [r[k]["cost"] / r["rrtconnect"]["cost"] for r in valid
-                    if r[k]["status"] == "solved" and r["rrtconnect"]["status"] == "solved"]
+            both = [
+                r[k]["cost"] / r["rrtconnect"]["cost"]
+                for r in valid
+                if r[k]["status"] == "solved" and r["rrtconnect"]["status"] == "solved"
+            ]
             s["cost_ratio_to_ompl"] = _stats(both)
-            s["cost_ratio_to_ompl"]["geomean"] = (_round(float(np.exp(np.mean(np.log(both)))))
-                                                  if both else None)
+            s["cost_ratio_to_ompl"]["geomean"] = (
+                _round(float(np.exp(np.mean(np.log(both))))) if both else None
+            )
         out[k] = s
     return out
 
@@ -266,13 +352,17 @@ def _compare_summary(rows: list[dict], labels: list[str]) -> dict:
 # vamp
 # ---------------------------------------------------------------------------
 
+
 def stage_vamp(args) -> None:
     try:
         from ntq_jax.planners import vamp_bridge
+
         vamp_bridge.require_vamp()
     except ImportError as e:
-        print(f"vamp: not importable here ({e}); see ntq_jax/planners/vamp_bridge.py for the "
-              "build", flush=True)
+        print(
+            f"vamp: not importable here ({e}); see ntq_jax/planners/vamp_bridge.py for the build",
+            flush=True,
+        )
         return
     args.planner = "vamp"
     stage_mbm(args)
@@ -282,62 +372,93 @@ def stage_vamp(args) -> None:
 # report
 # ---------------------------------------------------------------------------
 
+
 def stage_report(args) -> None:
     out = Path(args.out)
-    lines = ["# Planning for the Panda (benchmarks/bench_panda_plan.py)", "",
-             "Wall-clock and process CPU seconds on the shared 2-core machine, pinned to core 0 "
-             "(`taskset -c 0`); CPU time is the comparable figure.", ""]
+    lines = [
+        "# Planning for the Panda (benchmarks/bench_panda_plan.py)",
+        "",
+        "Wall-clock and process CPU seconds on the shared 2-core machine, pinned to core 0 "
+        "(`taskset -c 0`); CPU time is the comparable figure.",
+        "",
+    ]
     for f in sorted(out.glob("pool_*.json")):
         d = json.loads(f.read_text())
-        lines += [f"## Query pool: {d['env']}, {d['queries']} queries (p_nt 0.5), check "
-                  f"{d['check']}", "",
-                  f"Sampling: {d['sampling']['wall']} s wall, {d['sampling']['cpu']} cpu-s.", "",
-                  "| run | wall s | cpu s | solved | non-trivial | uniform | statuses | "
-                  "repaired | replanned | rejected | unreachable ends |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+        lines += [
+            f"## Query pool: {d['env']}, {d['queries']} queries (p_nt 0.5), check {d['check']}",
+            "",
+            f"Sampling: {d['sampling']['wall']} s wall, {d['sampling']['cpu']} cpu-s.",
+            "",
+            "| run | wall s | cpu s | solved | non-trivial | uniform | statuses | "
+            "repaired | replanned | rejected | unreachable ends |",
+            "|---|---|---|---|---|---|---|---|---|---|---|",
+        ]
         for r in d["runs"]:
             i = r["info"]
-            lines.append(f"| {r['run']}{' (compiles)' if r['run'] == 0 else ''} | {r['wall']} | "
-                         f"{r['cpu']} | {r['solved']} | {r['solved_nt']} | {r['solved_uniform']} | "
-                         f"{r['status']} | {i.get('repaired')} | {i.get('replanned')} | "
-                         f"{i.get('rejected')} | {i.get('unreachable_ends')} |")
+            lines.append(
+                f"| {r['run']}{' (compiles)' if r['run'] == 0 else ''} | {r['wall']} | "
+                f"{r['cpu']} | {r['solved']} | {r['solved_nt']} | {r['solved_uniform']} | "
+                f"{r['status']} | {i.get('repaired')} | {i.get('replanned')} | "
+                f"{i.get('rejected')} | {i.get('unreachable_ends')} |"
+            )
         last = d["runs"][-1]["info"]
-        lines += ["", "Stage wall seconds of the last run: " + ", ".join(
-            f"{k} {last[k]}" for k in ("build_time", "search_time", "smooth_time", "check_time")
-            if k in last) + ".", ""]
+        lines += [
+            "",
+            "Stage wall seconds of the last run: "
+            + ", ".join(
+                f"{k} {last[k]}"
+                for k in ("build_time", "search_time", "smooth_time", "check_time")
+                if k in last
+            )
+            + ".",
+            "",
+        ]
     for f in sorted(out.glob("mbm_*.json")):
         d = json.loads(f.read_text())
         s = _mbm_summary(d["problems"])
-        lines += [f"## MotionBenchMaker: {d['planner']} (check {d['check']})", "",
-                  f"{s['solved']} / {s['valid']} valid problems solved ({s['success']}); "
-                  f"{s['invalid']} invalid.", "",
-                  "| per problem, first of each scene excluded | median | p90 | max |",
-                  "|---|---|---|---|",
-                  f"| wall ms | {_ms(s['wall_s_excluding_first'], 'median')} | "
-                  f"{_ms(s['wall_s_excluding_first'], 'p90')} | "
-                  f"{_ms(s['wall_s_excluding_first'], 'max')} |",
-                  f"| cpu ms | {_ms(s['cpu_s_excluding_first'], 'median')} | "
-                  f"{_ms(s['cpu_s_excluding_first'], 'p90')} | "
-                  f"{_ms(s['cpu_s_excluding_first'], 'max')} |", "",
-                  f"Path cost (joint-space length) median {s['cost'].get('median')}; first "
-                  f"problem of a scene (compiles) median "
-                  f"{s['first_of_scene_wall_s'].get('median')} s wall.", "",
-                  "| scene | solved |", "|---|---|"]
+        lines += [
+            f"## MotionBenchMaker: {d['planner']} (check {d['check']})",
+            "",
+            f"{s['solved']} / {s['valid']} valid problems solved ({s['success']}); "
+            f"{s['invalid']} invalid.",
+            "",
+            "| per problem, first of each scene excluded | median | p90 | max |",
+            "|---|---|---|---|",
+            f"| wall ms | {_ms(s['wall_s_excluding_first'], 'median')} | "
+            f"{_ms(s['wall_s_excluding_first'], 'p90')} | "
+            f"{_ms(s['wall_s_excluding_first'], 'max')} |",
+            f"| cpu ms | {_ms(s['cpu_s_excluding_first'], 'median')} | "
+            f"{_ms(s['cpu_s_excluding_first'], 'p90')} | "
+            f"{_ms(s['cpu_s_excluding_first'], 'max')} |",
+            "",
+            f"Path cost (joint-space length) median {s['cost'].get('median')}; first "
+            f"problem of a scene (compiles) median "
+            f"{s['first_of_scene_wall_s'].get('median')} s wall.",
+            "",
+            "| scene | solved |",
+            "|---|---|",
+        ]
         lines += [f"| {k} | {v['solved']} / {v['problems']} |" for k, v in s["by_scene"].items()]
         lines.append("")
     f = out / "compare.json"
     if f.exists():
         d = json.loads(f.read_text())
         d["summary"] = _compare_summary(d["problems"], list(d["planners"]))
-        lines += ["## Same problems, three planners (every segment of ours certified; OMPL's "
-                  "discretised, then certified separately)", "",
-                  "| planner | solved | certified | cpu ms median | cost / OMPL median | "
-                  "geomean | p90 |", "|---|---|---|---|---|---|---|"]
+        lines += [
+            "## Same problems, three planners (every segment of ours certified; OMPL's "
+            "discretised, then certified separately)",
+            "",
+            "| planner | solved | certified | cpu ms median | cost / OMPL median | geomean | p90 |",
+            "|---|---|---|---|---|---|---|",
+        ]
         for k, s in d["summary"].items():
             r = s.get("cost_ratio_to_ompl", {})
-            lines.append(f"| {k} | {s['solved']} / {s['problems']} | "
-                         f"{s.get('solved_and_certified', s['solved'])} | "
-                         f"{_ms(s['cpu_s_excluding_first'], 'median')} | {r.get('median', '')} | "
-                         f"{r.get('geomean', '')} | {r.get('p90', '')} |")
+            lines.append(
+                f"| {k} | {s['solved']} / {s['problems']} | "
+                f"{s.get('solved_and_certified', s['solved'])} | "
+                f"{_ms(s['cpu_s_excluding_first'], 'median')} | {r.get('median', '')} | "
+                f"{r.get('geomean', '')} | {r.get('p90', '')} |"
+            )
         lines.append("")
     (out / "summary.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
@@ -364,8 +485,13 @@ def main() -> None:
     ap.add_argument("--roadmap-milestones", type=int, default=1000)
     ap.add_argument("--skip", nargs="*", help="compare: planners left out")
     args = ap.parse_args()
-    {"pool": stage_pool, "mbm": stage_mbm, "compare": stage_compare, "vamp": stage_vamp,
-     "report": stage_report}[args.stage](args)
+    {
+        "pool": stage_pool,
+        "mbm": stage_mbm,
+        "compare": stage_compare,
+        "vamp": stage_vamp,
+        "report": stage_report,
+    }[args.stage](args)
 
 
 if __name__ == "__main__":

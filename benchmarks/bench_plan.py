@@ -30,14 +30,13 @@ import tempfile
 import time
 from pathlib import Path
 
-
-
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def _git_show(rev: str, path: str) -> str | None:
-    r = subprocess.run(["git", "-C", str(ROOT), "show", f"{rev}:{path}"], capture_output=True,
-                       text=True)
+    r = subprocess.run(
+        ["git", "-C", str(ROOT), "show", f"{rev}:{path}"], capture_output=True, text=True
+    )
     return r.stdout if r.returncode == 0 else None
 
 
@@ -76,6 +75,7 @@ def _options(mod, cfg):
     if hasattr(mod.PlannerOptions, "from_config"):
         return mod.PlannerOptions.from_config(cfg.eval, steer=True)
     from ntq_jax.experiment import config as C
+
     return C.neural_options(cfg.eval, steer=True)
 
 
@@ -98,21 +98,32 @@ def against(env, pnet, q, key, cfg, other, repeats: int) -> dict:
     return {k: float(np.median(v)) for k, v in times.items()}
 
 
-def bench(env_name: str, *, queries: int, loop_queries: int, run=None, model: int = 3,
-          hidden=(256, 256, 128, 64), seed: int = 0, eval_overrides=(), other=None,
-          repeats: int = 5) -> dict:
+def bench(
+    env_name: str,
+    *,
+    queries: int,
+    loop_queries: int,
+    run=None,
+    model: int = 3,
+    hidden=(256, 256, 128, 64),
+    seed: int = 0,
+    eval_overrides=(),
+    other=None,
+    repeats: int = 5,
+) -> dict:
     import jax
     import numpy as np
 
-    from ntq_jax.experiment import config as C
     from ntq_jax import make_env, models
     from ntq_jax.envs import env_slug
+    from ntq_jax.experiment import config as C
     from ntq_jax.models import member_pnets
     from ntq_jax.neural_planner import plan_batch
 
     env = make_env(env_name)
     if run is not None:
         from ntq_jax.training import load_ensemble
+
         cfg = C.load(Path(run) / "config.yaml", list(eval_overrides))
         ens = load_ensemble(Path(run) / "models" / env_slug(env_name, env))
         source = f"trained PNet_{model} of {run}"
@@ -142,17 +153,25 @@ def bench(env_name: str, *, queries: int, loop_queries: int, run=None, model: in
     loop, succ, loop_compile = 0.0, 0, 0.0
     for i in range(n_loop):
         t0 = time.perf_counter()
-        r = plan_batch(env, pnet, q[i:i + 1], jax.random.fold_in(key, i), opts)
+        r = plan_batch(env, pnet, q[i : i + 1], jax.random.fold_in(key, i), opts)
         loop += time.perf_counter() - t0 - r.compile_seconds
         loop_compile += r.compile_seconds
         succ += int(r.success[0])
     loop *= len(q) / max(n_loop, 1)
     return {
-        "env": env_name, "robot": env.robot.kind, "queries": len(q), "loop_queries": n_loop,
-        "pnet": source, "n_plan": opts.n_plan, "replan_rounds": opts.replan_rounds,
-        "batched_seconds": batched, "batched_seconds_per_query": batched / len(q),
-        "loop_seconds": loop, "loop_seconds_per_query": loop / len(q),
-        "speedup": loop / batched, "compile_seconds": warm.compile_seconds,
+        "env": env_name,
+        "robot": env.robot.kind,
+        "queries": len(q),
+        "loop_queries": n_loop,
+        "pnet": source,
+        "n_plan": opts.n_plan,
+        "replan_rounds": opts.replan_rounds,
+        "batched_seconds": batched,
+        "batched_seconds_per_query": batched / len(q),
+        "loop_seconds": loop,
+        "loop_seconds_per_query": loop / len(q),
+        "speedup": loop / batched,
+        "compile_seconds": warm.compile_seconds,
         "loop_compile_seconds_excluded": loop_compile,
         "batched_success": float(res.success.mean()),
         "loop_success": succ / max(n_loop, 1),
@@ -162,43 +181,70 @@ def bench(env_name: str, *, queries: int, loop_queries: int, run=None, model: in
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("--env", action="append", default=None, help="environment(s) (default point/0)")
     ap.add_argument("--queries", type=int, default=500)
-    ap.add_argument("--loop-queries", type=int, default=500,
-                    help="queries timed in the per-query loop (scaled to --queries)")
+    ap.add_argument(
+        "--loop-queries",
+        type=int,
+        default=500,
+        help="queries timed in the per-query loop (scaled to --queries)",
+    )
     ap.add_argument("--run", default=None, help="use a trained ensemble of this run folder")
     ap.add_argument("--model", type=int, default=3)
     ap.add_argument("--hidden", type=int, nargs="+", default=[256, 256, 128, 64])
-    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                    help="eval config override, e.g. --set eval.n_plan=50")
-    ap.add_argument("--against", default=None, metavar="REV",
-                    help="also time the batched planner of this git revision, side by side")
+    ap.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="eval config override, e.g. --set eval.n_plan=50",
+    )
+    ap.add_argument(
+        "--against",
+        default=None,
+        metavar="REV",
+        help="also time the batched planner of this git revision, side by side",
+    )
     ap.add_argument("--repeats", type=int, default=5, help="interleaved repeats for --against")
     ap.add_argument("--json", default=None, help="also write the results to this JSON file")
     args = ap.parse_args(argv)
     other = planner_at(args.against) if args.against else None
     out = []
     for name in args.env or ["point/0"]:
-        r = bench(name, queries=args.queries, loop_queries=args.loop_queries, run=args.run,
-                  model=args.model, hidden=tuple(args.hidden), eval_overrides=args.set,
-                  other=other, repeats=args.repeats)
+        r = bench(
+            name,
+            queries=args.queries,
+            loop_queries=args.loop_queries,
+            run=args.run,
+            model=args.model,
+            hidden=tuple(args.hidden),
+            eval_overrides=args.set,
+            other=other,
+            repeats=args.repeats,
+        )
         out.append(r)
         if r["against"] is not None:
             a = r["against"]
-            print(f"{r['env']:8s} batched, median of {args.repeats}: this tree {a['current']:.3f} s, "
-                  f"{args.against} {a['other']:.3f} s: {a['other'] / a['current']:.2f}x faster",
-                  flush=True)
+            print(
+                f"{r['env']:8s} batched, median of {args.repeats}: this tree {a['current']:.3f} s, "
+                f"{args.against} {a['other']:.3f} s: {a['other'] / a['current']:.2f}x faster",
+                flush=True,
+            )
         if not r["loop_queries"]:
             continue
-        print(f"{r['env']:8s} {r['queries']} queries ({r['pnet']}, n_plan {r['n_plan']}, "
-              f"replan {r['replan_rounds']}): batched {r['batched_seconds']:.2f} s "
-              f"({r['batched_seconds_per_query'] * 1e3:.2f} ms/query), per-query loop "
-              f"{r['loop_seconds']:.2f} s ({r['loop_seconds_per_query'] * 1e3:.2f} ms/query"
-              f"{', measured on %d' % r['loop_queries'] if r['loop_queries'] < r['queries'] else ''}"
-              f"), speedup {r['speedup']:.1f}x; success {r['batched_success']:.3f} / "
-              f"{r['loop_success']:.3f}; compile {r['compile_seconds']:.1f} s", flush=True)
+        print(
+            f"{r['env']:8s} {r['queries']} queries ({r['pnet']}, n_plan {r['n_plan']}, "
+            f"replan {r['replan_rounds']}): batched {r['batched_seconds']:.2f} s "
+            f"({r['batched_seconds_per_query'] * 1e3:.2f} ms/query), per-query loop "
+            f"{r['loop_seconds']:.2f} s ({r['loop_seconds_per_query'] * 1e3:.2f} ms/query"
+            f"{', measured on %d' % r['loop_queries'] if r['loop_queries'] < r['queries'] else ''}"
+            f"), speedup {r['speedup']:.1f}x; success {r['batched_success']:.3f} / "
+            f"{r['loop_success']:.3f}; compile {r['compile_seconds']:.1f} s",
+            flush=True,
+        )
     if args.json:
         Path(args.json).write_text(json.dumps(out, indent=1))
     return 0

@@ -81,8 +81,13 @@ print(json.dumps(out))
 def child(src: Path, run: Path, env_name: str) -> dict:
     with tempfile.TemporaryDirectory() as cache:
         env = dict(os.environ, PYTHONPATH=str(src), JAX_COMPILATION_CACHE_DIR=cache)
-        r = subprocess.run([sys.executable, "-c", _CHILD, str(run), env_name],
-                           capture_output=True, text=True, env=env, cwd=str(src))
+        r = subprocess.run(
+            [sys.executable, "-c", _CHILD, str(run), env_name],
+            capture_output=True,
+            text=True,
+            env=env,
+            cwd=str(src),
+        )
     if r.returncode:
         tail = r.stderr.strip().splitlines()[-1] if r.stderr.strip() else "failed"
         raise SystemExit(f"error: the planner run in {src} failed: {tail}")
@@ -108,14 +113,22 @@ def main(argv=None) -> int:
         for side in ("base", "head"):
             r = child(getattr(args, side).resolve(), args.run.resolve(), args.env)
             got[side].append(r)
-            print(f"repeat {i + 1} {side}: compile {r['compile']:.1f} s, "
-                  f"planning {r['plan']:.2f} s", flush=True)
-    med = {side: {k: statistics.median(r[k] for r in rows) for k in ("compile", "plan")}
-           for side, rows in got.items()}
+            print(
+                f"repeat {i + 1} {side}: compile {r['compile']:.1f} s, planning {r['plan']:.2f} s",
+                flush=True,
+            )
+    med = {
+        side: {k: statistics.median(r[k] for r in rows) for k in ("compile", "plan")}
+        for side, rows in got.items()
+    }
     same = all(r["hashes"] == got["base"][0]["hashes"] for rows in got.values() for r in rows)
-    summary = {"env": args.env, "repeats": args.repeats, "median": med,
-               "ratio_head_to_base": {k: med["head"][k] / med["base"][k] for k in med["base"]},
-               "outputs_identical": same}
+    summary = {
+        "env": args.env,
+        "repeats": args.repeats,
+        "median": med,
+        "ratio_head_to_base": {k: med["head"][k] / med["base"][k] for k in med["base"]},
+        "outputs_identical": same,
+    }
     print(json.dumps(summary, indent=1))
     if args.json:
         args.json.write_text(json.dumps(summary, indent=1) + "\n")

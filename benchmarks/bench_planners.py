@@ -60,6 +60,7 @@ SQ2 = math.sqrt(2.0)
 # Grids
 # ---------------------------------------------------------------------------
 
+
 def env_grid(name: str, resolution: float) -> np.ndarray:
     """Occupancy grid of a package environment (its own padding), via the package's rasteriser."""
     import ntq_jax
@@ -67,8 +68,9 @@ def env_grid(name: str, resolution: float) -> np.ndarray:
     return np.asarray(ntq_jax.make_env(name).rasterize(resolution), bool)
 
 
-def random_box_grid(rng, n_boxes: int, size: float = 20.0, resolution: float = 0.1,
-                    padding: float = 0.8) -> np.ndarray:
+def random_box_grid(
+    rng, n_boxes: int, size: float = 20.0, resolution: float = 0.1, padding: float = 0.8
+) -> np.ndarray:
     """A random map: ``n_boxes`` boxes in a ``size`` x ``size`` square, inflated by ``padding``.
 
     A cell is occupied when its centre is within ``padding`` of a box (the
@@ -114,6 +116,7 @@ def sample_queries(rng, occ, n, reachable: bool):
 # A plain A* in Python (same graph as the JAX planner)
 # ---------------------------------------------------------------------------
 
+
 def heapq_astar(occ: np.ndarray, start, goal) -> float:
     """Textbook A* with a binary heap: 8-connected, no corner cutting, octile heuristic."""
     h, w = occ.shape
@@ -123,8 +126,16 @@ def heapq_astar(occ: np.ndarray, start, goal) -> float:
     if not (free[s] and free[t]):
         return math.inf
     gr, gc = divmod(t, w)
-    moves = [(-1, 0, 1.0), (1, 0, 1.0), (0, -1, 1.0), (0, 1, 1.0),
-             (-1, -1, SQ2), (-1, 1, SQ2), (1, -1, SQ2), (1, 1, SQ2)]
+    moves = [
+        (-1, 0, 1.0),
+        (1, 0, 1.0),
+        (0, -1, 1.0),
+        (0, 1, 1.0),
+        (-1, -1, SQ2),
+        (-1, 1, SQ2),
+        (1, -1, SQ2),
+        (1, 1, SQ2),
+    ]
 
     def octile(r, c):
         dr, dc = abs(r - gr), abs(c - gc)
@@ -161,6 +172,7 @@ def heapq_astar(occ: np.ndarray, start, goal) -> float:
 # Timing
 # ---------------------------------------------------------------------------
 
+
 def timed(fn, repeats: int):
     times = []
     out = None
@@ -173,8 +185,10 @@ def timed(fn, repeats: int):
 
 def bench(occ, starts, goals, args, label):
     n = len(starts)
-    print(f"\n== {label}: {n} queries on a {occ.shape[0]}x{occ.shape[1]} grid "
-          f"({occ.mean():.1%} occupied) ==")
+    print(
+        f"\n== {label}: {n} queries on a {occ.shape[0]}x{occ.shape[1]} grid "
+        f"({occ.mean():.1%} occupied) =="
+    )
     rows = []
 
     # JAX: per-grid tables once, then the batch (compiled on the first call)
@@ -185,13 +199,16 @@ def bench(occ, starts, goals, args, label):
     t0 = time.perf_counter()
     res = jax.block_until_ready(astar(graph, starts, goals))
     t_first = time.perf_counter() - t0
-    t_jax, t_jax_min, res = timed(lambda: jax.block_until_ready(astar(graph, starts, goals)),
-                                  args.repeats)
+    t_jax, t_jax_min, res = timed(
+        lambda: jax.block_until_ready(astar(graph, starts, goals)), args.repeats
+    )
     status = np.asarray(res.status)
     cost = np.asarray(res.cost)
-    print(f"JAX A*: first call (compile + run) {t_first:.2f} s; prepare_grid {t_prep * 1e3:.1f} ms "
-          f"(first {t_prep_first:.2f} s); solved {np.sum(status == PlanStatus.SOLVED)}/{n}, "
-          f"statuses {np.bincount(status, minlength=4).tolist()}")
+    print(
+        f"JAX A*: first call (compile + run) {t_first:.2f} s; prepare_grid {t_prep * 1e3:.1f} ms "
+        f"(first {t_prep_first:.2f} s); solved {np.sum(status == PlanStatus.SOLVED)}/{n}, "
+        f"statuses {np.bincount(status, minlength=4).tolist()}"
+    )
     rows.append(("JAX A* (JPS, batched)", t_jax, t_jax_min, n))
 
     # pyastar2d
@@ -205,14 +222,18 @@ def bench(occ, starts, goals, args, label):
         sl, gl = [tuple(map(int, x)) for x in starts], [tuple(map(int, x)) for x in goals]
 
         def run_pyastar():
-            return [pyastar2d.astar_path(weights, a, b, allow_diagonal=True) for a, b in zip(sl, gl)]
+            return [
+                pyastar2d.astar_path(weights, a, b, allow_diagonal=True) for a, b in zip(sl, gl)
+            ]
 
         run_pyastar()  # warm-up
         t_py, t_py_min, paths = timed(run_pyastar, args.repeats)
         found = np.array([p is not None for p in paths])
         agree = np.mean(found == (status == PlanStatus.SOLVED))
-        print(f"pyastar2d: found {found.sum()}/{n} (agrees with JAX on reachability for "
-              f"{agree:.1%}); its graph allows corner cutting and diagonal steps cost 1")
+        print(
+            f"pyastar2d: found {found.sum()}/{n} (agrees with JAX on reachability for "
+            f"{agree:.1%}); its graph allows corner cutting and diagonal steps cost 1"
+        )
         rows.append(("pyastar2d (C++)", t_py, t_py_min, n))
 
     # heapq A* (slow: fewer queries and repeats)
@@ -220,17 +241,22 @@ def bench(occ, starts, goals, args, label):
     if m > 0:
         reps = max(1, min(args.repeats, args.heapq_repeats))
         t_hq, t_hq_min, ref = timed(
-            lambda: [heapq_astar(occ, a, b) for a, b in zip(starts[:m], goals[:m])], reps)
+            lambda: [heapq_astar(occ, a, b) for a, b in zip(starts[:m], goals[:m])], reps
+        )
         ref = np.array(ref)
         both = np.isfinite(ref) & np.isfinite(cost[:m])
         same_reach = np.array_equal(np.isfinite(ref), np.isfinite(cost[:m]))
         err = np.max(np.abs(ref[both] - cost[:m][both])) if both.any() else 0.0
-        print(f"heapq A*: {m} queries x {reps} repeats; same reachability as JAX: {same_reach}; "
-              f"max |cost difference| {err:.2e} cells")
+        print(
+            f"heapq A*: {m} queries x {reps} repeats; same reachability as JAX: {same_reach}; "
+            f"max |cost difference| {err:.2e} cells"
+        )
         rows.append(("heapq A* (Python)", t_hq, t_hq_min, m))
 
     py = next((r for r in rows if r[0].startswith("pyastar2d")), None)
-    print(f"{'planner':26s} {'median s':>10s} {'ms/query':>10s} {'queries/s':>11s} {'vs pyastar2d':>13s}")
+    print(
+        f"{'planner':26s} {'median s':>10s} {'ms/query':>10s} {'queries/s':>11s} {'vs pyastar2d':>13s}"
+    )
     for name, t_med, t_min, k in rows:
         qps = k / t_med
         ratio = f"{qps / (py[3] / py[1]):.2f}x" if py else "n/a"
@@ -245,9 +271,11 @@ def bench_visgraph(env_name: str, n: int, seed: int) -> None:
     env = ntq_jax.make_env(env_name)
     for pad in (0.0, env.padding):
         st = benchmark_visgraph(env, n, padding=pad, seed=seed, repeats=3)
-        print(f"visgraph {env_name} padding {pad}: {st['nodes']} nodes, build {st['build_s']:.2f} s, "
-              f"{n} queries in {st['plan_s']:.3f} s = {st['queries_per_s']:.0f} queries/s "
-              f"(solved {st['solved']:.1%}, direct {st['direct']:.1%}, {st['devices']} device)")
+        print(
+            f"visgraph {env_name} padding {pad}: {st['nodes']} nodes, build {st['build_s']:.2f} s, "
+            f"{n} queries in {st['plan_s']:.3f} s = {st['queries_per_s']:.0f} queries/s "
+            f"(solved {st['solved']:.1%}, direct {st['direct']:.1%}, {st['devices']} device)"
+        )
 
 
 def bench_plan(env_name: str, n: int, seed: int, repeats: int) -> None:
@@ -262,39 +290,60 @@ def bench_plan(env_name: str, n: int, seed: int, repeats: int) -> None:
         ntq_jax.plan(env, q, planner, padding=0.0)
         first = time.perf_counter() - t0
         t_med, t_min, res = timed(lambda: ntq_jax.plan(env, q, planner, padding=0.0), repeats)
-        stages = {k: round(v * 1e3, 1) for k, v in res.info.items()
-                  if k.endswith("_time") and isinstance(v, float)}
-        print(f"plan({planner!r}): first call {first:.1f} s; median {t_med:.3f} s = "
-              f"{n / t_med:.0f} queries/s; solved {res.solved.mean():.1%}; "
-              f"mean waypoints {res.lengths[res.solved].mean():.2f}; stages (ms, last run) {stages}")
+        stages = {
+            k: round(v * 1e3, 1)
+            for k, v in res.info.items()
+            if k.endswith("_time") and isinstance(v, float)
+        }
+        print(
+            f"plan({planner!r}): first call {first:.1f} s; median {t_med:.3f} s = "
+            f"{n / t_med:.0f} queries/s; solved {res.solved.mean():.1%}; "
+            f"mean waypoints {res.lengths[res.solved].mean():.2f}; stages (ms, last run) {stages}"
+        )
         if planner == "astar":
             ast = res
         else:
             vis = res
     both = ast.solved & vis.solved
     r = ast.costs[both] / vis.costs[both]
-    print(f"smoothed A* cost / visgraph optimum over {both.sum()} queries: min {r.min():.5f}, "
-          f"median {np.median(r):.5f}, mean {r.mean():.5f}, p90 {np.percentile(r, 90):.5f}, "
-          f"p99 {np.percentile(r, 99):.5f}, max {r.max():.5f}; "
-          f"within 1%: {np.mean(r <= 1.01):.1%}, within 5%: {np.mean(r <= 1.05):.1%}")
+    print(
+        f"smoothed A* cost / visgraph optimum over {both.sum()} queries: min {r.min():.5f}, "
+        f"median {np.median(r):.5f}, mean {r.mean():.5f}, p90 {np.percentile(r, 90):.5f}, "
+        f"p99 {np.percentile(r, 99):.5f}, max {r.max():.5f}; "
+        f"within 1%: {np.mean(r <= 1.01):.1%}, within 5%: {np.mean(r <= 1.05):.1%}"
+    )
 
 
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--env", default="point/3", help="package environment to rasterise")
     p.add_argument("--resolution", type=float, default=0.1)
-    p.add_argument("--random-boxes", type=int, default=0,
-                   help="use a random 20x20 map of this many boxes (0.8 padding) instead of --env")
+    p.add_argument(
+        "--random-boxes",
+        type=int,
+        default=0,
+        help="use a random 20x20 map of this many boxes (0.8 padding) instead of --env",
+    )
     p.add_argument("--queries", type=int, default=1000)
     p.add_argument("--repeats", type=int, default=5)
-    p.add_argument("--heapq-queries", type=int, default=1000, help="queries for the (slow) heapq A*")
+    p.add_argument(
+        "--heapq-queries", type=int, default=1000, help="queries for the (slow) heapq A*"
+    )
     p.add_argument("--heapq-repeats", type=int, default=1)
     p.add_argument("--sets", default="reachable,uniform", help="query sets to run")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--visgraph-queries", type=int, default=100_000,
-                   help="queries for the visibility-graph throughput (0 = skip)")
-    p.add_argument("--plan-queries", type=int, default=1000,
-                   help="queries for the ntq_jax.plan end-to-end comparison (0 = skip)")
+    p.add_argument(
+        "--visgraph-queries",
+        type=int,
+        default=100_000,
+        help="queries for the visibility-graph throughput (0 = skip)",
+    )
+    p.add_argument(
+        "--plan-queries",
+        type=int,
+        default=1000,
+        help="queries for the ntq_jax.plan end-to-end comparison (0 = skip)",
+    )
     args = p.parse_args(argv)
 
     rng = np.random.default_rng(args.seed)
@@ -304,7 +353,9 @@ def main(argv=None):
     else:
         occ = env_grid(args.env, args.resolution)
         name = args.env
-    print(f"jax {jax.__version__} on {jax.devices()[0].platform}; grid: {name} at {args.resolution}")
+    print(
+        f"jax {jax.__version__} on {jax.devices()[0].platform}; grid: {name} at {args.resolution}"
+    )
     for kind in args.sets.split(","):
         starts, goals = sample_queries(rng, occ, args.queries, reachable=(kind == "reachable"))
         bench(occ, starts, goals, args, f"{name}, {kind} queries")

@@ -17,9 +17,9 @@ import time
 import jax
 import jax.numpy as jnp
 import numpy as np
+from common import interleaved
 from jax import lax
 
-from common import interleaved
 from ntq_jax.planners.grid_graph import DIRS, GridGraph, direction_index, prepare_grid
 
 
@@ -49,8 +49,9 @@ def _jump_tables(free):
     for k in range(4):
         dr, dc = (int(x) for x in DIRS[k])
         pr, pc = dc, dr
-        forced = ((_shift(free, dr + pr, dc + pc, False) & ~_shift(free, pr, pc, False))
-                  | (_shift(free, dr - pr, dc - pc, False) & ~_shift(free, -pr, -pc, False)))
+        forced = (_shift(free, dr + pr, dc + pc, False) & ~_shift(free, pr, pc, False)) | (
+            _shift(free, dr - pr, dc - pc, False) & ~_shift(free, -pr, -pc, False)
+        )
         tables[k] = _scan_lines(_shift(free, dr, dc, False), forced, dr, dc)
     for k in range(4, 8):
         dr, dc = (int(x) for x in DIRS[k])
@@ -91,21 +92,25 @@ def random_boxes(h: int, w: int, seed: int = 0) -> np.ndarray:
     occ = np.zeros((h, w), bool)
     while occ.mean() < 0.3:
         r, c = rng.integers(0, h), rng.integers(0, w)
-        occ[r:r + rng.integers(1, max(2, h // 8)), c:c + rng.integers(1, max(2, w // 8))] = True
+        occ[r : r + rng.integers(1, max(2, h // 8)), c : c + rng.integers(1, max(2, w // 8))] = True
     return occ
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--shape", action="append", help="HxW (repeatable); default 60x90, 256x256, 1024x1024")
+    ap.add_argument(
+        "--shape", action="append", help="HxW (repeatable); default 60x90, 256x256, 1024x1024"
+    )
     ap.add_argument("--reps", type=int, default=5)
     args = ap.parse_args()
     for shape in args.shape or ["60x90", "256x256", "1024x1024"]:
         h, w = (int(x) for x in shape.split("x"))
         occ = random_boxes(h, w)
         first = {}
-        for name, fn in (("jax_prepare", lambda: jax_prepare(jnp.asarray(occ))),
-                         ("prepare_grid", lambda: prepare_grid(occ))):
+        for name, fn in (
+            ("jax_prepare", lambda: jax_prepare(jnp.asarray(occ))),
+            ("prepare_grid", lambda: prepare_grid(occ)),
+        ):
             t0 = time.perf_counter()
             out = jax.block_until_ready(fn())
             first[name] = (time.perf_counter() - t0, out)
@@ -113,13 +118,20 @@ def main() -> None:
         for field in GridGraph._fields:
             x, y = np.asarray(getattr(a, field)), np.asarray(getattr(b, field))
             assert x.dtype == y.dtype and np.array_equal(x, y), (shape, field)
-        med = interleaved({"jax_prepare": lambda: jax_prepare(jnp.asarray(occ)),
-                           "prepare_grid": lambda: prepare_grid(occ)}, args.reps)
-        print(f"{shape}: first call jax_prepare {first['jax_prepare'][0]:.2f} s, prepare_grid "
-              f"{first['prepare_grid'][0]:.3f} s (ratio {first['prepare_grid'][0] / first['jax_prepare'][0]:.3f}); "
-              f"repeated (median of {args.reps}) jax_prepare {med['jax_prepare'] * 1e3:.1f} ms, "
-              f"prepare_grid {med['prepare_grid'] * 1e3:.1f} ms "
-              f"(ratio {med['prepare_grid'] / med['jax_prepare']:.2f}); same tables")
+        med = interleaved(
+            {
+                "jax_prepare": lambda: jax_prepare(jnp.asarray(occ)),
+                "prepare_grid": lambda: prepare_grid(occ),
+            },
+            args.reps,
+        )
+        print(
+            f"{shape}: first call jax_prepare {first['jax_prepare'][0]:.2f} s, prepare_grid "
+            f"{first['prepare_grid'][0]:.3f} s (ratio {first['prepare_grid'][0] / first['jax_prepare'][0]:.3f}); "
+            f"repeated (median of {args.reps}) jax_prepare {med['jax_prepare'] * 1e3:.1f} ms, "
+            f"prepare_grid {med['prepare_grid'] * 1e3:.1f} ms "
+            f"(ratio {med['prepare_grid'] / med['jax_prepare']:.2f}); same tables"
+        )
 
 
 if __name__ == "__main__":

@@ -15,8 +15,8 @@ from __future__ import annotations
 import argparse
 
 import numpy as np
-
 from common import interleaved
+
 from ntq_jax.planners.roadmap import prm_star_k, undirected_pairs
 
 
@@ -36,12 +36,19 @@ def main() -> None:
     i = np.repeat(np.arange(n), k)
     j = rng.integers(0, n, i.size)
     assert np.array_equal(unique_rows(i, j), undirected_pairs(i, j, n))
-    med = interleaved({"unique_rows": lambda: unique_rows(i, j),
-                       "undirected_pairs": lambda: undirected_pairs(i, j, n)}, args.reps)
+    med = interleaved(
+        {
+            "unique_rows": lambda: unique_rows(i, j),
+            "undirected_pairs": lambda: undirected_pairs(i, j, n),
+        },
+        args.reps,
+    )
     print(f"{n} milestones, k = {k}: {i.size} pairs")
     for name, t in med.items():
         print(f"{name:17s} {t * 1e3:8.1f} ms (median of {args.reps})")
-    print(f"ratio undirected_pairs / unique_rows: {med['undirected_pairs'] / med['unique_rows']:.3f}")
+    print(
+        f"ratio undirected_pairs / unique_rows: {med['undirected_pairs'] / med['unique_rows']:.3f}"
+    )
 
 
 if __name__ == "__main__":

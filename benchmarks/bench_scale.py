@@ -32,14 +32,15 @@ import resource
 import time
 from pathlib import Path
 
-RAY_NODES = 8        # nodes of the projected Ray cluster
-RAY_CORES = 16       # cores per node
+RAY_NODES = 8  # nodes of the projected Ray cluster
+RAY_CORES = 16  # cores per node
 RAY_OVERHEAD = 0.01  # Ray's measured overhead was 0.8 % (BENCHMARKS.md, "Executors")
 
 
 def _args(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("--env", default="rigid/0")
     ap.add_argument("--queries", type=int, default=1_000_000)
     ap.add_argument("--chunk", type=int, default=10_000)
@@ -57,11 +58,16 @@ def _args(argv=None):
 def _projection(steady_s_per_query: float, n: int = 1_000_000) -> dict:
     """Wall seconds of ``n`` queries at one process per core (a projection)."""
     one = steady_s_per_query * n
-    return {"label": "projection (chunks independent, one process per core, "
-                     "median per-query time of the chunk files; not measured)",
-            "1e6_on_1_core_s": one, "1e6_on_2_cores_s": one / 2, "1e6_on_16_cores_s": one / 16,
-            f"1e6_on_ray_{RAY_NODES}x{RAY_CORES}_cores_s":
-                one / (RAY_NODES * RAY_CORES) * (1 + RAY_OVERHEAD)}
+    return {
+        "label": "projection (chunks independent, one process per core, "
+        "median per-query time of the chunk files; not measured)",
+        "1e6_on_1_core_s": one,
+        "1e6_on_2_cores_s": one / 2,
+        "1e6_on_16_cores_s": one / 16,
+        f"1e6_on_ray_{RAY_NODES}x{RAY_CORES}_cores_s": one
+        / (RAY_NODES * RAY_CORES)
+        * (1 + RAY_OVERHEAD),
+    }
 
 
 def main(argv=None) -> int:
@@ -77,20 +83,40 @@ def main(argv=None) -> int:
     if args.threads is not None:
         options["threads"] = args.threads
     t0 = time.perf_counter()
-    rep = stream_chunks(env, out, n_queries=args.queries, chunk=args.chunk, seed=args.seed,
-                        check=args.check, options=options, max_chunks=args.max_chunks,
-                        shard=(w, n_w), progress=not args.no_progress)
+    rep = stream_chunks(
+        env,
+        out,
+        n_queries=args.queries,
+        chunk=args.chunk,
+        seed=args.seed,
+        check=args.check,
+        options=options,
+        max_chunks=args.max_chunks,
+        shard=(w, n_w),
+        progress=not args.no_progress,
+    )
     wall = time.perf_counter() - t0
     per_q = {s: rep.seconds[s] / max(rep.queries, 1) for s in STAGES}
     steady = _median_chunk(out, range(w, -(-args.queries // args.chunk), n_w), STAGES)
     summary = {
-        "env": args.env, "queries": args.queries, "chunk": args.chunk, "check": args.check,
-        "milestones": args.milestones, "shard": args.shard, "planned_chunks": len(rep.planned),
-        "skipped_chunks": len(rep.skipped), "planned_queries": rep.queries,
-        "solved": rep.solved, "wall_s": wall, "cpu_s": time.process_time(),
-        "affinity": len(os.sched_getaffinity(0)), "load_avg": os.getloadavg(),
+        "env": args.env,
+        "queries": args.queries,
+        "chunk": args.chunk,
+        "check": args.check,
+        "milestones": args.milestones,
+        "shard": args.shard,
+        "planned_chunks": len(rep.planned),
+        "skipped_chunks": len(rep.skipped),
+        "planned_queries": rep.queries,
+        "solved": rep.solved,
+        "wall_s": wall,
+        "cpu_s": time.process_time(),
+        "affinity": len(os.sched_getaffinity(0)),
+        "load_avg": os.getloadavg(),
         "peak_rss_gib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20,
-        "s_per_query": per_q, "median_chunk_s_per_query": steady}
+        "s_per_query": per_q,
+        "median_chunk_s_per_query": steady,
+    }
     if steady:
         summary["projection"] = _projection(sum(steady.values()))
     artifacts.write_json(out / f"scale_{w}of{n_w}.json", summary)
@@ -102,6 +128,7 @@ def _median_chunk(out: Path, indices, stages) -> dict:
     """Per stage, the median over the complete chunk files of seconds per query (robust to
     the chunks that paid compilation or a roadmap build); {} without chunk files."""
     import numpy as np
+
     from ntq_jax.data.stream import chunk_path
 
     rows = []

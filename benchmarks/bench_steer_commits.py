@@ -55,8 +55,14 @@ def run_child(src: Path, n: int, n_np: int) -> dict:
     # the version's package first, then this folder (for bench_steer's NumPy baseline)
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(src), str(HERE)]))
     code = CHILD.format(n=n, n_np=n_np)
-    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
-                         cwd=str(src), check=True)
+    out = subprocess.run(
+        [sys.executable, "-c", code],
+        env=env,
+        capture_output=True,
+        text=True,
+        cwd=str(src),
+        check=True,
+    )
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
@@ -69,22 +75,29 @@ def main(argv=None) -> dict:
     args = ap.parse_args(argv)
     here = HERE.parent
     tmp = Path(tempfile.mkdtemp(prefix="ntq_old_"))
-    subprocess.run(["git", "-C", str(here), "worktree", "add", "--detach", str(tmp / "src"),
-                    args.against], check=True, capture_output=True)
+    subprocess.run(
+        ["git", "-C", str(here), "worktree", "add", "--detach", str(tmp / "src"), args.against],
+        check=True,
+        capture_output=True,
+    )
     try:
         runs = {"this": [], args.against: []}
         for r in range(args.rounds):
             order = [("this", here), (args.against, tmp / "src")]
-            for name, src in (order if r % 2 == 0 else order[::-1]):
+            for name, src in order if r % 2 == 0 else order[::-1]:
                 res = run_child(src, args.n, args.n_numpy)
                 runs[name].append(res)
-                print(f"round {r}: {name:8s} public steer_to {res['api_qps'] / 1e6:8.1f} M/s, "
-                      f"NumPy {res['numpy_qps'] / 1e6:6.1f} M/s, "
-                      f"{res['api_qps'] / res['numpy_qps']:5.1f}x, agree {res['agree']}",
-                      flush=True)
+                print(
+                    f"round {r}: {name:8s} public steer_to {res['api_qps'] / 1e6:8.1f} M/s, "
+                    f"NumPy {res['numpy_qps'] / 1e6:6.1f} M/s, "
+                    f"{res['api_qps'] / res['numpy_qps']:5.1f}x, agree {res['agree']}",
+                    flush=True,
+                )
     finally:
-        subprocess.run(["git", "-C", str(here), "worktree", "remove", "--force", str(tmp / "src")],
-                       capture_output=True)
+        subprocess.run(
+            ["git", "-C", str(here), "worktree", "remove", "--force", str(tmp / "src")],
+            capture_output=True,
+        )
     summary = {}
     for name, rs in runs.items():
         api = float(np.median([x["api_qps"] for x in rs]))
@@ -92,8 +105,10 @@ def main(argv=None) -> dict:
         summary[name] = {"api_qps": api, "vs_numpy": ratio}
         print(f"{name:8s} median {api / 1e6:8.1f} M/s, {ratio:5.1f}x NumPy")
     rel = summary["this"]["api_qps"] / summary[args.against]["api_qps"]
-    print(f"this / {args.against}: {rel:.3f} (goal >= 0.9); this / NumPy "
-          f"{summary['this']['vs_numpy']:.1f}x (goal >= 30)")
+    print(
+        f"this / {args.against}: {rel:.3f} (goal >= 0.9); this / NumPy "
+        f"{summary['this']['vs_numpy']:.1f}x (goal >= 30)"
+    )
     return summary
 
 

@@ -40,41 +40,53 @@ import sys
 import time
 from pathlib import Path
 
-
 import numpy as np
 
 
-def jax_training(datasets, env, model_cfg, train_cfg, seed, ids, stop_after=None,
-                 shard=False) -> float:
+def jax_training(
+    datasets, env, model_cfg, train_cfg, seed, ids, stop_after=None, shard=False
+) -> float:
     """Wall seconds of one ``train_ensemble`` call on ``datasets`` (members ``ids``)."""
     from ntq_jax import training as T
 
     t = time.perf_counter()
-    T.train_ensemble(datasets, env, model_cfg, train_cfg, seed=seed, member_ids=ids,
-                     progress=False, stop_after=stop_after, shard=shard)
+    T.train_ensemble(
+        datasets,
+        env,
+        model_cfg,
+        train_cfg,
+        seed=seed,
+        member_ids=ids,
+        progress=False,
+        stop_after=stop_after,
+        shard=shard,
+    )
     return time.perf_counter() - t
 
 
 def together(datasets, env, model_cfg, train_cfg, seed, **kw) -> float:
     """The four members in one ensemble (one vmapped, jitted step) on one device."""
-    return jax_training(datasets, env, model_cfg, train_cfg, seed, list(range(len(datasets))),
-                        shard=False, **kw)
+    return jax_training(
+        datasets, env, model_cfg, train_cfg, seed, list(range(len(datasets))), shard=False, **kw
+    )
 
 
 def together_sharded(datasets, env, model_cfg, train_cfg, seed, **kw) -> float:
     """The same, the member axis sharded over the CPU devices (one per core)."""
-    return jax_training(datasets, env, model_cfg, train_cfg, seed, list(range(len(datasets))),
-                        shard=True, **kw)
+    return jax_training(
+        datasets, env, model_cfg, train_cfg, seed, list(range(len(datasets))), shard=True, **kw
+    )
 
 
 def sequential(datasets, env, model_cfg, train_cfg, seed, **kw) -> float:
     """Four single-model trainings, one after the other (the same code with one member)."""
-    return sum(jax_training([d], env, model_cfg, train_cfg, seed, [i], **kw)
-               for i, d in enumerate(datasets))
+    return sum(
+        jax_training([d], env, model_cfg, train_cfg, seed, [i], **kw)
+        for i, d in enumerate(datasets)
+    )
 
 
-VARIANTS = {"together": together, "together_sharded": together_sharded,
-            "sequential": sequential}
+VARIANTS = {"together": together, "together_sharded": together_sharded, "sequential": sequential}
 
 
 def bench_torch(members, spec, train_cfg, seed, threads):
@@ -112,15 +124,19 @@ def bench_torch(members, spec, train_cfg, seed, threads):
         for epoch in range(train_cfg.epochs):
             perm = torch.randperm(n)
             for b in range(0, n, train_cfg.batch_size):
-                idx = perm[b:b + train_cfg.batch_size]
+                idx = perm[b : b + train_cfg.batch_size]
                 opt.zero_grad(set_to_none=True)
                 loss = ((net(x[idx]) - y[idx]) ** 2).mean()
                 loss.backward()
                 opt.step()
                 steps += 1
         total_s += time.perf_counter() - t
-    return {"member_steps": steps, "seconds": total_s, "threads": torch.get_num_threads(),
-            "version": torch.__version__}
+    return {
+        "member_steps": steps,
+        "seconds": total_s,
+        "threads": torch.get_num_threads(),
+        "version": torch.__version__,
+    }
 
 
 def run_child(argv, variant: str) -> dict | None:
@@ -129,8 +145,12 @@ def run_child(argv, variant: str) -> dict | None:
 
     env = dict(os.environ)
     env.pop("JAX_COMPILATION_CACHE_DIR", None)
-    proc = subprocess.run([sys.executable, __file__, *argv, "--child", variant], env=env,
-                          capture_output=True, text=True)
+    proc = subprocess.run(
+        [sys.executable, __file__, *argv, "--child", variant],
+        env=env,
+        capture_output=True,
+        text=True,
+    )
     line = [ln for ln in proc.stdout.splitlines() if ln.startswith("CHILD ")]
     if proc.returncode != 0 or not line:
         print(f"child run {variant!r} failed:\n{proc.stderr[-2000:]}")
@@ -139,28 +159,47 @@ def run_child(argv, variant: str) -> dict | None:
 
 
 def parse_args(argv):
-    ap = argparse.ArgumentParser(description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("--hidden", default="256,256,128,64", help="hidden widths (comma-separated)")
     ap.add_argument("--dropout-layers", type=int, default=2)
     ap.add_argument("--rows", type=int, default=5000, help="rows of the largest dataset")
     ap.add_argument("--epochs", type=int, default=2)
     ap.add_argument("--batch", type=int, default=100)
     ap.add_argument("--steps-per-call", type=int, default=50)
-    ap.add_argument("--val-fraction", type=float, default=0.0,
-                    help="validation split (default 0: no validation passes, like the PyTorch "
-                         "loop)")
-    ap.add_argument("--repeats", type=int, default=3,
-                    help="interleaved repeats of the steady-state timings (medians reported)")
-    ap.add_argument("--data", type=Path, default=None,
-                    help="a real environment data folder instead of synthetic paths")
+    ap.add_argument(
+        "--val-fraction",
+        type=float,
+        default=0.0,
+        help="validation split (default 0: no validation passes, like the PyTorch loop)",
+    )
+    ap.add_argument(
+        "--repeats",
+        type=int,
+        default=3,
+        help="interleaved repeats of the steady-state timings (medians reported)",
+    )
+    ap.add_argument(
+        "--data",
+        type=Path,
+        default=None,
+        help="a real environment data folder instead of synthetic paths",
+    )
     ap.add_argument("--torch-threads", type=int, default=0, help="0 = PyTorch's default")
     ap.add_argument("--no-torch", action="store_true")
-    ap.add_argument("--no-end-to-end", action="store_true",
-                    help="skip the fresh-process runs that include compilation")
-    ap.add_argument("--cpu-devices", type=int, default=None,
-                    help="JAX CPU devices (as scripts/train.py; default min(cores, 4)) for the "
-                         "sharded variant; 1 = skip that variant")
+    ap.add_argument(
+        "--no-end-to-end",
+        action="store_true",
+        help="skip the fresh-process runs that include compilation",
+    )
+    ap.add_argument(
+        "--cpu-devices",
+        type=int,
+        default=None,
+        help="JAX CPU devices (as scripts/train.py; default min(cores, 4)) for the "
+        "sharded variant; 1 = skip that variant",
+    )
     ap.add_argument("--child", choices=sorted(VARIANTS), help=argparse.SUPPRESS)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", type=Path, default=None, help="also write the figures as JSON")
@@ -174,9 +213,15 @@ def configs(args):
 
     hidden = tuple(int(h) for h in args.hidden.split(","))
     model_cfg = ModelConfig(hidden=hidden, dropout=0.5, dropout_layers=args.dropout_layers)
-    train_cfg = TrainConfig(epochs=args.epochs, batch_size=args.batch, optimizer="adagrad",
-                            learning_rate=0.01, val_fraction=args.val_fraction,
-                            steps_per_call=args.steps_per_call, eval_every=10**9)
+    train_cfg = TrainConfig(
+        epochs=args.epochs,
+        batch_size=args.batch,
+        optimizer="adagrad",
+        learning_rate=0.01,
+        val_fraction=args.val_fraction,
+        steps_per_call=args.steps_per_call,
+        eval_every=10**9,
+    )
     return hidden, model_cfg, train_cfg
 
 
@@ -193,8 +238,10 @@ def load_data(args):
         env = make_env("point/0")
         lo, hi = (np.asarray(a) for a in env.robot.config_bounds(env.world))
         sizes = [args.rows, args.rows, args.rows, int(0.6 * args.rows)]
-        datasets = [data_mod.straight_line_rows(10 + i, lo, hi, step=1.0, n_rows=n)
-                    for i, n in enumerate(sizes)]
+        datasets = [
+            data_mod.straight_line_rows(10 + i, lo, hi, step=1.0, n_rows=n)
+            for i, n in enumerate(sizes)
+        ]
         source = f"synthetic straight paths on point/0, rows {sizes}"
     return env, datasets, source
 
@@ -204,10 +251,13 @@ def torch_available(args) -> bool:
     have_torch = not args.no_torch
     if have_torch:
         import importlib.util
+
         if importlib.util.find_spec("torch") is None:
             have_torch = False
-            print("PyTorch not installed: skipping the PyTorch comparison "
-                  "(pip install torch==2.13.0+cpu into the venv to include it)")
+            print(
+                "PyTorch not installed: skipping the PyTorch comparison "
+                "(pip install torch==2.13.0+cpu into the venv to include it)"
+            )
     return have_torch
 
 
@@ -228,8 +278,11 @@ def steady_state(args, run, variants, members, spec, train_cfg, member_steps):
         if have_torch:
             torch_info = bench_torch(members, spec, train_cfg, args.seed + r, args.torch_threads)
             times["torch"].append(torch_info["seconds"])
-        print(f"repeat {r + 1}/{args.repeats}: " + ", ".join(
-            f"{v} {member_steps / t[-1]:.1f}/s" for v, t in times.items() if t), flush=True)
+        print(
+            f"repeat {r + 1}/{args.repeats}: "
+            + ", ".join(f"{v} {member_steps / t[-1]:.1f}/s" for v, t in times.items() if t),
+            flush=True,
+        )
     return compile_s, times, torch_info
 
 
@@ -246,24 +299,33 @@ def end_to_end(args, argv_child, variants) -> dict:
 
 def variant_names(mesh, torch_info) -> dict:
     """The table's label of each variant."""
-    return {"together": "JAX, 4 members together (vmap, one jit, one device)",
-            "together_sharded": "JAX, 4 members together, member axis sharded over "
-                                f"{mesh.devices.size if mesh else 0} CPU devices",
-            "sequential": "JAX, 4 sequential single-model trainings",
-            "torch": (f"PyTorch {torch_info['version']} CPU ({torch_info['threads']} threads), "
-                      "4 sequential") if torch_info else ""}
+    return {
+        "together": "JAX, 4 members together (vmap, one jit, one device)",
+        "together_sharded": "JAX, 4 members together, member axis sharded over "
+        f"{mesh.devices.size if mesh else 0} CPU devices",
+        "sequential": "JAX, 4 sequential single-model trainings",
+        "torch": (
+            f"PyTorch {torch_info['version']} CPU ({torch_info['threads']} threads), 4 sequential"
+        )
+        if torch_info
+        else "",
+    }
 
 
 def print_table(args, names, times, compile_s, e2e, member_steps) -> None:
     """The table of member-steps/s, compile and end-to-end seconds per variant."""
     med = {v: float(np.median(t)) for v, t in times.items() if t}
-    print("\n| variant | member-steps/s (median of %d) | compile s | end to end s (fresh "
-          "process, incl. compile) |" % args.repeats)
+    print(
+        "\n| variant | member-steps/s (median of %d) | compile s | end to end s (fresh "
+        "process, incl. compile) |" % args.repeats
+    )
     print("|---|---:|---:|---:|")
     for v, t in med.items():
         c = compile_s.get(v)
-        print(f"| {names[v]} | {member_steps / t:.1f} | {'-' if c is None else f'{c:.1f}'} | "
-              f"{f'{e2e[v]:.1f}' if v in e2e else '-'} |")
+        print(
+            f"| {names[v]} | {member_steps / t:.1f} | {'-' if c is None else f'{c:.1f}'} | "
+            f"{f'{e2e[v]:.1f}' if v in e2e else '-'} |"
+        )
 
 
 def print_ratios(names, times, e2e) -> None:
@@ -273,9 +335,15 @@ def print_ratios(names, times, e2e) -> None:
     for v in ("together", "together_sharded"):
         if v not in times:
             continue
-        print(f"{names[v]} vs sequential: {pair(v, 'sequential'):.2f}x steady state "
-              f"(goal >= 2x)" + (f", {e2e['sequential'] / e2e[v]:.2f}x end to end incl. "
-                                 "compilation" if v in e2e and "sequential" in e2e else ""))
+        print(
+            f"{names[v]} vs sequential: {pair(v, 'sequential'):.2f}x steady state "
+            f"(goal >= 2x)"
+            + (
+                f", {e2e['sequential'] / e2e[v]:.2f}x end to end incl. compilation"
+                if v in e2e and "sequential" in e2e
+                else ""
+            )
+        )
         if times["torch"]:
             print(f"  vs PyTorch: {pair(v, 'torch'):.2f}x the member-steps/s (goal >= 1x)")
     if times["torch"]:
@@ -295,34 +363,47 @@ def main(argv=None) -> int:
     hidden, model_cfg, train_cfg = configs(args)
     env, datasets, source = load_data(args)
     spec = models.ModelSpec.from_env(env, model_cfg)
-    run = functools.partial(lambda f, **kw: VARIANTS[f](datasets, env, model_cfg, train_cfg,
-                                                        args.seed, **kw))
+    run = functools.partial(
+        lambda f, **kw: VARIANTS[f](datasets, env, model_cfg, train_cfg, args.seed, **kw)
+    )
 
     if args.child:  # a fresh process: the first call compiles, as a user's run would
         wall = run(args.child)
         print("CHILD " + json.dumps({"seconds": wall, "devices": len(jax.devices())}))
         return 0
 
-    members = [T.prepare_member(d, train_cfg.val_fraction, args.seed, i)
-               for i, d in enumerate(datasets)]
-    sched = T.Schedule(tuple(len(md.train_x) for md in members), train_cfg.batch_size,
-                       train_cfg.epochs)
+    members = [
+        T.prepare_member(d, train_cfg.val_fraction, args.seed, i) for i, d in enumerate(datasets)
+    ]
+    sched = T.Schedule(
+        tuple(len(md.train_x) for md in members), train_cfg.batch_size, train_cfg.epochs
+    )
     member_steps = sum(sched.member_steps)
-    print(f"data: {source}\nPNet {hidden}, batch {args.batch}, {args.epochs} epochs, "
-          f"Adagrad 0.01, {member_steps} member-steps per variant; JAX {jax.__version__} on "
-          f"{len(jax.devices())} {jax.default_backend()} device(s), {os.cpu_count()} CPU cores",
-          flush=True)
+    print(
+        f"data: {source}\nPNet {hidden}, batch {args.batch}, {args.epochs} epochs, "
+        f"Adagrad 0.01, {member_steps} member-steps per variant; JAX {jax.__version__} on "
+        f"{len(jax.devices())} {jax.default_backend()} device(s), {os.cpu_count()} CPU cores",
+        flush=True,
+    )
 
     mesh = T.member_mesh(len(datasets))
     variants = [v for v in VARIANTS if v != "together_sharded" or mesh is not None]
-    compile_s, times, torch_info = steady_state(args, run, variants, members, spec, train_cfg,
-                                                member_steps)
+    compile_s, times, torch_info = steady_state(
+        args, run, variants, members, spec, train_cfg, member_steps
+    )
     e2e = end_to_end(args, argv_child, variants)
     names = variant_names(mesh, torch_info)
     print_table(args, names, times, compile_s, e2e, member_steps)
-    out = {"hidden": hidden, "batch": args.batch, "epochs": args.epochs, "source": source,
-           "member_steps": member_steps, "seconds": times, "compile_s": compile_s,
-           "end_to_end_s": e2e}
+    out = {
+        "hidden": hidden,
+        "batch": args.batch,
+        "epochs": args.epochs,
+        "source": source,
+        "member_steps": member_steps,
+        "seconds": times,
+        "compile_s": compile_s,
+        "end_to_end_s": e2e,
+    }
     print_ratios(names, times, e2e)
     if args.json:
         args.json.write_text(json.dumps(out, indent=1))

@@ -19,14 +19,20 @@ from common import interleaved
 
 CASES = {
     "lazy": "import ntq_jax.planners.ompl_worker",
-    "eager": ("import ntq_jax.planners.ompl_worker, ntq_jax.envs, ntq_jax.geometry, "
-              "ntq_jax.presets, ntq_jax.queries, ntq_jax.types, ntq_jax.planners.registry"),
+    "eager": (
+        "import ntq_jax.planners.ompl_worker, ntq_jax.envs, ntq_jax.geometry, "
+        "ntq_jax.presets, ntq_jax.queries, ntq_jax.types, ntq_jax.planners.registry"
+    ),
 }
 
 
 def _run(code: str) -> bool:
-    out = subprocess.run([sys.executable, "-c", code + "; import sys; print('jax' in sys.modules)"],
-                         capture_output=True, text=True, check=True)
+    out = subprocess.run(
+        [sys.executable, "-c", code + "; import sys; print('jax' in sys.modules)"],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
     return out.stdout.strip() == "True"
 
 

@@ -30,13 +30,12 @@ import json
 import jax
 import jax.numpy as jnp
 import numpy as np
+from common import interleaved
 
 import ntq_jax as nj
 from ntq_jax.batching import fine_bucket_size
 from ntq_jax.robots import batch as B
 from ntq_jax.robots.rows import PIECE_MIN
-
-from common import interleaved
 
 SIZES = (1, 63, 64, 65, 1 << 20, (1 << 20) + 1, 10_000_000)
 GOAL_WRAPPER = 1.25  # public / bare kernel, at most
@@ -59,11 +58,15 @@ def kernels(env, method: str):
     """``(public(a, b), bare(a_padded, b_padded))`` for ``method``."""
     robot, world = env.robot, env.world
     if method == "steer_to":
-        return (lambda a, b: env.steer_to(a, b, padding=0),
-                lambda a, b: B.steer_to_batch(robot, world, a, b, 0.0))
+        return (
+            lambda a, b: env.steer_to(a, b, padding=0),
+            lambda a, b: B.steer_to_batch(robot, world, a, b, 0.0),
+        )
     if method == "is_valid":
-        return (lambda a, b: env.is_valid(a, padding=0),
-                lambda a, b: B.is_valid_batch(robot, world, a, 0.0))
+        return (
+            lambda a, b: env.is_valid(a, padding=0),
+            lambda a, b: B.is_valid_batch(robot, world, a, 0.0),
+        )
     return (lambda a, b: env.distance(a, b), lambda a, b: B.distance_batch(robot, a, b))
 
 
@@ -73,22 +76,31 @@ def measure(env, method: str, n: int, inputs: str, reps: int) -> dict:
     pad = ((0, m - n), (0, 0))
     ap, bp = jax.block_until_ready((jnp.asarray(np.pad(a, pad)), jnp.asarray(np.pad(b, pad))))
     public, bare = kernels(env, method)
-    x, y = (jax.block_until_ready((jnp.asarray(a), jnp.asarray(b))) if inputs == "device"
-            else (a, b))
+    x, y = jax.block_until_ready((jnp.asarray(a), jnp.asarray(b))) if inputs == "device" else (a, b)
     want = np.asarray(bare(ap, bp))[:n]
     got = np.asarray(public(x, y))
     same = bool(np.array_equal(got, want) if got.dtype == bool else np.allclose(got, want))
     t = interleaved({"public": lambda: public(x, y), "bare": lambda: bare(ap, bp)}, reps)
-    return {"env": env.name, "method": method, "inputs": inputs, "n": n, "bucket": m,
-            "public_s": t["public"], "bare_s": t["bare"], "ratio": t["public"] / t["bare"],
-            "public_per_s": n / t["public"], "same_answers": same}
+    return {
+        "env": env.name,
+        "method": method,
+        "inputs": inputs,
+        "n": n,
+        "bucket": m,
+        "public_s": t["public"],
+        "bare_s": t["bare"],
+        "ratio": t["public"] / t["bare"],
+        "public_per_s": n / t["public"],
+        "same_answers": same,
+    }
 
 
 def main(argv=None) -> list[dict]:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--robots", nargs="+", default=["point/3", "rigid/0", "nlink/4"])
-    ap.add_argument("--method", nargs="+", default=["steer_to"],
-                    choices=["steer_to", "is_valid", "distance"])
+    ap.add_argument(
+        "--method", nargs="+", default=["steer_to"], choices=["steer_to", "is_valid", "distance"]
+    )
     ap.add_argument("--inputs", nargs="+", default=["device", "numpy"])
     ap.add_argument("--max-rows", type=float, default=1e7)
     ap.add_argument("--reps", type=int, default=7)
@@ -96,8 +108,10 @@ def main(argv=None) -> list[dict]:
     args = ap.parse_args(argv)
     sizes = [n for n in SIZES if n <= args.max_rows]
     rows = []
-    print(f"{'env':9s} {'method':9s} {'inputs':6s} {'rows':>10s} {'public':>11s} {'bare':>11s} "
-          f"{'public/bare':>11s} {'queries/s':>10s}  same")
+    print(
+        f"{'env':9s} {'method':9s} {'inputs':6s} {'rows':>10s} {'public':>11s} {'bare':>11s} "
+        f"{'public/bare':>11s} {'queries/s':>10s}  same"
+    )
     for name in args.robots:
         env = nj.make_env(name)
         for method in args.method:
@@ -106,16 +120,21 @@ def main(argv=None) -> list[dict]:
                     r = measure(env, method, n, inputs, args.reps)
                     rows.append(r)
                     flag = "" if r["ratio"] <= GOAL_WRAPPER else f"  > {GOAL_WRAPPER}"
-                    print(f"{name:9s} {method:9s} {inputs:6s} {n:10d} {r['public_s'] * 1e3:9.3f}ms "
-                          f"{r['bare_s'] * 1e3:9.3f}ms {r['ratio']:11.2f} "
-                          f"{r['public_per_s']:10.3g}  {r['same_answers']}{flag}", flush=True)
+                    print(
+                        f"{name:9s} {method:9s} {inputs:6s} {n:10d} {r['public_s'] * 1e3:9.3f}ms "
+                        f"{r['bare_s'] * 1e3:9.3f}ms {r['ratio']:11.2f} "
+                        f"{r['public_per_s']:10.3g}  {r['same_answers']}{flag}",
+                        flush=True,
+                    )
     by = {(r["env"], r["method"], r["inputs"], r["n"]): r for r in rows}
     print(f"\nper-query rate at 2^k + 1 rows / at 2^k rows (goal >= {GOAL_NEIGHBOUR}):")
     for (env, method, inputs, n), r in by.items():
         low = by.get((env, method, inputs, n - 1))
         if low is not None and (n - 1) & (n - 2) == 0:
-            print(f"  {env} {method} {inputs} {n - 1}+1: "
-                  f"{r['public_per_s'] / low['public_per_s']:.2f}")
+            print(
+                f"  {env} {method} {inputs} {n - 1}+1: "
+                f"{r['public_per_s'] / low['public_per_s']:.2f}"
+            )
     if args.json:
         with open(args.json, "w") as f:
             json.dump(rows, f, indent=1)

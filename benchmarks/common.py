@@ -43,26 +43,36 @@ def interleaved(cases: dict, reps: int) -> dict:
 
 def git_revision() -> dict:
     import ntq_jax
+
     pkg = Path(ntq_jax.__file__).resolve().parent
 
     def run(*a):
         try:
-            return subprocess.run(["git", "-C", str(pkg), *a], capture_output=True, text=True,
-                                  timeout=30).stdout.strip()
+            return subprocess.run(
+                ["git", "-C", str(pkg), *a], capture_output=True, text=True, timeout=30
+            ).stdout.strip()
         except (OSError, subprocess.SubprocessError):
             return ""
-    return {"git_revision": run("rev-parse", "--short", "HEAD") or "unknown",
-            "git_dirty": bool(run("status", "--porcelain", "--", ".")),
-            "package_path": str(pkg)}
+
+    return {
+        "git_revision": run("rev-parse", "--short", "HEAD") or "unknown",
+        "git_dirty": bool(run("status", "--porcelain", "--", ".")),
+        "package_path": str(pkg),
+    }
 
 
 def machine() -> dict:
     import jax
     import numpy as np
-    return {"cpu_count": os.cpu_count(), "python": sys.version.split()[0],
-            "jax": jax.__version__, "numpy": np.__version__,
-            "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-            **git_revision()}
+
+    return {
+        "cpu_count": os.cpu_count(),
+        "python": sys.version.split()[0],
+        "jax": jax.__version__,
+        "numpy": np.__version__,
+        "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        **git_revision(),
+    }
 
 
 def loadavg() -> list[float]:
@@ -74,6 +84,7 @@ class LoadSampler:
 
     def __init__(self, every: float = 15.0):
         import threading
+
         self.every, self.samples = every, []
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
@@ -94,8 +105,16 @@ class LoadSampler:
 
     def summary(self) -> dict:
         xs = self.samples
-        return {"mean": round(sum(xs) / len(xs), 2), "max": round(max(xs), 2),
-                "n": len(xs), "every_s": self.every} if xs else {}
+        return (
+            {
+                "mean": round(sum(xs) / len(xs), 2),
+                "max": round(max(xs), 2),
+                "n": len(xs),
+                "every_s": self.every,
+            }
+            if xs
+            else {}
+        )
 
 
 def children_cpu() -> float:
@@ -111,6 +130,7 @@ def finite_or_none(x) -> float | None:
 
 def percentile(xs, p):
     import numpy as np
+
     return float(np.percentile(np.asarray(xs, np.float64), p)) if len(xs) else float("nan")
 
 

@@ -29,8 +29,10 @@ def compare(a: Path, b: Path, env_name: str, steer: bool = True) -> list[dict]:
     qa, qb = (np.load(r / "eval" / slug / "queries.npz") for r in (a, b))
     for kind in ("uniform", "nontrivial"):
         if not np.array_equal(qa[kind], qb[kind]):
-            raise SystemExit(f"error: the runs' {kind} test queries differ; compare runs made "
-                             "with the same seed, map and eval settings")
+            raise SystemExit(
+                f"error: the runs' {kind} test queries differ; compare runs made "
+                "with the same seed, map and eval settings"
+            )
     rows = []
     for m in range(4):
         for kind in ("uniform", "nontrivial"):
@@ -39,10 +41,18 @@ def compare(a: Path, b: Path, env_name: str, steer: bool = True) -> list[dict]:
                 continue
             sa, sb = (np.load(f)["success"].astype(bool) for f in (fa, fb))
             d = stats.paired_success_difference(sb, sa)
-            rows.append({"model": f"PNet_{m}", "kind": kind, "a": float(sa.mean()),
-                         "b": float(sb.mean()), "diff": d, "b_only": int((sb & ~sa).sum()),
-                         "a_only": int((sa & ~sb).sum()),
-                         "p": stats.mcnemar_exact(int((sb & ~sa).sum()), int((sa & ~sb).sum()))})
+            rows.append(
+                {
+                    "model": f"PNet_{m}",
+                    "kind": kind,
+                    "a": float(sa.mean()),
+                    "b": float(sb.mean()),
+                    "diff": d,
+                    "b_only": int((sb & ~sa).sum()),
+                    "a_only": int((sa & ~sb).sum()),
+                    "p": stats.mcnemar_exact(int((sb & ~sa).sum()), int((sa & ~sb).sum())),
+                }
+            )
     return rows
 
 
@@ -63,9 +73,11 @@ def main(argv=None) -> int:
     print("|---|---|---:|---:|---|---:|---:|")
     for r in rows:
         lo, hi = r["diff"]["ci"]
-        print(f"| {r['model']} | {r['kind']} | {r['a']:.3f} | {r['b']:.3f} | "
-              f"{r['diff']['diff']:+.3f} [{lo:+.3f}, {hi:+.3f}] | {r['b_only']} / {r['a_only']} | "
-              f"{r['p']:.2g} |")
+        print(
+            f"| {r['model']} | {r['kind']} | {r['a']:.3f} | {r['b']:.3f} | "
+            f"{r['diff']['diff']:+.3f} [{lo:+.3f}, {hi:+.3f}] | {r['b_only']} / {r['a_only']} | "
+            f"{r['p']:.2g} |"
+        )
     return 0
 
 

@@ -67,6 +67,7 @@ SAMPLE_CHUNK = 4096  # states per compiled call of the samplers' validity checks
 # coal's side
 # ---------------------------------------------------------------------------
 
+
 def coal_obstacles(world):
     """``[(geometry, Transform3s, aabb_lo (3,), aabb_hi (3,))]`` of the world's rows, float64."""
     import coal
@@ -78,7 +79,9 @@ def coal_obstacles(world):
             obj = coal.CollisionObject(geom, tf)
             obj.computeAABB()
             box = obj.getAABB()
-            out.append((geom, tf, np.asarray(box.min_, np.float64), np.asarray(box.max_, np.float64)))
+            out.append(
+                (geom, tf, np.asarray(box.min_, np.float64), np.asarray(box.max_, np.float64))
+            )
     return out
 
 
@@ -102,7 +105,7 @@ def _coal_shape(coal, kind, r):
 def sphere_centers(robot, q: np.ndarray, chunk: int = 1 << 14) -> np.ndarray:
     """``(N, S, 3)`` float64: our forward kinematics' sphere centres (float32 kernel)."""
     fk = jax.jit(jax.vmap(robot.sphere_centers))
-    parts = [np.asarray(fk(jnp.asarray(q[i:i + chunk]))) for i in range(0, len(q), chunk)]
+    parts = [np.asarray(fk(jnp.asarray(q[i : i + chunk]))) for i in range(0, len(q), chunk)]
     return np.concatenate(parts).astype(np.float64)
 
 
@@ -137,7 +140,7 @@ def coal_margins(robot, world, q: np.ndarray, padding: float) -> dict:
     self_m = np.full(n, np.inf)
     other = coal.Transform3s()
     for i0 in range(0, n, 4096):
-        c = centers[i0:i0 + 4096]
+        c = centers[i0 : i0 + 4096]
         gap = np.linalg.norm(c[:, pairs[:, 0]] - c[:, pairs[:, 1]], axis=-1) - reach
         rows, ps = np.nonzero(gap <= NEAR)
         for i, p in zip(rows.tolist(), ps.tolist()):
@@ -156,6 +159,7 @@ def coal_margins(robot, world, q: np.ndarray, padding: float) -> dict:
 # our side and the comparison
 # ---------------------------------------------------------------------------
 
+
 def our_answers(env, q: np.ndarray) -> dict:
     """``valid`` (``Env.is_valid``), ``obstacle_free`` and ``self_free`` ``(N,)`` bool."""
     robot, pad = env.robot, env.padding
@@ -166,9 +170,15 @@ def our_answers(env, q: np.ndarray) -> dict:
         return free, robot.self_collision_free(x)
 
     fn = jax.jit(jax.vmap(parts, in_axes=(0, None)))
-    obs, slf = (np.concatenate(v) for v in zip(*[
-        [np.asarray(o) for o in fn(jnp.asarray(q[i:i + 8192]), env.world)]
-        for i in range(0, len(q), 8192)]))
+    obs, slf = (
+        np.concatenate(v)
+        for v in zip(
+            *[
+                [np.asarray(o) for o in fn(jnp.asarray(q[i : i + 8192]), env.world)]
+                for i in range(0, len(q), 8192)
+            ]
+        )
+    )
     return {"valid": np.asarray(env.is_valid(q)), "obstacle_free": obs, "self_free": slf}
 
 
@@ -178,14 +188,18 @@ def compare_validity(env, q: np.ndarray) -> dict:
     ours = our_answers(env, q)
     margin = np.minimum(ref["obstacle"], ref["self"])
     out = {"configs": int(len(q)), "coal_calls": ref["coal_calls"], "band": BAND, "near": NEAR}
-    for name, m, got in (("valid", margin, ours["valid"]),
-                         ("obstacle_free", ref["obstacle"], ours["obstacle_free"]),
-                         ("self_free", ref["self"], ours["self_free"])):
+    for name, m, got in (
+        ("valid", margin, ours["valid"]),
+        ("obstacle_free", ref["obstacle"], ours["obstacle_free"]),
+        ("self_free", ref["self"], ours["self_free"]),
+    ):
         want, sure = m > 0.0, np.abs(m) > BAND
-        out[name] = {"reference_true": int(want.sum()),
-                     "disagree": int(np.sum((got != want) & sure)),
-                     "in_band": int(np.sum(~sure)),
-                     "disagree_in_band": int(np.sum((got != want) & ~sure))}
+        out[name] = {
+            "reference_true": int(want.sum()),
+            "disagree": int(np.sum((got != want) & sure)),
+            "in_band": int(np.sum(~sure)),
+            "disagree_in_band": int(np.sum((got != want) & ~sure)),
+        }
     bad = (ours["valid"] != (margin > 0.0)) & (np.abs(margin) > BAND)
     out["disagreeing_configs"] = np.flatnonzero(bad)[:20].tolist()
     ab = np.abs(margin)
@@ -197,11 +211,14 @@ def compare_validity(env, q: np.ndarray) -> dict:
 # sampling
 # ---------------------------------------------------------------------------
 
+
 def _valid(env, q: np.ndarray) -> np.ndarray:
     """``is_valid`` in fixed chunks of ``SAMPLE_CHUNK`` (one compiled shape for all sampling)."""
     from ntq_jax.robots.batch import valid_states
-    return valid_states(env.robot, env.world, np.asarray(q, np.float32), env.padding,
-                        chunk=SAMPLE_CHUNK)
+
+    return valid_states(
+        env.robot, env.world, np.asarray(q, np.float32), env.padding, chunk=SAMPLE_CHUNK
+    )
 
 
 def kernel_valid(env, q: np.ndarray) -> np.ndarray:
@@ -211,9 +228,11 @@ def kernel_valid(env, q: np.ndarray) -> np.ndarray:
     fn = _kernel(env.robot, env.padding)
     pad = -len(q) % DENSE_CHUNK
     q = np.concatenate([q, np.repeat(q[:1], pad, axis=0)]) if pad and len(q) else q
-    out = [np.asarray(fn(jnp.asarray(q[i:i + DENSE_CHUNK]), env.world))
-           for i in range(0, len(q), DENSE_CHUNK)]
-    return np.concatenate(out)[:len(q) - pad] if out else np.zeros(0, bool)
+    out = [
+        np.asarray(fn(jnp.asarray(q[i : i + DENSE_CHUNK]), env.world))
+        for i in range(0, len(q), DENSE_CHUNK)
+    ]
+    return np.concatenate(out)[: len(q) - pad] if out else np.zeros(0, bool)
 
 
 @functools.lru_cache(maxsize=None)
@@ -296,14 +315,15 @@ def sample_motions(env, seed: int, n: int) -> tuple[np.ndarray, np.ndarray, np.n
     p = _valid_uniform(env, rng, 2 * k[1])
     a2 = boundary_configs(env, rng, k[2], GRAZE_SCALE)
     b2 = _valid_steps(env, rng, a2, 0.02, 0.3)
-    a = np.concatenate([a0, p[:k[1]], a2])
-    b = np.concatenate([b0, p[k[1]:], b2])
+    a = np.concatenate([a0, p[: k[1]], a2])
+    b = np.concatenate([b0, p[k[1] :], b2])
     return a, b, np.repeat(np.arange(3, dtype=np.int8), k)
 
 
 # ---------------------------------------------------------------------------
 # dense discretised check and the certified comparison
 # ---------------------------------------------------------------------------
+
 
 def dense_steps(a: np.ndarray, b: np.ndarray, step: float = DENSE_STEP) -> np.ndarray:
     """``n = ceil(|b - a| / step)`` (>= 1) per motion, int64."""
@@ -321,15 +341,24 @@ def dense_states(a: np.ndarray, b: np.ndarray, steps: np.ndarray) -> np.ndarray:
     return (a64 + t * (b64 - a64)).astype(np.float32)
 
 
-def dense_free(env, a: np.ndarray, b: np.ndarray, step: float = DENSE_STEP) -> tuple[np.ndarray, int]:
+def dense_free(
+    env, a: np.ndarray, b: np.ndarray, step: float = DENSE_STEP
+) -> tuple[np.ndarray, int]:
     """``(free (N,) bool, states)``: every state of :func:`dense_states` valid by the
     one-state kernel, and how many states were checked."""
     steps = dense_steps(a, b, step)
     free = np.ones(len(a), bool)
     total = i = 0
     while i < len(a):  # motions i..j-1: about DENSE_CHUNK states (at least one motion)
-        j = i + 1 + int(np.searchsorted(np.cumsum(steps[i + 1:] + 1), DENSE_CHUNK - steps[i] - 1,
-                                        side="right"))
+        j = (
+            i
+            + 1
+            + int(
+                np.searchsorted(
+                    np.cumsum(steps[i + 1 :] + 1), DENSE_CHUNK - steps[i] - 1, side="right"
+                )
+            )
+        )
         states = dense_states(a[i:j], b[i:j], steps[i:j])
         size = len(states)
         ok = kernel_valid(env, states)
@@ -339,18 +368,24 @@ def dense_free(env, a: np.ndarray, b: np.ndarray, step: float = DENSE_STEP) -> t
     return free, total
 
 
-def compare_certified(env, a: np.ndarray, b: np.ndarray, kind: np.ndarray,
-                      discretized: bool = True) -> dict:
+def compare_certified(
+    env, a: np.ndarray, b: np.ndarray, kind: np.ndarray, discretized: bool = True
+) -> dict:
     """Certified (and discretised) ``steer_to`` against the dense check, per motion kind."""
     dense, states = dense_free(env, a, b)
     cert = np.asarray(env.steer_to(a, b, check="certified"))
     disc = np.asarray(env.steer_to(a, b)) if discretized else np.zeros(len(a), bool)
-    out = {"motions": int(len(a)), "dense_step": DENSE_STEP, "dense_states": int(states),
-           "false_free_motions": np.flatnonzero(cert & ~dense)[:20].tolist()}
+    out = {
+        "motions": int(len(a)),
+        "dense_step": DENSE_STEP,
+        "dense_states": int(states),
+        "false_free_motions": np.flatnonzero(cert & ~dense)[:20].tolist(),
+    }
     for k, name in enumerate(("short", "pair", "graze", "all")):
         m = kind == k if k < 3 else np.ones(len(a), bool)
         out[name] = {
-            "motions": int(m.sum()), "dense_free": int(np.sum(dense & m)),
+            "motions": int(m.sum()),
+            "dense_free": int(np.sum(dense & m)),
             "certified_free": int(np.sum(cert & m)),
             "certified_false_free": int(np.sum(cert & ~dense & m)),
             "certified_blocked_dense_free": int(np.sum(~cert & dense & m)),

@@ -56,18 +56,17 @@ import tempfile
 import threading
 import traceback
 
-import jax
-import numpy as np
-
-import ntq_jax as nj
-from ntq_jax import artifacts, data
-
 import bench_data
 import bench_gamma
 import bench_graph_search
 import bench_plan
+import jax
+import numpy as np
 from bench_steer import MAP, bench_certified, numpy_steer
 from common import interleaved, loadavg, machine
+
+import ntq_jax as nj
+from ntq_jax import artifacts, data
 
 TOLERANCE = 0.8  # a ratio fails when it is more than 20 % short of its goal
 # interleaved repeats (medians) per row; --reps N sets them all
@@ -104,7 +103,7 @@ DATA_ENV, DATA_K = "point/0", 100
 
 
 def _verdict(value: float, goal: float | None, kind: str) -> str:
-    """"met", "short (within 20 %)", "FAIL" for a judged ratio; "info" otherwise."""
+    """ "met", "short (within 20 %)", "FAIL" for a judged ratio; "info" otherwise."""
     if goal is None or kind == "info":
         return "info"
     met = value >= goal if kind == ">=" else value <= goal
@@ -112,10 +111,23 @@ def _verdict(value: float, goal: float | None, kind: str) -> str:
     return "met" if met else ("short (within 20 %)" if tolerated else "FAIL")
 
 
-def _row(name: str, value: float, unit: str, goal: float | None = None, kind: str = "info",
-         note: str = "") -> dict:
-    return {"name": name, "value": float(value), "unit": unit, "goal": goal, "kind": kind,
-            "verdict": _verdict(value, goal, kind), "note": note}
+def _row(
+    name: str,
+    value: float,
+    unit: str,
+    goal: float | None = None,
+    kind: str = "info",
+    note: str = "",
+) -> dict:
+    return {
+        "name": name,
+        "value": float(value),
+        "unit": unit,
+        "goal": goal,
+        "kind": kind,
+        "verdict": _verdict(value, goal, kind),
+        "note": note,
+    }
 
 
 def _fmt(v: float, unit: str) -> str:
@@ -133,8 +145,10 @@ def _fmt(v: float, unit: str) -> str:
 def print_row(r: dict) -> None:
     goal = "" if r["goal"] is None else f"{r['kind']} {_fmt(r['goal'], r['unit'])}"
     note = f"  ({r['note']})" if r["note"] else ""
-    print(f"{r['name']:<52} {_fmt(r['value'], r['unit']):>12}  {goal:<11} {r['verdict']}{note}",
-          flush=True)
+    print(
+        f"{r['name']:<52} {_fmt(r['value'], r['unit']):>12}  {goal:<11} {r['verdict']}{note}",
+        flush=True,
+    )
 
 
 @contextlib.contextmanager
@@ -158,8 +172,9 @@ def recorded_medians(module):
 def cpu_model() -> str:
     try:
         with open("/proc/cpuinfo") as f:
-            info = dict((k.strip(), v.strip()) for k, v in (line.split(":", 1) for line in f
-                                                            if ":" in line))
+            info = dict(
+                (k.strip(), v.strip()) for k, v in (line.split(":", 1) for line in f if ":" in line)
+            )
     except OSError:
         return "unknown CPU"
     flags = info.get("flags", "").split()
@@ -171,31 +186,53 @@ def cpu_model() -> str:
 # The rows
 # ---------------------------------------------------------------------------
 
+
 def steer_vs_numpy(reps: int) -> tuple[list[dict], dict]:
     """Row 1: the public point-robot steer_to against the vectorised NumPy slab test."""
     env = nj.Env.from_json(MAP)
     lo, hi = env.world.bounds[:, 0], env.world.bounds[:, 1]
-    a, b = (lo + jax.random.uniform(k, (STEER_PAIRS, 2)) * (hi - lo)
-            for k in jax.random.split(jax.random.key(0)))
+    a, b = (
+        lo + jax.random.uniform(k, (STEER_PAIRS, 2)) * (hi - lo)
+        for k in jax.random.split(jax.random.key(0))
+    )
     a_np, b_np = np.asarray(a[:NUMPY_PAIRS]), np.asarray(b[:NUMPY_PAIRS])
     boxes, bounds = np.asarray(env.world.boxes).tolist(), np.asarray(env.world.bounds).tolist()
-    t = interleaved({"api": lambda: env.steer_to(a, b, padding=0.0),
-                     "numpy": lambda: numpy_steer(a_np, b_np, boxes, bounds, 0.0)}, reps)
+    t = interleaved(
+        {
+            "api": lambda: env.steer_to(a, b, padding=0.0),
+            "numpy": lambda: numpy_steer(a_np, b_np, boxes, bounds, 0.0),
+        },
+        reps,
+    )
     ours, base = STEER_PAIRS / t["api"], NUMPY_PAIRS / t["numpy"]
-    detail = {"seconds": t, "cores": dict(interleaved.cores), "pairs": STEER_PAIRS,
-              "numpy_pairs": NUMPY_PAIRS}
-    return [_row("1. steer_to (point, padding 0) / NumPy", ours / base, "x", 30.0, ">=",
-                 f"{ours:.3g} vs {base:.3g} queries/s; cores {interleaved.cores['api']:.2f} / "
-                 f"{interleaved.cores['numpy']:.2f}; table: 100x, issue 47: 30x")], detail
+    detail = {
+        "seconds": t,
+        "cores": dict(interleaved.cores),
+        "pairs": STEER_PAIRS,
+        "numpy_pairs": NUMPY_PAIRS,
+    }
+    return [
+        _row(
+            "1. steer_to (point, padding 0) / NumPy",
+            ours / base,
+            "x",
+            30.0,
+            ">=",
+            f"{ours:.3g} vs {base:.3g} queries/s; cores {interleaved.cores['api']:.2f} / "
+            f"{interleaved.cores['numpy']:.2f}; table: 100x, issue 47: 30x",
+        )
+    ], detail
 
 
 def gamma_vs_check(reps: int) -> tuple[list[dict], dict]:
     """Row 2: gamma_nt's stream against the bare check it runs (bench_gamma's ratio)."""
     r = bench_gamma.bench_env("point/3", 0.0, reps, GAMMA_PAIRS, GAMMA_QUERIES)
     ratio = r["ratio"]
-    note = (f"{r['gamma_queries_per_second']:.3g} valid queries/s vs {r['check_per_second']:.3g} "
-            f"pairs/s ({r['queries']:,} queries, {r['pairs']:,} pairs); former goal >= 0.5: "
-            f"{'met' if ratio >= 0.5 else 'not met'}")
+    note = (
+        f"{r['gamma_queries_per_second']:.3g} valid queries/s vs {r['check_per_second']:.3g} "
+        f"pairs/s ({r['queries']:,} queries, {r['pairs']:,} pairs); former goal >= 0.5: "
+        f"{'met' if ratio >= 0.5 else 'not met'}"
+    )
     row = _row("2. gamma_nt stream / bare check (point/3, pad 0)", ratio, "x", 1.0, "<=", note)
     return [row], r
 
@@ -204,54 +241,98 @@ def certified_vs_discretised(reps: int) -> tuple[list[dict], list]:
     """Row 3: certified against discretised checks, same motions (no ratio goal: printed)."""
     rows = bench_certified(CERT_ENV, CERT_MOTIONS, reps, None, pad=CERT_PADDING)
     cert, disc, ratio = rows[0], rows[1], rows[2]["ratio"]
-    return [_row(f"3. certified / discretised check ({CERT_ENV}, pad {CERT_PADDING:g})", ratio, "x",
-                 note=f"{cert['per_second']:,.0f} vs {disc['per_second']:,.0f} motions/s on "
-                      f"{CERT_MOTIONS:,}; no ratio goal (BENCHMARKS.md: 0.95x at 10^5)")], rows
+    return [
+        _row(
+            f"3. certified / discretised check ({CERT_ENV}, pad {CERT_PADDING:g})",
+            ratio,
+            "x",
+            note=f"{cert['per_second']:,.0f} vs {disc['per_second']:,.0f} motions/s on "
+            f"{CERT_MOTIONS:,}; no ratio goal (BENCHMARKS.md: 0.95x at 10^5)",
+        )
+    ], rows
 
 
 def astar_vs_dijkstra(reps: int) -> tuple[list[dict], dict]:
     """Row 4: the roadmap's A* against scipy's Dijkstra, same roadmap and queries."""
-    args = argparse.Namespace(milestones=ROADMAP_MILESTONES, queries=ROADMAP_QUERIES, reps=reps,
-                              threads=os.cpu_count(), cache_dir=None)
+    args = argparse.Namespace(
+        milestones=ROADMAP_MILESTONES,
+        queries=ROADMAP_QUERIES,
+        reps=reps,
+        threads=os.cpu_count(),
+        cache_dir=None,
+    )
     out = io.StringIO()
     with recorded_medians(bench_graph_search) as med, contextlib.redirect_stdout(out):
         bench_graph_search.bench_map(CERT_ENV, args)
     ms = 1e3 * med["astar"] / ROADMAP_QUERIES
     ratio = med["dijkstra"] / med["astar"]
     return [
-        _row(f"4. A* / scipy Dijkstra ({CERT_ENV}, {ROADMAP_MILESTONES:,} milestones)", ratio, "x",
-             ROADMAP_FLOOR, ">=", f"{ROADMAP_QUERIES} queries, {os.cpu_count()} threads; "
-             f"floor, see ROADMAP_FLOOR"),
-        _row("4. roadmap search, A* ms per query (amortised)", ms, "ms",
-             note="goal <= 0.5 ms at 20,000 milestones, information only"),
+        _row(
+            f"4. A* / scipy Dijkstra ({CERT_ENV}, {ROADMAP_MILESTONES:,} milestones)",
+            ratio,
+            "x",
+            ROADMAP_FLOOR,
+            ">=",
+            f"{ROADMAP_QUERIES} queries, {os.cpu_count()} threads; floor, see ROADMAP_FLOOR",
+        ),
+        _row(
+            "4. roadmap search, A* ms per query (amortised)",
+            ms,
+            "ms",
+            note="goal <= 0.5 ms at 20,000 milestones, information only",
+        ),
     ], {"medians": dict(med), "printed": out.getvalue()}
 
 
 def batched_vs_loop(reps: int) -> tuple[list[dict], list]:
     """Row 5: the batched neural planner against a per-query loop of the same planner."""
     runs = [_plan_once() for _ in range(reps)]
-    med = {k: float(np.median([r[k] for r in runs]))
-           for k in ("speedup", "batched_seconds_per_query", "loop_seconds_per_query")}
-    return [_row(f"5. batched planner / per-query loop ({PLAN_ENV})", med["speedup"], "x", 10.0,
-                 ">=", f"medians of {reps}: {med['batched_seconds_per_query'] * 1e3:.2f} vs "
-                 f"{med['loop_seconds_per_query'] * 1e3:.2f} ms/query; {PLAN_QUERIES} queries, "
-                 f"the loop on {PLAN_LOOP_QUERIES}; untrained PNet")], runs
+    med = {
+        k: float(np.median([r[k] for r in runs]))
+        for k in ("speedup", "batched_seconds_per_query", "loop_seconds_per_query")
+    }
+    return [
+        _row(
+            f"5. batched planner / per-query loop ({PLAN_ENV})",
+            med["speedup"],
+            "x",
+            10.0,
+            ">=",
+            f"medians of {reps}: {med['batched_seconds_per_query'] * 1e3:.2f} vs "
+            f"{med['loop_seconds_per_query'] * 1e3:.2f} ms/query; {PLAN_QUERIES} queries, "
+            f"the loop on {PLAN_LOOP_QUERIES}; untrained PNet",
+        )
+    ], runs
 
 
 def data_generation() -> tuple[list[dict], dict]:
     """Row 6: D0..D3 of a tiny point/0 run, seconds (information only)."""
-    cfg = bench_data.load_config(bench_data.parse_args(
-        ["--env", DATA_ENV, "--k", str(DATA_K), "--gamma-queries", "100000"]))
+    cfg = bench_data.load_config(
+        bench_data.parse_args(["--env", DATA_ENV, "--k", str(DATA_K), "--gamma-queries", "100000"])
+    )
     with tempfile.TemporaryDirectory(prefix="ntq_smoke_") as out:
         t0 = time.perf_counter()
         from ntq_jax.experiment import config as C
-        s = data.generate_datasets(nj.make_env(DATA_ENV), C.data_options(cfg, DATA_ENV), out,
-                                   env_name=DATA_ENV, progress=False, figure=False)
+
+        s = data.generate_datasets(
+            nj.make_env(DATA_ENV),
+            C.data_options(cfg, DATA_ENV),
+            out,
+            env_name=DATA_ENV,
+            progress=False,
+            figure=False,
+        )
         secs = time.perf_counter() - t0
     stages = ", ".join(f"{k} {s['timings'][k]:.1f}" for k in ("sample", "plan", "gamma"))
-    return [_row(f"6. data generation D0..D3 ({DATA_ENV}, K = {DATA_K})", secs, "s",
-                 note=f"{s['planned_queries']} planned queries; {stages} s; compilation "
-                      "included; beside row 3's compilation")], {"timings": s["timings"]}
+    return [
+        _row(
+            f"6. data generation D0..D3 ({DATA_ENV}, K = {DATA_K})",
+            secs,
+            "s",
+            note=f"{s['planned_queries']} planned queries; {stages} s; compilation "
+            "included; beside row 3's compilation",
+        )
+    ], {"timings": s["timings"]}
 
 
 def warm_certified(seconds: dict) -> None:
@@ -273,20 +354,29 @@ def _plan_once() -> dict:
 
 # ---------------------------------------------------------------------------
 
+
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("--json", default=None, help="also write the rows and details to this file")
-    ap.add_argument("--reps", type=int, default=None,
-                    help=f"interleaved repeats of every row (default per row: {REPS})")
+    ap.add_argument(
+        "--reps",
+        type=int,
+        default=None,
+        help=f"interleaved repeats of every row (default per row: {REPS})",
+    )
     args = ap.parse_args(argv)
     reps = {k: args.reps or v for k, v in REPS.items()}
     t_import = time.perf_counter() - T_START
     load0 = loadavg()
     info = machine()
-    print(f"smoke speed check, {info['date']}: {cpu_model()}, {info['cpu_count']} CPUs, load "
-          f"{load0}; ntq_jax {info['git_revision']}{' (dirty tree)' if info['git_dirty'] else ''}, "
-          f"jax {info['jax']}, numpy {info['numpy']}", flush=True)
+    print(
+        f"smoke speed check, {info['date']}: {cpu_model()}, {info['cpu_count']} CPUs, load "
+        f"{load0}; ntq_jax {info['git_revision']}{' (dirty tree)' if info['git_dirty'] else ''}, "
+        f"jax {info['jax']}, numpy {info['numpy']}",
+        flush=True,
+    )
     print(f"{'ratio':<52} {'measured':>12}  {'goal':<11} verdict", flush=True)
 
     rows, details, seconds, cpu = [], {}, {"imports": t_import}, {}
@@ -297,8 +387,17 @@ def main(argv=None) -> int:
             got, details[name] = fn(*a)
         except Exception as e:  # noqa: BLE001 - a broken row fails the check, the others still run
             traceback.print_exc()
-            got = [{"name": name, "value": float("nan"), "unit": "", "goal": None, "kind": "error",
-                    "verdict": "FAIL", "note": f"{type(e).__name__}: {e}"}]
+            got = [
+                {
+                    "name": name,
+                    "value": float("nan"),
+                    "unit": "",
+                    "goal": None,
+                    "kind": "error",
+                    "verdict": "FAIL",
+                    "note": f"{type(e).__name__}: {e}",
+                }
+            ]
         seconds[name], cpu[name] = time.perf_counter() - t0, time.process_time() - c0
         for r in got:
             print_row(r)
@@ -324,16 +423,33 @@ def main(argv=None) -> int:
     judged = sum(r["kind"] in (">=", "<=", "error") for r in rows)
     wall = time.perf_counter() - T_START
     load1 = loadavg()
-    print("seconds: " + ", ".join(f"{k} {v:.1f}" for k, v in seconds.items())
-          + f"; CPU {time.process_time():.1f} s; load {load0} -> {load1}", flush=True)
-    print(f"{'FAIL' if failed else 'PASS'}: {len(failed)} of {judged} judged ratios more than 20 % "
-          f"short of their goals{' (' + '; '.join(failed) + ')' if failed else ''}; "
-          f"total wall time {wall:.1f} s", flush=True)
+    print(
+        "seconds: "
+        + ", ".join(f"{k} {v:.1f}" for k, v in seconds.items())
+        + f"; CPU {time.process_time():.1f} s; load {load0} -> {load1}",
+        flush=True,
+    )
+    print(
+        f"{'FAIL' if failed else 'PASS'}: {len(failed)} of {judged} judged ratios more than 20 % "
+        f"short of their goals{' (' + '; '.join(failed) + ')' if failed else ''}; "
+        f"total wall time {wall:.1f} s",
+        flush=True,
+    )
     if args.json:
-        artifacts.write_json(args.json, {
-            "machine": {**info, "cpu": cpu_model()}, "load": [load0, load1], "rows": rows,
-            "seconds": seconds, "cpu_seconds": cpu, "wall_seconds": wall,
-            "passed": not failed, "details": details}, default=str)
+        artifacts.write_json(
+            args.json,
+            {
+                "machine": {**info, "cpu": cpu_model()},
+                "load": [load0, load1],
+                "rows": rows,
+                "seconds": seconds,
+                "cpu_seconds": cpu,
+                "wall_seconds": wall,
+                "passed": not failed,
+                "details": details,
+            },
+            default=str,
+        )
     return 1 if failed else 0
 
 

@@ -24,8 +24,10 @@ from typing import Any
 
 import griffe
 
-ROLE = re.compile(r":(?:py:)?(?:func|class|mod|data|meth|attr|obj|exc|const)"
-                  r":`(?P<tilde>~?)(?P<target>[^`<>]+?)(?:\(\))?`")
+ROLE = re.compile(
+    r":(?:py:)?(?:func|class|mod|data|meth|attr|obj|exc|const)"
+    r":`(?P<tilde>~?)(?P<target>[^`<>]+?)(?:\(\))?`"
+)
 ROOT = "ntq_jax"
 
 
@@ -35,7 +37,7 @@ def _lookup(pkg: griffe.Module, path: str) -> griffe.Object | griffe.Alias | Non
     if not path.startswith(ROOT + "."):
         return None
     try:
-        return pkg.get_member(path[len(ROOT) + 1:])
+        return pkg.get_member(path[len(ROOT) + 1 :])
     except (KeyError, ValueError, griffe.AliasResolutionError, griffe.CyclicAliasError):
         return None
 
@@ -71,6 +73,7 @@ def resolve(pkg: griffe.Module, where: griffe.Object, name: str) -> str | None:
 
 def rewrite(text: str, pkg: griffe.Module, where: griffe.Object) -> str:
     """``text`` with every Sphinx role replaced (see the module's docstring)."""
+
     def sub(m: re.Match) -> str:
         target = m["target"].strip()
         shown = target.rsplit(".", 1)[-1] if m["tilde"] else target
@@ -78,6 +81,7 @@ def rewrite(text: str, pkg: griffe.Module, where: griffe.Object) -> str:
         if path is None:
             return f"`{shown}`"
         return f'<autoref identifier="{path}" optional>`{shown}`</autoref>'
+
     return ROLE.sub(sub, text)
 
 
@@ -155,5 +159,6 @@ class SphinxRoles(griffe.Extension):
             del mod.members[name]
             links.append(f'<autoref identifier="{path}" optional>`{name}`</autoref> (`{path}`)')
         if links and mod.docstring is not None:
-            mod.docstring.value += ("\n\nRe-exported here, documented where they are defined: "
-                                    + ", ".join(links) + ".")
+            mod.docstring.value += (
+                "\n\nRe-exported here, documented where they are defined: " + ", ".join(links) + "."
+            )

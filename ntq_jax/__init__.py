@@ -22,27 +22,49 @@ if TYPE_CHECKING:  # the names below, for type checkers and the API docs
     from ntq_jax.geometry import World
     from ntq_jax.planners import PlanResult, plan, register_planner
     from ntq_jax.presets import PAPER_GAMMA, PRESETS
-    from ntq_jax.queries import (NON_TRIVIAL, NT_EXHAUSTED, UNIFORM, FreeSpaceTooSmall,
-                                 GammaEstimate)
+    from ntq_jax.queries import NON_TRIVIAL, NT_EXHAUSTED, UNIFORM, FreeSpaceTooSmall, GammaEstimate
     from ntq_jax.types import PlanCause, PlanStatus
 
 #: Where each public name lives. They load on first use (PEP 562), so a process that
 #: imports only a JAX-free module of the package (the BIT* workers) never loads JAX.
 _EXPORTS = {
-    "Env": "ntq_jax.envs", "EnvError": "ntq_jax.envs", "make_env": "ntq_jax.envs",
+    "Env": "ntq_jax.envs",
+    "EnvError": "ntq_jax.envs",
+    "make_env": "ntq_jax.envs",
     "World": "ntq_jax.geometry",
-    "PlanResult": "ntq_jax.planners", "plan": "ntq_jax.planners",
+    "PlanResult": "ntq_jax.planners",
+    "plan": "ntq_jax.planners",
     "register_planner": "ntq_jax.planners",
-    "PRESETS": "ntq_jax.presets", "PAPER_GAMMA": "ntq_jax.presets",
-    "GammaEstimate": "ntq_jax.queries", "FreeSpaceTooSmall": "ntq_jax.queries",
-    "UNIFORM": "ntq_jax.queries", "NON_TRIVIAL": "ntq_jax.queries",
+    "PRESETS": "ntq_jax.presets",
+    "PAPER_GAMMA": "ntq_jax.presets",
+    "GammaEstimate": "ntq_jax.queries",
+    "FreeSpaceTooSmall": "ntq_jax.queries",
+    "UNIFORM": "ntq_jax.queries",
+    "NON_TRIVIAL": "ntq_jax.queries",
     "NT_EXHAUSTED": "ntq_jax.queries",
-    "PlanStatus": "ntq_jax.types", "PlanCause": "ntq_jax.types",
+    "PlanStatus": "ntq_jax.types",
+    "PlanCause": "ntq_jax.types",
 }
 
-__all__ = ["Env", "EnvError", "make_env", "World", "PRESETS", "PAPER_GAMMA", "GammaEstimate",
-           "FreeSpaceTooSmall", "UNIFORM", "NON_TRIVIAL", "NT_EXHAUSTED", "plan", "PlanResult",
-           "PlanStatus", "PlanCause", "register_planner", "__version__"]
+__all__ = [
+    "Env",
+    "EnvError",
+    "make_env",
+    "World",
+    "PRESETS",
+    "PAPER_GAMMA",
+    "GammaEstimate",
+    "FreeSpaceTooSmall",
+    "UNIFORM",
+    "NON_TRIVIAL",
+    "NT_EXHAUSTED",
+    "plan",
+    "PlanResult",
+    "PlanStatus",
+    "PlanCause",
+    "register_planner",
+    "__version__",
+]
 
 
 __getattr__, __dir__ = lazy_exports(__name__, globals(), _EXPORTS)

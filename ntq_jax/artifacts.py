@@ -29,12 +29,37 @@ import numpy as np
 
 from ntq_jax.errors import UsageError
 
-__all__ = ["tmp_name", "replace", "write_with", "write_bytes", "write_text", "write_json",
-           "save_npy", "save_npz", "save_figure", "write_folder", "clean_tmp", "unwritable_reason",
-           "FolderInUse", "LockUnsupported", "lock_folder", "unlock_folder", "holds_lock",
-           "lock_holder", "LOCK_NAME", "sha256", "json_default",
-           "sha256_json", "fingerprint", "npy_sha256", "array_digest", "tree_digest", "load_npz",
-           "compute_or_load", "enable_compile_cache"]
+__all__ = [
+    "tmp_name",
+    "replace",
+    "write_with",
+    "write_bytes",
+    "write_text",
+    "write_json",
+    "save_npy",
+    "save_npz",
+    "save_figure",
+    "write_folder",
+    "clean_tmp",
+    "unwritable_reason",
+    "FolderInUse",
+    "LockUnsupported",
+    "lock_folder",
+    "unlock_folder",
+    "holds_lock",
+    "lock_holder",
+    "LOCK_NAME",
+    "sha256",
+    "json_default",
+    "sha256_json",
+    "fingerprint",
+    "npy_sha256",
+    "array_digest",
+    "tree_digest",
+    "load_npz",
+    "compute_or_load",
+    "enable_compile_cache",
+]
 
 
 def tmp_name(path: Path) -> Path:
@@ -80,6 +105,7 @@ def write_folder(path: str | os.PathLike, fill: Callable[[Path], None]) -> Path:
     complete or absent, never half written; an interrupted fill leaves only the hidden
     folder, which the next write of ``path`` removes."""
     import shutil
+
     path = Path(path).absolute()
     tmp = path.with_name(f".{path.name}.tmp-folder")
     if tmp.exists():
@@ -123,7 +149,6 @@ def save_figure(fig, path: str | os.PathLike, **savefig_kwargs) -> Path:
     return write_with(path, lambda f: fig.savefig(f, format=fmt, **savefig_kwargs))
 
 
-
 def link_tree(src: str | os.PathLike, dst: str | os.PathLike) -> None:
     """``dst`` as a copy of ``src`` made of hard links (a plain copy where links fail); files
     already in ``dst`` are kept."""
@@ -143,6 +168,7 @@ def link_tree(src: str | os.PathLike, dst: str | os.PathLike) -> None:
 def clean_tmp(folder: str | os.PathLike) -> None:
     """Removes the temporary files and folders interrupted writes left in ``folder``."""
     import shutil
+
     folder = Path(folder)
     if folder.is_dir():
         for p in folder.glob(".*.tmp-*"):
@@ -239,7 +265,8 @@ def lock_folder(folder: str | os.PathLike, note: bool = True) -> Path:
                 raise LockUnsupported(
                     f"{folder}: its file system does not support file locks (flock: "
                     f"{(e.strerror or os.strerror(e.errno)).lower()}), which keep two processes "
-                    "from writing one folder; use a folder on a local disk") from None
+                    "from writing one folder; use a folder on a local disk"
+                ) from None
             who = os.pread(fd, 4096, 0).decode("utf-8", "replace").strip() or "another process"
             os.close(fd)
             raise FolderInUse(f"{folder} is in use by {who}") from None
@@ -247,8 +274,11 @@ def lock_folder(folder: str | os.PathLike, note: bool = True) -> Path:
     if note and not held[1]:
         import socket
         import time
-        info = (f"pid {os.getpid()} on {socket.gethostname()} since "
-                f"{time.strftime('%Y-%m-%d %H:%M:%S')}").encode()
+
+        info = (
+            f"pid {os.getpid()} on {socket.gethostname()} since "
+            f"{time.strftime('%Y-%m-%d %H:%M:%S')}"
+        ).encode()
         os.ftruncate(held[0], 0)
         os.pwrite(held[0], info, 0)
         held[1] = True
@@ -291,6 +321,7 @@ def unlock_folder(folder: str | os.PathLike) -> None:
 # ---------------------------------------------------------------------------
 # Hashing: every digest the package records is made here
 # ---------------------------------------------------------------------------
+
 
 def sha256(path: str | os.PathLike) -> str:
     """Hex sha256 of a file's bytes."""
@@ -378,8 +409,7 @@ def load_npz(path: str | os.PathLike, fingerprint: str | None = None) -> dict | 
     return out
 
 
-def compute_or_load(path: str | os.PathLike, fingerprint: str,
-                    compute: Callable[[], dict]) -> dict:
+def compute_or_load(path: str | os.PathLike, fingerprint: str, compute: Callable[[], dict]) -> dict:
     """The arrays saved at ``path`` if their fingerprint matches, else ``compute()``'s,
     saved atomically with the fingerprint (returned dict includes it)."""
     got = load_npz(path, fingerprint)
@@ -401,11 +431,14 @@ def enable_compile_cache() -> None:
     """
     import jax
 
-    path = os.environ.get("JAX_COMPILATION_CACHE_DIR",
-                          str(Path.home() / ".cache" / "ntq_jax" / "jax"))
+    path = os.environ.get(
+        "JAX_COMPILATION_CACHE_DIR", str(Path.home() / ".cache" / "ntq_jax" / "jax")
+    )
     try:
         jax.config.update("jax_compilation_cache_dir", path)
-        jax.config.update("jax_persistent_cache_min_compile_time_secs",
-                          float(os.environ.get("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", 2.0)))
+        jax.config.update(
+            "jax_persistent_cache_min_compile_time_secs",
+            float(os.environ.get("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", 2.0)),
+        )
     except Exception:  # noqa: BLE001 - the cache is an optimisation only
         pass

@@ -14,7 +14,14 @@ import numpy as np
 
 from ntq_jax.validation import check_count
 
-__all__ = ["bucket_size", "fine_bucket_size", "pad_rows", "padded_chunks", "group_chunks", "map_chunks"]
+__all__ = [
+    "bucket_size",
+    "fine_bucket_size",
+    "pad_rows",
+    "padded_chunks",
+    "group_chunks",
+    "map_chunks",
+]
 
 
 def bucket_size(n: int, minimum: int = 1) -> int:
@@ -46,8 +53,9 @@ def pad_rows(a: np.ndarray, rows: int, fill=0) -> np.ndarray:
     return np.concatenate([a, extra])
 
 
-def padded_chunks(arrays: Sequence[np.ndarray], chunk: int, fill=0
-                  ) -> Iterator[tuple[int, int, list[np.ndarray], np.ndarray]]:
+def padded_chunks(
+    arrays: Sequence[np.ndarray], chunk: int, fill=0
+) -> Iterator[tuple[int, int, list[np.ndarray], np.ndarray]]:
     """Yields ``(lo, m, padded, mask)`` for consecutive row chunks of ``arrays``.
 
     ``padded`` are the rows ``lo:lo+m`` of every array padded to exactly
@@ -58,14 +66,15 @@ def padded_chunks(arrays: Sequence[np.ndarray], chunk: int, fill=0
     n = np.asarray(arrays[0]).shape[0]
     for lo in range(0, n, chunk):
         m = min(chunk, n - lo)
-        padded = [pad_rows(np.asarray(a)[lo:lo + m], chunk, fill) for a in arrays]
+        padded = [pad_rows(np.asarray(a)[lo : lo + m], chunk, fill) for a in arrays]
         mask = np.zeros(chunk, bool)
         mask[:m] = True
         yield lo, m, padded, mask
 
 
-def group_chunks(groups: Sequence[np.ndarray], width: int
-                 ) -> Iterator[tuple[int, np.ndarray, np.ndarray]]:
+def group_chunks(
+    groups: Sequence[np.ndarray], width: int
+) -> Iterator[tuple[int, np.ndarray, np.ndarray]]:
     """Yields ``(lo, idx, mask)``: chunks of several groups side by side, ``width`` rows each.
 
     Chunk ``j`` holds the items ``lo:lo+width`` (``lo = j * width``) of every
@@ -77,14 +86,15 @@ def group_chunks(groups: Sequence[np.ndarray], width: int
     width = check_count("width", width, 1)
     n = max((len(g) for g in groups), default=0)
     for lo in range(0, n, width):
-        parts = [np.asarray(g)[lo:lo + width] for g in groups]
+        parts = [np.asarray(g)[lo : lo + width] for g in groups]
         idx = np.concatenate([pad_rows(p, width) for p in parts])
         mask = np.concatenate([np.arange(width) < len(p) for p in parts])
         yield lo, idx, mask
 
 
-def map_chunks(fn: Callable, *arrays: np.ndarray, chunk: int, fill=0, with_mask: bool = False,
-               empty=None):
+def map_chunks(
+    fn: Callable, *arrays: np.ndarray, chunk: int, fill=0, with_mask: bool = False, empty=None
+):
     """``fn`` over the rows of ``arrays`` in fixed-size padded chunks, outputs concatenated.
 
     Args:

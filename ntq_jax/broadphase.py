@@ -159,15 +159,24 @@ class ObstacleIndex:
         u, v = (x - self.x0) * inv, (y - self.y0) * inv
         col, row = jnp.floor(u), jnp.floor(v)
         fu, fv = u - col, v - row
-        inside = ((fu >= m) & (fu <= 1.0 - m) & (fv >= m) & (fv <= 1.0 - m)
-                  & (col >= 0.0) & (col < self.bnx) & (row >= 0.0) & (row < self.bny))
+        inside = (
+            (fu >= m)
+            & (fu <= 1.0 - m)
+            & (fv >= m)
+            & (fv <= 1.0 - m)
+            & (col >= 0.0)
+            & (col < self.bnx)
+            & (row >= 0.0)
+            & (row < self.bny)
+        )
         col = jnp.clip(jnp.where(inside, col, 0.0), 0, self.bnx - 1).astype(jnp.int32)
         row = jnp.clip(jnp.where(inside, row, 0.0), 0, self.bny - 1).astype(jnp.int32)
         return inside & (self.blocked.at[row * self.bnx + col].get(mode="promise_in_bounds") != 0)
 
 
-def fold(rows: Array, f, init, combine, sentinel=None, unroll_max: int | None = None,
-         block: int = BLOCK):
+def fold(
+    rows: Array, f, init, combine, sentinel=None, unroll_max: int | None = None, block: int = BLOCK
+):
     """``combine(acc, f(row))`` over the rows of ``rows`` (``(n, w)``), starting from ``init``.
 
     Unrolled at trace time for ``n <= unroll_max`` (default :data:`UNROLL_MAX`);
@@ -183,7 +192,9 @@ def fold(rows: Array, f, init, combine, sentinel=None, unroll_max: int | None = 
         return acc
     blocks = -(-n // block)
     if blocks * block > n:
-        pad = jnp.broadcast_to(jnp.asarray(sentinel, rows.dtype), (blocks * block - n, rows.shape[1]))
+        pad = jnp.broadcast_to(
+            jnp.asarray(sentinel, rows.dtype), (blocks * block - n, rows.shape[1])
+        )
         rows = jnp.concatenate([rows, pad])
 
     def body(j, acc):
@@ -199,8 +210,15 @@ def fold_candidates(rows: Array, f, init, combine, cheap: bool = True):
     """:func:`fold` over an index cell's candidate boxes (``(K, 4)``): unrolled up to
     :data:`INDEX_UNROLL_MAX` candidates for ``cheap`` tests, else looped in blocks of
     :data:`INDEX_BLOCK` (the heavier distance kernels: their compile time stays small)."""
-    return fold(rows, f, init, combine, SENTINEL_BOX,
-                unroll_max=INDEX_UNROLL_MAX if cheap else 0, block=INDEX_BLOCK)
+    return fold(
+        rows,
+        f,
+        init,
+        combine,
+        SENTINEL_BOX,
+        unroll_max=INDEX_UNROLL_MAX if cheap else 0,
+        block=INDEX_BLOCK,
+    )
 
 
 def choose_cell(bounds: np.ndarray, num_boxes: int, min_cell: float = 0.0) -> float:
@@ -253,15 +271,28 @@ def build_index(bounds, boxes, reach: float, cell: float | None = None) -> Obsta
     table = np.tile(np.asarray(SENTINEL_BOX, np.float32), (nx * ny, k, 1))
     for c, v in enumerate(lists):
         if v:
-            table[c, :len(v)] = bx[v]
+            table[c, : len(v)] = bx[v]
     extent = float(np.max(np.abs(bx[:, :2]) + bx[:, 2:], initial=0.0))
     bitmap = blocked_bitmap(b, bx, float(cell), max(scale, extent))
     if bitmap is None:
-        return ObstacleIndex(jnp.asarray(table), x0, y0, float(cell), int(nx), int(ny), float(reach))
+        return ObstacleIndex(
+            jnp.asarray(table), x0, y0, float(cell), int(nx), int(ny), float(reach)
+        )
     blocked, bcell, margin = bitmap
-    return ObstacleIndex(jnp.asarray(table), x0, y0, float(cell), int(nx), int(ny), float(reach),
-                         jnp.asarray(blocked.ravel()), bcell, int(blocked.shape[1]),
-                         int(blocked.shape[0]), margin)
+    return ObstacleIndex(
+        jnp.asarray(table),
+        x0,
+        y0,
+        float(cell),
+        int(nx),
+        int(ny),
+        float(reach),
+        jnp.asarray(blocked.ravel()),
+        bcell,
+        int(blocked.shape[1]),
+        int(blocked.shape[0]),
+        margin,
+    )
 
 
 def bitmap_cell(bounds: np.ndarray, boxes: np.ndarray, cell: float) -> float:

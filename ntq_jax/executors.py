@@ -45,8 +45,15 @@ import time
 import warnings
 from typing import Any, Callable, Iterable, Iterator, Protocol, Sequence
 
-__all__ = ["EXECUTORS", "Executor", "LocalExecutor", "RayExecutor", "make_executor",
-           "worker_env", "RAY_MISSING"]
+__all__ = [
+    "EXECUTORS",
+    "Executor",
+    "LocalExecutor",
+    "RayExecutor",
+    "make_executor",
+    "worker_env",
+    "RAY_MISSING",
+]
 
 EXECUTORS = ("local", "ray")
 _INIT_LOCK = threading.Lock()  # threads of one driver share one Ray connection
@@ -62,8 +69,7 @@ class Executor(Protocol):
     def slots(self) -> int:
         """How many calls run at the same time (1 for the local executor)."""
 
-    def imap_unordered(self, fn: Callable, items: Sequence[tuple]
-                       ) -> Iterator[tuple[int, Any]]:
+    def imap_unordered(self, fn: Callable, items: Sequence[tuple]) -> Iterator[tuple[int, Any]]:
         """``(i, fn(*items[i]))`` for every item, in completion order."""
 
     def adapt_planner(self, plan_fn: Callable) -> Callable:
@@ -79,8 +85,7 @@ class LocalExecutor:
     name = "local"
     slots = 1
 
-    def imap_unordered(self, fn: Callable, items: Sequence[tuple]
-                       ) -> Iterator[tuple[int, Any]]:
+    def imap_unordered(self, fn: Callable, items: Sequence[tuple]) -> Iterator[tuple[int, Any]]:
         for i, args in enumerate(items):
             yield i, fn(*args)
 
@@ -99,6 +104,7 @@ def _import_ray():
         import ray
     except ImportError:
         from ntq_jax.errors import UsageError
+
         raise UsageError(RAY_MISSING) from None
     return ray
 
@@ -110,6 +116,7 @@ def _ray_current_cluster() -> str | None:
     """The address ``ray start --head`` left for ``auto`` on this machine (Ray's own lookup:
     ``RAY_ADDRESS``, then ``<tmp>/ray/ray_current_cluster``), or None."""
     import tempfile
+
     env = os.environ.get("RAY_ADDRESS")
     if env:
         return env
@@ -133,31 +140,40 @@ def check_ray_address(address: str, timeout: float = RAY_CONNECT_TIMEOUT) -> Non
     accept a TCP connection within ``timeout`` seconds; nothing else is started.
     """
     from ntq_jax.errors import UsageError
-    fix = ("start one with 'ray start --head' (then --ray-address auto), pass the head "
-           "node's <host>:<port>, or leave --ray-address out to start a local Ray instance")
+
+    fix = (
+        "start one with 'ray start --head' (then --ray-address auto), pass the head "
+        "node's <host>:<port>, or leave --ray-address out to start a local Ray instance"
+    )
     given = address
     if address == "auto":
         found = _ray_current_cluster()
         if found is None:
-            raise UsageError(f"--ray-address auto: no Ray cluster is running on this machine; "
-                             f"{fix}")
+            raise UsageError(
+                f"--ray-address auto: no Ray cluster is running on this machine; {fix}"
+            )
         address = found
     target = address.split("://", 1)[1] if "://" in address else address
     host, sep, port = target.rpartition(":")
     if not sep or not host or not port.isdigit() or not 0 < int(port) < 65536:
-        raise UsageError(f"--ray-address {given!r}: expected auto, <host>:<port> or "
-                         f"ray://<host>:<port>; {fix}")
+        raise UsageError(
+            f"--ray-address {given!r}: expected auto, <host>:<port> or ray://<host>:<port>; {fix}"
+        )
     try:
         conn = socket.create_connection((host.strip("[]"), int(port)), timeout=timeout)
     except OSError as e:
         why = "timed out" if isinstance(e, TimeoutError) else (e.strerror or type(e).__name__)
-        raise UsageError(f"--ray-address {given}: no Ray cluster answers at {host}:{port} "
-                         f"({why} after at most {timeout:g} s); {fix}") from None
+        raise UsageError(
+            f"--ray-address {given}: no Ray cluster answers at {host}:{port} "
+            f"({why} after at most {timeout:g} s); {fix}"
+        ) from None
     with conn:
         why = None if _tls() else _not_grpc(conn, timeout)
     if why:
-        raise UsageError(f"--ray-address {given}: {host}:{port} answers but is not a Ray "
-                         f"cluster's head ({why}); {fix}")
+        raise UsageError(
+            f"--ray-address {given}: {host}:{port} answers but is not a Ray "
+            f"cluster's head ({why}); {fix}"
+        )
 
 
 #: HTTP/2's client connection preface and an empty SETTINGS frame (RFC 9113, 3.4)
@@ -191,8 +207,11 @@ def _not_grpc(conn: socket.socket, timeout: float) -> str | None:
     if len(got) == 9 and got[3] == 4:  # a frame header of type SETTINGS
         return None
     if not got:
-        return ("it closed the connection" if closed
-                else f"no answer to a gRPC connection within {timeout:g} s")
+        return (
+            "it closed the connection"
+            if closed
+            else f"no answer to a gRPC connection within {timeout:g} s"
+        )
     text = got.split(b"\r")[0].decode("ascii", "replace")
     return f"it answered {text!r}, not gRPC" if text.isprintable() else "it does not speak gRPC"
 
@@ -212,8 +231,14 @@ class RayExecutor:
 
     name = "ray"
 
-    def __init__(self, address: str | None = None, *, num_cpus: int = 1, max_retries: int = 3,
-                 local_cpus: int | None = None):
+    def __init__(
+        self,
+        address: str | None = None,
+        *,
+        num_cpus: int = 1,
+        max_retries: int = 3,
+        local_cpus: int | None = None,
+    ):
         self.address = address
         self.num_cpus = int(num_cpus)
         self.max_retries = int(max_retries)
@@ -223,7 +248,7 @@ class RayExecutor:
         if address is not None:
             check_ray_address(address)  # an unreachable cluster is an error now, in seconds
         self._task = None
-        self.latencies: list[float] = []    # per task: seconds from submission to its start
+        self.latencies: list[float] = []  # per task: seconds from submission to its start
         self.task_seconds: list[float] = []  # per task: seconds of fn(*args) in the worker
 
     # -- Ray ------------------------------------------------------------------
@@ -241,8 +266,11 @@ class RayExecutor:
         if self._ray is None:
             ray = _import_ray()
             if not ray.is_initialized():
-                kw: dict = {"include_dashboard": False, "log_to_driver": True,
-                            "configure_logging": False}
+                kw: dict = {
+                    "include_dashboard": False,
+                    "log_to_driver": True,
+                    "configure_logging": False,
+                }
                 if self.address is None:
                     kw["num_cpus"] = self.local_cpus
                 kw["runtime_env"] = {"env_vars": worker_env(local=self.address is None)}
@@ -260,12 +288,12 @@ class RayExecutor:
     def submit(self, fn: Callable, *args):
         """One task ``fn(*args)``: an ``ObjectRef`` of :func:`_timed_call`'s triple."""
         if self._task is None:
-            self._task = self.ray().remote(num_cpus=self.num_cpus,
-                                           max_retries=self.max_retries)(_timed_call)
+            self._task = self.ray().remote(num_cpus=self.num_cpus, max_retries=self.max_retries)(
+                _timed_call
+            )
         return self._task.remote(fn, time.time(), *args)
 
-    def imap_unordered(self, fn: Callable, items: Sequence[tuple]
-                       ) -> Iterator[tuple[int, Any]]:
+    def imap_unordered(self, fn: Callable, items: Sequence[tuple]) -> Iterator[tuple[int, Any]]:
         ray = self.ray()
         refs = {self.submit(fn, *args): i for i, args in enumerate(items)}
         pending = list(refs)
@@ -289,8 +317,10 @@ class RayExecutor:
         return plan_fn
 
     def __repr__(self) -> str:
-        return (f"RayExecutor(address={self.address!r}, num_cpus={self.num_cpus}, "
-                f"max_retries={self.max_retries})")
+        return (
+            f"RayExecutor(address={self.address!r}, num_cpus={self.num_cpus}, "
+            f"max_retries={self.max_retries})"
+        )
 
 
 def worker_env(*, local: bool) -> dict[str, str]:
@@ -313,7 +343,8 @@ def worker_env(*, local: bool) -> dict[str, str]:
         if folder and jax.config.jax_enable_compilation_cache:
             env["JAX_COMPILATION_CACHE_DIR"] = str(folder)
             env["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = repr(
-                float(jax.config.jax_persistent_cache_min_compile_time_secs))
+                float(jax.config.jax_persistent_cache_min_compile_time_secs)
+            )
     return env
 
 

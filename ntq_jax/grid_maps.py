@@ -94,6 +94,7 @@ class OccupancyGrid:
 # Rectangle cover
 # ---------------------------------------------------------------------------
 
+
 def rectangle_cover(occupied: np.ndarray) -> np.ndarray:
     """Disjoint rectangles whose union is exactly the occupied cells, ``(R, 4)`` int64 rows
     ``[row0, col0, row1, col1]`` (half-open: rows ``row0..row1-1``, columns ``col0..col1-1``).
@@ -130,8 +131,15 @@ def cover_boxes(grid: OccupancyGrid) -> np.ndarray:
     rects = rectangle_cover(grid.occupied).astype(np.float64)
     r, (x0, y0) = grid.resolution, grid.origin
     r0, c0, r1, c1 = rects.T
-    return np.stack([x0 + 0.5 * (c0 + c1) * r, y0 + 0.5 * (r0 + r1) * r,
-                     0.5 * (c1 - c0) * r, 0.5 * (r1 - r0) * r], axis=1)
+    return np.stack(
+        [
+            x0 + 0.5 * (c0 + c1) * r,
+            y0 + 0.5 * (r0 + r1) * r,
+            0.5 * (c1 - c0) * r,
+            0.5 * (r1 - r0) * r,
+        ],
+        axis=1,
+    )
 
 
 def grid_world(grid: OccupancyGrid):
@@ -141,6 +149,7 @@ def grid_world(grid: OccupancyGrid):
         GridMapError: float32 cannot hold the grid's geometry (:func:`check_float32`).
     """
     from ntq_jax.geometry import World
+
     boxes = cover_boxes(grid)
     check_float32(grid, boxes)
     return World.create(grid.bounds, boxes)
@@ -161,23 +170,34 @@ def check_float32(grid: OccupancyGrid, boxes: np.ndarray | None = None) -> None:
     with np.errstate(over="ignore", invalid="ignore"):
         b32, x32 = b.astype(np.float32), boxes.astype(np.float32)
     if not (np.all(np.isfinite(b)) and np.all(np.isfinite(b32)) and np.all(b32[:, 1] > b32[:, 0])):
-        raise GridMapError(f"{where}: its extent ({w} x {h} cells of {grid.resolution:g} from "
-                           f"({grid.origin[0]:g}, {grid.origin[1]:g})) is {b.tolist()}, which "
-                           "float32 world coordinates cannot hold; use a resolution (or scale) "
-                           "giving a finite map of non-zero width")
+        raise GridMapError(
+            f"{where}: its extent ({w} x {h} cells of {grid.resolution:g} from "
+            f"({grid.origin[0]:g}, {grid.origin[1]:g})) is {b.tolist()}, which "
+            "float32 world coordinates cannot hold; use a resolution (or scale) "
+            "giving a finite map of non-zero width"
+        )
     exact = _edges(b, boxes)
-    err = float(np.max(np.abs(_edges(b32.astype(np.float64), x32.astype(np.float64)) - exact),
-                       initial=0.0)) / grid.resolution
+    err = (
+        float(
+            np.max(
+                np.abs(_edges(b32.astype(np.float64), x32.astype(np.float64)) - exact), initial=0.0
+            )
+        )
+        / grid.resolution
+    )
     if not err <= MAX_EDGE_ERROR:
-        raise GridMapError(f"{where}: float32 world coordinates move its cell edges by up to "
-                           f"{err:.2g} cells (origin ({grid.origin[0]:g}, {grid.origin[1]:g}), "
-                           f"resolution {grid.resolution:g}); plan in the map's own frame: set "
-                           "its origin to [0, 0, 0] and add the origin to the planned paths")
+        raise GridMapError(
+            f"{where}: float32 world coordinates move its cell edges by up to "
+            f"{err:.2g} cells (origin ({grid.origin[0]:g}, {grid.origin[1]:g}), "
+            f"resolution {grid.resolution:g}); plan in the map's own frame: set "
+            "its origin to [0, 0, 0] and add the origin to the planned paths"
+        )
 
 
 # ---------------------------------------------------------------------------
 # MovingAI
 # ---------------------------------------------------------------------------
+
 
 def _read_text(path: Path) -> str:
     """The UTF-8 text of a map file; one :class:`GridMapError` line if unreadable."""
@@ -213,18 +233,22 @@ def read_movingai(path, scale: float = 1.0) -> OccupancyGrid:
         while n < len(lines) and not lines[n].strip():
             n += 1
         if n >= len(lines):
-            raise GridMapError(f"{path}: ended before the {key!r} header line "
-                               "(expected 'type octile', 'height H', 'width W', 'map')")
+            raise GridMapError(
+                f"{path}: ended before the {key!r} header line "
+                "(expected 'type octile', 'height H', 'width W', 'map')"
+            )
         parts = lines[n].split()
         if parts[0].lower() != key or (key == "map") != (len(parts) == 1) or len(parts) > 2:
             form = "map" if key == "map" else f"{key} <value>"
-            raise GridMapError(f"{path}: line {n + 1} is {validation.short_repr(lines[n])}: "
-                               f"expected {form!r}")
+            raise GridMapError(
+                f"{path}: line {n + 1} is {validation.short_repr(lines[n])}: expected {form!r}"
+            )
         header[key] = parts[1] if len(parts) > 1 else ""
         n += 1
     if header["type"] != "octile":
-        raise GridMapError(f"{path}: line 1: type {header['type']!r} is not supported "
-                           "(expected 'type octile')")
+        raise GridMapError(
+            f"{path}: line 1: type {header['type']!r} is not supported (expected 'type octile')"
+        )
     dims = {}
     for i, key in enumerate(("height", "width")):
         v = header[key]
@@ -236,15 +260,20 @@ def read_movingai(path, scale: float = 1.0) -> OccupancyGrid:
     for i in range(h):
         k = n + i
         if k >= len(lines) or (not lines[k] and k == len(lines) - 1):
-            raise GridMapError(f"{path}: has {i} map rows after the 'map' line, expected "
-                               f"height {h}")
+            raise GridMapError(
+                f"{path}: has {i} map rows after the 'map' line, expected height {h}"
+            )
         row = lines[k]
         if len(row) != w:
-            raise GridMapError(f"{path}: line {k + 1} has {len(row)} characters, expected width {w}")
+            raise GridMapError(
+                f"{path}: line {k + 1} has {len(row)} characters, expected width {w}"
+            )
         rows.append(row)
     extra = [k for k in range(n + h, len(lines)) if lines[k].strip()]
     if extra:
-        raise GridMapError(f"{path}: line {extra[0] + 1}: unexpected content after the {h} map rows")
+        raise GridMapError(
+            f"{path}: line {extra[0] + 1}: unexpected content after the {h} map rows"
+        )
     chars = np.frombuffer("".join(rows).encode("latin-1", "replace"), np.uint8).reshape(h, w)
     passable = np.isin(chars, np.frombuffer(MOVINGAI_PASSABLE.encode(), np.uint8))
     return OccupancyGrid(np.ascontiguousarray(~passable[::-1]), float(scale), (0.0, 0.0), str(path))
@@ -254,16 +283,20 @@ def read_movingai(path, scale: float = 1.0) -> OccupancyGrid:
 # ROS map_server
 # ---------------------------------------------------------------------------
 
+
 class _RosLoader(yaml.SafeLoader):
     """PyYAML's safe loader reading ``5e-2`` as a number, as map_server (yaml-cpp) does: YAML
     1.1, which PyYAML follows, needs a dot in a float (``5.0e-2``)."""
 
 
-_RosLoader.yaml_implicit_resolvers = {k: list(v) for k, v in
-                                      yaml.SafeLoader.yaml_implicit_resolvers.items()}
+_RosLoader.yaml_implicit_resolvers = {
+    k: list(v) for k, v in yaml.SafeLoader.yaml_implicit_resolvers.items()
+}
 _RosLoader.add_implicit_resolver(
     "tag:yaml.org,2002:float",
-    re.compile(r"^[-+]?(?:[0-9][0-9_]*)(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"), list("-+0123456789"))
+    re.compile(r"^[-+]?(?:[0-9][0-9_]*)(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"),
+    list("-+0123456789"),
+)
 
 _ROS_KEYS = {"image", "resolution", "origin", "occupied_thresh", "free_thresh", "negate", "mode"}
 
@@ -277,14 +310,14 @@ def _read_pgm(path: Path) -> np.ndarray:
     tokens: list[bytes] = []
     pos = 2
     while len(tokens) < 3:
-        while pos < len(data) and data[pos:pos + 1].isspace():
+        while pos < len(data) and data[pos : pos + 1].isspace():
             pos += 1
-        if data[pos:pos + 1] == b"#":
-            while pos < len(data) and data[pos:pos + 1] not in (b"\n", b"\r"):
+        if data[pos : pos + 1] == b"#":
+            while pos < len(data) and data[pos : pos + 1] not in (b"\n", b"\r"):
                 pos += 1
             continue
         start = pos
-        while pos < len(data) and not data[pos:pos + 1].isspace() and data[pos:pos + 1] != b"#":
+        while pos < len(data) and not data[pos : pos + 1].isspace() and data[pos : pos + 1] != b"#":
             pos += 1
         if start == pos:
             raise GridMapError(f"{path}: PGM header ends early (expected width, height, maxval)")
@@ -292,7 +325,9 @@ def _read_pgm(path: Path) -> np.ndarray:
     try:
         w, h, maxval = (int(t) for t in tokens)
     except ValueError:
-        raise GridMapError(f"{path}: PGM header {b' '.join(tokens)!r} is not width height maxval") from None
+        raise GridMapError(
+            f"{path}: PGM header {b' '.join(tokens)!r} is not width height maxval"
+        ) from None
     if w < 1 or h < 1 or not 0 < maxval < 65536:
         raise GridMapError(f"{path}: PGM header has width {w}, height {h}, maxval {maxval}")
     if magic == b"P5":
@@ -300,7 +335,9 @@ def _read_pgm(path: Path) -> np.ndarray:
         dtype = np.dtype(">u2") if maxval > 255 else np.dtype(np.uint8)
         need = w * h * dtype.itemsize
         if len(data) - pos < need:
-            raise GridMapError(f"{path}: PGM pixel data is {len(data) - pos} bytes, expected {need}")
+            raise GridMapError(
+                f"{path}: PGM pixel data is {len(data) - pos} bytes, expected {need}"
+            )
         px = np.frombuffer(data, dtype, w * h, pos).reshape(h, w).astype(np.float64)
     else:
         body = re.sub(rb"#[^\n\r]*", b" ", data[pos:]).split()
@@ -311,8 +348,10 @@ def _read_pgm(path: Path) -> np.ndarray:
         except ValueError:
             raise GridMapError(f"{path}: PGM pixel values must be integers") from None
         if px.size and not (px.min() >= 0 and px.max() <= maxval):
-            raise GridMapError(f"{path}: PGM pixel values must be in [0, {maxval}] (the header's "
-                               f"maxval), found {px.min():g}..{px.max():g}")
+            raise GridMapError(
+                f"{path}: PGM pixel values must be in [0, {maxval}] (the header's "
+                f"maxval), found {px.min():g}..{px.max():g}"
+            )
     return px * (255.0 / maxval)
 
 
@@ -338,8 +377,9 @@ def _read_image(path: Path) -> np.ndarray:
             if mode in ("LA", "P", "PA", "RGBA", "RGB"):
                 rgb = np.asarray(im.convert("RGB"), np.float64)
                 return rgb.mean(axis=2)
-            raise GridMapError(f"{path}: image mode {mode!r} is not supported "
-                               "(grayscale or RGB(A) PNG, or PGM)")
+            raise GridMapError(
+                f"{path}: image mode {mode!r} is not supported (grayscale or RGB(A) PNG, or PGM)"
+            )
     except GridMapError:
         raise
     except Exception as e:  # noqa: BLE001 - pillow raises many types for bad files
@@ -354,9 +394,11 @@ def _ros_number(spec, key, path, *, lo=None, hi=None) -> float:
     except ValueError as e:
         raise GridMapError(f"{path}: {e}") from None
     if (lo is not None and not v > lo) or (hi is not None and not v <= hi):
-        raise GridMapError(f"{path}: {key} is {v:g}, expected a number in "
-                           f"({lo:g}, {hi:g}]" if hi is not None else f"{path}: {key} is {v:g}, "
-                           f"expected a number > {lo:g}")
+        raise GridMapError(
+            f"{path}: {key} is {v:g}, expected a number in ({lo:g}, {hi:g}]"
+            if hi is not None
+            else f"{path}: {key} is {v:g}, expected a number > {lo:g}"
+        )
     return v
 
 
@@ -377,17 +419,23 @@ def read_ros_map(path, unknown: str = "occupied") -> OccupancyGrid:
     except yaml.YAMLError as e:
         mark = getattr(e, "problem_mark", None)
         where = f"line {mark.line + 1}" if mark is not None else "YAML"
-        raise GridMapError(f"{path}: {where}: not valid YAML ({getattr(e, 'problem', None) or e})") from None
+        raise GridMapError(
+            f"{path}: {where}: not valid YAML ({getattr(e, 'problem', None) or e})"
+        ) from None
     if not isinstance(spec, dict):
-        raise GridMapError(f"{path}: expected a YAML mapping with image, resolution, origin, "
-                           f"occupied_thresh, free_thresh, negate")
+        raise GridMapError(
+            f"{path}: expected a YAML mapping with image, resolution, origin, "
+            f"occupied_thresh, free_thresh, negate"
+        )
     extra = sorted(set(spec) - _ROS_KEYS, key=str)
     if extra:
         raise GridMapError(f"{path}: unknown field(s) {extra}; allowed: {sorted(_ROS_KEYS)}")
     image = spec.get("image")
     if not isinstance(image, str) or not image:
-        raise GridMapError(f"{path}: field 'image' must be the image's file name, got "
-                           f"{validation.short_repr(image)}")
+        raise GridMapError(
+            f"{path}: field 'image' must be the image's file name, got "
+            f"{validation.short_repr(image)}"
+        )
     mode = spec.get("mode", "trinary")
     if mode != "trinary":
         raise GridMapError(f"{path}: mode {mode!r} is not supported (only 'trinary')")
@@ -403,8 +451,9 @@ def read_ros_map(path, unknown: str = "occupied") -> OccupancyGrid:
     except ValueError as e:
         raise GridMapError(f"{path}: {e}") from None
     if yaw != 0.0:
-        raise GridMapError(f"{path}: origin yaw is {yaw:g}: only yaw 0 is supported "
-                           "(rotate the image instead)")
+        raise GridMapError(
+            f"{path}: origin yaw is {yaw:g}: only yaw 0 is supported (rotate the image instead)"
+        )
     negate = spec.get("negate", 0)
     if negate not in (0, 1) or isinstance(negate, float):
         raise GridMapError(f"{path}: negate must be 0 or 1, got {validation.short_repr(negate)}")
@@ -427,18 +476,20 @@ def read_grid(path, *, unknown: str = "occupied", scale: float | None = None) ->
     suffix = path.suffix.lower()
     if suffix in (".yaml", ".yml"):
         if scale is not None:
-            raise GridMapError(f"{path}: 'scale' is for MovingAI maps; a ROS map's cell size is "
-                               "its YAML 'resolution'")
+            raise GridMapError(
+                f"{path}: 'scale' is for MovingAI maps; a ROS map's cell size is "
+                "its YAML 'resolution'"
+            )
         return read_ros_map(path, unknown)
     if suffix == ".map":
         return read_movingai(path, 1.0 if scale is None else scale)
     raise GridMapError(f"{path}: not a grid map (expected a ROS map .yaml or a MovingAI .map)")
 
 
-
 # ---------------------------------------------------------------------------
 # Writing, and a maze generator (tests, benchmarks, examples)
 # ---------------------------------------------------------------------------
+
 
 def write_movingai(path, occupied: np.ndarray) -> Path:
     """Writes ``occupied`` (``(H, W)`` bool, row 0 at the bottom as in :class:`OccupancyGrid`)
@@ -446,8 +497,9 @@ def write_movingai(path, occupied: np.ndarray) -> Path:
     occ = np.asarray(occupied, bool)
     h, w = occ.shape
     rows = ["".join("@" if v else "." for v in row) for row in occ[::-1]]
-    return artifacts.write_text(path, f"type octile\nheight {h}\nwidth {w}\nmap\n"
-                                + "\n".join(rows) + "\n")
+    return artifacts.write_text(
+        path, f"type octile\nheight {h}\nwidth {w}\nmap\n" + "\n".join(rows) + "\n"
+    )
 
 
 def maze_grid(size: int = 256, corridor: int = 1, seed: int = 0) -> np.ndarray:
@@ -466,15 +518,18 @@ def maze_grid(size: int = 256, corridor: int = 1, seed: int = 0) -> np.ndarray:
     seen = np.zeros((m, m), bool)
 
     def room(r, c):
-        g[r * step + 1:r * step + 1 + corridor, c * step + 1:c * step + 1 + corridor] = False
+        g[r * step + 1 : r * step + 1 + corridor, c * step + 1 : c * step + 1 + corridor] = False
 
     stack = [(0, 0)]
     seen[0, 0] = True
     room(0, 0)
     while stack:
         r, c = stack[-1]
-        nb = [(r + dr, c + dc) for dr, dc in ((0, 1), (1, 0), (0, -1), (-1, 0))
-              if 0 <= r + dr < m and 0 <= c + dc < m and not seen[r + dr, c + dc]]
+        nb = [
+            (r + dr, c + dc)
+            for dr, dc in ((0, 1), (1, 0), (0, -1), (-1, 0))
+            if 0 <= r + dr < m and 0 <= c + dc < m and not seen[r + dr, c + dc]
+        ]
         if not nb:
             stack.pop()
             continue
@@ -482,7 +537,9 @@ def maze_grid(size: int = 256, corridor: int = 1, seed: int = 0) -> np.ndarray:
         seen[r2, c2] = True
         room(r2, c2)
         lo_r, lo_c = min(r, r2) * step + 1, min(c, c2) * step + 1
-        g[lo_r:lo_r + corridor + (step if r != r2 else 0),
-          lo_c:lo_c + corridor + (step if c != c2 else 0)] = False
+        g[
+            lo_r : lo_r + corridor + (step if r != r2 else 0),
+            lo_c : lo_c + corridor + (step if c != c2 else 0),
+        ] = False
         stack.append((r2, c2))
     return g

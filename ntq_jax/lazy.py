@@ -11,8 +11,9 @@ import importlib
 from typing import Callable
 
 
-def lazy_exports(package: str, namespace: dict, exports: dict[str, str]
-                 ) -> tuple[Callable[[str], object], Callable[[], list[str]]]:
+def lazy_exports(
+    package: str, namespace: dict, exports: dict[str, str]
+) -> tuple[Callable[[str], object], Callable[[], list[str]]]:
     """``(__getattr__, __dir__)`` for the package ``package`` whose globals are ``namespace``.
 
     ``exports`` maps each public name to the module it lives in. Any other name is tried

@@ -74,11 +74,17 @@ class ModelConfig:
     dropout_layers: int = 2
 
     def validate(self, p: str):
-        _check(len(self.hidden) >= 1 and all(h >= 1 for h in self.hidden), f"{p}.hidden",
-               f"must be a non-empty list of positive widths, got {list(self.hidden)}")
+        _check(
+            len(self.hidden) >= 1 and all(h >= 1 for h in self.hidden),
+            f"{p}.hidden",
+            f"must be a non-empty list of positive widths, got {list(self.hidden)}",
+        )
         _check(0.0 <= self.dropout < 1.0, f"{p}.dropout", f"must be in [0, 1), got {self.dropout}")
-        _check(0 <= self.dropout_layers <= len(self.hidden), f"{p}.dropout_layers",
-               f"must be in [0, {len(self.hidden)}], got {self.dropout_layers}")
+        _check(
+            0 <= self.dropout_layers <= len(self.hidden),
+            f"{p}.dropout_layers",
+            f"must be in [0, {len(self.hidden)}], got {self.dropout_layers}",
+        )
 
 
 Array = jax.Array
@@ -116,16 +122,27 @@ class ModelSpec:
             raise ValueError(f"ModelSpec: dropout_layers must be in [0, {len(self.hidden)}]")
 
     def to_json(self) -> dict:
-        return {"dim": self.dim, "hidden": list(self.hidden), "dropout": self.dropout,
-                "dropout_layers": self.dropout_layers, "lo": list(self.lo),
-                "hi": list(self.hi), "periodic": list(self.periodic)}
+        return {
+            "dim": self.dim,
+            "hidden": list(self.hidden),
+            "dropout": self.dropout,
+            "dropout_layers": self.dropout_layers,
+            "lo": list(self.lo),
+            "hi": list(self.hi),
+            "periodic": list(self.periodic),
+        }
 
     @staticmethod
     def from_json(d: dict) -> "ModelSpec":
-        return ModelSpec(dim=int(d["dim"]), hidden=tuple(int(h) for h in d["hidden"]),
-                         dropout=float(d["dropout"]), dropout_layers=int(d["dropout_layers"]),
-                         lo=tuple(float(v) for v in d["lo"]), hi=tuple(float(v) for v in d["hi"]),
-                         periodic=tuple(bool(v) for v in d["periodic"]))
+        return ModelSpec(
+            dim=int(d["dim"]),
+            hidden=tuple(int(h) for h in d["hidden"]),
+            dropout=float(d["dropout"]),
+            dropout_layers=int(d["dropout_layers"]),
+            lo=tuple(float(v) for v in d["lo"]),
+            hi=tuple(float(v) for v in d["hi"]),
+            periodic=tuple(bool(v) for v in d["periodic"]),
+        )
 
     @staticmethod
     def from_env(env, model_cfg) -> "ModelSpec":
@@ -138,10 +155,15 @@ class ModelSpec:
         lo, hi = env.robot.config_bounds(env.world)
         lo = tuple(float(v) for v in np.asarray(lo))
         hi = tuple(float(v) for v in np.asarray(hi))
-        return ModelSpec(dim=int(env.dim), hidden=tuple(model_cfg.hidden),
-                         dropout=float(model_cfg.dropout),
-                         dropout_layers=int(model_cfg.dropout_layers), lo=lo, hi=hi,
-                         periodic=periodic_dims(env.robot))
+        return ModelSpec(
+            dim=int(env.dim),
+            hidden=tuple(model_cfg.hidden),
+            dropout=float(model_cfg.dropout),
+            dropout_layers=int(model_cfg.dropout_layers),
+            lo=lo,
+            hi=hi,
+            periodic=periodic_dims(env.robot),
+        )
 
 
 def periodic_dims(robot) -> tuple[bool, ...]:
@@ -200,24 +222,31 @@ class PNet(nnx.Module):
             raise ValueError("PNet: dropout is active, pass a PRNG key (or deterministic=True)")
         u, offset = None, 0
         if not off:
-            u = prng.uniform_array(key, x.shape[:-1] + (sum(spec.hidden[:spec.dropout_layers]),))
+            u = prng.uniform_array(key, x.shape[:-1] + (sum(spec.hidden[: spec.dropout_layers]),))
         for i, (lin, act) in enumerate(zip(self.layers, self.acts)):
             x = act(lin(x))
             if not off and i < spec.dropout_layers:
                 w = spec.hidden[i]
-                keep = u[..., offset:offset + w] >= spec.dropout
+                keep = u[..., offset : offset + w] >= spec.dropout
                 x = jnp.where(keep, x / (1.0 - spec.dropout), 0.0)
                 offset += w
         return self.out(x)
 
-    def __call__(self, current: Array, goal: Array, *, key: Array | None = None,
-                 deterministic: bool = False) -> Array:
+    def __call__(
+        self, current: Array, goal: Array, *, key: Array | None = None, deterministic: bool = False
+    ) -> Array:
         """Next state ``(..., d)`` in robot coordinates from ``current`` and ``goal`` ``(..., d)``."""
         x = jnp.concatenate([self.normalize(current), self.normalize(goal)], axis=-1)
         return self.denormalize(self.net(x, key, deterministic))
 
-    def loss(self, inputs: Array, targets: Array, mask: Array, key: Array | None,
-             deterministic: bool = False) -> Array:
+    def loss(
+        self,
+        inputs: Array,
+        targets: Array,
+        mask: Array,
+        key: Array | None,
+        deterministic: bool = False,
+    ) -> Array:
         """Masked mean squared error in normalised units (shortest arc on periodic coordinates).
 
         Args:
@@ -249,6 +278,7 @@ def wrap_normalized_error(err: Array, periodic: Sequence[bool]) -> Array:
 # ---------------------------------------------------------------------------
 # Ensembles
 # ---------------------------------------------------------------------------
+
 
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)
@@ -312,10 +342,13 @@ def _graph_and_init(spec: ModelSpec):
     site instead of one per layer, which compiles several times faster on CPU.
     """
     graphdef, abstract = nnx.split(
-        nnx.eval_shape(lambda: PNet(spec, rngs=nnx.Rngs(params=jax.random.key(0)))), nnx.Param)
+        nnx.eval_shape(lambda: PNet(spec, rngs=nnx.Rngs(params=jax.random.key(0)))), nnx.Param
+    )
     paths_leaves, treedef = jax.tree_util.tree_flatten_with_path(abstract)
-    names = [next(k.key for k in reversed(p) if isinstance(k, jax.tree_util.DictKey))
-             for p, _ in paths_leaves]
+    names = [
+        next(k.key for k in reversed(p) if isinstance(k, jax.tree_util.DictKey))
+        for p, _ in paths_leaves
+    ]
     shapes = [leaf.shape for _, leaf in paths_leaves]
     total = sum(int(np.prod(sh)) for n, sh in zip(names, shapes) if n == "kernel")
 
@@ -326,7 +359,7 @@ def _graph_and_init(spec: ModelSpec):
             if n == "kernel":
                 size = int(np.prod(sh))
                 std = (1.0 / sh[0]) ** 0.5 / LECUN_TRUNC
-                leaves.append(z[off:off + size].reshape(sh) * std)
+                leaves.append(z[off : off + size].reshape(sh) * std)
                 off += size
             elif n == "negative_slope":
                 leaves.append(jnp.full(sh, PRELU_INIT, jnp.float32))
@@ -337,8 +370,9 @@ def _graph_and_init(spec: ModelSpec):
     return graphdef, jax.jit(jax.vmap(init_one))
 
 
-def init_ensemble(spec: ModelSpec, seed_or_key, num_members: int = 4,
-                  member_ids: Sequence[int] | None = None) -> Ensemble:
+def init_ensemble(
+    spec: ModelSpec, seed_or_key, num_members: int = 4, member_ids: Sequence[int] | None = None
+) -> Ensemble:
     """An ensemble of freshly initialised PNets.
 
     Args:
@@ -361,14 +395,16 @@ def member(ens: Ensemble, m: int) -> PNet:
     return nnx.merge(ens.graphdef, unstack_state(ens.params, m))
 
 
-def apply_member(graphdef, params, key: Array | None, current: Array, goal: Array,
-                 deterministic: bool = False) -> Array:
+def apply_member(
+    graphdef, params, key: Array | None, current: Array, goal: Array, deterministic: bool = False
+) -> Array:
     """Pure forward pass of one member given its ``params`` (no member axis)."""
     return nnx.merge(graphdef, params)(current, goal, key=key, deterministic=deterministic)
 
 
-def predictor(ens: Ensemble, member: int | None = None, *,
-              deterministic: bool = False) -> Callable[[Array, Array, Array], Array]:
+def predictor(
+    ens: Ensemble, member: int | None = None, *, deterministic: bool = False
+) -> Callable[[Array, Array, Array], Array]:
     """A pure, jittable next-state function in the robot's own coordinates.
 
     Dropout is active (MPNet plans stochastically) and driven by the explicit key.
@@ -397,19 +433,23 @@ def predictor(ens: Ensemble, member: int | None = None, *,
 
         def fn(key, current, goal):
             return one(p_m, jax.random.fold_in(key, member), current, goal)
+
         return fn
 
     def fn_all(key, current, goal):
         keys = jax.vmap(lambda m: jax.random.fold_in(key, m))(jnp.arange(num))
         return jax.vmap(one, in_axes=(0, 0, None, None))(params, keys, current, goal)
+
     return fn_all
 
 
 @functools.lru_cache(maxsize=8)
 def _member_apply(graphdef) -> Callable:
     """One apply function per graphdef, so ensembles of one architecture share a compilation."""
+
     def fn(params, m, key, current, goal):
         return apply_member(graphdef, params, jax.random.fold_in(key, m), current, goal)
+
     return fn
 
 
@@ -424,5 +464,6 @@ def member_pnets(ens) -> list[Partial]:
         fn = _member_apply(ens.graphdef)
     except TypeError:  # unhashable graphdef: no sharing across ensembles
         fn = _member_apply.__wrapped__(ens.graphdef)
-    return [Partial(fn, unstack_state(ens.params, m), jnp.uint32(m))
-            for m in range(ens.num_members)]
+    return [
+        Partial(fn, unstack_state(ens.params, m), jnp.uint32(m)) for m in range(ens.num_members)
+    ]

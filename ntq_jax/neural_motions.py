@@ -29,14 +29,23 @@ Array = jax.Array
 SEGMENT_CHUNK = 1024
 
 
-def steer(robot, world, a: Array, b: Array, padding: float, mask: Array,
-          check: str = "discretized") -> Array:
+def steer(
+    robot, world, a: Array, b: Array, padding: float, mask: Array, check: str = "discretized"
+) -> Array:
     """``(M, d), (M, d) -> (M,)`` via the package's batched motion check; unmasked = False."""
     return steer_to_cm(robot, world, a.T, b.T, padding, mask, check=check)
 
 
-def steer_gathered(robot, world, a: Array, b: Array, padding: float, mask: Array,
-                   check: str, chunk: int = SEGMENT_CHUNK) -> Array:
+def steer_gathered(
+    robot,
+    world,
+    a: Array,
+    b: Array,
+    padding: float,
+    mask: Array,
+    check: str,
+    chunk: int = SEGMENT_CHUNK,
+) -> Array:
     """:func:`steer` of the masked pairs only, gathered into chunks of ``chunk`` rows.
 
     The masked rows are moved to the front (a stable sort), checked ``chunk`` at a
@@ -65,8 +74,16 @@ def steer_gathered(robot, world, a: Array, b: Array, padding: float, mask: Array
     return jnp.zeros(total, bool).at[jnp.where(pos < count, order, total)].set(got, mode="drop")
 
 
-def segments(robot, world, p: Array, n: Array, padding: float, mask: Array,
-             check: str = "discretized", chunk: int = SEGMENT_CHUNK):
+def segments(
+    robot,
+    world,
+    p: Array,
+    n: Array,
+    padding: float,
+    mask: Array,
+    check: str = "discretized",
+    chunk: int = SEGMENT_CHUNK,
+):
     """Per-segment freedom ``(N, L-1)`` and the segment mask (existing segments of masked rows).
 
     The certified check runs on the existing segments only, ``chunk`` at a time

@@ -1,4 +1,5 @@
-"""The neural planner's contract: its options (:class:`PlannerOptions`) and its per-query results (:class:`NeuralPlanResult`).
+"""The neural planner's contract: its options (:class:`PlannerOptions`) and its per-query results
+(:class:`NeuralPlanResult`).
 
 :mod:`ntq_jax.neural_planner` takes the one and returns the other.
 """
@@ -25,8 +26,18 @@ NOSTEER_CHECKS = (True, False, "states", "replan")
 #: The :class:`PlannerOptions` fields each compiled stage of the neural planner reads
 #: (:mod:`ntq_jax.neural_steps`; a test traces each stage and checks it reads no other).
 STAGE_FIELDS = {
-    "coarse": ("n_plan", "steer", "delta", "delta_norm", "nosteer_check", "replan_rounds",
-               "replan_steps", "bidirectional", "plan_padding", "eval_padding"),
+    "coarse": (
+        "n_plan",
+        "steer",
+        "delta",
+        "delta_norm",
+        "nosteer_check",
+        "replan_rounds",
+        "replan_steps",
+        "bidirectional",
+        "plan_padding",
+        "eval_padding",
+    ),
     "valid": ("eval_padding",),
     "connect": ("replan_steps", "plan_padding"),
     "check": ("steer", "nosteer_check", "contract", "plan_padding", "eval_padding", "eval_check"),
@@ -87,15 +98,19 @@ class PlannerOptions:
         if self.delta_norm not in DELTA_NORMS:
             raise ValueError(f"delta_norm must be one of {DELTA_NORMS}, got {self.delta_norm!r}")
         if self.nosteer_check not in NOSTEER_CHECKS:
-            raise ValueError(f"nosteer_check must be True, False, 'states' or 'replan', got "
-                             f"{self.nosteer_check!r}")
+            raise ValueError(
+                f"nosteer_check must be True, False, 'states' or 'replan', got "
+                f"{self.nosteer_check!r}"
+            )
         if self.n_plan < 1:
             raise ValueError(f"n_plan must be >= 1, got {self.n_plan}")
         if not (self.delta > 0 and math.isfinite(self.delta)):
             raise ValueError(f"delta must be > 0, got {self.delta}")
         if self.replan_rounds < 0 or self.replan_steps < 1:
-            raise ValueError("replan_rounds must be >= 0 and replan_steps >= 1, got "
-                             f"{self.replan_rounds}, {self.replan_steps}")
+            raise ValueError(
+                "replan_rounds must be >= 0 and replan_steps >= 1, got "
+                f"{self.replan_rounds}, {self.replan_steps}"
+            )
         for name in ("plan_padding", "eval_padding"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0):

@@ -52,20 +52,28 @@ import jax.numpy as jnp
 import numpy as np
 from jax.tree_util import Partial
 
-from ntq_jax.validation import check_count
 from ntq_jax.batching import bucket_size, group_chunks, pad_rows, padded_chunks
 from ntq_jax.geometry import World
-from ntq_jax.neural_steps import (CHECK_ROWS, EnsemblePNet, MemberBlocks, Stages, cost_jit,
-                                  fold_in, is_key_stack, split2)
+from ntq_jax.neural_options import ALGORITHM_VERSION, DELTA_NORMS, NeuralPlanResult, PlannerOptions  # noqa: F401
+from ntq_jax.neural_steps import (
+    CHECK_ROWS,
+    EnsemblePNet,
+    MemberBlocks,
+    Stages,
+    cost_jit,
+    fold_in,
+    is_key_stack,
+    split2,
+)
 from ntq_jax.types import CAUSE_RANK, PlanCause
-from ntq_jax.neural_options import (ALGORITHM_VERSION, DELTA_NORMS, NeuralPlanResult,  # noqa: F401
-                                    PlannerOptions)
+from ntq_jax.validation import check_count
 
 Array = jax.Array
 
 # ---------------------------------------------------------------------------
 # Host side: windows, splices and the per-query state of a batch
 # ---------------------------------------------------------------------------
+
 
 def repair_windows(blocked: np.ndarray, ok: np.ndarray, n: int) -> list[tuple[int, int]]:
     """The windows ``(ia, ib)`` one replanning round reconnects in a path, last first.
@@ -109,8 +117,8 @@ def splice(path: np.ndarray, n: int, ia: int, ib: int, sub: np.ndarray):
         return None
     out = np.full_like(path, np.nan)
     out[:ia] = path[:ia]
-    out[ia:ia + len(sub)] = sub
-    out[ia + len(sub):nn] = path[ib + 1:n]
+    out[ia : ia + len(sub)] = sub
+    out[ia + len(sub) : nn] = path[ib + 1 : n]
     return out, nn
 
 
@@ -122,35 +130,48 @@ class _Batch:
     the same ``K`` queries, one block per member.
     """
 
-    paths: np.ndarray      # (K, L, d) float32, NaN padded
-    lengths: np.ndarray    # (K,) int32
-    valid: np.ndarray      # (K,) bool: start and goal valid on the evaluation geometry
-    reached: np.ndarray    # (K,) bool: the coarse plan reached the goal
-    feasible: np.ndarray   # (K,) bool: every segment free on the evaluation geometry
-    blocked: np.ndarray    # (K, L-1) bool: segments in collision
-    calls: np.ndarray      # (K,) int32 PNet predictions
-    replans: np.ndarray    # (K,) int32 replanning rounds
-    members: int = 1       # planners side by side: rows m*K/M.. (m+1)*K/M-1 are member m's
+    paths: np.ndarray  # (K, L, d) float32, NaN padded
+    lengths: np.ndarray  # (K,) int32
+    valid: np.ndarray  # (K,) bool: start and goal valid on the evaluation geometry
+    reached: np.ndarray  # (K,) bool: the coarse plan reached the goal
+    feasible: np.ndarray  # (K,) bool: every segment free on the evaluation geometry
+    blocked: np.ndarray  # (K, L-1) bool: segments in collision
+    calls: np.ndarray  # (K,) int32 PNet predictions
+    replans: np.ndarray  # (K,) int32 replanning rounds
+    members: int = 1  # planners side by side: rows m*K/M.. (m+1)*K/M-1 are member m's
 
     @staticmethod
     def empty(k: int, length: int, d: int, members: int = 1) -> "_Batch":
-        return _Batch(np.full((k, length, d), np.nan, np.float32), np.zeros(k, np.int32),
-                      np.zeros(k, bool), np.zeros(k, bool), np.zeros(k, bool),
-                      np.zeros((k, length - 1), bool), np.zeros(k, np.int32),
-                      np.zeros(k, np.int32), members)
+        return _Batch(
+            np.full((k, length, d), np.nan, np.float32),
+            np.zeros(k, np.int32),
+            np.zeros(k, bool),
+            np.zeros(k, bool),
+            np.zeros(k, bool),
+            np.zeros((k, length - 1), bool),
+            np.zeros(k, np.int32),
+            np.zeros(k, np.int32),
+            members,
+        )
 
     def cause(self) -> np.ndarray:
         """``(K,)`` int8 :class:`PlanCause` of every query."""
         success = self.reached & self.feasible
-        return np.where(~self.valid, PlanCause.INVALID_QUERY,
-                        np.where(~self.reached, PlanCause.NO_PATH,
-                                 np.where(success, PlanCause.SUCCESS, PlanCause.INFEASIBLE))
-                        ).astype(np.int8)
+        return np.where(
+            ~self.valid,
+            PlanCause.INVALID_QUERY,
+            np.where(
+                ~self.reached,
+                PlanCause.NO_PATH,
+                np.where(success, PlanCause.SUCCESS, PlanCause.INFEASIBLE),
+            ),
+        ).astype(np.int8)
 
 
 # ---------------------------------------------------------------------------
 # The stages of plan_batch
 # ---------------------------------------------------------------------------
+
 
 def _member_rows(b: _Batch, rows: np.ndarray) -> list[np.ndarray]:
     """Positions in ``rows`` (batch rows) of each member's rows, in order (one group per member)."""
@@ -166,8 +187,14 @@ def _coarse(stages: Stages, b: _Batch, q: np.ndarray, key, size: int) -> None:
     k = len(q)
     for lo, idx, act in group_chunks([np.arange(k)] * b.members, size):
         rows = idx + np.repeat(np.arange(b.members) * k, size)
-        out = stages("coarse", stages.pnet, fold_in(key, lo // size),
-                     jnp.asarray(q[idx, 0]), jnp.asarray(q[idx, 1]), jnp.asarray(act))
+        out = stages(
+            "coarse",
+            stages.pnet,
+            fold_in(key, lo // size),
+            jnp.asarray(q[idx, 0]),
+            jnp.asarray(q[idx, 1]),
+            jnp.asarray(act),
+        )
         for dst, src in zip((b.paths, b.lengths, b.valid, b.reached, b.calls), out):
             dst[rows[act]] = src[act]
     _recheck(stages, b, np.flatnonzero(b.reached))
@@ -178,7 +205,7 @@ def _window_validity(stages: Stages, b: _Batch, todo: np.ndarray, width: int) ->
     ok = np.zeros((len(todo), b.paths.shape[1]), bool)
     for lo, m, (sel,), _ in padded_chunks([np.arange(len(todo))], width):
         (o,) = stages("valid", jnp.asarray(b.paths[todo[sel]]), jnp.asarray(b.lengths[todo[sel]]))
-        ok[lo:lo + m] = o[:m]
+        ok[lo : lo + m] = o[:m]
     return ok
 
 
@@ -194,8 +221,14 @@ def _reconnect(stages: Stages, b: _Batch, rows, wa, wb, key, width: int):
     conn = np.zeros(len(rows), bool)
     a, z = b.paths[rows, wa], b.paths[rows, wb]
     for lo, sel, mask in group_chunks(_member_rows(b, rows), width):
-        o = stages("connect", stages.pnet, fold_in(key, lo // width),
-                   jnp.asarray(a[sel]), jnp.asarray(z[sel]), jnp.asarray(mask))
+        o = stages(
+            "connect",
+            stages.pnet,
+            fold_in(key, lo // width),
+            jnp.asarray(a[sel]),
+            jnp.asarray(z[sel]),
+            jnp.asarray(mask),
+        )
         part = sel[mask]
         sub[part], ns[part], conn[part] = o[0][mask], o[1][mask], o[2][mask]
         np.add.at(b.calls, rows[part], o[3][mask])
@@ -205,9 +238,13 @@ def _reconnect(stages: Stages, b: _Batch, rows, wa, wb, key, width: int):
 def _recheck(stages: Stages, b: _Batch, todo: np.ndarray) -> None:
     """Contraction and feasibility check of the paths ``todo`` (:data:`CHECK_ROWS` per call)."""
     for lo, m, (sel,), mask in padded_chunks([np.arange(len(todo))], CHECK_ROWS):
-        o = stages("check", jnp.asarray(b.paths[todo[sel]]), jnp.asarray(b.lengths[todo[sel]]),
-                   jnp.asarray(mask))
-        idx = todo[lo:lo + m]
+        o = stages(
+            "check",
+            jnp.asarray(b.paths[todo[sel]]),
+            jnp.asarray(b.lengths[todo[sel]]),
+            jnp.asarray(mask),
+        )
+        idx = todo[lo : lo + m]
         b.paths[idx], b.lengths[idx], b.feasible[idx], b.blocked[idx] = (x[:m] for x in o)
 
 
@@ -221,13 +258,16 @@ def _replan_round(stages: Stages, b: _Batch, todo: np.ndarray, key, width: int) 
     checked again.
     """
     ok = _window_validity(stages, b, todo, width)
-    wins = [(i, ia, ib) for j, i in enumerate(todo)
-            for ia, ib in repair_windows(b.blocked[i], ok[j], int(b.lengths[i]))]
+    wins = [
+        (i, ia, ib)
+        for j, i in enumerate(todo)
+        for ia, ib in repair_windows(b.blocked[i], ok[j], int(b.lengths[i]))
+    ]
     rows, wa, wb = np.array(wins, np.int64).reshape(-1, 3).T
     sub, ns, conn = _reconnect(stages, b, rows, wa, wb, key, width)
     for w in np.flatnonzero(conn):  # each path's windows are listed last first
         i = rows[w]
-        out = splice(b.paths[i], int(b.lengths[i]), wa[w], wb[w], sub[w, :ns[w]])
+        out = splice(b.paths[i], int(b.lengths[i]), wa[w], wb[w], sub[w, : ns[w]])
         if out is not None:
             b.paths[i], b.lengths[i] = out
     _recheck(stages, b, todo)
@@ -240,14 +280,16 @@ def _costs(robot, b: _Batch, success: np.ndarray) -> np.ndarray:
     ok = np.flatnonzero(success)
     if len(ok):
         sel = pad_rows(ok, bucket_size(len(ok)))
-        costs[ok] = np.asarray(cost_jit(robot, jnp.asarray(b.paths[sel]),
-                                        jnp.asarray(b.lengths[sel])))[: len(ok)]
+        costs[ok] = np.asarray(
+            cost_jit(robot, jnp.asarray(b.paths[sel]), jnp.asarray(b.lengths[sel]))
+        )[: len(ok)]
     return costs
 
 
 # ---------------------------------------------------------------------------
 # Public entry points
 # ---------------------------------------------------------------------------
+
 
 def as_pnet(pnet) -> Partial | EnsemblePNet:
     """Wraps a ``pnet(key, current, goal)`` callable as a pytree for the jitted planner.
@@ -281,6 +323,7 @@ def padded_world(world: World, multiple: int = 16) -> World:
     unroll over obstacles, so padding also lengthens every compilation: worth it
     only when many maps share one obstacle-count bucket.
     """
+
     def pad(a, row):
         n = a.shape[0]
         m = max(multiple, -(-n // multiple) * multiple)
@@ -288,14 +331,26 @@ def padded_world(world: World, multiple: int = 16) -> World:
         return jnp.concatenate([a, extra]) if m > n else a
 
     # a broad-phase index stays valid: it holds its own copies of the real boxes
-    return World(world.bounds, pad(world.boxes, [1e6, 1e6, 1.0, 1.0]),
-                 pad(world.discs, [1e6, 1e6, 1.0]), world.index)
+    return World(
+        world.bounds,
+        pad(world.boxes, [1e6, 1e6, 1.0, 1.0]),
+        pad(world.discs, [1e6, 1e6, 1.0]),
+        world.index,
+    )
 
 
-def plan_batch(env, pnet: Callable, queries, key: Array,
-               opts: PlannerOptions = PlannerOptions(), *, chunk: int = 1024,
-               repair_width: int = 256, pad_obstacles: int = 0,
-               rows: int | None = None) -> NeuralPlanResult:
+def plan_batch(
+    env,
+    pnet: Callable,
+    queries,
+    key: Array,
+    opts: PlannerOptions = PlannerOptions(),
+    *,
+    chunk: int = 1024,
+    repair_width: int = 256,
+    pad_obstacles: int = 0,
+    rows: int | None = None,
+) -> NeuralPlanResult:
     """Plans every query with the neural planner (all of a chunk in one jitted call).
 
     1. **Coarse plan** (Alg. 1, lines 2-9): for ``n_plan`` iterations, if
@@ -355,8 +410,16 @@ def plan_batch(env, pnet: Callable, queries, key: Array,
     return _result(env.robot, b, stages, slice(None))
 
 
-def plan_members(env, pnets, queries, key: Array, opts: PlannerOptions = PlannerOptions(), *,
-                 chunk: int = 1024, repair_width: int = 256) -> list[NeuralPlanResult]:
+def plan_members(
+    env,
+    pnets,
+    queries,
+    key: Array,
+    opts: PlannerOptions = PlannerOptions(),
+    *,
+    chunk: int = 1024,
+    repair_width: int = 256,
+) -> list[NeuralPlanResult]:
     """Every PNet of ``pnets`` plans every query on its own, all members in one batch.
 
     The result of member ``m`` is the one :func:`plan_batch` returns for
@@ -394,8 +457,17 @@ def plan_members(env, pnets, queries, key: Array, opts: PlannerOptions = Planner
     return [_result(env.robot, b, stages, slice(m * k, (m + 1) * k)) for m in range(len(members))]
 
 
-def plan_cascade(env, pnets, queries, key: Array, opts: PlannerOptions = PlannerOptions(), *,
-                 order=None, chunk: int = 1024, repair_width: int = 256) -> NeuralPlanResult:
+def plan_cascade(
+    env,
+    pnets,
+    queries,
+    key: Array,
+    opts: PlannerOptions = PlannerOptions(),
+    *,
+    order=None,
+    chunk: int = 1024,
+    repair_width: int = 256,
+) -> NeuralPlanResult:
     """The PNets as fallbacks: the first plans every query, the next the queries still
     unsolved, and so on; each query keeps its first success.
 
@@ -428,8 +500,9 @@ def plan_cascade(env, pnets, queries, key: Array, opts: PlannerOptions = Planner
     q = _check_inputs(env, queries, opts, chunk)
     order = list(range(len(pnets)) if order is None else order)
     if not order or len(set(order)) != len(order) or not all(0 <= m < len(pnets) for m in order):
-        raise ValueError(f"order must list distinct member indices of 0..{len(pnets) - 1}, "
-                         f"got {order}")
+        raise ValueError(
+            f"order must list distinct member indices of 0..{len(pnets) - 1}, got {order}"
+        )
     k = len(q)
     paths = np.full((k, opts.max_len, env.dim), np.nan, np.float32)
     lengths = np.zeros(k, np.int32)
@@ -442,8 +515,16 @@ def plan_cascade(env, pnets, queries, key: Array, opts: PlannerOptions = Planner
     for j, m in enumerate(order):
         if not len(left):
             break
-        res = plan_batch(env, pnets[m], q[left], fold_in(key, j), opts, chunk=chunk,
-                         repair_width=repair_width, rows=k)
+        res = plan_batch(
+            env,
+            pnets[m],
+            q[left],
+            fold_in(key, j),
+            opts,
+            chunk=chunk,
+            repair_width=repair_width,
+            rows=k,
+        )
         seconds, compile_seconds = seconds + res.seconds, compile_seconds + res.compile_seconds
         calls[left] += res.pnet_calls
         replans[left] += res.replans
@@ -451,14 +532,24 @@ def plan_cascade(env, pnets, queries, key: Array, opts: PlannerOptions = Planner
         better = r < rank[left]
         rows = left[better]
         paths[rows] = np.nan
-        paths[rows, :res.paths.shape[1]] = res.paths[better]
+        paths[rows, : res.paths.shape[1]] = res.paths[better]
         lengths[rows], costs[rows] = res.lengths[better], res.costs[better]
         cause[rows], rank[rows], member[rows] = res.cause[better], r[better], m
         left = left[~res.success]
     success = cause == PlanCause.SUCCESS
     top = max(1, int(lengths.max(initial=0)))
-    return NeuralPlanResult(paths[:, :top], lengths, success, costs, cause, calls, replans,
-                            seconds, compile_seconds, member)
+    return NeuralPlanResult(
+        paths[:, :top],
+        lengths,
+        success,
+        costs,
+        cause,
+        calls,
+        replans,
+        seconds,
+        compile_seconds,
+        member,
+    )
 
 
 def _check_inputs(env, queries, opts: PlannerOptions, chunk: int) -> np.ndarray:
@@ -471,8 +562,9 @@ def _check_inputs(env, queries, opts: PlannerOptions, chunk: int) -> np.ndarray:
     return q
 
 
-def _plan(stages: Stages, q: np.ndarray, key, chunk: int, repair_width: int,
-          members: int, rows: int = 0) -> _Batch:
+def _plan(
+    stages: Stages, q: np.ndarray, key, chunk: int, repair_width: int, members: int, rows: int = 0
+) -> _Batch:
     """Steps 1-4 of :func:`plan_batch` for ``members`` planners side by side, with the
     compiled shapes of ``max(len(q), rows)`` queries."""
     opts = stages.opts
@@ -494,7 +586,24 @@ def _result(robot, b: _Batch, stages: Stages, rows: slice) -> NeuralPlanResult:
     success = (b.reached & b.feasible)[rows]
     lengths = b.lengths[rows]
     top = max(1, int(lengths.max(initial=0)))
-    sub = _Batch(b.paths[rows], lengths, b.valid[rows], b.reached[rows], b.feasible[rows],
-                 b.blocked[rows], b.calls[rows], b.replans[rows])
-    return NeuralPlanResult(sub.paths[:, :top], lengths, success, _costs(robot, sub, success),
-                            sub.cause(), sub.calls, sub.replans, stages.run, stages.compile)
+    sub = _Batch(
+        b.paths[rows],
+        lengths,
+        b.valid[rows],
+        b.reached[rows],
+        b.feasible[rows],
+        b.blocked[rows],
+        b.calls[rows],
+        b.replans[rows],
+    )
+    return NeuralPlanResult(
+        sub.paths[:, :top],
+        lengths,
+        success,
+        _costs(robot, sub, success),
+        sub.cause(),
+        sub.calls,
+        sub.replans,
+        stages.run,
+        stages.compile,
+    )

@@ -8,7 +8,8 @@ windows (:func:`connect_core`), the contraction and re-check of repaired paths
 (:func:`check_core`) and the costs of the successful paths (:data:`cost_jit`,
 float32 in the robot's metric). Wherever a step asks the PNet for a next state
 it goes through :func:`propose`: one PNet's prediction, or, for an
-:class:`EnsemblePNet`, every member's prediction and the :func:`choose` rule. The stages take ``(robot, opts, world, ...)``:
+:class:`EnsemblePNet`, every member's prediction and the :func:`choose` rule. The stages take
+``(robot, opts, world, ...)``:
 the robot and ``opts`` (a :class:`ntq_jax.neural_planner.PlannerOptions`, whose
 paddings are numbers) are static, the world is traced. :class:`Stages` runs
 them through a bounded cache of compiled programs keyed by the static settings
@@ -25,8 +26,9 @@ import jax.numpy as jnp
 import numpy as np
 from jax.tree_util import Partial
 
+from ntq_jax.neural_motions import segments as _segments
+from ntq_jax.neural_motions import steer as _steer
 from ntq_jax.planners.smoothing import shortcut_batch
-from ntq_jax.neural_motions import segments as _segments, steer as _steer
 from ntq_jax.robots.batch import is_valid_cm
 
 Array = jax.Array
@@ -42,6 +44,7 @@ CHECK_ROWS = 256
 # ---------------------------------------------------------------------------
 # The ensemble planner's proposals
 # ---------------------------------------------------------------------------
+
 
 @jax.tree_util.register_pytree_node_class
 class EnsemblePNet:
@@ -101,11 +104,19 @@ class MemberBlocks:
             func, args = stacked
             keys = key if batched else jnp.broadcast_to(key, (m,) + key.shape)
             out = jax.vmap(lambda a, k, c, g: func(*a, k, c, g))(
-                args, keys, current.reshape(m, w, -1), goal.reshape(m, w, -1))
+                args, keys, current.reshape(m, w, -1), goal.reshape(m, w, -1)
+            )
             return out.reshape(m * w, -1)
-        return jnp.concatenate([
-            p(key[i] if batched else key, current[i * w:(i + 1) * w], goal[i * w:(i + 1) * w])
-            for i, p in enumerate(self.members)])
+        return jnp.concatenate(
+            [
+                p(
+                    key[i] if batched else key,
+                    current[i * w : (i + 1) * w],
+                    goal[i * w : (i + 1) * w],
+                )
+                for i, p in enumerate(self.members)
+            ]
+        )
 
     def tree_flatten(self):
         return self.members, None
@@ -119,15 +130,13 @@ def _stacked_partials(members):
     """``(func, stacked args)`` when every member is a ``Partial`` of one function with
     arguments of one structure and shape (e.g. an ensemble's members), else None."""
     first = members[0]
-    if not all(isinstance(p, Partial) and p.func is first.func and not p.keywords
-               for p in members):
+    if not all(isinstance(p, Partial) and p.func is first.func and not p.keywords for p in members):
         return None
     trees = [jax.tree_util.tree_structure(p.args) for p in members]
     shapes = [[jnp.shape(x) for x in jax.tree_util.tree_leaves(p.args)] for p in members]
     if any(t != trees[0] for t in trees) or any(s != shapes[0] for s in shapes):
         return None
-    return first.func, jax.tree_util.tree_map(lambda *xs: jnp.stack(xs),
-                                              *[p.args for p in members])
+    return first.func, jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *[p.args for p in members])
 
 
 def is_key_stack(key) -> bool:
@@ -163,8 +172,16 @@ def _count(mask: Array, k: int) -> Array:
     return mask if k == 1 else mask.astype(jnp.int32) * k
 
 
-def choose(robot, world, cands: Array, cur: Array, tgt: Array, live: Array, padding: float,
-           steer: bool = True) -> Array:
+def choose(
+    robot,
+    world,
+    cands: Array,
+    cur: Array,
+    tgt: Array,
+    live: Array,
+    padding: float,
+    steer: bool = True,
+) -> Array:
     """The ensemble's rule: the index ``(N,)`` of the candidate to append, per row.
 
     ``cands (M, N, d)`` are the members' proposals from ``cur (N, d)`` towards
@@ -207,8 +224,9 @@ def choose(robot, world, cands: Array, cur: Array, tgt: Array, live: Array, padd
     return jnp.argmin(jnp.where(tier == best[None], score, jnp.inf), axis=0)
 
 
-def propose(robot, world, pnet, key, cur: Array, tgt: Array, live: Array, padding: float,
-            steer: bool = True) -> Array:
+def propose(
+    robot, world, pnet, key, cur: Array, tgt: Array, live: Array, padding: float, steer: bool = True
+) -> Array:
     """The next state ``(N, d)`` from ``cur`` towards ``tgt``: the PNet's prediction, or
     for an :class:`EnsemblePNet` every member's and the one :func:`choose` picks."""
     if not isinstance(pnet, EnsemblePNet):
@@ -224,6 +242,7 @@ def propose(robot, world, pnet, key, cur: Array, tgt: Array, live: Array, paddin
 # Building blocks (inside jit)
 # ---------------------------------------------------------------------------
 
+
 def _rows(x: Array, idx: Array) -> Array:
     """``x[n, idx[n]]`` for ``x (N, L, d)``, ``idx (N,)``."""
     return jnp.take_along_axis(x, idx[:, None, None], axis=1)[:, 0]
@@ -236,8 +255,11 @@ def _join(a: Array, na: Array, b: Array, nb: Array, length: int) -> tuple[Array,
     ib = jnp.clip(na[:, None] + nb[:, None] - 1 - t, 0, b.shape[1] - 1)
     ga = jnp.take_along_axis(a, ia[..., None], axis=1)
     gb = jnp.take_along_axis(b, ib[..., None], axis=1)
-    out = jnp.where((t < na[:, None])[..., None], ga,
-                    jnp.where((t < (na + nb)[:, None])[..., None], gb, jnp.nan))
+    out = jnp.where(
+        (t < na[:, None])[..., None],
+        ga,
+        jnp.where((t < (na + nb)[:, None])[..., None], gb, jnp.nan),
+    )
     return out, na + nb
 
 
@@ -253,8 +275,9 @@ def contract(robot, world, p: Array, n: Array, padding: float, mask: Array):
     return jnp.where(keep[:, None, None], q, p), jnp.where(keep, m, n)
 
 
-def _connect(robot, world, pnet, key, a: Array, b: Array, active: Array, steps: int,
-             padding: float):
+def _connect(
+    robot, world, pnet, key, a: Array, b: Array, active: Array, steps: int, padding: float
+):
     """Bidirectional neural connection of ``a`` and ``b`` (MPNet), at most ``steps`` predictions.
 
     Returns ``(A, nA, B, nB, connected, calls)``: the two growing paths (``A[0] = a``,
@@ -285,8 +308,16 @@ def _connect(robot, world, pnet, key, a: Array, b: Array, active: Array, steps: 
         return s + 1, act, conn, pa, na, pb, nb, calls + _count(grow, k)
 
     one = jnp.ones(num, jnp.int32)
-    init = (jnp.int32(0), active, jnp.zeros(num, bool), buf.at[:, 0].set(a), one,
-            buf.at[:, 0].set(b), one, jnp.zeros(num, jnp.int32))
+    init = (
+        jnp.int32(0),
+        active,
+        jnp.zeros(num, bool),
+        buf.at[:, 0].set(a),
+        one,
+        buf.at[:, 0].set(b),
+        one,
+        jnp.zeros(num, jnp.int32),
+    )
     _, _, conn, pa, na, pb, nb, calls = jax.lax.while_loop(cond, body, init)
     return pa, na, pb, nb, conn & active, calls
 
@@ -320,8 +351,17 @@ def _forward(robot, world, pnet, key, starts, goals, active, opts, length):
             hit = _steer(robot, world, end, goals, opts.plan_padding, live)
         else:
             hit = live & near(end)
-        nxt = propose(robot, world, pnet, fold_in(key, i), end, goals, live & ~hit,
-                      opts.plan_padding, opts.steer)
+        nxt = propose(
+            robot,
+            world,
+            pnet,
+            fold_in(key, i),
+            end,
+            goals,
+            live & ~hit,
+            opts.plan_padding,
+            opts.steer,
+        )
         new = jnp.where(hit[:, None], goals, nxt) if opts.repairs else nxt
         append = live & (~hit | opts.repairs)
         p = p.at[rows, jnp.where(append, n, length)].set(new, mode="drop")
@@ -332,8 +372,15 @@ def _forward(robot, world, pnet, key, starts, goals, active, opts, length):
         calls = calls + _count(live & ~hit, k)
         return i + 1, p, n, end, done, reached, calls
 
-    init = (jnp.int32(0), p, jnp.ones(num, jnp.int32), starts, ~active, jnp.zeros(num, bool),
-            jnp.zeros(num, jnp.int32))
+    init = (
+        jnp.int32(0),
+        p,
+        jnp.ones(num, jnp.int32),
+        starts,
+        ~active,
+        jnp.zeros(num, bool),
+        jnp.zeros(num, jnp.int32),
+    )
     _, p, n, end, done, reached, calls = jax.lax.while_loop(cond, body, init)
     if not opts.steer:  # the state appended last is checked too (with repairs: goal appended)
         last = active & ~done & near(end)
@@ -370,6 +417,7 @@ def _contract_and_check(robot, world, opts, p, n, mask, do_contract: bool):
 # The stages (one jitted call each)
 # ---------------------------------------------------------------------------
 
+
 def coarse_core(robot, opts, world, pnet, key, starts, goals, active):
     """Coarse plan of a batch (one jitted call): ``(p, n, valid, reached, calls)``.
 
@@ -377,11 +425,15 @@ def coarse_core(robot, opts, world, pnet, key, starts, goals, active):
     stage of a fixed shape (:data:`CHECK_ROWS` paths) compiled once per process.
     """
     length = opts.max_len
-    valid = (active & is_valid_cm(robot, world, starts.T, opts.eval_padding)
-             & is_valid_cm(robot, world, goals.T, opts.eval_padding))
+    valid = (
+        active
+        & is_valid_cm(robot, world, starts.T, opts.eval_padding)
+        & is_valid_cm(robot, world, goals.T, opts.eval_padding)
+    )
     if opts.bidirectional:
-        pa, na, pb, nb, reached, calls = _connect(robot, world, pnet, key, starts, goals, valid,
-                                                  opts.n_plan, opts.plan_padding)
+        pa, na, pb, nb, reached, calls = _connect(
+            robot, world, pnet, key, starts, goals, valid, opts.n_plan, opts.plan_padding
+        )
         p, n = _join(pa, na, pb, nb, length)
     else:
         p, n, reached, calls = _forward(robot, world, pnet, key, starts, goals, valid, opts, length)
@@ -403,8 +455,9 @@ def connect_core(robot, opts, world, pnet, key, a, b, active):
     runs from ``a`` to ``b``.
     """
     steps = opts.replan_steps
-    pa, na, pb, nb, conn, calls = _connect(robot, world, pnet, key, a, b, active, steps,
-                                           opts.plan_padding)
+    pa, na, pb, nb, conn, calls = _connect(
+        robot, world, pnet, key, a, b, active, steps, opts.plan_padding
+    )
     sub, ns = _join(pa, na, pb, nb, steps + 2)
     return sub, ns, conn, calls
 
@@ -422,7 +475,8 @@ def cost_core(robot, p, n):
     """``(N,)`` cost of the paths ``p[:n]`` in the robot's metric (0 for a single state)."""
     num, length, d = p.shape
     seg_cost = jax.vmap(robot.distance, in_axes=(1, 1))(
-        p[:, :-1].reshape(-1, d).T, p[:, 1:].reshape(-1, d).T).reshape(num, length - 1)
+        p[:, :-1].reshape(-1, d).T, p[:, 1:].reshape(-1, d).T
+    ).reshape(num, length - 1)
     seg = jnp.arange(length - 1)[None, :] < (n - 1)[:, None]
     return jnp.sum(jnp.where(seg, seg_cost, 0.0), axis=1)
 
@@ -444,8 +498,13 @@ _COMPILED: collections.OrderedDict = collections.OrderedDict()  # LRU of COMPILE
 def _signature(name, args) -> tuple:
     robot, opts = args[:2]
     leaves, tree = jax.tree_util.tree_flatten(args[2:])
-    return (name, robot, opts, tree,
-            tuple((x.shape, str(x.dtype)) for x in map(jnp.asarray, leaves)))
+    return (
+        name,
+        robot,
+        opts,
+        tree,
+        tuple((x.shape, str(x.dtype)) for x in map(jnp.asarray, leaves)),
+    )
 
 
 def _compiled(name, args):

@@ -29,8 +29,19 @@ import numpy as np
 from ntq_jax import artifacts
 from ntq_jax.types import QUERY_KINDS, PlanStatus
 
-__all__ = ["draw_map", "draw_arm", "is_scene", "hand_trace", "dataset_figure", "curves_figure", "success_figure",
-           "examples_figure", "queries_figure", "query_figure", "learning_curve_figure"]
+__all__ = [
+    "draw_map",
+    "draw_arm",
+    "is_scene",
+    "hand_trace",
+    "dataset_figure",
+    "curves_figure",
+    "success_figure",
+    "examples_figure",
+    "queries_figure",
+    "query_figure",
+    "learning_curve_figure",
+]
 
 #: maps with more boxes are drawn as one image of at most IMAGE_PIXELS a side, not one patch
 #: per box (which grows with the box count in time and memory)
@@ -44,8 +55,10 @@ JOINT_SPACE_KINDS = ("nlink", "serial_arm")
 
 def _plt():
     import matplotlib
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
     return plt
 
 
@@ -69,7 +82,8 @@ def draw_map(ax, spec: dict, padded: bool = False, joint_space: bool | None = No
     Obstacles are dark; with ``padded``, their padding (``spec["padding"]``) is
     drawn light around them. A map of more than :data:`IMAGE_MAP_BOXES` boxes
     is drawn as one image (:data:`IMAGE_PIXELS` a side; padding with square
-    corners), so drawing time and memory do not grow with the box count. ``joint_space`` (default: for an arm) sets up the
+    corners), so drawing time and memory do not grow with the box count. ``joint_space``
+    (default: for an arm) sets up the
     ``[-pi, pi]^2`` axes of joints 1 and 2 instead (no obstacles there).
     """
     if joint_space is None:
@@ -78,8 +92,10 @@ def draw_map(ax, spec: dict, padded: bool = False, joint_space: bool | None = No
         _joint_axes(ax)
         return
     if len(spec["bounds"]) != 2:
-        raise ValueError(f"{spec.get('name')!r}: draw_map draws a planar map; a 3-D scene is "
-                         "drawn by ntq_jax.scenes.viewer.draw_scene")
+        raise ValueError(
+            f"{spec.get('name')!r}: draw_map draws a planar map; a 3-D scene is "
+            "drawn by ntq_jax.scenes.viewer.draw_scene"
+        )
     from matplotlib.patches import Circle, FancyBboxPatch, Rectangle
 
     pad = float(spec.get("padding", 0.0))
@@ -89,8 +105,16 @@ def draw_map(ax, spec: dict, padded: bool = False, joint_space: bool | None = No
         boxes = boxes[:0]
     for cx, cy, hw, hh in boxes:
         if padded and pad > 0:
-            ax.add_patch(FancyBboxPatch((cx - hw, cy - hh), 2 * hw, 2 * hh,
-                                        boxstyle=f"round,pad={pad}", fc="0.85", ec="none"))
+            ax.add_patch(
+                FancyBboxPatch(
+                    (cx - hw, cy - hh),
+                    2 * hw,
+                    2 * hh,
+                    boxstyle=f"round,pad={pad}",
+                    fc="0.85",
+                    ec="none",
+                )
+            )
         ax.add_patch(Rectangle((cx - hw, cy - hh), 2 * hw, 2 * hh, fc="0.35", ec="none"))
     for cx, cy, r in spec.get("discs", []):
         if padded and pad > 0:
@@ -116,9 +140,16 @@ def _draw_boxes_image(ax, boxes: np.ndarray, bounds, pad: float):
         hi = np.ceil((boxes[:, :2] + boxes[:, 2:] + grow - (x0, y0)) * scale).astype(np.int64)
         lo, hi = np.clip(lo, 0, (w, h)), np.clip(hi, 0, (w, h))
         for (c0, r0), (c1, r1) in zip(lo.tolist(), hi.tolist()):
-            img[r0:max(r1, r0 + 1), c0:max(c1, c0 + 1)] = shade
-    ax.imshow(img, cmap="gray", vmin=0.0, vmax=1.0, origin="lower", extent=(x0, x1, y0, y1),
-              interpolation="nearest")
+            img[r0 : max(r1, r0 + 1), c0 : max(c1, c0 + 1)] = shade
+    ax.imshow(
+        img,
+        cmap="gray",
+        vmin=0.0,
+        vmax=1.0,
+        origin="lower",
+        extent=(x0, x1, y0, y1),
+        interpolation="nearest",
+    )
 
 
 def draw_arm(ax, env, path: np.ndarray):
@@ -133,6 +164,7 @@ def draw_arm(ax, env, path: np.ndarray):
 def is_scene(env) -> bool:
     """Whether ``env`` is a 3-D scene with an arm (drawn by :mod:`ntq_jax.scenes.viewer`)."""
     from ntq_jax.geometry import World3D
+
     return isinstance(env.world, World3D)
 
 
@@ -155,19 +187,30 @@ def hand_trace(env, path: np.ndarray, per_segment: int = 8) -> np.ndarray:
 def _scene_panel(ax, env, states, title: str, path=None) -> None:
     """The obstacles of a 3-D scene and its arm at ``states`` (and along ``path``) on ``ax``."""
     from ntq_jax.scenes import viewer
-    viewer.draw_scene(env, states=np.asarray(states, np.float64), path=path, ax=ax,
-                      labels=["start", "goal"], title=title, legend=False, limits="bounds",
-                      resolution=12, arm_resolution=6)
+
+    viewer.draw_scene(
+        env,
+        states=np.asarray(states, np.float64),
+        path=path,
+        ax=ax,
+        labels=["start", "goal"],
+        title=title,
+        legend=False,
+        limits="bounds",
+        resolution=12,
+        arm_resolution=6,
+    )
 
 
 def _workspace_panel(ax, env, spec: dict, d) -> None:
     """The first panel of :func:`dataset_figure` for an arm: one solved path of ``d``."""
     solved = len(d.path_lengths) > 0
-    p = np.asarray(d.paths[0, :int(d.path_lengths[0])]) if solved else None
+    p = np.asarray(d.paths[0, : int(d.path_lengths[0])]) if solved else None
     title = f"{spec.get('name')}: workspace, one solved path"
     if is_scene(env):
-        _scene_panel(ax, env, env.query if p is None else p[[0, -1]], title,
-                     None if p is None else p)
+        _scene_panel(
+            ax, env, env.query if p is None else p[[0, -1]], title, None if p is None else p
+        )
         return
     draw_map(ax, spec, padded=True, joint_space=False)
     if p is not None:
@@ -175,8 +218,9 @@ def _workspace_panel(ax, env, spec: dict, d) -> None:
     ax.set_title(title)
 
 
-def dataset_figure(env, datasets: Sequence, out: Path, n_points: int = 400, n_paths: int = 6
-                   ) -> Path:
+def dataset_figure(
+    env, datasets: Sequence, out: Path, n_points: int = 400, n_paths: int = 6
+) -> Path:
     """PNG of the map with the start/goal distributions of D0 and D2 and a few solved paths.
 
     Point robot and rigid body: (x, y) of starts (green) and goals (blue) and
@@ -194,14 +238,18 @@ def dataset_figure(env, datasets: Sequence, out: Path, n_points: int = 400, n_pa
     spec = env.to_json()
     ds = datasets
     picks = [0, min(2, len(ds) - 1)]
-    picks = [(i, f"D{i}: p_nt={ds[i].meta['p_nt']}" + (", pruned" if ds[i].meta["prune"] else ""))
-             for i in picks]
+    picks = [
+        (i, f"D{i}: p_nt={ds[i].meta['p_nt']}" + (", pruned" if ds[i].meta["prune"] else ""))
+        for i in picks
+    ]
     arm = spec["robot"]["kind"] in JOINT_SPACE_KINDS
     rng = np.random.default_rng(0)
     ncol = len(picks) + (1 if arm else 0)
     fig = plt.figure(figsize=(5 * ncol, 5))
-    axes = [fig.add_subplot(1, ncol, j + 1, projection="3d" if j == 0 and is_scene(env)
-                            else None) for j in range(ncol)]
+    axes = [
+        fig.add_subplot(1, ncol, j + 1, projection="3d" if j == 0 and is_scene(env) else None)
+        for j in range(ncol)
+    ]
     if arm:
         _workspace_panel(axes[0], env, spec, ds[picks[-1][0]])
         axes = axes[1:]
@@ -214,21 +262,25 @@ def dataset_figure(env, datasets: Sequence, out: Path, n_points: int = 400, n_pa
             g = np.linspace(-np.pi, np.pi, 181, dtype=np.float32)
             A, B = np.meshgrid(g, g)
             ok = np.asarray(env.is_valid(np.stack([A.ravel(), B.ravel()], 1))).reshape(A.shape)
-            ax.imshow(~ok, origin="lower", extent=(-np.pi, np.pi, -np.pi, np.pi), cmap="Greys",
-                      alpha=0.5)
+            ax.imshow(
+                ~ok, origin="lower", extent=(-np.pi, np.pi, -np.pi, np.pi), cmap="Greys", alpha=0.5
+            )
         ax.scatter(q[sel, 0, 0], q[sel, 0, 1], s=4, c="green", label="start")
         ax.scatter(q[sel, 1, 0], q[sel, 1, 1], s=4, c="blue", label="goal")
         for p in rng.permutation(len(d.path_lengths))[:n_paths]:
             L = int(d.path_lengths[p])
             ax.plot(d.paths[p, :L, 0], d.paths[p, :L, 1], "-", color="magenta", lw=1.2)
         st = d.meta["stats"]
-        ax.set_title(f"{title}\n{st['solved']}/{st['queries']} solved, {st['samples']} samples",
-                     fontsize=9)
+        ax.set_title(
+            f"{title}\n{st['solved']}/{st['queries']} solved, {st['samples']} samples", fontsize=9
+        )
         ax.legend(loc="upper right", fontsize=7, markerscale=3)
     g = ds[0].meta.get("gamma_nt", {}) or {}
     if g.get("gamma") is not None:
-        fig.suptitle(f"{spec.get('name')}  (gamma_nt = {g['gamma']:.3f} at padding "
-                     f"{g['padding']})", fontsize=10)
+        fig.suptitle(
+            f"{spec.get('name')}  (gamma_nt = {g['gamma']:.3f} at padding {g['padding']})",
+            fontsize=10,
+        )
     fig.tight_layout()
     return _save(fig, out)
 
@@ -250,11 +302,17 @@ def curves_figure(history, labels: Sequence[str], out: Path) -> Path | None:
     ax = fig.add_subplot()
     for m, lab in enumerate(labels):
         ok = np.isfinite(h.train_loss[:, m])
-        line, = ax.plot(h.epoch[ok, m], h.train_loss[ok, m], "--", lw=1, label=f"{lab} train")
+        (line,) = ax.plot(h.epoch[ok, m], h.train_loss[ok, m], "--", lw=1, label=f"{lab} train")
         okv = np.isfinite(h.val_loss[:, m])
         if okv.any():
-            ax.plot(h.epoch[okv, m], h.val_loss[okv, m], "-", lw=1.5, color=line.get_color(),
-                    label=f"{lab} val")
+            ax.plot(
+                h.epoch[okv, m],
+                h.val_loss[okv, m],
+                "-",
+                lw=1.5,
+                color=line.get_color(),
+                label=f"{lab} val",
+            )
     ax.set_xlabel("epoch")
     ax.set_ylabel("loss (normalised MSE)")
     ax.set_yscale("log")
@@ -294,8 +352,14 @@ def success_figure(rows, path: Path, steer: bool = True) -> Path | None:
         for j, m in enumerate(models):
             ys, lo, hi = [], [], []
             for e in envs:
-                r = next((r for r in rows if r["env"] == e and r["model"] == m
-                          and r["query_kind"] == kind), None)
+                r = next(
+                    (
+                        r
+                        for r in rows
+                        if r["env"] == e and r["model"] == m and r["query_kind"] == kind
+                    ),
+                    None,
+                )
                 y = r["success_ratio"] if r else np.nan
                 ci = r["success_ci95"] if r else (np.nan, np.nan)
                 ys.append(y)
@@ -304,20 +368,26 @@ def success_figure(rows, path: Path, steer: bool = True) -> Path | None:
             x = np.arange(len(envs)) + (j - (len(models) - 1) / 2) * width
             ax.bar(x, ys, width, yerr=[lo, hi], capsize=2, label=m)
         gam = {r["env"]: r.get("gamma_nt") for r in rows}
-        ax.set_xticks(np.arange(len(envs)),
-                      [f"{e}\n$\\gamma_{{nt}}$={_fmt(gam[e])}" for e in envs])
+        ax.set_xticks(np.arange(len(envs)), [f"{e}\n$\\gamma_{{nt}}$={_fmt(gam[e])}" for e in envs])
         ax.set_title(KIND_TITLE[kind] + ("" if steer else " (no steerTo)"))
         ax.set_ylim(0, 1.05)
         ax.grid(axis="y", alpha=0.3)
     axes[0].set_ylabel("success ratio (95% interval)")
     handles, labels = axes[0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="upper center", ncol=len(models), fontsize=8,
-               bbox_to_anchor=(0.5, 1.06))
+    fig.legend(
+        handles,
+        labels,
+        loc="upper center",
+        ncol=len(models),
+        fontsize=8,
+        bbox_to_anchor=(0.5, 1.06),
+    )
     return _save(fig, path, bbox_inches="tight")
 
 
-def examples_figure(env, reference: dict | None, saved: dict, path: Path,
-                    n_examples: int = 4) -> Path | None:
+def examples_figure(
+    env, reference: dict | None, saved: dict, path: Path, n_examples: int = 4
+) -> Path | None:
     """Neural paths (each model) beside the reference paths on non-trivial test queries.
 
     Args:
@@ -345,14 +415,29 @@ def examples_figure(env, reference: dict | None, saved: dict, path: Path,
         else:
             draw_map(ax, ej)
             ax.set_title(title, fontsize=9)
-        _path_line(ax, env, scene, rp, color="k", ls="--", lw=2,
-                   label=f"reference ({ref['nontrivial_costs'][i]:.2f})")
+        _path_line(
+            ax,
+            env,
+            scene,
+            rp,
+            color="k",
+            ls="--",
+            lw=2,
+            label=f"reference ({ref['nontrivial_costs'][i]:.2f})",
+        )
         for j, (m, z) in enumerate(saved.items()):
             good = bool(z["success"][i])
-            _path_line(ax, env, scene, z["paths"][i, : z["lengths"][i]],
-                       ls="-" if good else ":", color=colors[j % len(colors)], lw=1.3,
-                       **({} if scene else {"marker": ".", "ms": 4}),
-                       label=f"{m} ({z['costs'][i]:.2f})" if good else f"{m} (failed)")
+            _path_line(
+                ax,
+                env,
+                scene,
+                z["paths"][i, : z["lengths"][i]],
+                ls="-" if good else ":",
+                color=colors[j % len(colors)],
+                lw=1.3,
+                **({} if scene else {"marker": ".", "ms": 4}),
+                label=f"{m} ({z['costs'][i]:.2f})" if good else f"{m} (failed)",
+            )
         if not scene:
             ax.plot(*rp[0, :2], "o", color="green", ms=7)
             ax.plot(*rp[-1, :2], "*", color="blue", ms=10)
@@ -386,9 +471,17 @@ def queries_figure(env, queries: dict | None, path: Path) -> Path | None:
     return _save(fig, path, bbox_inches="tight")
 
 
-def query_figure(env, path: np.ndarray, success: bool, cost: float, label: str,
-                 start, goal, out: Path, optimum: tuple[np.ndarray, float] | None = None
-                 ) -> Path:
+def query_figure(
+    env,
+    path: np.ndarray,
+    success: bool,
+    cost: float,
+    label: str,
+    start,
+    goal,
+    out: Path,
+    optimum: tuple[np.ndarray, float] | None = None,
+) -> Path:
     """One planned query: the path (solid if a success), the optimum if given, start and goal."""
     plt = _plt()
     fig, ax = plt.subplots(figsize=(5, 5))
@@ -396,8 +489,14 @@ def query_figure(env, path: np.ndarray, success: bool, cost: float, label: str,
     if optimum is not None:
         p, c = optimum
         ax.plot(p[:, 0], p[:, 1], "k--", lw=2, label=f"optimum ({c:.3f})")
-    ax.plot(path[:, 0], path[:, 1], "-" if success else ":", color="tab:red", marker=".",
-            label=f"{label} ({cost:.3f})" if success else f"{label} (failed)")
+    ax.plot(
+        path[:, 0],
+        path[:, 1],
+        "-" if success else ":",
+        color="tab:red",
+        marker=".",
+        label=f"{label} ({cost:.3f})" if success else f"{label} (failed)",
+    )
     ax.plot(*start[:2], "o", color="green", ms=8)
     ax.plot(*goal[:2], "*", color="blue", ms=12)
     ax.legend(fontsize=8)
@@ -416,15 +515,19 @@ def learning_curve_figure(rows, path: Path, title: str = "") -> Path | None:
     plt = _plt()
     names = sorted({r["dataset"] for r in rows}, key=lambda n: (len(n), n))
     kinds = [k for k in ("nontrivial", "uniform") if any(r["kind"] == k for r in rows)]
-    fig, axes = plt.subplots(2, len(kinds), figsize=(5.2 * len(kinds), 7.2), squeeze=False,
-                             sharey=True)
+    fig, axes = plt.subplots(
+        2, len(kinds), figsize=(5.2 * len(kinds), 7.2), squeeze=False, sharey=True
+    )
     for col, kind in enumerate(kinds):
-        for row, (xkey, xlabel) in enumerate((("rows", "training rows (samples)"),
-                                              ("size", "K_train (queries per dataset)"))):
+        for row, (xkey, xlabel) in enumerate(
+            (("rows", "training rows (samples)"), ("size", "K_train (queries per dataset)"))
+        ):
             ax = axes[row, col]
             for j, nm in enumerate(names):
-                rr = sorted((r for r in rows if r["dataset"] == nm and r["kind"] == kind),
-                            key=lambda r: r[xkey])
+                rr = sorted(
+                    (r for r in rows if r["dataset"] == nm and r["kind"] == kind),
+                    key=lambda r: r[xkey],
+                )
                 if not rr:
                     continue
                 x = np.array([r[xkey] for r in rr], float)
@@ -442,8 +545,9 @@ def learning_curve_figure(rows, path: Path, title: str = "") -> Path | None:
             if col == 0:
                 ax.set_ylabel("success ratio (95% interval)")
     handles, labels = axes[0, 0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="upper center", ncol=len(names), fontsize=9,
-               bbox_to_anchor=(0.5, 1.0))
+    fig.legend(
+        handles, labels, loc="upper center", ncol=len(names), fontsize=9, bbox_to_anchor=(0.5, 1.0)
+    )
     if title:
         fig.suptitle(title, y=1.04)
     fig.tight_layout(rect=(0, 0, 1, 0.96))

@@ -28,6 +28,7 @@ import numpy as np
 
 Array = jax.Array
 
+
 def triple32(x: Array) -> Array:
     """Wellons' triple32 hash of uint32 words."""
     x = x.astype(jnp.uint32)
@@ -85,8 +86,9 @@ def uniform_array(key: Array, shape: tuple[int, ...]) -> Array:
     """
     n = math.prod(shape)
     if n > 2**32:
-        raise ValueError(f"uniform_array: {n} draws exceed the 2**32 counters of one key; "
-                         "split the batch")
+        raise ValueError(
+            f"uniform_array: {n} draws exceed the 2**32 counters of one key; split the batch"
+        )
     seeds = jax.random.bits(key, (2,), jnp.uint32)
     return uniform(seeds, jnp.arange(n, dtype=jnp.uint32).reshape(shape))
 

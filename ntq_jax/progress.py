@@ -59,12 +59,12 @@ def tqdm_progress(*, desc: str, total: int | None, unit: str, initial: int = 0) 
     """A tqdm bar (the scripts' default)."""
     from tqdm.auto import tqdm
 
-    return tqdm(total=total, initial=initial, desc=desc, unit=unit, leave=True,
-                dynamic_ncols=True)
+    return tqdm(total=total, initial=initial, desc=desc, unit=unit, leave=True, dynamic_ncols=True)
 
 
-def open_bar(progress: Progress, *, desc: str, total: int | None, unit: str,
-             initial: int = 0) -> Bar:
+def open_bar(
+    progress: Progress, *, desc: str, total: int | None, unit: str, initial: int = 0
+) -> Bar:
     """The bar ``progress`` asks for: silent for None/False, tqdm for True, else the factory's."""
     if progress is None or progress is False:
         return NullBar()

@@ -32,10 +32,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from ntq_jax import prng
-from ntq_jax.validation import check_count, check_padding, check_probability
 from ntq_jax.geometry import KERNEL_COMPILER_OPTIONS, World
 from ntq_jax.robots.batch import is_valid_cm, steer_to_cm, steer_to_pairs, valid_states
 from ntq_jax.stats import wilson_interval
+from ntq_jax.validation import check_count, check_padding, check_probability
 
 Array = jax.Array
 
@@ -51,7 +51,9 @@ STATE_BLOCK = 8192  # candidate states drawn per block (fixed: results do not de
 QUERY_BLOCK = 4096  # candidate queries checked per block by the non-trivial sampler
 DEFAULT_N_MAX = 10_000
 MAX_STATE_BLOCKS = 100_000  # ~8e8 candidates before giving up on a nearly-full map
-MAX_CHUNK = 1 << 26  # gamma_nt: candidate pairs per compiled chunk (~8 bytes each for the point robot)
+MAX_CHUNK = (
+    1 << 26
+)  # gamma_nt: candidate pairs per compiled chunk (~8 bytes each for the point robot)
 
 
 class FreeSpaceTooSmall(ValueError):
@@ -61,6 +63,7 @@ class FreeSpaceTooSmall(ValueError):
 # ---------------------------------------------------------------------------
 # Uniform valid states
 # ---------------------------------------------------------------------------
+
 
 @functools.partial(jax.jit, static_argnames=("robot", "size"))
 def _uniform_block(robot, world: World, key: Array, size: int) -> Array:
@@ -95,11 +98,14 @@ def valid_state_stream(robot, world: World, key: Array, padding: float):
         if i == 63 and accepted == 0:
             raise FreeSpaceTooSmall(
                 f"no valid state among {drawn} uniform samples (padding={padding}): the free "
-                "space is empty or too small to sample; reduce the padding or the obstacles")
+                "space is empty or too small to sample; reduce the padding or the obstacles"
+            )
         if ok.any():
             yield cand[ok]
-    raise FreeSpaceTooSmall(f"only {accepted} valid states among {drawn} samples "
-                            f"(padding={padding}); the free space is too small to sample")
+    raise FreeSpaceTooSmall(
+        f"only {accepted} valid states among {drawn} samples "
+        f"(padding={padding}); the free space is too small to sample"
+    )
 
 
 def _take(stream, n: int, d: int) -> np.ndarray:
@@ -128,6 +134,7 @@ def sample_uniform_queries(robot, world: World, key: Array, n: int, padding: flo
 # ---------------------------------------------------------------------------
 # Non-trivial queries (Alg. 3)
 # ---------------------------------------------------------------------------
+
 
 def replay_nontrivial(blocked: np.ndarray, n_max: int, attempts0: int = 0):
     """Replays the sequential sampler of Alg. 3 over a stream of candidate queries.
@@ -171,8 +178,9 @@ def replay_nontrivial(blocked: np.ndarray, n_max: int, attempts0: int = 0):
     return idx, exhausted[idx], after
 
 
-def sample_nontrivial_queries(robot, world: World, key: Array, n: int, padding: float,
-                              n_max: int = DEFAULT_N_MAX):
+def sample_nontrivial_queries(
+    robot, world: World, key: Array, n: int, padding: float, n_max: int = DEFAULT_N_MAX
+):
     """``n`` queries from Alg. 3, ``((n, 2, d), exhausted (n,) bool)``.
 
     Exactly the sequential rejection sampler applied to the stream of uniform
@@ -189,7 +197,7 @@ def sample_nontrivial_queries(robot, world: World, key: Array, n: int, padding: 
         while len(buf) < 2 * QUERY_BLOCK:
             buf = np.concatenate([buf, next(stream)])
         cand = buf[: 2 * QUERY_BLOCK].reshape(QUERY_BLOCK, 2, robot.dim)
-        buf = buf[2 * QUERY_BLOCK:]
+        buf = buf[2 * QUERY_BLOCK :]
         # the shared chunked program of steer_to_pairs (the same answers at any batch size)
         blocked = ~steer_to_pairs(robot, world, cand[:, 0], cand[:, 1], padding)
         idx, exh, attempts = replay_nontrivial(blocked, n_max, attempts)
@@ -205,8 +213,10 @@ def sample_nontrivial_queries(robot, world: World, key: Array, n: int, padding: 
 # The p_nt mixture (Alg. 2)
 # ---------------------------------------------------------------------------
 
-def sample_queries(robot, world: World, key: Array, n: int, p_nt: float, padding: float,
-                   n_max: int = DEFAULT_N_MAX):
+
+def sample_queries(
+    robot, world: World, key: Array, n: int, p_nt: float, padding: float, n_max: int = DEFAULT_N_MAX
+):
     """``n`` queries of Alg. 2: each non-trivial with probability ``p_nt``, else uniform.
 
     Args:
@@ -244,6 +254,7 @@ def sample_queries(robot, world: World, key: Array, n: int, p_nt: float, padding
 # ---------------------------------------------------------------------------
 # gamma_nt
 # ---------------------------------------------------------------------------
+
 
 class GammaEstimate(NamedTuple):
     """Result of :func:`gamma_nt`.
@@ -317,7 +328,9 @@ def _lane_outcomes(robot, world: World, seeds: Array, lane0: Array, size: int, p
     return _outcomes_from_uniforms(robot, world, u, padding)
 
 
-COUNT_ROWS = 64  # lanes are counted as (COUNT_ROWS, size / COUNT_ROWS) so XLA splits them over cores
+COUNT_ROWS = (
+    64  # lanes are counted as (COUNT_ROWS, size / COUNT_ROWS) so XLA splits them over cores
+)
 
 
 def count_rows(both: Array, blocked: Array) -> tuple[Array, Array]:
@@ -342,8 +355,9 @@ def count_outcomes(both: Array, blocked: Array) -> tuple[Array, Array]:
     return jnp.sum(v), jnp.sum(b)
 
 
-_gamma_jit = functools.partial(jax.jit, static_argnames=("robot", "padding", "size"),
-                               compiler_options=KERNEL_COMPILER_OPTIONS)
+_gamma_jit = functools.partial(
+    jax.jit, static_argnames=("robot", "padding", "size"), compiler_options=KERNEL_COMPILER_OPTIONS
+)
 
 
 @_gamma_jit
@@ -356,8 +370,16 @@ def _gamma_chunk_lanes(robot, world, seeds, lane0, padding: float, size: int):
     return _lane_outcomes(robot, world, seeds, lane0, size, padding)
 
 
-def _chunk_prefix(robot, world: World, seeds: Array, padding: float, chunk: int,
-                  rows_valid: np.ndarray, rows_blocked: np.ndarray, need: int) -> tuple[int, int]:
+def _chunk_prefix(
+    robot,
+    world: World,
+    seeds: Array,
+    padding: float,
+    chunk: int,
+    rows_valid: np.ndarray,
+    rows_blocked: np.ndarray,
+    need: int,
+) -> tuple[int, int]:
     """``(blocked, candidates)`` of a chunk's lanes up to its ``need``-th valid one.
 
     From the chunk's per-row counts: the rows before the one holding that lane
@@ -380,8 +402,9 @@ def _chunk_prefix(robot, world: World, seeds: Array, padding: float, chunk: int,
 SMALL_ROWS = 8
 
 
-def _small_estimate(robot, world: World, seeds: Array, padding: float, chunk: int,
-                    n: int) -> tuple[int, int] | None:
+def _small_estimate(
+    robot, world: World, seeds: Array, padding: float, chunk: int, n: int
+) -> tuple[int, int] | None:
     """``(blocked, candidates)`` of chunk 0's lanes up to its ``n``-th valid one, from its
     first :data:`SMALL_ROWS` rows checked lane by lane; None when they hold fewer than ``n``
     valid queries (or ``n`` is above half their lanes: whole chunks are then cheaper)."""
@@ -417,8 +440,15 @@ def default_chunk(robot, world: World | None = None) -> int:
     return INDEXED_POINT_CHUNK if getattr(world, "index", None) is not None else 1 << 22
 
 
-def gamma_nt(robot, world: World, key: Array, n: int, padding: float, chunk: int | None = None,
-             progress: Callable[[int], None] | None = None) -> GammaEstimate:
+def gamma_nt(
+    robot,
+    world: World,
+    key: Array,
+    n: int,
+    padding: float,
+    chunk: int | None = None,
+    progress: Callable[[int], None] | None = None,
+) -> GammaEstimate:
     """Estimates gamma_nt over exactly ``n`` uniform valid queries, streaming in chunks.
 
     Each chunk of ``chunk`` candidate pairs is generated, checked and counted in
@@ -446,8 +476,9 @@ def gamma_nt(robot, world: World, key: Array, n: int, padding: float, chunk: int
     """
     n = check_count("n", n, 1)
     padding = check_padding(padding)
-    chunk = (default_chunk(robot, world) if chunk is None
-             else check_count("chunk", chunk, 1, MAX_CHUNK))
+    chunk = (
+        default_chunk(robot, world) if chunk is None else check_count("chunk", chunk, 1, MAX_CHUNK)
+    )
     if progress is not None and not callable(progress):
         raise TypeError(f"progress must be callable or None, got {type(progress).__name__}")
     t0 = time.perf_counter()
@@ -469,36 +500,60 @@ def gamma_nt(robot, world: World, key: Array, n: int, padding: float, chunk: int
             queries, blocked, cands = counts
             # the next chunk is queued before this one is read, unless this one likely ends it
             expect = chunk * queries / cands if cands else chunk
-            nxt = (_gamma_chunk_counts(robot, world, seeds(i + 1), padding, chunk)
-                   if queries + expect < n else None)
+            nxt = (
+                _gamma_chunk_counts(robot, world, seeds(i + 1), padding, chunk)
+                if queries + expect < n
+                else None
+            )
             v_rows, b_rows = (np.asarray(x) for x in pending)
             v = int(v_rows.sum())
             if queries + v >= n:
-                blk, used = _chunk_prefix(robot, world, seeds(i), padding, chunk, v_rows, b_rows,
-                                          n - queries)
+                blk, used = _chunk_prefix(
+                    robot, world, seeds(i), padding, chunk, v_rows, b_rows, n - queries
+                )
                 counts = (n, blocked + blk, cands + used)
                 break
             counts = (queries + v, blocked + int(b_rows.sum()), cands + chunk)
             if progress is not None:
                 progress(counts[0])
-            pending = (nxt if nxt is not None
-                       else _gamma_chunk_counts(robot, world, seeds(i + 1), padding, chunk))
+            pending = (
+                nxt
+                if nxt is not None
+                else _gamma_chunk_counts(robot, world, seeds(i + 1), padding, chunk)
+            )
             i += 1
             if i > 64 and counts[0] == 0:
-                raise FreeSpaceTooSmall(f"no valid query among {counts[2]} candidates "
-                                        f"(padding={padding})")
+                raise FreeSpaceTooSmall(
+                    f"no valid query among {counts[2]} candidates (padding={padding})"
+                )
         jax.block_until_ready(nxt)
         if progress is not None:
             progress(counts[0])
     except KeyboardInterrupt:
         queries, blocked, cands = counts
-        partial = (GammaEstimate(blocked / queries, wilson_interval(blocked, queries), queries,
-                                 blocked, cands, time.perf_counter() - t0) if queries else None)
+        partial = (
+            GammaEstimate(
+                blocked / queries,
+                wilson_interval(blocked, queries),
+                queries,
+                blocked,
+                cands,
+                time.perf_counter() - t0,
+            )
+            if queries
+            else None
+        )
         raise GammaInterrupted(partial) from None
     return _estimate(counts, t0)
 
 
 def _estimate(counts: tuple[int, int, int], t0: float) -> GammaEstimate:
     queries, blocked, cands = counts
-    return GammaEstimate(blocked / queries, wilson_interval(blocked, queries), queries, blocked,
-                         cands, time.perf_counter() - t0)
+    return GammaEstimate(
+        blocked / queries,
+        wilson_interval(blocked, queries),
+        queries,
+        blocked,
+        cands,
+        time.perf_counter() - t0,
+    )

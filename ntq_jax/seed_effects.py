@@ -36,8 +36,14 @@ import math
 
 import numpy as np
 
-__all__ = ["proportion_variance", "paired_difference_variance", "SeedEstimate", "seed_estimate",
-           "pooled_spread", "combine"]
+__all__ = [
+    "proportion_variance",
+    "paired_difference_variance",
+    "SeedEstimate",
+    "seed_estimate",
+    "pooled_spread",
+    "combine",
+]
 
 
 def proportion_variance(k: int, n: int) -> float:
@@ -118,6 +124,7 @@ class SeedEstimate:
     def _halfwidth(self, confidence: float) -> float:
         """``max(t_{df} se, t_{df_seed} sqrt(V_seed))``."""
         from scipy import stats as _st
+
         q = 0.5 + confidence / 2
         tq = lambda df: float(_st.norm.ppf(q) if math.isinf(df) else _st.t.ppf(q, df))  # noqa: E731
         vs, dfs = self.seed_part
@@ -145,6 +152,7 @@ class SeedEstimate:
 
         def sf(t, df):
             return float(_st.norm.sf(t) if math.isinf(df) else _st.t.sf(t, df))
+
         p = 2 * sf(d / self.se, self.df)
         vs, dfs = self.seed_part
         if vs > 0:
@@ -209,6 +217,11 @@ def combine(estimates, weights=None) -> SeedEstimate:
     comps = tuple((k, wi * wi * v, df) for e, wi in zip(es, w) for k, v, df in e.components)
     spreads = [e.spread for e in es if math.isfinite(e.spread)]
     spread = math.sqrt(sum(s * s for s in spreads) / len(spreads)) if spreads else float("nan")
-    return SeedEstimate(float(sum(wi * e.estimate for e, wi in zip(es, w))), comps,
-                        sum(e.seeds for e in es), spread, any(e.borrowed for e in es),
-                        all(e.seed_aware for e in es))
+    return SeedEstimate(
+        float(sum(wi * e.estimate for e, wi in zip(es, w))),
+        comps,
+        sum(e.seeds for e in es),
+        spread,
+        any(e.borrowed for e in es),
+        all(e.seed_aware for e in es),
+    )

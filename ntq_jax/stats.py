@@ -48,14 +48,36 @@ import warnings
 import numpy as np
 
 from ntq_jax.multiplicity import benjamini_hochberg, holm
-from ntq_jax.seed_effects import (SeedEstimate, combine, paired_difference_variance,
-                                  pooled_spread, proportion_variance, seed_estimate)
+from ntq_jax.seed_effects import (
+    SeedEstimate,
+    combine,
+    paired_difference_variance,
+    pooled_spread,
+    proportion_variance,
+    seed_estimate,
+)
 
-__all__ = ["wilson_interval", "fisher_exact_p", "kendall_tau", "mcnemar_exact",
-           "paired_success_difference", "paired_cost_difference",
-           "wilcoxon_p", "paired_comparison", "N_BOOT", "SEED", "holm", "benjamini_hochberg",
-           "proportion_variance", "paired_difference_variance", "SeedEstimate", "seed_estimate",
-           "pooled_spread", "combine", "stratified_kendall"]
+__all__ = [
+    "wilson_interval",
+    "fisher_exact_p",
+    "kendall_tau",
+    "mcnemar_exact",
+    "paired_success_difference",
+    "paired_cost_difference",
+    "wilcoxon_p",
+    "paired_comparison",
+    "N_BOOT",
+    "SEED",
+    "holm",
+    "benjamini_hochberg",
+    "proportion_variance",
+    "paired_difference_variance",
+    "SeedEstimate",
+    "seed_estimate",
+    "pooled_spread",
+    "combine",
+    "stratified_kendall",
+]
 
 N_BOOT = 10_000  #: bootstrap resamples of the cost difference
 SEED = 0  #: bootstrap seed (results are deterministic per seed)
@@ -64,6 +86,7 @@ _MAX_DRAWS = 1 << 22  # resample indices drawn per chunk (memory bound of the bo
 
 def _z(confidence: float) -> float:
     from scipy import stats as _st
+
     return float(_st.norm.ppf(0.5 + confidence / 2))
 
 
@@ -84,6 +107,7 @@ def wilson_interval(k: int, n: int, z: float = 1.959963984540054) -> tuple[float
 def fisher_exact_p(sa: int, na: int, sb: int, nb: int) -> float:
     """Two-sided Fisher exact p-value of ``sa / na`` against ``sb / nb`` (independent samples)."""
     from scipy.stats import fisher_exact
+
     return float(fisher_exact([[sa, na - sa], [sb, nb - sb]]).pvalue)
 
 
@@ -93,6 +117,7 @@ def kendall_tau(x, y) -> tuple[float, float, float]:
     Exact when neither ``x`` nor ``y`` has ties, SciPy's ``auto`` otherwise.
     """
     from scipy.stats import kendalltau
+
     method = "exact" if len(set(x)) == len(x) and len(set(y)) == len(y) else "auto"
     lo = kendalltau(x, y, method=method, alternative="less")
     hi = kendalltau(x, y, method=method, alternative="greater")
@@ -112,6 +137,7 @@ def mcnemar_exact(b: int, c: int) -> float:
     if b + c == 0:
         return 1.0
     from scipy import stats as _st
+
     return float(_st.binomtest(b, b + c, 0.5).pvalue)
 
 
@@ -163,8 +189,9 @@ def paired_success_difference(success_a, success_b, confidence: float = 0.95) ->
     return {**out, "diff": diff, "ci": [max(-1.0, lo), min(1.0, hi)]}
 
 
-def paired_cost_difference(x, y, *, n_boot: int = N_BOOT, seed: int = SEED,
-                           confidence: float = 0.95) -> dict:
+def paired_cost_difference(
+    x, y, *, n_boot: int = N_BOOT, seed: int = SEED, confidence: float = 0.95
+) -> dict:
     """Mean paired difference ``mean(x - y)`` with a percentile paired bootstrap interval.
 
     The ``n`` query pairs are resampled with replacement ``n_boot`` times
@@ -199,7 +226,7 @@ def paired_cost_difference(x, y, *, n_boot: int = N_BOOT, seed: int = SEED,
     means = np.empty(n_boot)
     for s in range(0, n_boot, per):
         k = min(per, n_boot - s)
-        means[s:s + k] = d[rng.integers(0, n, size=(k, n), dtype=np.int32)].mean(axis=1)
+        means[s : s + k] = d[rng.integers(0, n, size=(k, n), dtype=np.int32)].mean(axis=1)
     alpha = (1 - confidence) / 2
     lo, hi = np.quantile(means, [alpha, 1 - alpha])
     return {"n": n, "diff": diff, "ci": [float(lo), float(hi)]}
@@ -246,14 +273,16 @@ def wilcoxon_p(x, y) -> float:
         with warnings.catch_warnings():  # scipy's small-sample / ties notes
             warnings.simplefilter("ignore")
             from scipy import stats as _st
+
             p = _st.wilcoxon(d).pvalue
     except ValueError:
         return float("nan")
     return float(p)
 
 
-def paired_comparison(a: dict, b: dict, *, n_boot: int = N_BOOT, seed: int = SEED,
-                      confidence: float = 0.95) -> dict:
+def paired_comparison(
+    a: dict, b: dict, *, n_boot: int = N_BOOT, seed: int = SEED, confidence: float = 0.95
+) -> dict:
     """Model A against model B on the same queries, from their per-query arrays.
 
     Args:
@@ -278,8 +307,10 @@ def paired_comparison(a: dict, b: dict, *, n_boot: int = N_BOOT, seed: int = SEE
     """
     sa, sb = np.asarray(a["success"], bool), np.asarray(b["success"], bool)
     if sa.shape != sb.shape:
-        raise ValueError(f"not paired: {sa.shape[0] if sa.ndim else 0} and "
-                         f"{sb.shape[0] if sb.ndim else 0} queries")
+        raise ValueError(
+            f"not paired: {sa.shape[0] if sa.ndim else 0} and "
+            f"{sb.shape[0] if sb.ndim else 0} queries"
+        )
     if "queries" in a and "queries" in b and not np.array_equal(a["queries"], b["queries"]):
         raise ValueError("not paired: the two models were tested on different queries")
     s = paired_success_difference(sa, sb, confidence)
@@ -291,21 +322,35 @@ def paired_comparison(a: dict, b: dict, *, n_boot: int = N_BOOT, seed: int = SEE
     ra = np.asarray(a["costs"], np.float64)[both] / ref[both]
     rb = np.asarray(b["costs"], np.float64)[both] / ref[both]
     cd = paired_cost_difference(ra, rb, n_boot=n_boot, seed=seed, confidence=confidence)
-    return {"n": s["n"], "both": s["both"], "only_a": s["only_a"], "only_b": s["only_b"],
-            "neither": s["neither"], "success_diff": s["diff"], "success_diff_ci95": s["ci"],
-            "mcnemar_p": mcnemar_exact(s["only_a"], s["only_b"]),
-            "cost_n": cd["n"], "cost_ratio_diff": cd["diff"], "cost_ratio_diff_ci95": cd["ci"],
-            "wilcoxon_p": wilcoxon_p(ra, rb)}
+    return {
+        "n": s["n"],
+        "both": s["both"],
+        "only_a": s["only_a"],
+        "only_b": s["only_b"],
+        "neither": s["neither"],
+        "success_diff": s["diff"],
+        "success_diff_ci95": s["ci"],
+        "mcnemar_p": mcnemar_exact(s["only_a"], s["only_b"]),
+        "cost_n": cd["n"],
+        "cost_ratio_diff": cd["diff"],
+        "cost_ratio_diff_ci95": cd["ci"],
+        "wilcoxon_p": wilcoxon_p(ra, rb),
+    }
 
 
 # ---------------------------------------------------------------------------
 # Trends over maps within strata
 # ---------------------------------------------------------------------------
 
+
 def _kendall_s(x, y) -> int:
     """Kendall's S: concordant minus discordant pairs (a tie counts 0)."""
-    return int(sum(np.sign(x[i] - x[j]) * np.sign(y[i] - y[j])
-                   for i, j in itertools.combinations(range(len(x)), 2)))
+    return int(
+        sum(
+            np.sign(x[i] - x[j]) * np.sign(y[i] - y[j])
+            for i, j in itertools.combinations(range(len(x)), 2)
+        )
+    )
 
 
 def stratified_kendall(strata) -> tuple[float, float, float]:
@@ -322,8 +367,9 @@ def stratified_kendall(strata) -> tuple[float, float, float]:
         if n < 2:
             continue
         if n > 8:
-            raise ValueError(f"stratified_kendall enumerates permutations: at most 8 points "
-                             f"per stratum, got {n}")
+            raise ValueError(
+                f"stratified_kendall enumerates permutations: at most 8 points per stratum, got {n}"
+            )
         s_obs += _kendall_s(x, y)
         pairs += n * (n - 1) // 2
         here: dict = {}

@@ -15,15 +15,24 @@ from typing import Any, NamedTuple, Protocol
 
 import numpy as np
 
-__all__ = ["PlanStatus", "PlanCause", "STATUS_NAMES", "CAUSE_NAMES", "QUERY_KINDS", "PlanResult",
-           "PlannerFn"]
+__all__ = [
+    "PlanStatus",
+    "PlanCause",
+    "STATUS_NAMES",
+    "CAUSE_NAMES",
+    "QUERY_KINDS",
+    "PlanResult",
+    "PlannerFn",
+]
 
 
 class PlanStatus(enum.IntEnum):
     """Per-query outcome of a classical planner (stored as int8)."""
 
-    SOLVED = 0   #: a path was found and every segment passed ``steer_to`` at the planning padding
-    NO_PATH = 1  #: no path (proved on the planner's representation, or the found path failed the check)
+    SOLVED = 0  #: a path was found and every segment passed ``steer_to`` at the planning padding
+    NO_PATH = (
+        1  #: no path (proved on the planner's representation, or the found path failed the check)
+    )
     TIMEOUT = 2  #: the planner's budget ran out (BIT*'s time budget, A*'s buffers)
     INVALID = 3  #: start or goal is not a valid state at the planning padding (or not finite)
 
@@ -31,17 +40,21 @@ class PlanStatus(enum.IntEnum):
 class PlanCause(enum.IntEnum):
     """Per-query outcome of the neural planner (stored as int8 in saved evaluations)."""
 
-    SUCCESS = 0        #: reached the goal, collision-free on the evaluation geometry
-    NO_PATH = 1        #: goal not reached within ``n_plan`` steps (Alg. 1's empty path)
-    INFEASIBLE = 2     #: reached but still in collision after replanning
+    SUCCESS = 0  #: reached the goal, collision-free on the evaluation geometry
+    NO_PATH = 1  #: goal not reached within ``n_plan`` steps (Alg. 1's empty path)
+    INFEASIBLE = 2  #: reached but still in collision after replanning
     INVALID_QUERY = 3  #: start or goal invalid on the evaluation geometry, or not finite
 
 
 #: Outcomes from a success to the farthest failure: a combination of several planners'
 #: attempts on a query keeps the attempt of lowest rank (an infeasible path is closer to a
 #: success than no path, which is closer than an invalid query).
-CAUSE_RANK = {PlanCause.SUCCESS: 0, PlanCause.INFEASIBLE: 1, PlanCause.NO_PATH: 2,
-              PlanCause.INVALID_QUERY: 3}
+CAUSE_RANK = {
+    PlanCause.SUCCESS: 0,
+    PlanCause.INFEASIBLE: 1,
+    PlanCause.NO_PATH: 2,
+    PlanCause.INVALID_QUERY: 3,
+}
 
 #: :class:`PlanStatus` -> its lower-case name (``"solved"``, ``"no_path"``, ...).
 STATUS_NAMES = {s: s.name.lower() for s in PlanStatus}
@@ -79,7 +92,7 @@ class PlanResult(NamedTuple):
 
     def path(self, i: int) -> np.ndarray | None:
         """Query ``i``'s path ``(lengths[i], d)``, or None unless solved."""
-        return self.paths[i, :self.lengths[i]] if self.status[i] == PlanStatus.SOLVED else None
+        return self.paths[i, : self.lengths[i]] if self.status[i] == PlanStatus.SOLVED else None
 
 
 class PlannerFn(Protocol):
@@ -90,5 +103,6 @@ class PlannerFn(Protocol):
     planners. An unsolvable query is a status, never an exception.
     """
 
-    def __call__(self, env: Any, queries: np.ndarray, *, padding: float, seed: int,
-                 **options: Any) -> PlanResult: ...
+    def __call__(
+        self, env: Any, queries: np.ndarray, *, padding: float, seed: int, **options: Any
+    ) -> PlanResult: ...

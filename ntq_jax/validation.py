@@ -26,8 +26,20 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["is_number", "number", "number_list", "number_rows", "short_repr", "MAX_FLOAT32_MOVE",
-           "check_float32", "check_count", "check_probability", "check_real", "check_padding", "check_positive"]
+__all__ = [
+    "is_number",
+    "number",
+    "number_list",
+    "number_rows",
+    "short_repr",
+    "MAX_FLOAT32_MOVE",
+    "check_float32",
+    "check_count",
+    "check_probability",
+    "check_real",
+    "check_padding",
+    "check_positive",
+]
 
 
 def short_repr(value: Any, limit: int = 60) -> str:
@@ -38,8 +50,7 @@ def short_repr(value: Any, limit: int = 60) -> str:
 
 def is_number(value: Any) -> bool:
     """True for int and float values (Python or NumPy scalars); False for bools, strings and the rest."""
-    return (isinstance(value, numbers.Real)
-            and not isinstance(value, (bool, np.bool_)))
+    return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
 
 
 def _finite(value: Any) -> float | None:
@@ -61,8 +72,9 @@ def number(value: Any, key: str, *, minimum: float | None = None, strict: bool =
     """
     bound = "" if minimum is None else f" {'>' if strict else '>='} {minimum:g}"
     if not is_number(value):
-        raise ValueError(f"{key} must be a number{bound}, got {short_repr(value)}"
-                         f" ({type(value).__name__})")
+        raise ValueError(
+            f"{key} must be a number{bound}, got {short_repr(value)} ({type(value).__name__})"
+        )
     v = _finite(value)
     if v is None or (minimum is not None and (v <= minimum if strict else v < minimum)):
         raise ValueError(f"{key} must be a finite number{bound}, got {short_repr(value)}")
@@ -74,8 +86,9 @@ def _is_sequence(value: Any) -> bool:
     return isinstance(value, (list, tuple)) or (isinstance(value, np.ndarray) and value.ndim >= 1)
 
 
-def number_list(value: Any, key: str, form: str, length: int | None = None,
-                min_length: int = 0) -> tuple[float, ...]:
+def number_list(
+    value: Any, key: str, form: str, length: int | None = None, min_length: int = 0
+) -> tuple[float, ...]:
     """A flat list of numbers (exactly ``length`` of them if given) as a tuple of floats.
 
     ``form`` is the expected form shown in the message (e.g. ``"[x, y]"``).
@@ -86,17 +99,21 @@ def number_list(value: Any, key: str, form: str, length: int | None = None,
     """
     count = f"{length} numbers" if length is not None else f"at least {min_length} number(s)"
     if not _is_sequence(value):
-        raise ValueError(f"{key} must be a list {form} ({count}), got {short_repr(value)}"
-                         f" ({type(value).__name__})")
+        raise ValueError(
+            f"{key} must be a list {form} ({count}), got {short_repr(value)}"
+            f" ({type(value).__name__})"
+        )
     items = list(value)
     if (length is not None and len(items) != length) or len(items) < min_length:
-        raise ValueError(f"{key} is {short_repr(value)}: expected {form} ({count}), "
-                         f"got {len(items)} entries")
+        raise ValueError(
+            f"{key} is {short_repr(value)}: expected {form} ({count}), got {len(items)} entries"
+        )
     out = []
     for i, v in enumerate(items):
         if _finite(v) is None:
-            raise ValueError(f"{key}[{i}] is {short_repr(v)}: expected {form} with finite numbers "
-                             f"({count})")
+            raise ValueError(
+                f"{key}[{i}] is {short_repr(v)}: expected {form} with finite numbers ({count})"
+            )
         out.append(float(v))
     return tuple(out)
 
@@ -116,8 +133,11 @@ def number_rows(value: Any, key: str, width: int, form: str) -> np.ndarray:
     expected = f"a list of rows {form} ({width} numbers each)"
     if value is None:
         raise ValueError(f"{key} must be {expected} (or [] for none), got null")
-    if not isinstance(value, (list, tuple, np.ndarray)) and hasattr(value, "__array__") \
-            and hasattr(value, "dtype"):
+    if (
+        not isinstance(value, (list, tuple, np.ndarray))
+        and hasattr(value, "__array__")
+        and hasattr(value, "dtype")
+    ):
         value = np.asarray(value)  # a JAX array
     if isinstance(value, np.ndarray):
         if value.size == 0:
@@ -128,12 +148,15 @@ def number_rows(value: Any, key: str, width: int, form: str) -> np.ndarray:
             raise ValueError(f"{key} must be {expected}, got an array of shape {value.shape}")
         if not np.all(np.isfinite(value)):
             i = int(np.flatnonzero(~np.all(np.isfinite(value), axis=1))[0])
-            raise ValueError(f"{key}[{i}] is {short_repr(value[i].tolist())}: expected {form} "
-                             "with finite numbers")
+            raise ValueError(
+                f"{key}[{i}] is {short_repr(value[i].tolist())}: expected {form} "
+                "with finite numbers"
+            )
         return value.astype(np.float64)
     if not isinstance(value, (list, tuple)):
-        raise ValueError(f"{key} must be {expected}, got {short_repr(value)}"
-                         f" ({type(value).__name__})")
+        raise ValueError(
+            f"{key} must be {expected}, got {short_repr(value)} ({type(value).__name__})"
+        )
     rows = []
     for i, row in enumerate(value):
         if isinstance(row, np.ndarray):
@@ -141,12 +164,16 @@ def number_rows(value: Any, key: str, width: int, form: str) -> np.ndarray:
         if not isinstance(row, (list, tuple)):
             raise ValueError(f"{key}[{i}] is {short_repr(row)}, not a row: expected {expected}")
         if len(row) != width:
-            raise ValueError(f"{key}[{i}] is {short_repr(row)} ({len(row)} numbers): expected "
-                             f"{form} ({width} numbers)")
+            raise ValueError(
+                f"{key}[{i}] is {short_repr(row)} ({len(row)} numbers): expected "
+                f"{form} ({width} numbers)"
+            )
         bad = [v for v in row if _finite(v) is None]
         if bad:
-            raise ValueError(f"{key}[{i}] is {short_repr(row)}: {short_repr(bad[0])} is not a "
-                             f"finite number; expected {form}")
+            raise ValueError(
+                f"{key}[{i}] is {short_repr(row)}: {short_repr(bad[0])} is not a "
+                f"finite number; expected {form}"
+            )
         rows.append([float(v) for v in row])
     return np.asarray(rows, np.float64).reshape(-1, width)
 
@@ -154,6 +181,7 @@ def number_rows(value: Any, key: str, width: int, form: str) -> np.ndarray:
 # ---------------------------------------------------------------------------
 # Arguments of the library's functions: counts, probabilities, paddings
 # ---------------------------------------------------------------------------
+
 
 def check_count(name: str, value, minimum: int = 0, maximum: int | None = None) -> int:
     """``value`` as a Python int in ``[minimum, maximum]``; TypeError / ValueError naming ``name``.
@@ -167,8 +195,9 @@ def check_count(name: str, value, minimum: int = 0, maximum: int | None = None) 
     try:
         v = operator.index(value)
     except TypeError:
-        raise TypeError(f"{name} must be an int >= {minimum}, got {value!r} "
-                        f"({type(value).__name__})") from None
+        raise TypeError(
+            f"{name} must be an int >= {minimum}, got {value!r} ({type(value).__name__})"
+        ) from None
     if v < minimum:
         raise ValueError(f"{name} must be an int >= {minimum}, got {v}")
     if maximum is not None and v > maximum:
@@ -179,15 +208,17 @@ def check_count(name: str, value, minimum: int = 0, maximum: int | None = None) 
 def check_probability(name: str, value) -> float:
     """``value`` as a float in ``[0, 1]``; TypeError / ValueError naming ``name``."""
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
-        raise TypeError(f"{name} must be a number in [0, 1], got {value!r} "
-                        f"({type(value).__name__})")
+        raise TypeError(
+            f"{name} must be a number in [0, 1], got {value!r} ({type(value).__name__})"
+        )
     if not 0.0 <= value <= 1.0:  # also refuses NaN
         raise ValueError(f"{name} must be a number in [0, 1], got {value!r}")
     return float(value)
 
 
-def check_real(name: str, value, *, minimum: float = 0.0, inclusive: bool = False,
-               maximum: float | None = None) -> float:
+def check_real(
+    name: str, value, *, minimum: float = 0.0, inclusive: bool = False, maximum: float | None = None
+) -> float:
     """``value`` as a finite float ``> minimum`` (``>=`` when ``inclusive``) and ``<= maximum``;
     TypeError (not a real number, or a bool) / ValueError (NaN, infinite, out of range)
     naming ``name`` and the range."""
@@ -195,8 +226,9 @@ def check_real(name: str, value, *, minimum: float = 0.0, inclusive: bool = Fals
     if maximum is not None:
         bound += f" and <= {maximum:g}"
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
-        raise TypeError(f"{name} must be a finite number {bound}, got {value!r} "
-                        f"({type(value).__name__})")
+        raise TypeError(
+            f"{name} must be a finite number {bound}, got {value!r} ({type(value).__name__})"
+        )
     v = float(value)
     ok = math.isfinite(v) and (v >= minimum if inclusive else v > minimum)
     if not ok or (maximum is not None and v > maximum):
@@ -246,9 +278,13 @@ def check_float32(rows: dict[str, Any]) -> None:
             at = tuple(bad[0])
             where = key + "".join(f"[{i}]" for i in at)
             if not np.isfinite(np.float32(a[at])):
-                raise ValueError(f"{where} is {a[at]:g}, beyond float32's range (about "
-                                 "+-3.4e38) of the world's coordinates; use smaller units")
-            raise ValueError(f"{where} is {float(a[at])!r}, which float32 (the world's coordinates) "
-                             f"stores as {float(np.float32(a[at]))!r}: moved by {moved[at]:.3g}, "
-                             f"more than {MAX_FLOAT32_MOVE:g} of the map's size {size:g}; put the "
-                             "map near the origin (subtract an offset from every coordinate)")
+                raise ValueError(
+                    f"{where} is {a[at]:g}, beyond float32's range (about "
+                    "+-3.4e38) of the world's coordinates; use smaller units"
+                )
+            raise ValueError(
+                f"{where} is {float(a[at])!r}, which float32 (the world's coordinates) "
+                f"stores as {float(np.float32(a[at]))!r}: moved by {moved[at]:.3g}, "
+                f"more than {MAX_FLOAT32_MOVE:g} of the map's size {size:g}; put the "
+                "map near the origin (subtract an offset from every coordinate)"
+            )

@@ -29,12 +29,20 @@ def main(argv=None) -> int:
 
 
 def _main(argv) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("name", nargs="?", help="preset name (e.g. point/0), Panda problem "
-                    "(panda/<scene>/<number>) or JSON map file")
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    ap.add_argument(
+        "name",
+        nargs="?",
+        help="preset name (e.g. point/0), Panda problem (panda/<scene>/<number>) or JSON map file",
+    )
     ap.add_argument("--out", type=Path, help="output file (default: print to stdout)")
-    ap.add_argument("--png", type=Path, help="also draw a 3-D scene with its arm at the "
-                    "query's start and goal to this PNG")
+    ap.add_argument(
+        "--png",
+        type=Path,
+        help="also draw a 3-D scene with its arm at the query's start and goal to this PNG",
+    )
     ap.add_argument("--list", action="store_true", help="list the presets and exit")
     args = ap.parse_args(argv)
     for flag, path in (("--out", args.out), ("--png", args.png)):
@@ -45,19 +53,25 @@ def _main(argv) -> int:
 
     if args.list:
         from ntq_jax.scenes import mbm
+
         for name, g in nj.PAPER_GAMMA.items():
             print(f"{name:10s} paper gamma_nt {g:.3f}")
-        print(f"panda/<scene>/<number>: MotionBenchMaker's Panda problems, scenes "
-              f"{', '.join(mbm.SCENES)}; numbers {mbm.NUMBERS[0]}..{mbm.NUMBERS[-1]}")
+        print(
+            f"panda/<scene>/<number>: MotionBenchMaker's Panda problems, scenes "
+            f"{', '.join(mbm.SCENES)}; numbers {mbm.NUMBERS[0]}..{mbm.NUMBERS[-1]}"
+        )
         return 0
     if not args.name:
         raise UsageError("give a preset name or a JSON file (or --list)")
     env = nj.make_env(args.name)
     if args.png is not None:
         from ntq_jax.geometry import World3D
+
         if not isinstance(env.world, World3D):
-            raise UsageError(f"--png draws 3-D scenes; {env.name} is planar (its figures: "
-                             "ntq_jax.plotting.draw_map)")
+            raise UsageError(
+                f"--png draws 3-D scenes; {env.name} is planar (its figures: "
+                "ntq_jax.plotting.draw_map)"
+            )
         if args.png.suffix.lower() != ".png":
             raise UsageError(f"--png {args.png}: give a file name ending in .png")
     if args.out:
@@ -67,6 +81,7 @@ def _main(argv) -> int:
         print(json.dumps(env.to_json(), indent=1))
     if args.png is not None:
         from ntq_jax.scenes import viewer
+
         viewer.save(viewer.draw_scene(env), args.png)
         print(f"wrote {args.png}")
     return 0

@@ -58,8 +58,13 @@ from typing import NamedTuple
 from ntq_jax.experiment.cells import check_cells, damaged, is_done, paired
 from ntq_jax.experiment.cli import UsageError, run_cli
 
-MAPS = {"rigid/0": "rigid", "point/0": "point", "nlink/4": "nlink", "rigid/2": "rigid",
-        "point/3": "point"}  # the factor maps, in the order --next runs them
+MAPS = {
+    "rigid/0": "rigid",
+    "point/0": "point",
+    "nlink/4": "nlink",
+    "rigid/2": "rigid",
+    "point/3": "point",
+}  # the factor maps, in the order --next runs them
 #: The paper's other maps: only their default cell (the task's reproduction of the map,
 #: Tables I-IV), queued after the factor maps' cells and before the cells beyond the paper
 PAPER_ONLY = ("rigid/1", "rigid/3", "nlink/6", "nlink/2", "point/1", "point/2")
@@ -117,8 +122,10 @@ class Cell(NamedTuple):
 
 KEEP_LAST = "+keep_last"
 #: the paper's four datasets and D4: D2's queries pruned, each path keeping its last step
-KEEP_LAST_DATASETS = ("data.datasets=[{p_nt: 0.0}, {p_nt: 0.5}, {p_nt: 1.0}, "
-                      "{p_nt: 1.0, prune: true}, {name: D4, p_nt: 1.0, prune: keep_last}]")
+KEEP_LAST_DATASETS = (
+    "data.datasets=[{p_nt: 0.0}, {p_nt: 0.5}, {p_nt: 1.0}, "
+    "{p_nt: 1.0, prune: true}, {name: D4, p_nt: 1.0, prune: keep_last}]"
+)
 
 
 def data_overrides(cell: Cell, cfg) -> list[str]:
@@ -130,14 +137,18 @@ def data_overrides(cell: Cell, cfg) -> list[str]:
         base = Cell(cell.map, cell.data[: -len(FULL_EPOCHS)], cell.budget, cell.train_seed)
         return data_overrides(base, cfg)
     if cell.data == "bitstar":
-        return [f"planner.per_env=[{{env: {cell.map}, name: roadmap, data_paths: raw}}]",
-                f"data.per_env=[{{env: {cell.map}, paths_from: {BITSTAR_RECORD}}}]"]
+        return [
+            f"planner.per_env=[{{env: {cell.map}, name: roadmap, data_paths: raw}}]",
+            f"data.per_env=[{{env: {cell.map}, paths_from: {BITSTAR_RECORD}}}]",
+        ]
     if cell.data in ("shortcut", "raw"):
         return [f"planner.data_paths={cell.data}"] + _per_env_data_paths(cfg, cell.map, cell.data)
     spacing = DENSITY.get(cell.map, cfg.planner.data_paths_for(cell.map))
     if isinstance(spacing, bool) or not isinstance(spacing, (int, float)):
-        raise UsageError(f"{cell.map}: no resampling spacing for the density cells (set "
-                         "planner.data_paths in its task config)")
+        raise UsageError(
+            f"{cell.map}: no resampling spacing for the density cells (set "
+            "planner.data_paths in its task config)"
+        )
     return [f"planner.data_paths={spacing}"]
 
 
@@ -150,8 +161,9 @@ def _per_env_data_paths(cfg, map_name: str, mode) -> list[str]:
     for r in rows:
         if r["env"] == map_name:
             r["data_paths"] = mode
-    items = ", ".join("{" + ", ".join(f"{k}: {v}" for k, v in r.items() if v is not None) + "}"
-                      for r in rows)
+    items = ", ".join(
+        "{" + ", ".join(f"{k}: {v}" for k, v in r.items() if v is not None) + "}" for r in rows
+    )
     return [f"planner.per_env=[{items}]"]
 
 
@@ -178,7 +190,8 @@ def cells(seeds: bool = True) -> list[Cell]:
     the config's budgets, then MPNet's budgets on the default data, then the default's
     training seeds 1 and 2 (one factor varied at a time around the task's default); then
     the default cell of each of the paper's other maps (:data:`PAPER_ONLY`) and, with
-    ``seeds``, their training seeds 1 and 2; then the pruning beyond the paper (``+keep_last``) on the factor maps; then the point maps'
+    ``seeds``, their training seeds 1 and 2; then the pruning beyond the paper (``+keep_last``)
+    on the factor maps; then the point maps'
     :data:`COSTLY` data modes; last their density cells at the config's epochs
     (:data:`FULL_EPOCHS`)."""
     out, costly = [], []
@@ -189,9 +202,17 @@ def cells(seeds: bool = True) -> list[Cell]:
             (costly if last else out).append(Cell(m, data, "ours"))
         out.append(Cell(m, default_data(m), "mpnet"))
         if task_of(m) == "rigid":  # Table III: the rigid body without steerTo
-            out += [Cell(m, default_data(m), v) for v in ("nosteer_l2", "nosteer_unchecked",
-                                                         "nosteer_paper", "nosteer_discretized",
-                                                         "nosteer_states", "nosteer_replan")]
+            out += [
+                Cell(m, default_data(m), v)
+                for v in (
+                    "nosteer_l2",
+                    "nosteer_unchecked",
+                    "nosteer_paper",
+                    "nosteer_discretized",
+                    "nosteer_states",
+                    "nosteer_replan",
+                )
+            ]
         if seeds:
             out += [Cell(m, default_data(m), "ours", k) for k in (1, 2)]
     out += [Cell(m, default_data(m), "ours") for m in PAPER_ONLY]
@@ -204,8 +225,12 @@ def cells(seeds: bool = True) -> list[Cell]:
 def record_rows(record: Path, pool: str) -> int:
     """Queries of ``pool`` the record's chunk files cover, from row 0 without a gap."""
     import re
-    spans = sorted((int(m.group(1)), int(m.group(2))) for f in (record / pool).glob("*.npz")
-                   if (m := re.fullmatch(r"plan_(\d+)_(\d+)\.npz", f.name)))
+
+    spans = sorted(
+        (int(m.group(1)), int(m.group(2)))
+        for f in (record / pool).glob("*.npz")
+        if (m := re.fullmatch(r"plan_(\d+)_(\d+)\.npz", f.name))
+    )
     end = 0
     for lo, hi in spans:
         if lo > end:
@@ -226,10 +251,12 @@ def ready(cell: Cell) -> str | None:
             return f"no BIT* record in {rec}"
         have = {p: record_rows(rec, p) for p in ("U", "N")}
         if any(have[p] < pools[p] for p in ("U", "N")):
-            return (f"the BIT* record covers U {have['U']}/{pools['U']}, N {have['N']}/"
-                    f"{pools['N']} (resume: python scripts/record_paths.py --config "
-                    "configs/rigid.yaml --env rigid/0 --planner bitstar --workers 1 "
-                    f"--out {rec})")
+            return (
+                f"the BIT* record covers U {have['U']}/{pools['U']}, N {have['N']}/"
+                f"{pools['N']} (resume: python scripts/record_paths.py --config "
+                "configs/rigid.yaml --env rigid/0 --planner bitstar --workers 1 "
+                f"--out {rec})"
+            )
     return None
 
 
@@ -237,6 +264,7 @@ def claim(cell: Cell, runs: Path) -> bool:
     """Claims ``cell`` for this process (False: another ``--next`` worker runs it), so that
     one worker per core can run ``--next`` side by side."""
     from ntq_jax import artifacts
+
     folder = runs / ".claims" / cell.key.replace("/", "__")
     folder.mkdir(parents=True, exist_ok=True)
     try:
@@ -251,8 +279,13 @@ def next_cell(all_cells: list[Cell], results: Path, runs: Path) -> list[Cell]:
     (``[]`` if none is free). Only that one cell is claimed: a claim is held until the
     process exits, so claiming more would starve the other workers."""
     done = lambda c: is_done(results / c.key)  # noqa: E731
-    base_done = lambda c: c.budget == "ours" and not c.train_seed or done(  # noqa: E731
-        Cell(c.map, c.data, "ours"))
+    base_done = lambda c: (
+        c.budget == "ours"
+        and not c.train_seed
+        or done(  # noqa: E731
+            Cell(c.map, c.data, "ours")
+        )
+    )
     todo = [c for c in all_cells if not done(c) and ready(c) is None and base_done(c)]
     todo.sort(key=lambda c: damaged(results / c.key) is None)  # a damaged cell is redone first
     return next(([c] for c in todo if claim(c, runs)), [])
@@ -261,13 +294,17 @@ def next_cell(all_cells: list[Cell], results: Path, runs: Path) -> list[Cell]:
 def cell_config(cell: Cell, extra: list[str] = ()):
     """The cell's resolved config and its ``--set`` overrides (``extra`` last)."""
     from ntq_jax.experiment.pipeline import load_config
+
     task = task_of(cell.map)
     path = f"configs/{task}.yaml"
     base = load_config(path, [f"envs=[{cell.map}]", *extra])
     sets = [f"envs=[{cell.map}]", *data_overrides(cell, base)]
     sets += EVAL_VARIANTS[cell.budget]
-    if (task == "point" and cell.data.split("+")[0] in COSTLY
-            and not cell.data.endswith(FULL_EPOCHS)):
+    if (
+        task == "point"
+        and cell.data.split("+")[0] in COSTLY
+        and not cell.data.endswith(FULL_EPOCHS)
+    ):
         sets.append(f"train.epochs={COSTLY_EPOCHS}")
     if cell.train_seed:
         sets.append(f"train.seed={cell.train_seed}")
@@ -286,8 +323,15 @@ def run_folder(cell: Cell, runs: Path, paper_runs: Path | None) -> Path:
     return paper_runs / task_of(cell.map) / name
 
 
-def run_cell(cell: Cell, runs: Path, results: Path, progress: bool, extra: list[str] = (),
-             paper_runs: Path | None = None, paper_results: Path | None = None) -> None:
+def run_cell(
+    cell: Cell,
+    runs: Path,
+    results: Path,
+    progress: bool,
+    extra: list[str] = (),
+    paper_runs: Path | None = None,
+    paper_results: Path | None = None,
+) -> None:
     from ntq_jax import make_env
     from ntq_jax.experiment.pipeline import prepare_run, run_pipeline
     from ntq_jax.experiment.summaries import read_summary, write_summary
@@ -304,6 +348,7 @@ def run_cell(cell: Cell, runs: Path, results: Path, progress: bool, extra: list[
     env = make_env(cell.map)
     run = prepare_run(cfg, run_folder(cell, runs, paper_runs))
     from ntq_jax import artifacts
+
     if cell.budget != "ours" or cell.train_seed:  # the same data (and models for a budget)
         base = run_folder(Cell(cell.map, cell.data, "ours"), runs, paper_runs)
         if (base / "results.json").is_file():
@@ -313,8 +358,11 @@ def run_cell(cell: Cell, runs: Path, results: Path, progress: bool, extra: list[
                 artifacts.link_tree(base / "eval" / cell.slug, run / "eval" / cell.slug)
         else:  # a fresh machine: the base cell's run folder is gone; its data (and, for a
             # budget cell, its models) are made again from the same config and seeds
-            print(f"[{cell.key}] no run of {Cell(cell.map, cell.data, 'ours').key} here: "
-                  "its data (and models) are made again", flush=True)
+            print(
+                f"[{cell.key}] no run of {Cell(cell.map, cell.data, 'ours').key} here: "
+                "its data (and models) are made again",
+                flush=True,
+            )
     t0 = time.perf_counter()
     print(f"[{cell.key}] run folder {run}", flush=True)
     run_pipeline(cfg, run, progress=progress, figures=False)
@@ -326,18 +374,24 @@ def run_cell(cell: Cell, runs: Path, results: Path, progress: bool, extra: list[
         dest = paper_results / task / cell.slug
         rcmd = f"python scripts/reproduce.py --config configs/{task}.yaml --env {cell.map}"
         if cell.train_seed:
-            dest, rcmd = (dest / "seeds" / f"train_seed_{cell.train_seed}",
-                          rcmd + f" --train-seeds {cell.train_seed}")
+            dest, rcmd = (
+                dest / "seeds" / f"train_seed_{cell.train_seed}",
+                rcmd + f" --train-seeds {cell.train_seed}",
+            )
         write_summary(run, cell.map, env, dest, command=rcmd)
         check_cells(results)  # REPRODUCTION.md reads the factor cells too
         from ntq_jax.experiment import reproduction
+
         print(f"report: {reproduction.write(paper_results)}", flush=True)
     from ntq_jax import artifacts
+
     history = run / "models" / cell.slug / "history.csv"
     if cell.budget == "ours" and history.is_file():  # the loss per epoch of the cell's PNets
         artifacts.write_text(out / "history.csv", history.read_text())
-    artifacts.write_json(out / "paired.json", {"cell": cell._asdict(), "sets": sets,
-                                               "paired": paired(run, cell, env)})
+    artifacts.write_json(
+        out / "paired.json",
+        {"cell": cell._asdict(), "sets": sets, "paired": paired(run, cell, env)},
+    )
     print(f"[{cell.key}] done in {time.perf_counter() - t0:.0f} s", flush=True)
 
 
@@ -368,24 +422,31 @@ def report(results: Path) -> Path:
         "|---|---|---|---:|---|---|---|---|---|---|",
     ]
     from ntq_jax.experiment import factor_table
+
     cells = factor_table.load_cells(results)  # each comparison with its BH q
     for p in cells:
         c = p["cell"]
         by = {}
         for r in p["paired"]:
-            label = r["model"] + ("" if r.get("baseline", "PNet_0") == "PNet_0"
-                                  else f" vs {r['baseline']}")
+            label = r["model"] + (
+                "" if r.get("baseline", "PNet_0") == "PNet_0" else f" vs {r['baseline']}"
+            )
             by.setdefault((r["query_kind"], r["steer"], label), {})[r["band"]] = r
         for (kind, steer, model), parts in sorted(by.items(), key=str):
             cellf = []
             for band in ("all", "in_band", "out_band"):
                 r = parts.get(band)
-                cellf.append("-" if not r or "success_diff" not in r
-                             else f"{factor_table.diff_text(r)} (n={r['n']})")
-            lines.append(f"| {c['map']} | {c['data']} | {c['budget']} | {c['train_seed']} | "
-                         f"{kind} | {'yes' if steer else 'no'} | {model} | " + " | ".join(cellf)
-                         + " |")
+                cellf.append(
+                    "-"
+                    if not r or "success_diff" not in r
+                    else f"{factor_table.diff_text(r)} (n={r['n']})"
+                )
+            lines.append(
+                f"| {c['map']} | {c['data']} | {c['budget']} | {c['train_seed']} | "
+                f"{kind} | {'yes' if steer else 'no'} | {model} | " + " | ".join(cellf) + " |"
+            )
     from ntq_jax import artifacts
+
     lines += [""] + factor_table.decomposition(cells)
     path = results / "README.md"
     artifacts.write_text(path, "\n".join(lines).rstrip("\n") + "\n")
@@ -397,23 +458,35 @@ def main(argv=None) -> int:
 
 
 def _main(argv) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("--list", action="store_true", help="list the cells and their state")
     ap.add_argument("--next", action="store_true", help="run the first pending, ready cell")
     ap.add_argument("--cell", action="append", default=[], help="run this cell (repeatable)")
     ap.add_argument("--report-only", action="store_true", help="only regenerate README.md")
     ap.add_argument("--runs", default="runs/factors")
     ap.add_argument("--results", default="results/factors")
-    ap.add_argument("--paper-runs", default="runs/paper",
-                    help="scripts/reproduce.py's run folders, shared by the default cells "
-                         "('none': keep them under --runs)")
-    ap.add_argument("--paper-results", default="results/paper",
-                    help="where a default cell also writes its map's reproduction summary "
-                         "and REPRODUCTION.md (as scripts/reproduce.py would)")
+    ap.add_argument(
+        "--paper-runs",
+        default="runs/paper",
+        help="scripts/reproduce.py's run folders, shared by the default cells "
+        "('none': keep them under --runs)",
+    )
+    ap.add_argument(
+        "--paper-results",
+        default="results/paper",
+        help="where a default cell also writes its map's reproduction summary "
+        "and REPRODUCTION.md (as scripts/reproduce.py would)",
+    )
     ap.add_argument("--no-progress", action="store_true")
-    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                    help="config override for every cell (smaller sizes for a trial run)")
+    ap.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="config override for every cell (smaller sizes for a trial run)",
+    )
     args = ap.parse_args(argv)
     runs, results = Path(args.runs), Path(args.results)
     all_cells = {c.key: c for c in cells()}
@@ -422,13 +495,23 @@ def _main(argv) -> int:
         return 0
     if args.list or not (args.next or args.cell):
         from ntq_jax.artifacts import lock_holder
+
         for c in all_cells.values():
             done, why = is_done(results / c.key), damaged(results / c.key)
             held = None if done else lock_holder(runs / ".claims" / c.key.replace("/", "__"))
-            note = (f"{why}; --next redoes it" if why else f"claimed by {held}" if held
-                    else None if done else ready(c))
-            print(f"{'done   ' if done else 'running' if held else 'pending'} {c.key}"
-                  + (f"  ({note})" if note else ""))
+            note = (
+                f"{why}; --next redoes it"
+                if why
+                else f"claimed by {held}"
+                if held
+                else None
+                if done
+                else ready(c)
+            )
+            print(
+                f"{'done   ' if done else 'running' if held else 'pending'} {c.key}"
+                + (f"  ({note})" if note else "")
+            )
         return 0
     todo = [all_cells[k] for k in args.cell if k in all_cells]
     unknown = [k for k in args.cell if k not in all_cells]
@@ -443,12 +526,19 @@ def _main(argv) -> int:
         if not claim(c, runs):
             raise UsageError(f"--cell {c.key}: another factor_study.py process is running it")
         paper = args.paper_runs != "none"
-        run_cell(c, runs, results, not args.no_progress, args.set,
-                 Path(args.paper_runs) if paper else None,
-                 Path(args.paper_results) if paper else None)
+        run_cell(
+            c,
+            runs,
+            results,
+            not args.no_progress,
+            args.set,
+            Path(args.paper_runs) if paper else None,
+            Path(args.paper_results) if paper else None,
+        )
         print(f"report: {report(results)}", flush=True)
         if paper and (Path(args.paper_results) / "REPRODUCTION.md").is_file():
             from ntq_jax.experiment import reproduction  # its factor section reads results
+
             print(f"report: {reproduction.write(Path(args.paper_results))}", flush=True)
     return 0
 

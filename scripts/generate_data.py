@@ -29,8 +29,13 @@ import sys
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
-from ntq_jax.experiment.cli import (add_run_options, check_writable_folder, executor_of, run_cli,
-                                    start_run)
+from ntq_jax.experiment.cli import (
+    add_run_options,
+    check_writable_folder,
+    executor_of,
+    run_cli,
+    start_run,
+)
 
 
 def main(argv=None) -> int:
@@ -39,20 +44,33 @@ def main(argv=None) -> int:
 
 
 def _main(argv) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    add_run_options(ap, set_example="data.k_train=100", figures_help="skip the PNG figures",
-                    cpu_devices_help="JAX CPU devices to create (default 1)", executor=True)
-    ap.add_argument("--env", action="append", default=None,
-                    help="environment(s) to generate (default: every one in the config's envs)")
+    ap = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    add_run_options(
+        ap,
+        set_example="data.k_train=100",
+        figures_help="skip the PNG figures",
+        cpu_devices_help="JAX CPU devices to create (default 1)",
+        executor=True,
+    )
+    ap.add_argument(
+        "--env",
+        action="append",
+        default=None,
+        help="environment(s) to generate (default: every one in the config's envs)",
+    )
     ap.add_argument("--out", default=None, help="output root (default: <out_dir>/data)")
-    ap.add_argument("--planner", default=None,
-                    help="planner name overriding planner.name (astar, visgraph, bitstar, roadmap)")
+    ap.add_argument(
+        "--planner",
+        default=None,
+        help="planner name overriding planner.name (astar, visgraph, bitstar, roadmap)",
+    )
     args = ap.parse_args(argv)
     start_run(args)
 
-    from ntq_jax.experiment import config as C
     from ntq_jax import artifacts, data, make_env
+    from ntq_jax.experiment import config as C
 
     overrides = list(args.set)
     if args.planner:
@@ -63,13 +81,20 @@ def _main(argv) -> int:
     check_writable_folder(out, "--out")  # before any work
     made = {name: make_env(name) for name in envs}  # every env valid before any work
     from ntq_jax.experiment.pipeline import check_planners
+
     check_planners(cfg, made)
     executor = executor_of(args, cfg)
 
     def one(name):
-        return data.generate_datasets(made[name], C.data_options(cfg, name), out, env_name=name,
-                                      progress=not args.no_progress, figure=not args.no_figures,
-                                      executor=executor)
+        return data.generate_datasets(
+            made[name],
+            C.data_options(cfg, name),
+            out,
+            env_name=name,
+            progress=not args.no_progress,
+            figure=not args.no_figures,
+            executor=executor,
+        )
 
     if executor.name == "local" or len(made) == 1:
         summaries = map(one, made)
@@ -80,18 +105,31 @@ def _main(argv) -> int:
     results = {}
     for name, s in zip(made, summaries):
         results[name] = s
-        state = "already complete (verified)" if s["skipped"] else (
-            f"done in {s['timings']['total']:.1f} s"
-            + (f" (reused {s['reused_queries']} planned queries)" if s["reused_queries"] else ""))
+        state = (
+            "already complete (verified)"
+            if s["skipped"]
+            else (
+                f"done in {s['timings']['total']:.1f} s"
+                + (
+                    f" (reused {s['reused_queries']} planned queries)"
+                    if s["reused_queries"]
+                    else ""
+                )
+            )
+        )
         print(f"{name}: {s['env_dir']} {state}")
         for ds, why in s.get("damaged", {}).items():
-            print(f"  {ds}: damaged ({why}); "
-                  + ("rewritten" if ds in s.get("rewritten", []) else "left as it is"))
+            print(
+                f"  {ds}: damaged ({why}); "
+                + ("rewritten" if ds in s.get("rewritten", []) else "left as it is")
+            )
         for ds, st in s["datasets"].items():
-            print(f"  {ds}: {st['queries']} queries, {st['solved']} solved, {st['samples']} "
-                  f"samples, pruned {st['fraction_pruned']:.1%}, mean waypoints "
-                  f"{st['mean_waypoints']:.2f}, blocked {st['blocked_fraction']:.3f} "
-                  f"(gamma_nt {st['gamma_nt']})")
+            print(
+                f"  {ds}: {st['queries']} queries, {st['solved']} solved, {st['samples']} "
+                f"samples, pruned {st['fraction_pruned']:.1%}, mean waypoints "
+                f"{st['mean_waypoints']:.2f}, blocked {st['blocked_fraction']:.3f} "
+                f"(gamma_nt {st['gamma_nt']})"
+            )
     artifacts.write_json(out / "generate_summary.json", results, default=str)
     return 0
 

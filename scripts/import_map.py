@@ -43,13 +43,21 @@ def _robot(text: str) -> dict:
 
 
 def _main(argv) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("grid", help="a ROS map .yaml/.yml or a MovingAI .map file")
     ap.add_argument("--robot", default="point", help="robot kind or robot JSON (default: point)")
-    ap.add_argument("--padding", type=float, default=0.0, help="data-generation padding (default 0)")
+    ap.add_argument(
+        "--padding", type=float, default=0.0, help="data-generation padding (default 0)"
+    )
     ap.add_argument("--name", help="map name (default: the file's stem)")
-    ap.add_argument("--unknown", choices=("occupied", "free"), default="occupied",
-                    help="ROS maps: what unknown cells become (default occupied)")
+    ap.add_argument(
+        "--unknown",
+        choices=("occupied", "free"),
+        default="occupied",
+        help="ROS maps: what unknown cells become (default occupied)",
+    )
     ap.add_argument("--scale", type=float, help="MovingAI maps: world units per cell (default 1)")
     ap.add_argument("--out", type=Path, help="output JSON (default: print to stdout)")
     args = ap.parse_args(argv)
@@ -58,11 +66,14 @@ def _main(argv) -> int:
 
     if args.out:
         check_writable(args.out, "--out")  # a folder or an unwritable place: before the work
-    env = Env.from_grid(args.grid, _robot(args.robot), args.padding, args.name, args.unknown,
-                        args.scale)
+    env = Env.from_grid(
+        args.grid, _robot(args.robot), args.padding, args.name, args.unknown, args.scale
+    )
     h, w = env.grid.shape
-    summary = (f"{args.grid}: {w} x {h} cells of {env.grid.resolution:g}, "
-               f"{int(env.grid.occupied.sum())} occupied -> {env.world.num_boxes} boxes")
+    summary = (
+        f"{args.grid}: {w} x {h} cells of {env.grid.resolution:g}, "
+        f"{int(env.grid.occupied.sum())} occupied -> {env.world.num_boxes} boxes"
+    )
     if args.out:
         env.save_json(args.out)
         print(f"{summary}; wrote {args.out}")

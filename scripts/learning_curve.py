@@ -25,8 +25,13 @@ import sys
 import time
 from pathlib import Path
 
-from ntq_jax.experiment.cli import (add_run_options, check_writable_folder, executor_of, run_cli,
-                                    start_run)
+from ntq_jax.experiment.cli import (
+    add_run_options,
+    check_writable_folder,
+    executor_of,
+    run_cli,
+    start_run,
+)
 
 
 def main(argv=None) -> int:
@@ -35,34 +40,54 @@ def main(argv=None) -> int:
 
 
 def _main(argv) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("--env", default=None, help="the map (default: the config's first)")
-    ap.add_argument("--sizes", default="250,500,1000,2000,3000",
-                    help="comma-separated K_train values (default 250,500,1000,2000,3000)")
-    ap.add_argument("--out", default=None,
-                    help="curve folder (default: <out_dir>/curve-<map>-<config hash>; rerun "
-                         "to resume)")
-    add_run_options(ap, set_example="train.epochs=20", figures_help="skip curve.png",
-                    cpu_devices_help="JAX CPU devices to create (the PNets train on separate "
-                    "cores); default 1", executor=True)
+    ap.add_argument(
+        "--sizes",
+        default="250,500,1000,2000,3000",
+        help="comma-separated K_train values (default 250,500,1000,2000,3000)",
+    )
+    ap.add_argument(
+        "--out",
+        default=None,
+        help="curve folder (default: <out_dir>/curve-<map>-<config hash>; rerun to resume)",
+    )
+    add_run_options(
+        ap,
+        set_example="train.epochs=20",
+        figures_help="skip curve.png",
+        cpu_devices_help="JAX CPU devices to create (the PNets train on separate cores); default 1",
+        executor=True,
+    )
     args = ap.parse_args(argv)
     start_run(args)  # before any JAX operation
-    from ntq_jax.experiment.curve import parse_sizes, run_curve
     from ntq_jax.envs import env_slug, resolve_envs
+    from ntq_jax.experiment.curve import parse_sizes, run_curve
     from ntq_jax.experiment.pipeline import load_config
 
     cfg = load_config(args.config, args.set)
     env_name = args.env or cfg.envs[0]
     env = resolve_envs([env_name])[env_name]  # a bad map is an error before anything is written
     sizes = parse_sizes(args.sizes, cfg.data.k_train_for(env_name))
-    out = Path(args.out) if args.out else (Path(cfg.out_dir) /
-                                           f"curve-{env_slug(env_name, env)}-{cfg.hash()[:8]}")
+    out = (
+        Path(args.out)
+        if args.out
+        else (Path(cfg.out_dir) / f"curve-{env_slug(env_name, env)}-{cfg.hash()[:8]}")
+    )
     check_writable_folder(out, "--out")  # before any work
     print(f"curve folder: {out}", flush=True)
     t0 = time.perf_counter()
-    files = run_curve(cfg, env_name, sizes, out, progress=not args.no_progress,
-                      figures=not args.no_figures, executor=executor_of(args, cfg))
+    files = run_curve(
+        cfg,
+        env_name,
+        sizes,
+        out,
+        progress=not args.no_progress,
+        figures=not args.no_figures,
+        executor=executor_of(args, cfg),
+    )
     print()
     print(Path(files["md"]).read_text())
     print(f"done in {time.perf_counter() - t0:.0f} s; curve folder: {out}")

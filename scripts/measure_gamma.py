@@ -17,7 +17,8 @@ gamma_nt; ``--padding`` measures another geometry (e.g. the data-generation one)
 A 3-D scene (``panda/<scene>/<number>``, a 3-D JSON) is measured over the world of
 that one problem: MotionBenchMaker's problems of a scene place it at different poses
 around the robot and rearrange its small objects, so their gamma_nt differ (problems
-1-10 of bookshelf_tall: 0.08 to 0.25; see results/panda_gamma/README.md). Its motions are checked at the arm's resolution (1/32 rad: ~170 states on an
+1-10 of bookshelf_tall: 0.08 to 0.25; see results/panda_gamma/README.md). Its motions are checked
+at the arm's resolution (1/32 rad: ~170 states on an
 average free 7-D motion), so it runs at thousands of queries per second, not millions,
 after about a minute of compilation (two programs: whole chunks, and the last chunk's
 prefix; the persistent compilation cache keeps them for the next run unless
@@ -48,7 +49,7 @@ from pathlib import Path
 from ntq_jax.experiment.cli import UsageError, check_writable, run_cli, seed_arg
 
 MAX_QUERIES = 10**15  # ~80 days at the fastest measured rate (1.5e8 queries/s, point robot)
-INTERRUPTED = 130     # the shell's exit code for a process ended by SIGINT
+INTERRUPTED = 130  # the shell's exit code for a process ended by SIGINT
 #: The default chunk of a 3-D arm (``ntq_jax.queries.default_chunk`` is 2**15): at a few
 #: thousand queries per second, 4096 candidates take about a second, so the bar moves
 #: steadily, at the rate of 2**15 (panda/box/1 on one core: 2,860 vs 2,430 queries/s).
@@ -78,6 +79,7 @@ def _queries(text: str) -> int:
 
 def _chunk(text: str) -> int:
     from ntq_jax.queries import MAX_CHUNK
+
     return _count(text, MAX_CHUNK)
 
 
@@ -152,11 +154,15 @@ class _Eta:
         self.reported = True
         rate = (done - d0) / (now - t0)
         eta = (self.total - done) / rate
-        msg = (f"{self.total:,} queries at {rate:,.0f} queries/s: about {_duration(eta)} left; "
-               f"memory {_peak_gib():.2f} GiB, flat from here (fixed-size chunks)")
+        msg = (
+            f"{self.total:,} queries at {rate:,.0f} queries/s: about {_duration(eta)} left; "
+            f"memory {_peak_gib():.2f} GiB, flat from here (fixed-size chunks)"
+        )
         if eta > self.max_hours * 3600:
-            raise ScriptError(f"{msg}, more than --max-hours {self.max_hours:g}: ask for fewer "
-                              "--queries, or raise --max-hours")
+            raise ScriptError(
+                f"{msg}, more than --max-hours {self.max_hours:g}: ask for fewer "
+                "--queries, or raise --max-hours"
+            )
         self.bar.write(msg, file=sys.stderr)
 
 
@@ -169,66 +175,109 @@ def _cpu_seconds() -> float:
 def _peak_gib() -> float:
     """This process's peak resident memory in GiB (Linux and macOS units)."""
     import resource
+
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     return peak / (2**30 if sys.platform == "darwin" else 2**20)
 
 
-def _existing(path: Path, env: str, queries: int, padding: float, seed: int,
-              chunk: int | None) -> dict | None:
+def _existing(
+    path: Path, env: str, queries: int, padding: float, seed: int, chunk: int | None
+) -> dict | None:
     """The result in ``path`` if it is this measurement (else None: measure it)."""
     try:
         data = json.loads(path.read_text())
     except (OSError, ValueError):
         return None
-    same = (isinstance(data, dict) and data.get("env") == env and data.get("queries") == queries
-            and data.get("padding") == padding and data.get("seed") == seed
-            and data.get("chunk") == chunk)
+    same = (
+        isinstance(data, dict)
+        and data.get("env") == env
+        and data.get("queries") == queries
+        and data.get("padding") == padding
+        and data.get("seed") == seed
+        and data.get("chunk") == chunk
+    )
     return data if same else None
 
 
 def _report_json(d: dict) -> None:
-    print(f"env {d['env']}  padding {d['padding']:g}  queries {d['queries']:,}  "
-          f"non-trivial {d['non_trivial']:,}")
+    print(
+        f"env {d['env']}  padding {d['padding']:g}  queries {d['queries']:,}  "
+        f"non-trivial {d['non_trivial']:,}"
+    )
     print(f"gamma_nt = {d['gamma']:.6f}  95% CI [{d['ci95'][0]:.6f}, {d['ci95'][1]:.6f}]")
     print(f"{d['seconds']:.2f} s  {d['queries_per_second']:,.0f} queries/s (when measured)")
 
 
 def _report(env, padding: float, est, file=None) -> None:
     lo, hi = est.ci95
-    print(f"env {env.name}  padding {padding:g}  queries {est.queries:,}  "
-          f"non-trivial {est.non_trivial:,}", file=file)
+    print(
+        f"env {env.name}  padding {padding:g}  queries {est.queries:,}  "
+        f"non-trivial {est.non_trivial:,}",
+        file=file,
+    )
     print(f"gamma_nt = {est.gamma:.6f}  95% CI [{lo:.6f}, {hi:.6f}]", file=file)
-    print(f"{est.seconds:.2f} s  {est.queries_per_second:,.0f} queries/s  "
-          f"({est.candidates_per_second:,.0f} raw candidates/s)  peak memory "
-          f"{_peak_gib():.2f} GiB", file=file)
+    print(
+        f"{est.seconds:.2f} s  {est.queries_per_second:,.0f} queries/s  "
+        f"({est.candidates_per_second:,.0f} raw candidates/s)  peak memory "
+        f"{_peak_gib():.2f} GiB",
+        file=file,
+    )
 
 
 def _parser() -> argparse.ArgumentParser:
     """The command line's options."""
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--env", default="point/0", help="preset name (point/0..3, rigid/0..3, "
-                    "nlink/2|4|6), a Panda problem (panda/<scene>/<number>, e.g. panda/cage/1) "
-                    "or a JSON map file (default: point/0)")
-    ap.add_argument("--queries", type=_queries, default=10**7,
-                    help=f"uniform valid queries to examine; accepts 1e9 (default: 1e7, at most "
-                    f"{MAX_QUERIES:.0e})")
-    ap.add_argument("--padding", type=_padding, default=0.0,
-                    help="clearance of the geometry (default 0: the evaluation geometry)")
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    ap.add_argument(
+        "--env",
+        default="point/0",
+        help="preset name (point/0..3, rigid/0..3, "
+        "nlink/2|4|6), a Panda problem (panda/<scene>/<number>, e.g. panda/cage/1) "
+        "or a JSON map file (default: point/0)",
+    )
+    ap.add_argument(
+        "--queries",
+        type=_queries,
+        default=10**7,
+        help=f"uniform valid queries to examine; accepts 1e9 (default: 1e7, at most "
+        f"{MAX_QUERIES:.0e})",
+    )
+    ap.add_argument(
+        "--padding",
+        type=_padding,
+        default=0.0,
+        help="clearance of the geometry (default 0: the evaluation geometry)",
+    )
     ap.add_argument("--seed", type=seed_arg, default=0, help="PRNG seed, 0 .. 2**32-1")
-    ap.add_argument("--chunk", type=_chunk, default=None,
-                    help="candidate queries per compiled chunk (default: 4M point, 256k point on a "
-                    "map of more than 64 boxes, 4096 a 3-D arm, 32k others); memory grows with "
-                    "it, not with --queries")
-    ap.add_argument("--max-hours", type=_hours, default=24.0,
-                    help="stop at once if the time estimate exceeds this (default 24; inf: no limit)")
+    ap.add_argument(
+        "--chunk",
+        type=_chunk,
+        default=None,
+        help="candidate queries per compiled chunk (default: 4M point, 256k point on a "
+        "map of more than 64 boxes, 4096 a 3-D arm, 32k others); memory grows with "
+        "it, not with --queries",
+    )
+    ap.add_argument(
+        "--max-hours",
+        type=_hours,
+        default=24.0,
+        help="stop at once if the time estimate exceeds this (default 24; inf: no limit)",
+    )
     ap.add_argument("--json", type=Path, default=None, help="also write the result as JSON")
-    ap.add_argument("--skip-existing", action="store_true",
-                    help="if --json already holds this measurement (same env, queries, padding, "
-                    "seed, chunk), print it and measure nothing")
+    ap.add_argument(
+        "--skip-existing",
+        action="store_true",
+        help="if --json already holds this measurement (same env, queries, padding, "
+        "seed, chunk), print it and measure nothing",
+    )
     ap.add_argument("--no-progress", action="store_true", help="hide the progress bar")
-    ap.add_argument("--no-compile-cache", action="store_true",
-                    help="do not use JAX's persistent compilation cache (~/.cache/ntq_jax/jax; "
-                    "a 3-D arm's two programs take about a minute to compile)")
+    ap.add_argument(
+        "--no-compile-cache",
+        action="store_true",
+        help="do not use JAX's persistent compilation cache (~/.cache/ntq_jax/jax; "
+        "a 3-D arm's two programs take about a minute to compile)",
+    )
     return ap
 
 
@@ -251,29 +300,41 @@ def _run(argv) -> int:
         artifacts.enable_compile_cache()
     env = nj.make_env(args.env)
     three_d = isinstance(env.world, World3D)
-    chunk = args.chunk if args.chunk is not None else (
-        ARM3D_CHUNK if three_d else default_chunk(env.robot, env.world))
+    chunk = (
+        args.chunk
+        if args.chunk is not None
+        else (ARM3D_CHUNK if three_d else default_chunk(env.robot, env.world))
+    )
     if args.skip_existing:
         done = _existing(args.json, env.name, args.queries, args.padding, args.seed, chunk)
         if done is not None:
             print(f"{args.json} already holds this measurement; not measured again")
             _report_json(done)
             return 0
-    bar = tqdm(total=args.queries, unit="q", unit_scale=True, disable=args.no_progress,
-               desc=f"gamma_nt {env.name}", file=sys.stderr)
+    bar = tqdm(
+        total=args.queries,
+        unit="q",
+        unit_scale=True,
+        disable=args.no_progress,
+        desc=f"gamma_nt {env.name}",
+        file=sys.stderr,
+    )
     eta = _Eta(bar, args.queries, args.max_hours)
     cpu0 = _cpu_seconds()
     try:
-        est = env.gamma_nt(jax.random.key(args.seed), args.queries, padding=args.padding,
-                           chunk=chunk, progress=eta)
+        est = env.gamma_nt(
+            jax.random.key(args.seed), args.queries, padding=args.padding, chunk=chunk, progress=eta
+        )
     except KeyboardInterrupt as e:
         bar.close()
         partial = getattr(e, "estimate", None)
         if partial is None:
             print("interrupted before the first chunk was counted: no estimate", file=sys.stderr)
         else:
-            print(f"interrupted after {partial.queries:,} of {args.queries:,} queries; the "
-                  "estimate so far:")
+            print(
+                f"interrupted after {partial.queries:,} of {args.queries:,} queries; the "
+                "estimate so far:"
+            )
             _report(env, args.padding, partial)
         if args.json is not None:
             print(f"{args.json} not written (interrupted)", file=sys.stderr)
@@ -284,35 +345,53 @@ def _run(argv) -> int:
     cpu = _cpu_seconds() - cpu0
     ahead, rate = eta.streaming()
     if rate is not None:
-        print(f"streaming: {rate:,.0f} queries/s after the first chunk ({ahead:.1f} s to it, "
-              "compilation included)")
-    print(f"cpu time {cpu:.1f} s, {est.queries / max(cpu, 1e-9):,.0f} queries per cpu-second "
-          "(compilation included; on a shared core the wall-clock rate is lower)")
+        print(
+            f"streaming: {rate:,.0f} queries/s after the first chunk ({ahead:.1f} s to it, "
+            "compilation included)"
+        )
+    print(
+        f"cpu time {cpu:.1f} s, {est.queries / max(cpu, 1e-9):,.0f} queries per cpu-second "
+        "(compilation included; on a shared core the wall-clock rate is lower)"
+    )
     if args.json:
-        artifacts.write_json(args.json, _result_json(env, args, est, chunk, cpu, ahead, rate,
-                                                     three_d))
+        artifacts.write_json(
+            args.json, _result_json(env, args, est, chunk, cpu, ahead, rate, three_d)
+        )
     return 0
 
 
 def _result_json(env, args, est, chunk: int, cpu: float, ahead, rate, three_d: bool) -> dict:
     """What ``--json`` writes: the estimate, its interval, rates and the settings."""
     import ntq_jax as nj
+
     lo, hi = est.ci95
     resolution = getattr(env.robot, "resolution", None)
-    out = {"env": env.name, "padding": args.padding, "seed": args.seed,
-           "queries": est.queries, "non_trivial": est.non_trivial, "gamma": est.gamma,
-           "ci95": [lo, hi], "seconds": est.seconds,
-           "queries_per_second": est.queries_per_second,
-           "candidates": est.candidates,
-           "candidates_per_second": est.candidates_per_second,
-           "cpu_seconds": cpu, "first_chunk_seconds": ahead, "streaming_queries_per_second": rate,
-           "chunk": chunk, "resolution": resolution,
-           "check": "exact" if resolution is None else "discretized",
-           "cpus": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None,
-           "version": nj.__version__}
+    out = {
+        "env": env.name,
+        "padding": args.padding,
+        "seed": args.seed,
+        "queries": est.queries,
+        "non_trivial": est.non_trivial,
+        "gamma": est.gamma,
+        "ci95": [lo, hi],
+        "seconds": est.seconds,
+        "queries_per_second": est.queries_per_second,
+        "candidates": est.candidates,
+        "candidates_per_second": est.candidates_per_second,
+        "cpu_seconds": cpu,
+        "first_chunk_seconds": ahead,
+        "streaming_queries_per_second": rate,
+        "chunk": chunk,
+        "resolution": resolution,
+        "check": "exact" if resolution is None else "discretized",
+        "cpus": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None,
+        "version": nj.__version__,
+    }
     if three_d:
-        out["world"] = ("the world of this one problem (the problems of a scene place it "
-                        "differently, and their gamma_nt differ)")
+        out["world"] = (
+            "the world of this one problem (the problems of a scene place it "
+            "differently, and their gamma_nt differ)"
+        )
     return out
 
 
@@ -322,6 +401,7 @@ def main(argv=None) -> int:
     one ``error:`` line on stderr and exit code 2; Ctrl-C exits with code 130 without a
     traceback (during the estimate, after printing the estimate so far)."""
     from ntq_jax.queries import FreeSpaceTooSmall
+
     return run_cli(lambda: _run(argv), extra=(FreeSpaceTooSmall,))
 
 

@@ -35,8 +35,13 @@ import sys
 import time
 from pathlib import Path
 
-from ntq_jax.experiment.cli import (UsageError, add_run_options, check_writable_folder, run_cli,
-                                    start_run)
+from ntq_jax.experiment.cli import (
+    UsageError,
+    add_run_options,
+    check_writable_folder,
+    run_cli,
+    start_run,
+)
 
 
 def main(argv=None) -> int:
@@ -54,10 +59,9 @@ def _seeds(text: str) -> list[int]:
     return seeds
 
 
-
-
-def _one(cfg, name: str, env, run: Path, out: Path, *, args, command: str,
-         data_from: Path | None = None) -> None:
+def _one(
+    cfg, name: str, env, run: Path, out: Path, *, args, command: str, data_from: Path | None = None
+) -> None:
     """Runs the pipeline for one map (unless its summary is current) and writes its summary."""
     from ntq_jax.envs import env_slug
     from ntq_jax.experiment.pipeline import prepare_run, run_pipeline
@@ -68,27 +72,32 @@ def _one(cfg, name: str, env, run: Path, out: Path, *, args, command: str,
         print(f"[{name}] summary up to date: {out / 'summary.json'}", flush=True)
         return
     from ntq_jax.experiment.cli import executor_of
+
     executor = executor_of(args, cfg)  # an unreachable Ray cluster: refused before any write
     run = prepare_run(cfg, run)
     if data_from is not None:  # the same data: hard links to the map's datasets
         from ntq_jax import artifacts
+
         slug = env_slug(name, env)
         artifacts.link_tree(data_from / "data" / slug, run / "data" / slug)
     print(f"[{name}] run folder: {run}", flush=True)
     t0 = time.perf_counter()
-    run_pipeline(cfg, run, progress=not args.no_progress, figures=not args.no_figures,
-                 executor=executor)
+    run_pipeline(
+        cfg, run, progress=not args.no_progress, figures=not args.no_figures, executor=executor
+    )
     path = write_summary(run, name, env, out, command=command)
     print(f"[{name}] done in {time.perf_counter() - t0:.0f} s; summary: {path}", flush=True)
 
 
 def _report(results: Path) -> None:
     from ntq_jax.experiment import reproduction
+
     print(f"report: {reproduction.write(results)}", flush=True)
 
 
 def _check(results: Path) -> int:
     from ntq_jax.experiment import reproduction
+
     problem = reproduction.check(results)
     print(problem or f"{results / reproduction.DOC_NAME} is up to date", flush=True)
     return 1 if problem else 0
@@ -97,8 +106,10 @@ def _check(results: Path) -> int:
 def _report_only(args, results: Path) -> int:
     """``--report-only [--check]``: REPRODUCTION.md from the summaries under ``results``."""
     if args.env or args.train_seeds or args.config:
-        raise UsageError("--report-only regenerates REPRODUCTION.md from every summary in "
-                         "--results; it takes no --config, --env or --train-seeds")
+        raise UsageError(
+            "--report-only regenerates REPRODUCTION.md from every summary in "
+            "--results; it takes no --config, --env or --train-seeds"
+        )
     if args.check:
         return _check(results)
     check_writable_folder(results, "--results")
@@ -107,22 +118,44 @@ def _report_only(args, results: Path) -> int:
 
 
 def _main(argv) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--env", action="append", default=None,
-                    help="a map of the config (repeatable; default: every map)")
-    ap.add_argument("--train-seeds", default="", metavar="K,K",
-                    help="extra training seeds per map, same data (e.g. 1,2)")
+    ap = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    ap.add_argument(
+        "--env",
+        action="append",
+        default=None,
+        help="a map of the config (repeatable; default: every map)",
+    )
+    ap.add_argument(
+        "--train-seeds",
+        default="",
+        metavar="K,K",
+        help="extra training seeds per map, same data (e.g. 1,2)",
+    )
     ap.add_argument("--runs", default="runs/paper", help="run folders (default runs/paper)")
-    ap.add_argument("--results", default="results/paper",
-                    help="summary folders and REPRODUCTION.md (default results/paper)")
-    ap.add_argument("--report-only", action="store_true",
-                    help="only regenerate REPRODUCTION.md from the summaries")
-    ap.add_argument("--check", action="store_true",
-                    help="with --report-only: write nothing, exit 1 if REPRODUCTION.md is stale")
-    add_run_options(ap, set_example="eval.k_test=100", figures_help="skip the PNG figures",
-                    cpu_devices_help="JAX CPU devices to create (one per core); default 1",
-                    executor=True)
+    ap.add_argument(
+        "--results",
+        default="results/paper",
+        help="summary folders and REPRODUCTION.md (default results/paper)",
+    )
+    ap.add_argument(
+        "--report-only",
+        action="store_true",
+        help="only regenerate REPRODUCTION.md from the summaries",
+    )
+    ap.add_argument(
+        "--check",
+        action="store_true",
+        help="with --report-only: write nothing, exit 1 if REPRODUCTION.md is stale",
+    )
+    add_run_options(
+        ap,
+        set_example="eval.k_test=100",
+        figures_help="skip the PNG figures",
+        cpu_devices_help="JAX CPU devices to create (one per core); default 1",
+        executor=True,
+    )
     args = ap.parse_args(argv)
     results = Path(args.results)
     if args.report_only:
@@ -130,8 +163,10 @@ def _main(argv) -> int:
     if args.check:
         raise UsageError("--check goes with --report-only")
     if args.config is None:
-        raise UsageError("--config is required (configs/point.yaml, configs/rigid.yaml or "
-                         "configs/nlink.yaml), unless --report-only")
+        raise UsageError(
+            "--config is required (configs/point.yaml, configs/rigid.yaml or "
+            "configs/nlink.yaml), unless --report-only"
+        )
     seeds = _seeds(args.train_seeds)
     check_writable_folder(results, "--results")
     check_writable_folder(args.runs, "--runs")
@@ -143,8 +178,9 @@ def _main(argv) -> int:
     names = args.env or list(base.envs)
     unknown = [n for n in names if n not in base.envs]
     if unknown:
-        raise UsageError(f"--env {unknown[0]} is not a map of {args.config} "
-                         f"({', '.join(base.envs)})")
+        raise UsageError(
+            f"--env {unknown[0]} is not a map of {args.config} ({', '.join(base.envs)})"
+        )
     envs = resolve_envs(names)
     command = "python scripts/reproduce.py " + " ".join(sys.argv[1:] if argv is None else argv)
     for name in names:
@@ -158,8 +194,16 @@ def _main(argv) -> int:
             cfg_k = load_config(args.config, [*args.set, f"envs=[{name}]", f"train.seed={k}"])
             if cfg_k.train.seed_for(cfg_k.seed) == cfg.train.seed_for(cfg.seed):
                 continue  # the map's own run
-            _one(cfg_k, name, env, run.with_name(f"{slug}-train_seed_{k}"),
-                 out / "seeds" / f"train_seed_{k}", args=args, command=command, data_from=run)
+            _one(
+                cfg_k,
+                name,
+                env,
+                run.with_name(f"{slug}-train_seed_{k}"),
+                out / "seeds" / f"train_seed_{k}",
+                args=args,
+                command=command,
+                data_from=run,
+            )
             _report(results)
     return 0
 

@@ -32,19 +32,26 @@ def main(argv=None) -> int:
 
 
 def _main(argv) -> int:
-    ap = argparse.ArgumentParser(description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--data", type=Path, required=True,
-                    help="environment data folder (env.json + D0..D3)")
-    add_run_options(ap, set_example="train.epochs=5", figures_help=None,
-                    config_help="YAML config (its model and train sections are used; "
-                                "default: the embedded default)",
-                    cpu_devices_help="JAX CPU devices to create (one per core): the members "
-                                     "train on separate cores; results then differ from a "
-                                     "one-device run at float level. Default 1")
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    ap.add_argument(
+        "--data", type=Path, required=True, help="environment data folder (env.json + D0..D3)"
+    )
+    add_run_options(
+        ap,
+        set_example="train.epochs=5",
+        figures_help=None,
+        config_help="YAML config (its model and train sections are used; "
+        "default: the embedded default)",
+        cpu_devices_help="JAX CPU devices to create (one per core): the members "
+        "train on separate cores; results then differ from a "
+        "one-device run at float level. Default 1",
+    )
     ap.add_argument("--out", type=Path, default=None, help="output folder (default: DATA/pnets)")
-    ap.add_argument("--no-shard", action="store_true",
-                    help="never shard the member axis over devices")
+    ap.add_argument(
+        "--no-shard", action="store_true", help="never shard the member axis over devices"
+    )
     args = ap.parse_args(argv)
     start_run(args)  # --cpu-devices checked and applied before any JAX operation
 
@@ -52,26 +59,38 @@ def _main(argv) -> int:
 
     cfg = load(args.config, args.set)
     if not (args.data / "env.json").is_file():
-        raise UsageError(f"--data {args.data}: no env.json there; pass an environment folder "
-                         "written by scripts/generate_data.py (env.json beside D0..D3)")
+        raise UsageError(
+            f"--data {args.data}: no env.json there; pass an environment folder "
+            "written by scripts/generate_data.py (env.json beside D0..D3)"
+        )
     out = args.out or args.data / "pnets"
 
     import jax
 
     from ntq_jax import training as T
 
-    print(f"training {cfg.model.hidden} PNets on {args.data} -> {out} "
-          f"({len(jax.devices())} {jax.default_backend()} device(s))", file=sys.stderr)
+    print(
+        f"training {cfg.model.hidden} PNets on {args.data} -> {out} "
+        f"({len(jax.devices())} {jax.default_backend()} device(s))",
+        file=sys.stderr,
+    )
     t0 = time.perf_counter()
-    ens, hist = T.train_from_folder(args.data, out, progress=not args.no_progress,
-                                    shard=False if args.no_shard else None, **train_args(cfg))
+    ens, hist = T.train_from_folder(
+        args.data,
+        out,
+        progress=not args.no_progress,
+        shard=False if args.no_shard else None,
+        **train_args(cfg),
+    )
     dt = time.perf_counter() - t0
     last = {}
     for m in range(hist.train_loss.shape[1]):
         tl = hist.train_loss[:, m]
         vl = hist.val_loss[:, m]
-        last[f"D{m}"] = (float(tl[~(tl != tl)][-1]) if (tl == tl).any() else float("nan"),
-                         float(vl[~(vl != vl)][-1]) if (vl == vl).any() else float("nan"))
+        last[f"D{m}"] = (
+            float(tl[~(tl != tl)][-1]) if (tl == tl).any() else float("nan"),
+            float(vl[~(vl != vl)][-1]) if (vl == vl).any() else float("nan"),
+        )
     for name, (tl, vl) in last.items():
         print(f"{name}: train loss {tl:.5g}  val loss {vl:.5g}")
     print(f"done in {dt:.1f} s; ensemble: {out / 'ensemble'}; curves: {out / 'curves.png'}")

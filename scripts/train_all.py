@@ -51,21 +51,36 @@ def main(argv=None) -> int:
 
 
 def _main(argv) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--out", default=None,
-                    help="run folder (default: <out_dir>/<task>-<config hash>; rerun to resume)")
-    ap.add_argument("--overwrite", action="store_true",
-                    help="delete --out first when it is not a run of this config (another "
-                         "config, or run.json missing or corrupt) and start over; only a folder "
-                         "holding nothing but a run's files is deleted")
-    ap.add_argument("--full-tables", action="store_true",
-                    help="also print every table of tables.md (the end of a run prints a "
-                         "headline per map and where the tables and figures are)")
-    add_run_options(ap, set_example="eval.k_test=100", figures_help="skip the PNG figures",
-                    cpu_devices_help="JAX CPU devices to create (one per core): the four PNets "
-                    "train on separate cores (speed: BENCHMARKS.md); results then differ from a "
-                    "one-device run at float level. Default 1", executor=True)
+    ap = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    ap.add_argument(
+        "--out",
+        default=None,
+        help="run folder (default: <out_dir>/<task>-<config hash>; rerun to resume)",
+    )
+    ap.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="delete --out first when it is not a run of this config (another "
+        "config, or run.json missing or corrupt) and start over; only a folder "
+        "holding nothing but a run's files is deleted",
+    )
+    ap.add_argument(
+        "--full-tables",
+        action="store_true",
+        help="also print every table of tables.md (the end of a run prints a "
+        "headline per map and where the tables and figures are)",
+    )
+    add_run_options(
+        ap,
+        set_example="eval.k_test=100",
+        figures_help="skip the PNG figures",
+        cpu_devices_help="JAX CPU devices to create (one per core): the four PNets "
+        "train on separate cores (speed: BENCHMARKS.md); results then differ from a "
+        "one-device run at float level. Default 1",
+        executor=True,
+    )
     args = ap.parse_args(argv)
     start_run(args)  # before any JAX operation
     cfg = load_config(args.config, args.set)
@@ -73,8 +88,9 @@ def _main(argv) -> int:
     run = prepare_run(cfg, args.out, overwrite=args.overwrite)  # validates before writing
     print(f"run folder: {run}", flush=True)
     t0 = time.perf_counter()
-    out = run_pipeline(cfg, run, progress=not args.no_progress, figures=not args.no_figures,
-                       executor=executor)
+    out = run_pipeline(
+        cfg, run, progress=not args.no_progress, figures=not args.no_figures, executor=executor
+    )
     print()
     if args.full_tables:
         print((run / "tables.md").read_text())

@@ -8,7 +8,6 @@ from pathlib import Path
 
 from script_loader import load_script
 
-
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -25,8 +24,11 @@ def _listing(root: Path) -> dict:
     if root.is_dir():
         for p in sorted(root.rglob("*")):
             st = p.stat()
-            out[str(p.relative_to(root))] = (p.is_dir(), 0 if p.is_dir() else st.st_size,
-                                             st.st_mtime_ns)
+            out[str(p.relative_to(root))] = (
+                p.is_dir(),
+                0 if p.is_dir() else st.st_size,
+                st.st_mtime_ns,
+            )
     return out
 
 
@@ -38,9 +40,19 @@ def _one_error_line(err: str, status_lines: int = 0) -> str:
     return lines[-1]
 
 
-TINY = ["envs=[point/2]", "data.k_train=40", "data.gamma_queries=2000", "data.gamma_eval=false",
-        "train.epochs=2", "model.hidden=[32,32]", "eval.k_test=16", "eval.n_plan=20",
-        "eval.replan_rounds=2", "eval.replan_steps=6", "eval.gamma_queries=2000"]
+TINY = [
+    "envs=[point/2]",
+    "data.k_train=40",
+    "data.gamma_queries=2000",
+    "data.gamma_eval=false",
+    "train.epochs=2",
+    "model.hidden=[32,32]",
+    "eval.k_test=16",
+    "eval.n_plan=20",
+    "eval.replan_rounds=2",
+    "eval.replan_steps=6",
+    "eval.gamma_queries=2000",
+]
 
 
 def _files(folder: Path) -> set:
@@ -48,7 +60,6 @@ def _files(folder: Path) -> set:
 
 
 def _env():
-    import os
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join([str(ROOT)] + [p for p in [env.get("PYTHONPATH")] if p])
     env.setdefault("JAX_PLATFORMS", "cpu")

@@ -75,7 +75,8 @@ if _PROFILE:
             if _current["test"] is not None and record.msg.startswith("Compiling %s with global"):
                 name, avals = record.args[0], record.args[1]
                 _profile.setdefault(_current["test"], {}).setdefault("lowered", []).append(
-                    [str(name), " ".join(str(a) for a in avals)])
+                    [str(name), " ".join(str(a) for a in avals)]
+                )
 
     _pxla_log = logging.getLogger("jax._src.interpreters.pxla")
     _pxla_log.setLevel(logging.DEBUG)
@@ -164,9 +165,19 @@ def script(capsys):
 
 #: The tiny point/2 pipeline run several files check (test_golden, test_train_all,
 #: test_bad_inputs): data -> four PNets -> evaluation -> report, figures included.
-TINY_RUN = ["envs=[point/2]", "data.k_train=40", "data.gamma_queries=2000", "data.gamma_eval=false",
-            "train.epochs=2", "model.hidden=[32,32]", "eval.k_test=16", "eval.n_plan=20",
-            "eval.replan_rounds=2", "eval.replan_steps=6", "eval.gamma_queries=2000"]
+TINY_RUN = [
+    "envs=[point/2]",
+    "data.k_train=40",
+    "data.gamma_queries=2000",
+    "data.gamma_eval=false",
+    "train.epochs=2",
+    "model.hidden=[32,32]",
+    "eval.k_test=16",
+    "eval.n_plan=20",
+    "eval.replan_rounds=2",
+    "eval.replan_steps=6",
+    "eval.gamma_queries=2000",
+]
 
 
 def _produce_tiny_run(out: Path) -> dict:

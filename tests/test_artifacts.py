@@ -59,6 +59,7 @@ def test_write_folder_is_complete_or_absent(tmp_path):
         raise RuntimeError("interrupted")
 
     import pytest
+
     with pytest.raises(RuntimeError):
         artifacts.write_folder(tmp_path / "ens", broken)
     assert (tmp_path / "ens" / "a.txt").read_text() == "1"  # the complete folder is untouched

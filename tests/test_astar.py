@@ -22,13 +22,20 @@ MOVES = [(-1, 0), (1, 0), (0, -1), (0, 1), (-1, -1), (-1, 1), (1, -1), (1, 1)]
 # Independent reference: the graph built edge by edge, solved by scipy
 # ---------------------------------------------------------------------------
 
+
 def reference_graph(occ):
     """Sparse adjacency of the 8-grid: straight 1, diagonal sqrt(2) only if both side cells are free."""
     h, w = occ.shape
     free = ~occ
 
     def is_free(r, c):
-        return (0 <= r) & (r < h) & (0 <= c) & (c < w) & free[np.clip(r, 0, h - 1), np.clip(c, 0, w - 1)]
+        return (
+            (0 <= r)
+            & (r < h)
+            & (0 <= c)
+            & (c < w)
+            & free[np.clip(r, 0, h - 1), np.clip(c, 0, w - 1)]
+        )
 
     rr, cc = np.nonzero(free)
     rows, cols, wts = [], [], []
@@ -39,8 +46,9 @@ def reference_graph(occ):
         rows.append(rr[ok] * w + cc[ok])
         cols.append((rr[ok] + dr) * w + cc[ok] + dc)
         wts.append(np.full(ok.sum(), SQ2 if dr and dc else 1.0))
-    return sp.csr_matrix((np.concatenate(wts), (np.concatenate(rows), np.concatenate(cols))),
-                         shape=(h * w, h * w))
+    return sp.csr_matrix(
+        (np.concatenate(wts), (np.concatenate(rows), np.concatenate(cols))), shape=(h * w, h * w)
+    )
 
 
 def random_box_map(rng, h, w, n_boxes, walls=0):
@@ -48,7 +56,9 @@ def random_box_map(rng, h, w, n_boxes, walls=0):
     occ = np.zeros((h, w), bool)
     for _ in range(n_boxes):
         r0, c0 = rng.integers(0, h), rng.integers(0, w)
-        occ[r0:r0 + rng.integers(2, max(3, h // 4)), c0:c0 + rng.integers(2, max(3, w // 4))] = True
+        occ[
+            r0 : r0 + rng.integers(2, max(3, h // 4)), c0 : c0 + rng.integers(2, max(3, w // 4))
+        ] = True
     for k in range(walls):
         if k % 2 == 0:
             r = rng.integers(h // 4, 3 * h // 4)
@@ -84,8 +94,8 @@ def check_paths(occ, res, starts, goals):
         if status[i] != PlanStatus.SOLVED:
             assert plen[i] == 0 and nwp[i] == 0 and np.all(path[i] == -1) and np.isinf(cost[i])
             continue
-        p = path[i, :plen[i]]
-        assert np.all(path[i, plen[i]:] == -1)
+        p = path[i, : plen[i]]
+        assert np.all(path[i, plen[i] :] == -1)
         assert tuple(p[0]) == tuple(starts[i]) and tuple(p[-1]) == tuple(goals[i])
         assert np.all((p >= 0) & (p < [h, w])) and not occ[p[:, 0], p[:, 1]].any()
         d = np.diff(p, axis=0)
@@ -93,16 +103,20 @@ def check_paths(occ, res, starts, goals):
         diag = np.abs(d).sum(1) == 2
         a = p[:-1][diag]
         dd = d[diag]
-        assert not occ[a[:, 0] + dd[:, 0], a[:, 1]].any() and not occ[a[:, 0], a[:, 1] + dd[:, 1]].any(), \
-            "corner cut"
+        assert (
+            not occ[a[:, 0] + dd[:, 0], a[:, 1]].any()
+            and not occ[a[:, 0], a[:, 1] + dd[:, 1]].any()
+        ), "corner cut"
         np.testing.assert_allclose(np.where(diag, SQ2, 1.0).sum(), cost[i], rtol=1e-5, atol=1e-4)
         # the waypoints are the path's corners: joined by straight or diagonal lines of path cells
-        wp = wps[i, :nwp[i]]
-        assert np.all(wps[i, nwp[i]:] == -1)
+        wp = wps[i, : nwp[i]]
+        assert np.all(wps[i, nwp[i] :] == -1)
         assert tuple(wp[0]) == tuple(starts[i]) and tuple(wp[-1]) == tuple(goals[i])
         seg = np.diff(wp, axis=0)
         n_cells = np.abs(seg).max(1)
-        assert np.all((seg[:, 0] == 0) | (seg[:, 1] == 0) | (np.abs(seg[:, 0]) == np.abs(seg[:, 1])))
+        assert np.all(
+            (seg[:, 0] == 0) | (seg[:, 1] == 0) | (np.abs(seg[:, 0]) == np.abs(seg[:, 1]))
+        )
         assert n_cells.sum() + 1 == plen[i]
         np.testing.assert_array_equal(p[np.concatenate([[0], np.cumsum(n_cells)])], wp)
 
@@ -157,10 +171,23 @@ def test_invalid_trivial_and_unreachable_queries():
     occ = np.zeros((60, 90), bool)
     occ[:, 45] = True  # two halves, no door
     occ[5, 5] = True
-    starts = np.array([[0, 0], [5, 5], [0, 0], [-1, 3], [0, 90], [60, 0], [3, 3], [0, 0], [2, 2],
-                       [-10**6, 10**9]])
-    goals = np.array([[5, 5], [0, 0], [0, 50], [0, 0], [0, 0], [0, 0], [3, 3], [59, 44], [2, 45],
-                      [0, 0]])
+    starts = np.array(
+        [
+            [0, 0],
+            [5, 5],
+            [0, 0],
+            [-1, 3],
+            [0, 90],
+            [60, 0],
+            [3, 3],
+            [0, 0],
+            [2, 2],
+            [-(10**6), 10**9],
+        ]
+    )
+    goals = np.array(
+        [[5, 5], [0, 0], [0, 50], [0, 0], [0, 0], [0, 0], [3, 3], [59, 44], [2, 45], [0, 0]]
+    )
     res = solve(occ, starts, goals)
     S, N, I = PlanStatus.SOLVED, PlanStatus.NO_PATH, PlanStatus.INVALID
     np.testing.assert_array_equal(res.status, [I, I, N, I, I, I, S, S, I, I])
@@ -178,7 +205,9 @@ def test_no_corner_cutting():
     starts = np.array([[0, 0], [1, 0], [10, 10]])
     goals = np.array([[1, 1], [0, 0], [11, 11]])
     res = solve(occ, starts, goals)
-    np.testing.assert_allclose(np.asarray(res.cost)[:2], [2.0, 1.0])  # not sqrt(2): (0, 1) is occupied
+    np.testing.assert_allclose(
+        np.asarray(res.cost)[:2], [2.0, 1.0]
+    )  # not sqrt(2): (0, 1) is occupied
     assert int(res.status[2]) == PlanStatus.NO_PATH and np.isinf(float(res.cost[2]))
     check_paths(occ, res, starts, goals)
 
@@ -193,7 +222,9 @@ def test_capacity_is_reported_not_raised():
     assert np.any(st == PlanStatus.TIMEOUT) and np.any(st == PlanStatus.SOLVED)
     ok = st == PlanStatus.SOLVED
     np.testing.assert_array_equal(np.asarray(small.cost)[ok], np.asarray(full.cost)[ok])
-    assert np.all(np.isin(st[st_full == PlanStatus.SOLVED], [PlanStatus.SOLVED, PlanStatus.TIMEOUT]))
+    assert np.all(
+        np.isin(st[st_full == PlanStatus.SOLVED], [PlanStatus.SOLVED, PlanStatus.TIMEOUT])
+    )
     assert np.all(st[st_full != PlanStatus.SOLVED] == st_full[st_full != PlanStatus.SOLVED])
     check_paths(occ, small, starts, goals)
 
@@ -221,8 +252,10 @@ def oracle_tables(occ):
             while free(y[0] + dr, y[1] + dc):
                 n += 1
                 x, y = y, (y[0] + dr, y[1] + dc)
-                if any(free(y[0] + s * pr, y[1] + s * pc) and not free(x[0] + s * pr, x[1] + s * pc)
-                       for s in (1, -1)):
+                if any(
+                    free(y[0] + s * pr, y[1] + s * pc) and not free(x[0] + s * pr, x[1] + s * pc)
+                    for s in (1, -1)
+                ):
                     break
             else:
                 n = -n
@@ -251,9 +284,14 @@ def test_grid_tables_equal_the_cell_by_cell_oracle(seed):
     """:func:`prepare_grid`'s jump distances and component labels, on boxes, walls with doors,
     salt-and-pepper noise and degenerate shapes, against :func:`oracle_tables`."""
     rng = np.random.default_rng(seed)
-    grids = [random_box_map(rng, 23, 31, 6, walls=2), noise_map(rng, 17, 19, 0.3),
-             noise_map(rng, 1, 12, 0.2), noise_map(rng, 9, 1, 0.2), np.zeros((5, 7), bool),
-             np.ones((3, 4), bool)]
+    grids = [
+        random_box_map(rng, 23, 31, 6, walls=2),
+        noise_map(rng, 17, 19, 0.3),
+        noise_map(rng, 1, 12, 0.2),
+        noise_map(rng, 9, 1, 0.2),
+        np.zeros((5, 7), bool),
+        np.ones((3, 4), bool),
+    ]
     for occ in grids:
         graph = prepare_grid(occ)
         jump, label = oracle_tables(occ)
@@ -273,9 +311,10 @@ def test_one_compilation_per_shape():
     for k in range(3):
         occ = random_box_map(rng, 60, 90, 4 + 2 * k)
         starts, goals = sample_queries(rng, occ, 100 + 50 * k)
-        res = A.astar(prepare_grid(occ), *(np.resize(q, (CHUNK, 2)).astype(np.int32)
-                                           for q in (starts, goals)))  # queries repeated
-        np.testing.assert_array_equal(res.cost[:len(starts)], solve(occ, starts, goals).cost)
+        res = A.astar(
+            prepare_grid(occ), *(np.resize(q, (CHUNK, 2)).astype(np.int32) for q in (starts, goals))
+        )  # queries repeated
+        np.testing.assert_array_equal(res.cost[: len(starts)], solve(occ, starts, goals).cost)
     assert A._search_batch._cache_size() == size
 
 
@@ -313,8 +352,13 @@ def test_non_bool_and_empty_grids_are_refused():
     ZeroDivisionError), and ``progress`` receives the 9 tables."""
     q = np.zeros((1, 2), int)
     image = np.full((6, 7), 255, np.uint8)
-    bad = {"uint8": image, "int64": np.zeros((6, 7), np.int64), "float32": np.full((6, 7), 0.2, np.float32),
-           "float64": np.full((6, 7), np.nan), "<U1": np.full((6, 7), "x")}
+    bad = {
+        "uint8": image,
+        "int64": np.zeros((6, 7), np.int64),
+        "float32": np.full((6, 7), 0.2, np.float32),
+        "float64": np.full((6, 7), np.nan),
+        "<U1": np.full((6, 7), "x"),
+    }
     for dtype, occ in bad.items():
         with pytest.raises(ValueError, match=rf"bool occupancy grid.*dtype {dtype}.*image < 128"):
             prepare_grid(occ)
@@ -354,5 +398,9 @@ def test_non_bool_and_empty_grids_are_refused():
 
     occ = np.zeros((8, 9), bool)
     graph = prepare_grid(occ, progress=lambda **kw: Bar(**kw))
-    assert calls[0] == ("open", 9, "table") and calls.count(("update", 1)) == 9 and calls[-1] == ("close",)
+    assert (
+        calls[0] == ("open", 9, "table")
+        and calls.count(("update", 1)) == 9
+        and calls[-1] == ("close",)
+    )
     np.testing.assert_array_equal(np.asarray(graph.jump), np.asarray(prepare_grid(occ).jump))

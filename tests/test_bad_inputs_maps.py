@@ -1,4 +1,5 @@
-"""Hostile inputs, maps and environments: JSON map rows, resolution floors, rigid-body angles, map slugs, empty and full maps, states that are not numbers.
+"""Hostile inputs, maps and environments: JSON map rows, resolution floors, rigid-body angles,
+map slugs, empty and full maps, states that are not numbers.
 
 Every expected failure is one clear error, nothing is written where it must not be
 (split from tests/test_bad_inputs.py by the surface each test probes; the shared
@@ -15,66 +16,107 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from bad_inputs_common import ROOT, TINY, _script
 
 import ntq_jax as nj
-from ntq_jax.envs import env_slug, resolve_envs
-from ntq_jax.envs import MAX_STATES_PER_MOTION, EnvError
+from ntq_jax.envs import MAX_STATES_PER_MOTION, EnvError, env_slug, resolve_envs
 from ntq_jax.presets import PRESETS
-
-from bad_inputs_common import ROOT, _script, TINY
 
 
 def _tree(path: Path) -> dict[str, bytes]:
     """Every file under ``path`` with its bytes (to assert that nothing was written or changed)."""
-    return {str(p.relative_to(path)): p.read_bytes() for p in sorted(path.rglob("*")) if p.is_file()}
+    return {
+        str(p.relative_to(path)): p.read_bytes() for p in sorted(path.rglob("*")) if p.is_file()
+    }
 
 
-_POINT_MAP = {"name": "m", "robot": {"kind": "point"}, "bounds": [[0, 10], [0, 10]],
-              "boxes": [[5, 5, 1, 1]], "discs": [[2, 2, 0.5]], "padding": 0.1}
+_POINT_MAP = {
+    "name": "m",
+    "robot": {"kind": "point"},
+    "bounds": [[0, 10], [0, 10]],
+    "boxes": [[5, 5, 1, 1]],
+    "discs": [[2, 2, 0.5]],
+    "padding": 0.1,
+}
 
 
 _ARM = {"kind": "nlink", "link_lengths": [2.0, 2.0], "base": [5.0, 5.0], "resolution": 0.02}
 
 
-_RIGID = {"kind": "rigid_body", "length": 1.2, "width": 0.4, "angle_weight": 0.5,
-          "resolution": 0.05}
+_RIGID = {
+    "kind": "rigid_body",
+    "length": 1.2,
+    "width": 0.4,
+    "angle_weight": 0.5,
+    "resolution": 0.05,
+}
 
 
-@pytest.mark.parametrize("patch, match", [
-    # rows of the wrong width are refused, never reshaped into other geometry
-    ({"discs": [[1, 2, 1, 1], [5, 5, 1, 1], [3, 3, 1, 1]]},
-     r"discs\[0\] is \[1, 2, 1, 1\] \(4 numbers\): expected \[cx, cy, r\] \(3 numbers\)"),
-    ({"boxes": [[1, 2, 1, 1, 3, 3]]},
-     r"boxes\[0\] is \[1, 2, 1, 1, 3, 3\] \(6 numbers\): expected \[cx, cy, half_w, half_h\]"),
-    ({"boxes": [5, 5, 1, 1]},
-     r"boxes\[0\] is 5, not a row: expected a list of rows \[cx, cy, half_w, half_h\]"),
-    ({"boxes": [[5, 5, 1, 1], [1, 2, 3]]},
-     r"boxes\[1\] is \[1, 2, 3\] \(3 numbers\): expected \[cx, cy, half_w, half_h\] \(4 numbers\)"),
-    ({"boxes": None}, r"boxes must be a list of rows \[cx, cy, half_w, half_h\].*got null"),
-    ({"bounds": [[0, 10, 20], [0, 10]]}, r"bounds\[0\] is \[0, 10, 20\].*expected \[min, max\]"),
-    ({"bounds": [0, 10, 0, 10]}, r"bounds\[0\] is 0, not a row"),
-    # entries are numbers: not bools, not strings
-    ({"boxes": [[5, "5", 1, 1]]}, r"boxes\[0\] is \[5, '5', 1, 1\]: '5' is not a finite number"),
-    ({"discs": [[2, 2, True]]}, r"discs\[0\] is \[2, 2, True\]: True is not a finite number"),
-    ({"padding": True}, r"padding must be a number >= 0, got True \(bool\)"),
-    ({"padding": "0.5"}, r"padding must be a number >= 0, got '0.5' \(str\)"),
-    ({"name": None}, r"name must be a non-empty string, got None"),
-    ({"robot": {**_ARM, "link_lengths": "22"}},
-     r"robot: nlink.link_lengths must be a list \[l1, l2, \.\.\.\].*got '22' \(str\)"),
-    ({"robot": {**_ARM, "base": "55"}},
-     r"robot: nlink.base must be a list \[x, y\] \(2 numbers\), got '55' \(str\)"),
-    ({"robot": {**_ARM, "base": [1, 2, 3]}}, r"nlink.base is \[1, 2, 3\]: expected \[x, y\]"),
-    ({"robot": {**_ARM, "link_lengths": [2, False]}}, r"nlink.link_lengths\[1\] is False"),
-    ({"robot": {**_RIGID, "length": True}}, r"rigid_body.length must be a number > 0, got True"),
-    ({"robot": {**_RIGID, "resolution": None}}, r"rigid_body.resolution must be a number > 0"),
-    ({"robot": {"kind": ["point"]}}, r"robot.kind \['point'\] is unknown"),
-    # bounded discretisation: no resolution that makes one motion check millions of states
-    ({"robot": {**_RIGID, "resolution": 1e-9}},
-     (r"rigid_body.resolution 1e-09 is too fine: the longest motion \(15.71\).*1.57e\+10 states; "
-      r"use resolution >= 0.000157 \(at most 100000 states per motion\)")),
-    ({"robot": {**_ARM, "resolution": 1e-7}},
-     r"nlink.resolution 1e-07 rad is too fine.*use resolution >= 8.89e-05 rad"),
-])
+@pytest.mark.parametrize(
+    "patch, match",
+    [
+        # rows of the wrong width are refused, never reshaped into other geometry
+        (
+            {"discs": [[1, 2, 1, 1], [5, 5, 1, 1], [3, 3, 1, 1]]},
+            r"discs\[0\] is \[1, 2, 1, 1\] \(4 numbers\): expected \[cx, cy, r\] \(3 numbers\)",
+        ),
+        (
+            {"boxes": [[1, 2, 1, 1, 3, 3]]},
+            r"boxes\[0\] is \[1, 2, 1, 1, 3, 3\] \(6 numbers\): expected \[cx, cy, half_w, half_h\]",
+        ),
+        (
+            {"boxes": [5, 5, 1, 1]},
+            r"boxes\[0\] is 5, not a row: expected a list of rows \[cx, cy, half_w, half_h\]",
+        ),
+        (
+            {"boxes": [[5, 5, 1, 1], [1, 2, 3]]},
+            r"boxes\[1\] is \[1, 2, 3\] \(3 numbers\): expected \[cx, cy, half_w, half_h\] \(4 numbers\)",
+        ),
+        ({"boxes": None}, r"boxes must be a list of rows \[cx, cy, half_w, half_h\].*got null"),
+        (
+            {"bounds": [[0, 10, 20], [0, 10]]},
+            r"bounds\[0\] is \[0, 10, 20\].*expected \[min, max\]",
+        ),
+        ({"bounds": [0, 10, 0, 10]}, r"bounds\[0\] is 0, not a row"),
+        # entries are numbers: not bools, not strings
+        (
+            {"boxes": [[5, "5", 1, 1]]},
+            r"boxes\[0\] is \[5, '5', 1, 1\]: '5' is not a finite number",
+        ),
+        ({"discs": [[2, 2, True]]}, r"discs\[0\] is \[2, 2, True\]: True is not a finite number"),
+        ({"padding": True}, r"padding must be a number >= 0, got True \(bool\)"),
+        ({"padding": "0.5"}, r"padding must be a number >= 0, got '0.5' \(str\)"),
+        ({"name": None}, r"name must be a non-empty string, got None"),
+        (
+            {"robot": {**_ARM, "link_lengths": "22"}},
+            r"robot: nlink.link_lengths must be a list \[l1, l2, \.\.\.\].*got '22' \(str\)",
+        ),
+        (
+            {"robot": {**_ARM, "base": "55"}},
+            r"robot: nlink.base must be a list \[x, y\] \(2 numbers\), got '55' \(str\)",
+        ),
+        ({"robot": {**_ARM, "base": [1, 2, 3]}}, r"nlink.base is \[1, 2, 3\]: expected \[x, y\]"),
+        ({"robot": {**_ARM, "link_lengths": [2, False]}}, r"nlink.link_lengths\[1\] is False"),
+        (
+            {"robot": {**_RIGID, "length": True}},
+            r"rigid_body.length must be a number > 0, got True",
+        ),
+        ({"robot": {**_RIGID, "resolution": None}}, r"rigid_body.resolution must be a number > 0"),
+        ({"robot": {"kind": ["point"]}}, r"robot.kind \['point'\] is unknown"),
+        # bounded discretisation: no resolution that makes one motion check millions of states
+        (
+            {"robot": {**_RIGID, "resolution": 1e-9}},
+            (
+                r"rigid_body.resolution 1e-09 is too fine: the longest motion \(15.71\).*1.57e\+10 states; "
+                r"use resolution >= 0.000157 \(at most 100000 states per motion\)"
+            ),
+        ),
+        (
+            {"robot": {**_ARM, "resolution": 1e-7}},
+            r"nlink.resolution 1e-07 rad is too fine.*use resolution >= 8.89e-05 rad",
+        ),
+    ],
+)
 def test_map_bad_field_is_one_error_naming_key_row_and_form(tmp_path, patch, match):
     f = tmp_path / "m.json"
     f.write_text(json.dumps({**_POINT_MAP, **patch}))
@@ -88,8 +130,14 @@ def test_map_bad_field_is_one_error_naming_key_row_and_form(tmp_path, patch, mat
 
 def test_map_good_rows_still_load_exactly(tmp_path):
     """The strict parser keeps every valid form: lists, tuples, NumPy rows, empty lists."""
-    env = nj.Env.from_json({**_POINT_MAP, "boxes": [(5, 5, 1, 1), np.array([8, 8, 0.5, 0.5])],
-                            "discs": [], "padding": 0})
+    env = nj.Env.from_json(
+        {
+            **_POINT_MAP,
+            "boxes": [(5, 5, 1, 1), np.array([8, 8, 0.5, 0.5])],
+            "discs": [],
+            "padding": 0,
+        }
+    )
     assert np.asarray(env.world.boxes).tolist() == [[5, 5, 1, 1], [8, 8, 0.5, 0.5]]
     assert env.world.discs.shape == (0, 3) and env.padding == 0.0
     arm = nj.Env.from_json({**_POINT_MAP, "robot": _ARM})
@@ -115,8 +163,9 @@ def test_map_resolution_floor_bounds_the_work_of_steer_to():
     floor = longest / MAX_STATES_PER_MOTION
     with pytest.raises(EnvError, match="too fine"):
         nj.Env.from_json({**_POINT_MAP, "robot": {**_RIGID, "resolution": floor * 0.99}})
-    env = nj.Env.from_json({**_POINT_MAP, "boxes": [], "discs": [],
-                            "robot": {**_RIGID, "resolution": floor * 1.01}})
+    env = nj.Env.from_json(
+        {**_POINT_MAP, "boxes": [], "discs": [], "robot": {**_RIGID, "resolution": floor * 1.01}}
+    )
     a = np.array([[1, 1, 0], [1, 9, 3], [9, 1, -3]], np.float32)
     b = np.array([[9, 9, 3], [9, 1, 0], [1, 9, 0]], np.float32)
     env.steer_to(a[:1], b[:1]).block_until_ready()  # compile
@@ -127,6 +176,7 @@ def test_map_resolution_floor_bounds_the_work_of_steer_to():
     for name in PRESETS:
         nj.make_env(name)
     from ntq_jax.experiment.pipeline import load_config
+
     for f in sorted((ROOT / "configs").glob("*.yaml")):
         resolve_envs(load_config(f, []).envs)
 
@@ -145,8 +195,9 @@ def test_map_rigid_theta_plus_2pi_k_is_theta(k):
     env = nj.make_env("rigid/1")
     rng = np.random.default_rng(abs(k))
     n = 4000
-    s = np.stack([rng.uniform(0, 10, n), rng.uniform(0, 10, n), rng.uniform(-np.pi, np.pi, n)],
-                 1).astype(np.float32)
+    s = np.stack(
+        [rng.uniform(0, 10, n), rng.uniform(0, 10, n), rng.uniform(-np.pi, np.pi, n)], 1
+    ).astype(np.float32)
     big = s.copy()
     big[:, 2] = (s[:, 2].astype(np.float64) + 2 * np.pi * k).astype(np.float32)
     wrapped = big.copy()
@@ -158,11 +209,16 @@ def test_map_rigid_theta_plus_2pi_k_is_theta(k):
     d = np.asarray(env.distance(big[:-1], big[1:]))
     np.testing.assert_allclose(d, np.asarray(env.distance(wrapped[:-1], wrapped[1:])), atol=2e-5)
     clear = jax.vmap(env.robot.clearance, in_axes=(0, None, None))
-    np.testing.assert_allclose(np.asarray(clear(jnp.asarray(big), env.world, 0.0)),
-                               np.asarray(clear(jnp.asarray(wrapped), env.world, 0.0)), atol=2e-5)
+    np.testing.assert_allclose(
+        np.asarray(clear(jnp.asarray(big), env.world, 0.0)),
+        np.asarray(clear(jnp.asarray(wrapped), env.world, 0.0)),
+        atol=2e-5,
+    )
     m = 300
-    assert (np.asarray(env.steer_to(big[:m], big[m:2 * m], padding=0.0)).tolist()
-            == np.asarray(env.steer_to(wrapped[:m], wrapped[m:2 * m], padding=0.0)).tolist())
+    assert (
+        np.asarray(env.steer_to(big[:m], big[m : 2 * m], padding=0.0)).tolist()
+        == np.asarray(env.steer_to(wrapped[:m], wrapped[m : 2 * m], padding=0.0)).tolist()
+    )
 
 
 def test_map_rigid_theta_beyond_the_limit_is_invalid():
@@ -196,9 +252,11 @@ def test_map_slug_is_unique_to_the_content(tmp_path):
     assert env_slug("point/0", nj.make_env("point/1")).startswith("point_0-")
     assert list(resolve_envs([str(a), str(b), "point/0"])) == [str(a), str(b), "point/0"]
     before = _tree(tmp_path)
-    for names, listed in [([str(a), str(a2)], [str(a), str(a2)]),
-                          (["point/2", str(b)], ["point/2", str(b)]),
-                          (["point/0", "point/3", "point/0"], ["point/0", "point/0"])]:
+    for names, listed in [
+        ([str(a), str(a2)], [str(a), str(a2)]),
+        (["point/2", str(b)], ["point/2", str(b)]),
+        (["point/0", "point/3", "point/0"], ["point/0", "point/0"]),
+    ]:
         with pytest.raises(EnvError, match="envs lists the same environment more than once") as e:
             resolve_envs(names)
         for name in listed:
@@ -261,19 +319,23 @@ def test_map_duplicate_envs_write_no_data(tmp_path):
     assert not (run / "data").exists() and not (run / "models").exists()
 
 
-@pytest.mark.parametrize("boxes, words", [
-    ([], ["D3", "pruning removed every segment", "drop D3 from data.datasets"]),
-    ([[5, 5, 6, 6]], ["valid"]),  # every state occupied: the sampler's one line
-])
+@pytest.mark.parametrize(
+    "boxes, words",
+    [
+        ([], ["D3", "pruning removed every segment", "drop D3 from data.datasets"]),
+        ([[5, 5, 6, 6]], ["valid"]),  # every state occupied: the sampler's one line
+    ],
+)
 def test_an_empty_or_full_map_through_train_all_is_one_line(tmp_path, capsys, boxes, words):
     """No obstacles: D3 (pruned) is empty, said before any training; no free space: the
     sampler's FreeSpaceTooSmall, one line (both were tracebacks)."""
     f = tmp_path / "m.json"
     f.write_text(json.dumps({**_POINT_MAP, "boxes": boxes, "discs": []}))
     args = [a for s in TINY if not s.startswith("envs=") for a in ("--set", s)]
-    code = _script("train_all").main(args + ["--set", f"envs=[{f}]", "--out",
-                                             str(tmp_path / "run"), "--no-progress",
-                                             "--no-figures"])
+    code = _script("train_all").main(
+        args
+        + ["--set", f"envs=[{f}]", "--out", str(tmp_path / "run"), "--no-progress", "--no-figures"]
+    )
     assert code == 2
     err = capsys.readouterr().err
     lines = [ln for ln in err.strip().splitlines() if ln.strip()]
@@ -286,14 +348,19 @@ def test_an_empty_or_full_map_through_train_all_is_one_line(tmp_path, capsys, bo
     assert not (tmp_path / "run" / "models" / "m" / "ensemble").exists()
 
 
-@pytest.mark.parametrize("bad", [[["1", "1"]], np.array([[True, False]]),
-                                 np.array([[1 + 1j, 2]]), [[1, [2]]]],
-                         ids=["strings", "bool", "complex", "ragged"])
+@pytest.mark.parametrize(
+    "bad",
+    [[["1", "1"]], np.array([[True, False]]), np.array([[1 + 1j, 2]]), [[1, [2]]]],
+    ids=["strings", "bool", "complex", "ragged"],
+)
 def test_states_must_be_real_numbers(bad):
     """steer_to / is_valid / distance refuse non-real input (["1","1"] was True)."""
     env = nj.make_env("point/0")
-    for call in (lambda: env.steer_to(bad, bad), lambda: env.is_valid(bad),
-                 lambda: env.distance(bad, bad)):
+    for call in (
+        lambda: env.steer_to(bad, bad),
+        lambda: env.is_valid(bad),
+        lambda: env.distance(bad, bad),
+    ):
         with pytest.raises(TypeError, match="real numbers"):
             call()
     assert bool(env.is_valid(np.array([[1, 1]], np.int64))[0])  # integers are numbers

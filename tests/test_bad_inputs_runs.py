@@ -1,4 +1,5 @@
-"""Hostile inputs, run folders, configs and datasets: train_all's --out and --set, run.json, --overwrite, damaged datasets and checkpoints, a full disk.
+"""Hostile inputs, run folders, configs and datasets: train_all's --out and --set, run.json,
+--overwrite, damaged datasets and checkpoints, a full disk.
 
 Every expected failure is one clear error, nothing is written where it must not be
 (split from tests/test_bad_inputs.py by the surface each test probes; the shared
@@ -16,9 +17,7 @@ import sys
 from pathlib import Path
 
 import pytest
-
-from bad_inputs_common import ROOT, _script, _listing, _one_error_line, TINY
-
+from bad_inputs_common import ROOT, TINY, _listing, _one_error_line, _script
 
 SETS = sum((["--set", s] for s in TINY), [])
 
@@ -48,8 +47,11 @@ def run_copy(finished_run, tmp_path):
 def _bad_out_case(tmp_path, case):
     """``(train_all.py arguments, path that must stay as it is, expected words)`` of one case."""
     if case == "unknown_env":
-        return ["--out", str(tmp_path / "new"), "--set", "envs=[point/9]"], tmp_path / "new", \
-            ["point/9", "unknown environment"]
+        return (
+            ["--out", str(tmp_path / "new"), "--set", "envs=[point/9]"],
+            tmp_path / "new",
+            ["point/9", "unknown environment"],
+        )
     if case == "out_is_file":
         f = tmp_path / "afile"
         f.write_text("keep me")
@@ -61,15 +63,21 @@ def _bad_out_case(tmp_path, case):
     if case == "read_only":
         if os.geteuid() == 0:  # root writes into a mode-555 folder: use a read-only file system
             assert Path("/proc").is_dir()
-            return ["--out", "/proc/ntq_jax_run"], tmp_path / "new", \
-                ["/proc/ntq_jax_run", "creating a file in /proc failed", "writable place"]
+            return (
+                ["--out", "/proc/ntq_jax_run"],
+                tmp_path / "new",
+                ["/proc/ntq_jax_run", "creating a file in /proc failed", "writable place"],
+            )
         ro = tmp_path / "ro"
         ro.mkdir()
         ro.chmod(0o555)
         return ["--out", str(ro / "run")], ro, ["Permission denied", "--out", "writable place"]
     if case == "cpu_devices_0":
-        return ["--out", str(tmp_path / "new"), "--cpu-devices", "0"], tmp_path / "new", \
-            ["--cpu-devices 0", "positive"]
+        return (
+            ["--out", str(tmp_path / "new"), "--cpu-devices", "0"],
+            tmp_path / "new",
+            ["--cpu-devices 0", "positive"],
+        )
     if case == "not_a_run_folder":
         d = tmp_path / "mine"
         d.mkdir()
@@ -81,35 +89,80 @@ def _bad_out_case(tmp_path, case):
         (d / "notes.txt").write_text("mine")
         return ["--out", str(d), "--overwrite"], d, ["notes.txt", "refuses to delete"]
     if case == "bad_config_key":
-        return ["--out", str(tmp_path / "new"), "--set", "data.k_trian=3"], tmp_path / "new", \
-            ["k_trian", "k_train"]
+        return (
+            ["--out", str(tmp_path / "new"), "--set", "data.k_trian=3"],
+            tmp_path / "new",
+            ["k_trian", "k_train"],
+        )
     if case == "bad_set_yaml":
-        return ["--out", str(tmp_path / "new"), "--set", "data.k_train=[1,"], \
-            tmp_path / "new", ["data.k_train=[1,", "not valid YAML", "quote"]
+        return (
+            ["--out", str(tmp_path / "new"), "--set", "data.k_train=[1,"],
+            tmp_path / "new",
+            ["data.k_train=[1,", "not valid YAML", "quote"],
+        )
     if case == "binary_config":
         f = tmp_path / "bin.yaml"
         f.write_bytes(bytes(range(256)))
-        return ["--out", str(tmp_path / "new"), "--config", str(f)], tmp_path / "new", \
-            ["bin.yaml", "not a text"]
+        return (
+            ["--out", str(tmp_path / "new"), "--config", str(f)],
+            tmp_path / "new",
+            ["bin.yaml", "not a text"],
+        )
     if case == "per_env_typo":
-        return ["--out", str(tmp_path / "new"), "--set",
-                "data.per_env=[{env: point/9, k_train: 5}]"], tmp_path / "new", \
-            ["data.per_env[0].env", "point/9", "not an environment"]
+        return (
+            ["--out", str(tmp_path / "new"), "--set", "data.per_env=[{env: point/9, k_train: 5}]"],
+            tmp_path / "new",
+            ["data.per_env[0].env", "point/9", "not an environment"],
+        )
     if case == "visgraph_rigid":
-        return ["--out", str(tmp_path / "new"), "--set", "envs=[rigid/0]", "--set",
-                "planner.name=visgraph", "--set", "planner.per_env=[]"], tmp_path / "new", \
-            ["planner.name visgraph", "point robot only", "roadmap"]
+        return (
+            [
+                "--out",
+                str(tmp_path / "new"),
+                "--set",
+                "envs=[rigid/0]",
+                "--set",
+                "planner.name=visgraph",
+                "--set",
+                "planner.per_env=[]",
+            ],
+            tmp_path / "new",
+            ["planner.name visgraph", "point robot only", "roadmap"],
+        )
     if case == "astar_arm":
-        return ["--out", str(tmp_path / "new"), "--set", "envs=[point/0, nlink/6]", "--set",
-                "planner.per_env=[{env: nlink/6, name: astar}]"], tmp_path / "new", \
-            ["planner.per_env astar for nlink/6", "2-D configuration space"]
+        return (
+            [
+                "--out",
+                str(tmp_path / "new"),
+                "--set",
+                "envs=[point/0, nlink/6]",
+                "--set",
+                "planner.per_env=[{env: nlink/6, name: astar}]",
+            ],
+            tmp_path / "new",
+            ["planner.per_env astar for nlink/6", "2-D configuration space"],
+        )
     raise AssertionError(case)
 
 
-@pytest.mark.parametrize("case", ["unknown_env", "out_is_file", "out_under_file", "read_only",
-                                  "cpu_devices_0", "not_a_run_folder", "overwrite_foreign_folder",
-                                  "bad_config_key", "visgraph_rigid", "astar_arm",
-                                  "bad_set_yaml", "binary_config", "per_env_typo"])
+@pytest.mark.parametrize(
+    "case",
+    [
+        "unknown_env",
+        "out_is_file",
+        "out_under_file",
+        "read_only",
+        "cpu_devices_0",
+        "not_a_run_folder",
+        "overwrite_foreign_folder",
+        "bad_config_key",
+        "visgraph_rigid",
+        "astar_arm",
+        "bad_set_yaml",
+        "binary_config",
+        "per_env_typo",
+    ],
+)
 def test_run_bad_out_or_config_is_one_error_and_writes_nothing(tmp_path, capsys, case):
     args, keep, words = _bad_out_case(tmp_path, case)
     before = _listing(tmp_path)
@@ -157,9 +210,16 @@ def test_run_foreign_config_refused_and_overwrite_starts_over(run_copy, capsys):
     assert "- 16" in (run / "config.yaml").read_text()
 
 
-@pytest.mark.parametrize("mine", ["figures/mine.txt", "models/point_2/notes.md",
-                                  "data/point_2/my_queries.csv", "data/point_2/D0/keep.npy",
-                                  "paths/point_2/analysis/out.txt"])
+@pytest.mark.parametrize(
+    "mine",
+    [
+        "figures/mine.txt",
+        "models/point_2/notes.md",
+        "data/point_2/my_queries.csv",
+        "data/point_2/D0/keep.npy",
+        "paths/point_2/analysis/out.txt",
+    ],
+)
 def test_overwrite_never_deletes_a_users_file_in_a_subfolder(run_copy, mine):
     """--overwrite checks the whole tree against what a run writes before deleting anything."""
     from ntq_jax.experiment.pipeline import PipelineError, foreign_files, load_config, prepare_run
@@ -187,8 +247,7 @@ def _dataset_bytes(env_dir: Path) -> dict:
 
 
 def _mtimes(env_dir: Path) -> dict:
-    return {str(f.relative_to(env_dir)): f.stat().st_mtime_ns
-            for f in sorted(env_dir.glob("D*/*"))}
+    return {str(f.relative_to(env_dir)): f.stat().st_mtime_ns for f in sorted(env_dir.glob("D*/*"))}
 
 
 @pytest.mark.parametrize("damage", ["truncate", "flip_byte"])
@@ -199,16 +258,25 @@ def test_data_damaged_array_repaired_by_the_advised_command(run_copy, damage, sc
     original, mtimes = _dataset_bytes(env_dir), _mtimes(env_dir)
     f = env_dir / "D2" / "paths.npy"
     blob = f.read_bytes()
-    f.write_bytes(blob[: len(blob) // 2] if damage == "truncate"
-                  else blob[:-5] + bytes([blob[-5] ^ 1]) + blob[-4:])
+    f.write_bytes(
+        blob[: len(blob) // 2]
+        if damage == "truncate"
+        else blob[:-5] + bytes([blob[-5] ^ 1]) + blob[-4:]
+    )
     with pytest.raises(DatasetError) as e:
         load_datasets(env_dir)
     msg = str(e.value)
     assert "paths.npy" in msg and ("truncated" in msg or "sha256" in msg)
     argv = _advised_command(msg) + ["--no-progress", "--no-figure"]
     if damage == "truncate":  # the command as a user types it, in a new interpreter
-        proc = subprocess.run(argv, cwd=ROOT, capture_output=True, text=True, timeout=600,
-                              env=dict(os.environ, PYTHONPATH=str(ROOT)))
+        proc = subprocess.run(
+            argv,
+            cwd=ROOT,
+            capture_output=True,
+            text=True,
+            timeout=600,
+            env=dict(os.environ, PYTHONPATH=str(ROOT)),
+        )
     else:  # the same script's main in this process (its compiled programs are this run's)
         proc = script("generate_data", *argv[2:])
     assert proc.returncode == 0, proc.stderr
@@ -252,8 +320,21 @@ def test_data_generate_script_says_complete_only_when_verified(run_copy, capsys)
     cfg = str(env_dir / "config.yaml")
     before = _listing(env_dir)
     gen = _script("generate_data")
-    assert gen.main(["--config", cfg, "--out", str(run_copy / "data"), "--env", "point/2",
-                     "--no-progress", "--no-figure"]) == 0
+    assert (
+        gen.main(
+            [
+                "--config",
+                cfg,
+                "--out",
+                str(run_copy / "data"),
+                "--env",
+                "point/2",
+                "--no-progress",
+                "--no-figure",
+            ]
+        )
+        == 0
+    )
     assert "already complete (verified)" in capsys.readouterr().out
     assert {k: v for k, v in _listing(env_dir).items()} == before
 
@@ -264,10 +345,22 @@ def test_script_corrupt_ensemble_is_one_line_with_the_fix(run_copy):
         if f.is_file() and f.stat().st_size > 100:
             f.write_bytes(f.read_bytes()[: f.stat().st_size // 3])
     before = _listing(run_copy)
-    proc = subprocess.run([sys.executable, str(ROOT / "scripts" / "train_all.py"), "--out",
-                           str(run_copy), "--no-progress", "--no-figures", "--no-compile-cache"]
-                          + SETS, capture_output=True, text=True, timeout=600,
-                          env=dict(os.environ, PYTHONPATH=str(ROOT)))
+    proc = subprocess.run(
+        [
+            sys.executable,
+            str(ROOT / "scripts" / "train_all.py"),
+            "--out",
+            str(run_copy),
+            "--no-progress",
+            "--no-figures",
+            "--no-compile-cache",
+        ]
+        + SETS,
+        capture_output=True,
+        text=True,
+        timeout=600,
+        env=dict(os.environ, PYTHONPATH=str(ROOT)),
+    )
     assert proc.returncode == 2, proc.stderr
     line = _one_error_line(proc.stderr)
     assert str(ens) in line and "delete" in line and "rerun" in line, line
@@ -286,15 +379,18 @@ def test_script_train_on_damaged_data_is_one_line(run_copy, tmp_path, capsys):
     f = env_dir / "D1" / "queries.npy"
     f.write_bytes(f.read_bytes()[:40])
     out = tmp_path / "pnets"
-    assert _script("train").main(["--data", str(env_dir), "--out", str(out), "--no-progress"]
-                                 + SETS) == 2
+    assert (
+        _script("train").main(["--data", str(env_dir), "--out", str(out), "--no-progress"] + SETS)
+        == 2
+    )
     line = _one_error_line(capsys.readouterr().err, status_lines=1)  # "training ... on ..."
     assert "D1/queries.npy" in line and "scripts/generate_data.py --config" in line
     assert not out.exists()
 
 
-def test_a_full_disk_during_train_all_is_one_line_and_the_run_resumes(run_copy, capsys,
-                                                                       monkeypatch):
+def test_a_full_disk_during_train_all_is_one_line_and_the_run_resumes(
+    run_copy, capsys, monkeypatch
+):
     """ENOSPC while writing (also wrapped by a library, as Orbax does) is one line naming the
     file and the fix; nothing half-written is left, and the same command then finishes."""
     from ntq_jax import artifacts

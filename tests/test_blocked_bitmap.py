@@ -12,7 +12,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings, strategies as st
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 import ntq_jax as nj
 from ntq_jax import broadphase, geometry, grid_maps
@@ -34,18 +35,27 @@ def _padded(world: World, reach: float, cell: float) -> World:
     nb = world.num_boxes
     assert nb <= MAX_BOXES
     sentinel = np.asarray(broadphase.SENTINEL_BOX, np.float32)
-    boxes = np.concatenate([np.asarray(world.boxes), np.broadcast_to(sentinel, (MAX_BOXES - nb, 4))])
+    boxes = np.concatenate(
+        [np.asarray(world.boxes), np.broadcast_to(sentinel, (MAX_BOXES - nb, 4))]
+    )
     index = broadphase.build_index(world.bounds, world.boxes, reach, cell)
     k = index.capacity
     assert k <= MAX_K
     table = np.asarray(index.boxes)
-    table = np.concatenate([table, np.broadcast_to(sentinel, (table.shape[0], MAX_K - k, 4))], axis=1)
-    return dataclasses.replace(world, boxes=jnp.asarray(boxes),
-                               index=dataclasses.replace(index, boxes=jnp.asarray(table)))
+    table = np.concatenate(
+        [table, np.broadcast_to(sentinel, (table.shape[0], MAX_K - k, 4))], axis=1
+    )
+    return dataclasses.replace(
+        world, boxes=jnp.asarray(boxes), index=dataclasses.replace(index, boxes=jnp.asarray(table))
+    )
 
 
-_exact = jax.jit(lambda a, b, world, padding: jax.vmap(geometry.segment_free, in_axes=(1, 1, None, None))(
-    a, b, world, padding), static_argnums=3)
+_exact = jax.jit(
+    lambda a, b, world, padding: jax.vmap(geometry.segment_free, in_axes=(1, 1, None, None))(
+        a, b, world, padding
+    ),
+    static_argnums=3,
+)
 
 
 @functools.partial(jax.jit, static_argnums=3)
@@ -54,10 +64,15 @@ def _indexed_and_exact(a, b, worlds, paddings):
     (static), and the unindexed exact kernel on the same boxes at that padding. One compiled
     program for all the paddings of a setting: the paddings and the index geometry are
     static, and one program compiles in about 60% of the CPU time of the six separate ones."""
-    return [(PointRobot().steer_to_batch(a, b, w, p),
-             jax.vmap(geometry.segment_free, in_axes=(1, 1, None, None))(
-                 a, b, dataclasses.replace(w, index=None), p))
-            for w, p in zip(worlds, paddings)]
+    return [
+        (
+            PointRobot().steer_to_batch(a, b, w, p),
+            jax.vmap(geometry.segment_free, in_axes=(1, 1, None, None))(
+                a, b, dataclasses.replace(w, index=None), p
+            ),
+        )
+        for w, p in zip(worlds, paddings)
+    ]
 
 
 def _segments(rng, n, res, origin):
@@ -69,8 +84,16 @@ def _segments(rng, n, res, origin):
     k = n // 4
     # uniform in the workspace (short and long)
     a = rng.uniform(0, span, (k, 2))
-    out.append((a, np.where(rng.random((k, 1)) < 0.5, a + rng.normal(0, 2 * res, a.shape),
-                            rng.uniform(0, span, (k, 2)))))
+    out.append(
+        (
+            a,
+            np.where(
+                rng.random((k, 1)) < 0.5,
+                a + rng.normal(0, 2 * res, a.shape),
+                rng.uniform(0, span, (k, 2)),
+            ),
+        )
+    )
     # grid vertices: through cell corners (diagonals of cells and of blocks of cells)
     out.append((rng.integers(0, GRID + 1, (k, 2)) * res, rng.integers(0, GRID + 1, (k, 2)) * res))
     # along grid lines: a shared x (or y) that is a cell edge
@@ -80,12 +103,14 @@ def _segments(rng, n, res, origin):
     a = np.where(vertical[:, None], np.c_[line, s], np.c_[s, line])
     b = np.where(vertical[:, None], np.c_[line, t], np.c_[t, line])
     out.append((a, b))
+
     # endpoints on cell boundaries: one coordinate on a grid line, the other anywhere
     def on_edge(m):
         p = rng.uniform(0, span, (m, 2))
         j = rng.integers(0, 2, m)
         p[np.arange(m), j] = rng.integers(0, GRID + 1, m) * res
         return p
+
     out.append((on_edge(n - 3 * k), on_edge(n - 3 * k)))
     a = np.concatenate([p for p, _ in out]) + [x0, y0]
     b = np.concatenate([q for _, q in out]) + [x0, y0]
@@ -96,7 +121,10 @@ def _segments(rng, n, res, origin):
 # The bitmap
 # ---------------------------------------------------------------------------
 
-@pytest.mark.parametrize("res, origin", [(1.0, (0.0, 0.0)), (0.05, (-3.2, 1.7)), (0.3, (10.0, -4.0))])
+
+@pytest.mark.parametrize(
+    "res, origin", [(1.0, (0.0, 0.0)), (0.05, (-3.2, 1.7)), (0.3, (10.0, -4.0))]
+)
 def test_bitmap_is_the_grid(res, origin):
     """On an imported grid whose index cells are the grid's (or a multiple of them), the
     bitmap is exactly the occupancy grid at the grid's resolution."""
@@ -114,7 +142,7 @@ def test_bitmap_is_the_grid(res, origin):
 BITMAP_CELLS = 200 * 150  # the most bitmap cells below: cells of at least 0.1 (the thinnest box)
 
 
-@given(seed=st.integers(0, 10 ** 6), cell=st.sampled_from([0.3, 0.5, 1.0, 1.7]))
+@given(seed=st.integers(0, 10**6), cell=st.sampled_from([0.3, 0.5, 1.0, 1.7]))
 @settings(max_examples=30, deadline=None)
 def test_bitmap_cells_lie_inside_one_box(seed, cell):
     """Arbitrary boxes: every set cell lies inside one box (conservative), and the bitmap is
@@ -130,22 +158,39 @@ def test_bitmap_cells_lie_inside_one_box(seed, cell):
     lo_x, lo_y = cols * bcell, rows * bcell
     hi_x, hi_y = lo_x + bcell, lo_y + bcell
     tol = 0.5 * margin
-    inside = ((lo_x[:, None] >= boxes[:, 0] - boxes[:, 2] - tol) & (hi_x[:, None] <= boxes[:, 0] + boxes[:, 2] + tol)
-              & (lo_y[:, None] >= boxes[:, 1] - boxes[:, 3] - tol) & (hi_y[:, None] <= boxes[:, 1] + boxes[:, 3] + tol))
+    inside = (
+        (lo_x[:, None] >= boxes[:, 0] - boxes[:, 2] - tol)
+        & (hi_x[:, None] <= boxes[:, 0] + boxes[:, 2] + tol)
+        & (lo_y[:, None] >= boxes[:, 1] - boxes[:, 3] - tol)
+        & (hi_y[:, None] <= boxes[:, 1] + boxes[:, 3] + tol)
+    )
     assert inside.any(axis=1).all()
     # the points certainly_blocked accepts: at least margin inside a set cell, so inside a box;
     # the flat bitmap padded with zeros (never read: its reads are clipped to bnx * bny cells)
     # to one length, so that its eager gather compiles once, not once per bitmap size
     assert blocked.size <= BITMAP_CELLS
     flat = np.zeros(BITMAP_CELLS, np.uint8)
-    flat[:blocked.size] = blocked.ravel()
-    index = broadphase.ObstacleIndex(jnp.zeros((1, 4, 4)), 0.0, 0.0, 20.0, 1, 1, 1.0,
-                                     jnp.asarray(flat), bcell, blocked.shape[1],
-                                     blocked.shape[0], margin)
+    flat[: blocked.size] = blocked.ravel()
+    index = broadphase.ObstacleIndex(
+        jnp.zeros((1, 4, 4)),
+        0.0,
+        0.0,
+        20.0,
+        1,
+        1,
+        1.0,
+        jnp.asarray(flat),
+        bcell,
+        blocked.shape[1],
+        blocked.shape[0],
+        margin,
+    )
     pts = rng.uniform(0, 20, (4000, 2)).astype(np.float32)
     hit = np.asarray(index.certainly_blocked(jnp.asarray(pts[:, 0]), jnp.asarray(pts[:, 1])))
     p = pts[hit].astype(np.float64)
-    in_box = ((np.abs(p[:, None, 0] - boxes[:, 0]) < boxes[:, 2]) & (np.abs(p[:, None, 1] - boxes[:, 1]) < boxes[:, 3]))
+    in_box = (np.abs(p[:, None, 0] - boxes[:, 0]) < boxes[:, 2]) & (
+        np.abs(p[:, None, 1] - boxes[:, 1]) < boxes[:, 3]
+    )
     assert in_box.any(axis=1).all()
 
 
@@ -160,7 +205,9 @@ def test_no_bitmap_without_whole_cells():
     rng = np.random.default_rng(0)
     a = rng.uniform(3, 7, (500, 2)).astype(np.float32)
     b = rng.uniform(3, 7, (500, 2)).astype(np.float32)
-    ref = _exact(jnp.asarray(a.T), jnp.asarray(b.T), dataclasses.replace(env.world, index=None), 0.1)
+    ref = _exact(
+        jnp.asarray(a.T), jnp.asarray(b.T), dataclasses.replace(env.world, index=None), 0.1
+    )
     np.testing.assert_array_equal(np.asarray(env.steer_to(a, b)), np.asarray(ref))
 
 
@@ -168,11 +215,13 @@ def test_no_bitmap_without_whole_cells():
 # The flag queue
 # ---------------------------------------------------------------------------
 
+
 @functools.cache
 def _flag_queue_picks(num: int):
     """The jitted ``flags -> (pick(0 .. num - 1), work)``, one per length (the densities share it)."""
-    return jax.jit(lambda f: (lambda p, w: (p(jnp.arange(num, dtype=jnp.int32)), w))(
-        *base.flag_queue(f)))
+    return jax.jit(
+        lambda f: (lambda p, w: (p(jnp.arange(num, dtype=jnp.int32)), w))(*base.flag_queue(f))
+    )
 
 
 @pytest.mark.parametrize("num", [1, 31, 32, 33, 1000, 4099])
@@ -183,7 +232,7 @@ def test_flag_queue_lists_the_flags_in_order(num, density):
     pick, work = _flag_queue_picks(num)(jnp.asarray(flags))
     ref = np.flatnonzero(flags)
     assert int(work) == len(ref)
-    np.testing.assert_array_equal(np.asarray(pick)[:len(ref)], ref)
+    np.testing.assert_array_equal(np.asarray(pick)[: len(ref)], ref)
 
 
 @functools.partial(jax.jit, static_argnums=3)
@@ -195,7 +244,8 @@ def _check_queue_planted(a, n, planted, cache):
     def valid_at(ap, bp, t):
         nq = n[ap[0].astype(jnp.int32)]
         bad = planted[ap[0].astype(jnp.int32)] & (
-            jnp.abs(t * nq - ap[1]) < 0.25)  # the planted state k = n // 2
+            jnp.abs(t * nq - ap[1]) < 0.25
+        )  # the planted state k = n // 2
         return (t >= 0) & (t <= 1) & ~bad
 
     queue = base.flag_queue(n > 0) if cache else None
@@ -228,8 +278,11 @@ def test_check_queue_checks_exactly_the_states_of_each_motion(work, cache):
 PAD_CELLS = (0.0, 0.1, 0.5)  # the paddings, in cells of the grid
 
 
-@given(seed=st.integers(0, 10 ** 6), density=st.sampled_from([0.15, 0.35, 0.6]),
-       setting=st.sampled_from([(1.0, (0.0, 0.0), 1), (0.05, (-3.2, 1.7), 2)]))
+@given(
+    seed=st.integers(0, 10**6),
+    density=st.sampled_from([0.15, 0.35, 0.6]),
+    setting=st.sampled_from([(1.0, (0.0, 0.0), 1), (0.05, (-3.2, 1.7), 2)]),
+)
 @settings(max_examples=14, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 def test_indexed_steer_equals_exact_on_random_grids(seed, density, setting):
     """Random occupancy grids (exact rectangle cover), index cells of 1 or 2 grid cells,

@@ -50,9 +50,12 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 import shapely
-from hypothesis import HealthCheck, Phase, given, settings, strategies as st
+from hypothesis import HealthCheck, Phase, given, settings
+from hypothesis import strategies as st
+from test_geometry_oracle import tangent_segments
 
-from ntq_jax import geometry as G, make_env
+from ntq_jax import geometry as G
+from ntq_jax import make_env
 from ntq_jax.batching import map_chunks
 from ntq_jax.envs import Env
 from ntq_jax.geometry import World
@@ -60,7 +63,6 @@ from ntq_jax.presets import PRESETS
 from ntq_jax.robots import NLinkArm, RigidBody
 from ntq_jax.robots.batch import CERTIFIED_CHUNK, _steer_masked, steer_to_pairs, valid_states
 from ntq_jax.robots.certified import CERT_MARGIN
-from test_geometry_oracle import tangent_segments
 
 EPS32 = float(np.finfo(np.float32).eps)
 F64 = np.float64
@@ -98,14 +100,17 @@ def _logu(rng, lo, hi, n):
 # Oracle geometry (float64, shapely)
 # ---------------------------------------------------------------------------
 
+
 def rect_corners64(q, hl, hw):
     """Corners ``(N, 4, 2)`` of rectangles at poses ``q`` ``(N, 3)`` (float64)."""
     q = np.asarray(q, F64)
     hl = np.broadcast_to(np.asarray(hl, F64), q.shape[:1])
     hw = np.broadcast_to(np.asarray(hw, F64), q.shape[:1])
     co, si = np.cos(q[:, 2]), np.sin(q[:, 2])
-    pts = [np.stack([q[:, 0] + a * hl * co - b * hw * si, q[:, 1] + a * hl * si + b * hw * co], 1)
-           for a, b in ((1, 1), (-1, 1), (-1, -1), (1, -1))]
+    pts = [
+        np.stack([q[:, 0] + a * hl * co - b * hw * si, q[:, 1] + a * hl * si + b * hw * co], 1)
+        for a, b in ((1, 1), (-1, 1), (-1, -1), (1, -1))
+    ]
     return np.stack(pts, 1)
 
 
@@ -131,15 +136,19 @@ def oracle_obstacle_dists(geoms, world: World):
     """``(N, B + C)`` exact float64 distances of each geometry to each obstacle (0 when they meet)."""
     boxes, discs = np.asarray(world.boxes, F64), np.asarray(world.discs, F64)
     cols = [shapely.distance(geoms, p) for p in box_polys(boxes)]
-    cols += [np.maximum(shapely.distance(geoms, shapely.Point(d[0], d[1])) - d[2], 0.0) for d in discs]
+    cols += [
+        np.maximum(shapely.distance(geoms, shapely.Point(d[0], d[1])) - d[2], 0.0) for d in discs
+    ]
     return np.stack(cols, 1)
 
 
 def wall_dist64(pts, bounds):
     """Signed distance of points ``(..., 2)`` to the workspace boundary (> 0 inside)."""
     b = np.asarray(bounds, F64)
-    return np.minimum(np.minimum(pts[..., 0] - b[0, 0], b[0, 1] - pts[..., 0]),
-                      np.minimum(pts[..., 1] - b[1, 0], b[1, 1] - pts[..., 1]))
+    return np.minimum(
+        np.minimum(pts[..., 0] - b[0, 0], b[0, 1] - pts[..., 0]),
+        np.minimum(pts[..., 1] - b[1, 0], b[1, 1] - pts[..., 1]),
+    )
 
 
 class Obstacles:
@@ -166,6 +175,7 @@ class Obstacles:
 # 1. Distance kernels against shapely
 # ---------------------------------------------------------------------------
 
+
 @functools.lru_cache(maxsize=None)
 def _dist_kernel(name: str):
     fns = {
@@ -179,8 +189,17 @@ def _dist_kernel(name: str):
 
 def rand_obstacles(rng, kind, n):
     if kind == "box":
-        return f32(np.stack([rng.uniform(0, 20, n), rng.uniform(0, 20, n),
-                             _logu(rng, 0.05, 5, n), _logu(rng, 0.05, 5, n)], 1))
+        return f32(
+            np.stack(
+                [
+                    rng.uniform(0, 20, n),
+                    rng.uniform(0, 20, n),
+                    _logu(rng, 0.05, 5, n),
+                    _logu(rng, 0.05, 5, n),
+                ],
+                1,
+            )
+        )
     return f32(np.stack([rng.uniform(0, 20, n), rng.uniform(0, 20, n), _logu(rng, 0.05, 4, n)], 1))
 
 
@@ -241,8 +260,9 @@ def rect_cases(rng, obst, kind):
     at a signed offset (axis-aligned thetas included: edge-to-edge contacts), and random near it."""
     n = len(obst)
     hl, hw = _logu(rng, 0.05, 2.0, n), _logu(rng, 0.05, 2.0, n)
-    th = f32(np.where(rng.random(n) < 0.4, rng.choice(SPECIAL_THETAS, n),
-                      rng.uniform(-np.pi, np.pi, n))).astype(F64)
+    th = f32(
+        np.where(rng.random(n) < 0.4, rng.choice(SPECIAL_THETAS, n), rng.uniform(-np.pi, np.pi, n))
+    ).astype(F64)
     px, py, nx, ny = anchor(rng, obst, kind, signed_offsets(rng, n))
     x, y = support_placement(px, py, nx, ny, th, hl, hw)
     rx, ry = region(rng, obst, kind)
@@ -280,7 +300,9 @@ def _distance_case(shape: str, kind: str, seed: int, n: int):
     return cases, obst, got, want, kernel_tol(scale)
 
 
-@pytest.mark.parametrize("shape, kind", [(s, k) for s in ("segment", "rect") for k in ("box", "disc")])
+@pytest.mark.parametrize(
+    "shape, kind", [(s, k) for s in ("segment", "rect") for k in ("box", "disc")]
+)
 def test_distance_kernels_match_shapely(shape, kind):
     """The one-item distance kernels, vmapped, agree with shapely within ``kernel_tol`` on random
     near-touching, intersecting and far cases (measured worst error 2.2e-6 at scale ~20, i.e.
@@ -294,17 +316,28 @@ def test_distance_kernels_match_shapely(shape, kind):
         err = np.abs(got - want)
         bad = np.flatnonzero(~(err <= tol))  # NaN counts as bad
         if bad.size:
-            rows = "\n".join(f"  case={cases[i].tolist()} obstacle={obst[i].tolist()} "
-                             f"kernel={got[i]!r} shapely={want[i]!r}" for i in bad[:5])
-            pytest.fail(f"{shape}_{kind} distance: {bad.size} cases off by more than the tolerance "
-                        f"(seed {seed}), e.g.\n{rows}")
-        stats.append(((want == 0).sum(), ((want > 0) & (want < 1e-3)).sum(), (want > 1e-3).sum(),
-                      len(want)))
+            rows = "\n".join(
+                f"  case={cases[i].tolist()} obstacle={obst[i].tolist()} "
+                f"kernel={got[i]!r} shapely={want[i]!r}"
+                for i in bad[:5]
+            )
+            pytest.fail(
+                f"{shape}_{kind} distance: {bad.size} cases off by more than the tolerance "
+                f"(seed {seed}), e.g.\n{rows}"
+            )
+        stats.append(
+            ((want == 0).sum(), ((want > 0) & (want < 1e-3)).sum(), (want > 1e-3).sum(), len(want))
+        )
 
     check()
     zero, near, far, total = np.sum(stats, 0)
     # the mix: intersecting (distance 0), near-touching (< 1e-3) and clearly apart
-    assert zero > 0.1 * total and near > 0.05 * total and far > 0.2 * total, (zero, near, far, total)
+    assert zero > 0.1 * total and near > 0.05 * total and far > 0.2 * total, (
+        zero,
+        near,
+        far,
+        total,
+    )
 
 
 # ---------------------------------------------------------------------------
@@ -348,17 +381,24 @@ CLEAR_WORLD_BOUNDS = [[0.0, 20.0], [0.0, 20.0]]
 ARM_BOUNDS = [[-10.0, 10.0], [-10.0, 10.0]]
 RIGIDS = [RigidBody(length=1.2, width=0.4), RigidBody(length=2.5, width=1.0)]
 ARMS = [NLinkArm((4.0, 3.5)), NLinkArm((2.0, 1.5, 2.5, 1.0, 1.8, 1.2), base=(1.0, -0.5))]
-pad_st = st.one_of(st.just(0.0), st.sampled_from([0.4, 0.8]),
-                   st.floats(0.125, 1.5, width=32))
+pad_st = st.one_of(st.just(0.0), st.sampled_from([0.4, 0.8]), st.floats(0.125, 1.5, width=32))
 
 
 def random_world(rng, bounds, nb=3, nd=2):
     b = np.asarray(bounds, F64)
     lo, hi = b[:, 0] + 1.0, b[:, 1] - 1.0
-    boxes = np.stack([rng.uniform(lo[0], hi[0], nb), rng.uniform(lo[1], hi[1], nb),
-                      _logu(rng, 0.1, 3.0, nb), _logu(rng, 0.1, 3.0, nb)], 1)
-    discs = np.stack([rng.uniform(lo[0], hi[0], nd), rng.uniform(lo[1], hi[1], nd),
-                      _logu(rng, 0.1, 2.5, nd)], 1)
+    boxes = np.stack(
+        [
+            rng.uniform(lo[0], hi[0], nb),
+            rng.uniform(lo[1], hi[1], nb),
+            _logu(rng, 0.1, 3.0, nb),
+            _logu(rng, 0.1, 3.0, nb),
+        ],
+        1,
+    )
+    discs = np.stack(
+        [rng.uniform(lo[0], hi[0], nd), rng.uniform(lo[1], hi[1], nd), _logu(rng, 0.1, 2.5, nd)], 1
+    )
     return World.create(bounds, f32(boxes), f32(discs))
 
 
@@ -374,8 +414,9 @@ def rigid_states_near(rng, robot: RigidBody, world: World, pad, n):
     px, py = np.where(isbox, bx, dx), np.where(isbox, by, dy)
     nx, ny = np.where(isbox, bnx, dnx), np.where(isbox, bny, dny)
     hl, hw = 0.5 * robot.length, 0.5 * robot.width
-    th = f32(np.where(rng.random(n) < 0.3, rng.choice(SPECIAL_THETAS, n),
-                      rng.uniform(-np.pi, np.pi, n))).astype(F64)
+    th = f32(
+        np.where(rng.random(n) < 0.3, rng.choice(SPECIAL_THETAS, n), rng.uniform(-np.pi, np.pi, n))
+    ).astype(F64)
     c, si = np.cos(th), np.sin(th)
     x, y = support_placement(px, py, nx, ny, th, hl, hw)
     b = np.asarray(world.bounds, F64)
@@ -419,10 +460,14 @@ def test_robot_clearance_matches_shapely(robot):
         got = clearance(robot, world, q, pad)
         bad = np.flatnonzero(~(np.abs(got - want) <= tol))
         if bad.size:
-            rows = "\n".join(f"  q={q[i].tolist()} kernel={got[i]!r} shapely={want[i]!r}" for i in bad[:5])
-            pytest.fail(f"{robot} clearance (padding {pad!r}, seed {seed}, world boxes="
-                        f"{np.asarray(world.boxes).tolist()} discs={np.asarray(world.discs).tolist()}): "
-                        f"{bad.size} cases off, e.g.\n{rows}")
+            rows = "\n".join(
+                f"  q={q[i].tolist()} kernel={got[i]!r} shapely={want[i]!r}" for i in bad[:5]
+            )
+            pytest.fail(
+                f"{robot} clearance (padding {pad!r}, seed {seed}, world boxes="
+                f"{np.asarray(world.boxes).tolist()} discs={np.asarray(world.discs).tolist()}): "
+                f"{bad.size} cases off, e.g.\n{rows}"
+            )
         stats.append(((np.abs(want) < 1e-2).sum(), (want > 0).sum(), len(want)))
 
     check()
@@ -453,8 +498,11 @@ def boundary_states(rng, env: Env, pad: float, n: int):
         b = np.where(vm[:, None], b, m)
     u = rng.normal(size=a.shape)
     u /= np.linalg.norm(u, axis=1, keepdims=True)
-    step = np.where(rng.random((n, 1)) < 0.05, 10 ** rng.uniform(-7, -5, (n, 1)),
-                    10 ** rng.uniform(-4.5, -0.5, (n, 1)))
+    step = np.where(
+        rng.random((n, 1)) < 0.05,
+        10 ** rng.uniform(-7, -5, (n, 1)),
+        10 ** rng.uniform(-4.5, -0.5, (n, 1)),
+    )
     return f32(a + u * step)
 
 
@@ -513,13 +561,17 @@ def test_clearance_positive_iff_valid(name):
         in_band = ~sure_valid & ~sure_invalid
         off = (c > 0) != valid
         bad = np.flatnonzero(off & ~((np.abs(c) < BAND) & in_band))
-        assert not bad.size, (f"{name} padding {pad}: clearance sign disagrees with is_valid outside "
-                              f"the band: {[(q[i].tolist(), c[i], valid[i]) for i in bad[:5]]}")
+        assert not bad.size, (
+            f"{name} padding {pad}: clearance sign disagrees with is_valid outside "
+            f"the band: {[(q[i].tolist(), c[i], valid[i]) for i in bad[:5]]}"
+        )
         # and both agree with shapely outside the band
         assert (valid[sure_valid]).all() and not valid[sure_invalid].any()
         # (the arm's band adds the float32 forward-kinematics bound, up to 1.4e-4 for six links)
-        assert in_band.mean() < (0.15 if robot.kind == "rigid_body" else 0.25), \
-            ("too many states within the band", in_band.mean())
+        assert in_band.mean() < (0.15 if robot.kind == "rigid_body" else 0.25), (
+            "too many states within the band",
+            in_band.mean(),
+        )
         assert off.mean() < 0.01, (name, pad, off.mean())
         assert (np.abs(c) < 1e-2).mean() > 0.3, "states not near the boundary"
         assert 0.2 < valid.mean() < 0.8, valid.mean()
@@ -537,12 +589,19 @@ DELTA = CERT_MARGIN / 4  # certified free must keep this far (the module promise
 
 # rigid/0's blocks plus two discs (the presets have boxes only, and every map with other obstacle
 # counts costs another compilation), rigid/0's robot and padding (0.4)
-RIGID_DISCS = dict(PRESETS["rigid/0"], name="rigid/0+discs",
-                   discs=[[7.5, 7.5, 0.6], [1.5, 6.0, 0.4]])
+RIGID_DISCS = dict(
+    PRESETS["rigid/0"], name="rigid/0+discs", discs=[[7.5, 7.5, 0.6], [1.5, 6.0, 0.4]]
+)
 # (environment, padding): both paddings for the rigid body and the 6-link arm, one each for the
 # 2- and 4-link arms (every compiled (robot, padding) costs seconds; the suite has a budget)
-PROP3_CASES = [("rigid/0+discs", "zero"), ("rigid/0+discs", "data"), ("nlink/2", "zero"),
-               ("nlink/4", "data"), ("nlink/6", "zero"), ("nlink/6", "data")]
+PROP3_CASES = [
+    ("rigid/0+discs", "zero"),
+    ("rigid/0+discs", "data"),
+    ("nlink/2", "zero"),
+    ("nlink/4", "data"),
+    ("nlink/6", "zero"),
+    ("nlink/6", "data"),
+]
 
 
 @functools.lru_cache(maxsize=None)
@@ -554,7 +613,9 @@ def motion_length(robot, a, b):
     """The robot's metric (float64): SE(2) ``|dp| + w |dtheta|`` (shortest arc) or Euclidean."""
     a, b = a.astype(F64), b.astype(F64)
     if robot.kind == "rigid_body":
-        return np.hypot(*(b[:, :2] - a[:, :2]).T) + robot.angle_weight * np.abs(wrap64(b[:, 2] - a[:, 2]))
+        return np.hypot(*(b[:, :2] - a[:, :2]).T) + robot.angle_weight * np.abs(
+            wrap64(b[:, 2] - a[:, 2])
+        )
     return np.linalg.norm(b - a, axis=1)
 
 
@@ -572,7 +633,9 @@ def sample_motions(rng, env: Env, pad: float):
     valid = np.flatnonzero(c > 0)
     near_ok = np.flatnonzero((c > 0) & (c < NEAR_CLEARANCE))
     n_near = N_MOTIONS - N_UNIFORM
-    if near_ok.size < n_near:  # few near states on this map: the valid ones with the least clearance
+    if (
+        near_ok.size < n_near
+    ):  # few near states on this map: the valid ones with the least clearance
         near_ok = valid[np.argsort(c[valid])[:n_near]]
     a_near = cand[rng.choice(near_ok, n_near)].astype(F64)
     # displacement of metric length L, log-uniform
@@ -662,8 +725,13 @@ def test_certified_has_no_false_frees(name, pad_mode):
     totals = np.zeros(4, int)
 
     # 3 examples for the rigid body, 2 for the arms (their dense checks cost more) of 256 motions
-    @settings(max_examples=3 if env.robot.kind == "rigid_body" else 2, deadline=None, database=None,
-              phases=PHASES, suppress_health_check=list(HealthCheck))
+    @settings(
+        max_examples=3 if env.robot.kind == "rigid_body" else 2,
+        deadline=None,
+        database=None,
+        phases=PHASES,
+        suppress_health_check=list(HealthCheck),
+    )
     @given(seed=seeds)
     def check(seed):
         rng = np.random.default_rng(seed)
@@ -673,10 +741,14 @@ def test_certified_has_no_false_frees(name, pad_mode):
         close = dense_check(env, a[i], b[i], pad, DELTA)
         if close.any():
             real = dense_check(env, a[i[close]], b[i[close]], pad, 0.0)  # distance <= padding
-            rows = "\n".join(f"  a={a[j].tolist()} b={b[j].tolist()} collides={r}"
-                             for j, r in zip(i[close][:5], real[:5]))
-            pytest.fail(f"{name} padding {pad}: {close.sum()} certified-free motions are not clear "
-                        f"by {DELTA} ({real.sum()} collide: false frees), seed {seed}:\n{rows}")
+            rows = "\n".join(
+                f"  a={a[j].tolist()} b={b[j].tolist()} collides={r}"
+                for j, r in zip(i[close][:5], real[:5])
+            )
+            pytest.fail(
+                f"{name} padding {pad}: {close.sum()} certified-free motions are not clear "
+                f"by {DELTA} ({real.sum()} collide: false frees), seed {seed}:\n{rows}"
+            )
         totals[:] += [free.sum(), (~free).sum(), (free & near).sum(), near.sum()]
 
     check()
@@ -690,38 +762,57 @@ def test_certified_has_no_false_frees(name, pad_mode):
 # 4. What the discretised check misses
 # ---------------------------------------------------------------------------
 
+
 def test_certified_catches_thin_box_the_discretised_check_misses():
     """A 0.1-wide wall crossed by a rigid body (resolution 1.0) and swept by an arm (resolution
     1.0 rad): the discretised check steps over it, the certified one blocks, shapely confirms the
     collision."""
-    rigid = Env.from_json({"name": "thin-rigid", "bounds": [[0, 10], [0, 10]],
-                           "robot": {"kind": "rigid_body", "length": 0.2, "width": 0.2,
-                                     "resolution": 1.0},
-                           "boxes": [[5.0, 5.0, 0.05, 1.0]], "padding": 0.0})
+    rigid = Env.from_json(
+        {
+            "name": "thin-rigid",
+            "bounds": [[0, 10], [0, 10]],
+            "robot": {"kind": "rigid_body", "length": 0.2, "width": 0.2, "resolution": 1.0},
+            "boxes": [[5.0, 5.0, 0.05, 1.0]],
+            "padding": 0.0,
+        }
+    )
     # states at x = 3.5, 4.5, 5.5, 6.5 (3 steps of 1.0): the wall x in [4.95, 5.05] lies between
     # (with a turn or a slant: 3 steps too, the states straddle the wall as well)
     ra = np.array([[3.5, 5.0, 0.0], [3.7, 5.0, 0.0], [3.6, 4.8, 0.0], [3.5, 2.0, 0.0]], np.float32)
     rb = np.array([[6.5, 5.0, 0.0], [6.4, 5.0, 0.5], [6.4, 5.1, 0.0], [6.5, 2.0, 0.0]], np.float32)
-    arm = Env.from_json({"name": "thin-arm", "bounds": [[-10, 10], [-10, 10]],
-                         "robot": {"kind": "nlink", "link_lengths": [3.0, 3.0], "resolution": 1.0},
-                         "boxes": [[4.0, 0.0, 0.5, 0.05]], "padding": 0.0})
+    arm = Env.from_json(
+        {
+            "name": "thin-arm",
+            "bounds": [[-10, 10], [-10, 10]],
+            "robot": {"kind": "nlink", "link_lengths": [3.0, 3.0], "resolution": 1.0},
+            "boxes": [[4.0, 0.0, 0.5, 0.05]],
+            "padding": 0.0,
+        }
+    )
     # joint 1 from -0.5 to 1.0 (2 steps: -0.5, 0.25, 1.0): the arm sweeps over the wall at angle 0
     qa = np.array([[-0.5, 0.0], [-0.5, 0.1], [0.6, 0.0]], np.float32)
     qb = np.array([[1.0, 0.0], [1.0, 0.1], [1.0, 0.0]], np.float32)
-    for env, a, b, expect_hit, pads in ((rigid, ra, rb, [True, True, True, False], (0.0,)),
-                                        (arm, qa, qb, [True, True, False], (0.0,))):
+    for env, a, b, expect_hit, pads in (
+        (rigid, ra, rb, [True, True, True, False], (0.0,)),
+        (arm, qa, qb, [True, True, False], (0.0,)),
+    ):
         for pad in pads:
             disc = np.asarray(env.steer_to(a, b, padding=pad, check="discretized"))
             cert = np.asarray(env.steer_to(a, b, padding=pad, check="certified"))
             hits = dense_check(env, a, b, pad, 0.0)
             assert hits.tolist() == expect_hit, (env.name, pad, hits)
             assert disc.all(), (env.name, pad, disc)  # the discretised check misses the wall ...
-            assert cert.tolist() == [not h for h in expect_hit], (env.name, pad, cert)  # ... this one not
+            assert cert.tolist() == [not h for h in expect_hit], (
+                env.name,
+                pad,
+                cert,
+            )  # ... this one not
 
 
 # ---------------------------------------------------------------------------
 # 5. Certified within discretised; blocked inputs; zero-length motions
 # ---------------------------------------------------------------------------
+
 
 @pytest.mark.parametrize("name", ["rigid/0+discs", "nlink/4"])
 def test_certified_implies_valid_ends_and_discretised_free(name):
@@ -733,8 +824,10 @@ def test_certified_implies_valid_ends_and_discretised_free(name):
     for seed in range(3):
         a, b, _ = sample_motions(np.random.default_rng(seed), env, pad)
         cert = certified(env, a, b, pad)
-        disc = np.asarray(steer_to_pairs(env.robot, env.world, a, b, pad, chunk=N_MOTIONS,
-                                         check="discretized"), bool)
+        disc = np.asarray(
+            steer_to_pairs(env.robot, env.world, a, b, pad, chunk=N_MOTIONS, check="discretized"),
+            bool,
+        )
         va = valid_states(env.robot, env.world, a, pad)
         vb = valid_states(env.robot, env.world, b, pad)
         assert not (cert & ~(va & vb)).any(), "certified free with an invalid endpoint"
@@ -753,10 +846,16 @@ def test_blocked_inputs_and_zero_length_motions():
     # One box and one disc, each repeated to rigid/0+discs' obstacle counts (3 boxes, 2 discs:
     # the same map): with rigid/0's robot and padding (0.4) the certified program (and the
     # clearance one) are the ones test_certified_has_no_false_frees compiles.
-    env = Env.from_json({"name": "one-box", "bounds": [[0, 10], [0, 10]],
-                         "robot": {"kind": "rigid_body", "length": 1.2, "width": 0.4},
-                         "boxes": [[5.0, 5.0, 1.0, 1.0]] * 3, "discs": [[8.0, 8.0, 0.5]] * 2,
-                         "padding": 0.4})
+    env = Env.from_json(
+        {
+            "name": "one-box",
+            "bounds": [[0, 10], [0, 10]],
+            "robot": {"kind": "rigid_body", "length": 1.2, "width": 0.4},
+            "boxes": [[5.0, 5.0, 1.0, 1.0]] * 3,
+            "discs": [[8.0, 8.0, 0.5]] * 2,
+            "padding": 0.4,
+        }
+    )
     robot, world = env.robot, env.world
     free_q = [2.0, 2.0, 0.3]
     near_q = [7.5, 5.0, 0.0]  # rectangle x in [6.9, 8.1]: 0.9 from the box, clearance 0.5
@@ -790,9 +889,17 @@ def test_blocked_inputs_and_zero_length_motions():
     # coordinate-major, robot.certified_steer_to_batch(a, b, world, 0.4, mask)), the rows padded
     # to its one chunk shape with masked-out zero rows
     n, fill = len(rows), CERTIFIED_CHUNK - len(rows)
-    got = np.asarray(_steer_masked(robot, world, np.pad(a, ((0, fill), (0, 0))),
-                                   np.pad(b, ((0, fill), (0, 0))), np.pad(mask, (0, fill)), 0.4,
-                                   "certified"))
+    got = np.asarray(
+        _steer_masked(
+            robot,
+            world,
+            np.pad(a, ((0, fill), (0, 0))),
+            np.pad(b, ((0, fill), (0, 0))),
+            np.pad(mask, (0, fill)),
+            0.4,
+            "certified",
+        )
+    )
     assert got[:n].tolist() == want
     assert not got[n:].any()  # masked out
     # the public chunked entry point agrees (its padding rows are masked out; several chunks:
@@ -801,13 +908,15 @@ def test_blocked_inputs_and_zero_length_motions():
     tight = f32([[7.0 + CERT_MARGIN / 4, 5.0, 0.0]])  # 0.4 + margin/4 from the box
     assert 0 < clearance(robot, world, tight, 0.4)[0] < CERT_MARGIN
     a2, b2 = np.concatenate([a[mask], tight]), np.concatenate([b[mask], tight])
-    assert steer_to_pairs(robot, world, a2, b2, 0.4, check="certified").tolist() == \
-        [w for w, m in zip(want, mask) if m] + [False]
+    assert steer_to_pairs(robot, world, a2, b2, 0.4, check="certified").tolist() == [
+        w for w, m in zip(want, mask) if m
+    ] + [False]
 
 
 # ---------------------------------------------------------------------------
 # 6. The point robot: certified == discretised (both exact)
 # ---------------------------------------------------------------------------
+
 
 @pytest.mark.parametrize("name", ["point/0", "point/3"])
 def test_point_robot_certified_equals_discretised(name):
@@ -815,8 +924,13 @@ def test_point_robot_certified_equals_discretised(name):
     rng = np.random.default_rng(0)
     lo, hi = env.world.bounds[:, 0], env.world.bounds[:, 1]
     a = f32(rng.uniform(np.asarray(lo) - 0.5, np.asarray(hi) + 0.5, (4096, 2)))
-    b = f32(np.where(rng.random((4096, 1)) < 0.5, a + rng.normal(0, 1.0, a.shape),
-                     rng.uniform(np.asarray(lo), np.asarray(hi), a.shape)))
+    b = f32(
+        np.where(
+            rng.random((4096, 1)) < 0.5,
+            a + rng.normal(0, 1.0, a.shape),
+            rng.uniform(np.asarray(lo), np.asarray(hi), a.shape),
+        )
+    )
     a[:8, 0] = np.nan
     for pad in (0.0, env.padding):
         cert = np.asarray(env.steer_to(a, b, padding=pad, check="certified"))
@@ -833,19 +947,26 @@ def test_certified_steer_to_compiles_once_for_every_batch_size():
     from ntq_jax.robots.batch import CERTIFIED_CHUNK
     from ntq_jax.robots.batch import _steer_masked as kernel
 
-    env = Env.from_json({"name": "thin-arm-2", "bounds": [[-10, 10], [-10, 10]],
-                         "robot": {"kind": "nlink", "link_lengths": [3.0, 3.0],
-                                   "resolution": 1.0},
-                         "boxes": [[4.0, 0.0, 0.5, 0.05]], "padding": 0.0})
+    env = Env.from_json(
+        {
+            "name": "thin-arm-2",
+            "bounds": [[-10, 10], [-10, 10]],
+            "robot": {"kind": "nlink", "link_lengths": [3.0, 3.0], "resolution": 1.0},
+            "boxes": [[4.0, 0.0, 0.5, 0.05]],
+            "padding": 0.0,
+        }
+    )
     rng = np.random.default_rng(3)
     n = 2 * CERTIFIED_CHUNK + 5
     a, b = (f32(rng.uniform(-np.pi, np.pi, (n, 2))) for _ in range(2))
-    want = np.asarray(steer_to_pairs(env.robot, env.world, a, b, 0.0, chunk=256,
-                                     check="certified"), bool)
+    want = np.asarray(
+        steer_to_pairs(env.robot, env.world, a, b, 0.0, chunk=256, check="certified"), bool
+    )
     assert 0.05 < want.mean() < 0.95
     sizes = [1, 3, 700, CERTIFIED_CHUNK, CERTIFIED_CHUNK + 1, n]
-    assert (np.asarray(steer_to_pairs(env.robot, env.world, a, b, 0.0, check="certified"))
-            == want).all()  # the default chunk: compiled here, once
+    assert (
+        np.asarray(steer_to_pairs(env.robot, env.world, a, b, 0.0, check="certified")) == want
+    ).all()  # the default chunk: compiled here, once
     before = kernel._cache_size()
     for m in sizes:
         got = env.steer_to(a[:m], b[:m], check="certified")

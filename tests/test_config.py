@@ -21,7 +21,11 @@ def test_every_shipped_config_loads():
 def test_defaults_are_the_papers_datasets():
     cfg = config.load()
     assert [(d.p_nt, d.prune) for d in cfg.data.datasets] == [
-        (0.0, False), (0.5, False), (1.0, False), (1.0, True)]
+        (0.0, False),
+        (0.5, False),
+        (1.0, False),
+        (1.0, True),
+    ]
     assert cfg.train.optimizer == "adagrad" and cfg.train.learning_rate == 0.01
 
 
@@ -34,9 +38,20 @@ def test_numbers_without_a_dot_are_numbers_in_files_and_overrides(tmp_path):
     assert cfg.planner.data_paths == 0.05 and cfg.planner.time_budget == 3.0
     assert cfg.data.gamma_queries == 100000 and isinstance(cfg.data.gamma_queries, int)
     assert cfg.sampling.n_max == 1000 and cfg.data.prune_padding == 0.1 and cfg.eval.k_test == 200
-    assert cfg.hash() == config.load(None, [
-        "planner.data_paths=0.05", "planner.time_budget=3.0", "data.gamma_queries=100000",
-        "sampling.n_max=1000", "data.prune_padding=0.1", "eval.k_test=200"]).hash()
+    assert (
+        cfg.hash()
+        == config.load(
+            None,
+            [
+                "planner.data_paths=0.05",
+                "planner.time_budget=3.0",
+                "data.gamma_queries=100000",
+                "sampling.n_max=1000",
+                "data.prune_padding=0.1",
+                "eval.k_test=200",
+            ],
+        ).hash()
+    )
     with pytest.raises(ConfigError, match=r"data\.gamma_queries: expected an integer, got 1\.5"):
         config.load(None, ["data.gamma_queries=1.5e0"])
     assert config.load(None, ["out_dir='1e3'"]).out_dir == "1e3"  # quoted: a string
@@ -56,20 +71,23 @@ def test_overrides_parse_yaml_values():
     assert cfg.data.k_train == 7 and cfg.eval.steer == (True, False) and cfg.model.hidden == (8, 4)
 
 
-@pytest.mark.parametrize("text, key", [
-    ("data:\n  k_trian: 5\n", "data.k_trian"),
-    ("smapling: {}\n", "smapling"),
-    ("data:\n  k_train: -3\n", "data.k_train"),
-    ("data:\n  k_train: 2.5\n", "data.k_train"),
-    ("data:\n  datasets: [{p_nt: 1.5}]\n", "data.datasets[0].p_nt"),
-    ("data:\n  datasets: [{p_nt: -0.1, prune: true}]\n", "data.datasets[0].p_nt"),
-    ("data:\n  datasets: [{p_nt: 0.5, prune: 3}]\n", "data.datasets[0].prune"),
-    ("planner:\n  name: rrt\n", "planner.name"),
-    ("train:\n  learning_rate: '0.1'\n", "train.learning_rate"),
-    ("model:\n  hidden: []\n", "model.hidden"),
-    ("eval:\n  k_test: 0\n", "eval.k_test"),
-    ("envs: point/0\n", "envs"),
-])
+@pytest.mark.parametrize(
+    "text, key",
+    [
+        ("data:\n  k_trian: 5\n", "data.k_trian"),
+        ("smapling: {}\n", "smapling"),
+        ("data:\n  k_train: -3\n", "data.k_train"),
+        ("data:\n  k_train: 2.5\n", "data.k_train"),
+        ("data:\n  datasets: [{p_nt: 1.5}]\n", "data.datasets[0].p_nt"),
+        ("data:\n  datasets: [{p_nt: -0.1, prune: true}]\n", "data.datasets[0].p_nt"),
+        ("data:\n  datasets: [{p_nt: 0.5, prune: 3}]\n", "data.datasets[0].prune"),
+        ("planner:\n  name: rrt\n", "planner.name"),
+        ("train:\n  learning_rate: '0.1'\n", "train.learning_rate"),
+        ("model:\n  hidden: []\n", "model.hidden"),
+        ("eval:\n  k_test: 0\n", "eval.k_test"),
+        ("envs: point/0\n", "envs"),
+    ],
+)
 def test_bad_values_name_the_key_and_the_file(tmp_path, text, key):
     f = tmp_path / "bad.yaml"
     f.write_text(text)
@@ -98,15 +116,18 @@ def test_missing_and_unparsable_files(tmp_path):
 
 
 def test_per_env_planner_and_training_seed():
-    from ntq_jax.experiment.evaluate import task_of
     from ntq_jax import make_env
+    from ntq_jax.experiment.evaluate import task_of
     from ntq_jax.experiment.pipeline import load_config
 
     cfg = load_config(None, [])  # the embedded default: four point maps and rigid/0
     assert cfg.envs[-1] == "rigid/0"
     assert [cfg.planner.name_for(e) for e in cfg.envs] == ["astar"] * 4 + ["roadmap"]
     assert [task_of(make_env(e)) for e in ("point/1", "rigid/0", "nlink/4")] == [
-        "point", "rigid", "nlink"]
+        "point",
+        "rigid",
+        "nlink",
+    ]
     # a per-map planner that does not exist is one error naming the key
     with pytest.raises(ConfigError, match=r"planner\.per_env\[0\]\.name"):
         load_config(None, ["planner.per_env=[{env: rigid/0, name: rrt}]"])
@@ -127,9 +148,9 @@ def test_smooth_data_reaches_the_data_planner_only():
     """planner.smooth_data: null keeps the hash and the planners' default (shortcut paths);
     false reaches astar/roadmap data generation, never the evaluation reference."""
     from ntq_jax import make_env
-    from ntq_jax.planners.jobs import planner_options
     from ntq_jax.experiment.pipeline import load_config
     from ntq_jax.planners import plan
+    from ntq_jax.planners.jobs import planner_options
 
     cfg = load_config(None, [])
     assert "smooth_data" not in cfg.to_dict()["planner"]
@@ -165,9 +186,12 @@ def test_the_embedded_default_is_one_yaml_shipped_with_the_package():
     from pathlib import Path
 
     from ntq_jax.experiment import pipeline
+
     res = importlib.resources.files("ntq_jax.experiment") / "default.yaml"
     assert res.is_file() and pipeline.DEFAULT["envs"][-1] == "rigid/0"
-    pyproject = tomllib.loads((Path(__file__).resolve().parent.parent / "pyproject.toml").read_text())
+    pyproject = tomllib.loads(
+        (Path(__file__).resolve().parent.parent / "pyproject.toml").read_text()
+    )
     assert "default.yaml" in pyproject["tool"]["setuptools"]["package-data"]["ntq_jax.experiment"]
     cfg = pipeline.load_config(None, [])
     assert cfg.planner.name_for("rigid/0") == "roadmap" and cfg.data.k_train == 600
@@ -186,8 +210,14 @@ def test_the_config_maps_onto_the_cores_options():
     assert config.neural_options(base.eval) == PlannerOptions()
     args = config.train_args(base)
     assert (args["model"], args["train"], args["seed"]) == (ModelConfig(), TrainConfig(), 0)
-    cfg = config.load(None, ["seed=3", "data.per_env=[{env: point/1, k_train: 7}]",
-                             "planner.per_env=[{env: point/1, name: visgraph}]"])
+    cfg = config.load(
+        None,
+        [
+            "seed=3",
+            "data.per_env=[{env: point/1, k_train: 7}]",
+            "planner.per_env=[{env: point/1, name: visgraph}]",
+        ],
+    )
     o = config.data_options(cfg, "point/1")
     assert (o.seed, o.k_train, o.planner.name, o.planner.roadmap_seed) == (3, 7, "visgraph", 3)
     assert o.recorded() == cfg.to_dict() and o.recorded_hash() == cfg.hash()

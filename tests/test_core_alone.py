@@ -47,13 +47,21 @@ _CHILD = textwrap.dedent("""
 
 
 def test_core_runs_without_the_experiment_layer(tmp_path):
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
-        [str(REPO), *filter(None, [os.environ.get("PYTHONPATH")])]))
-    r = subprocess.run([sys.executable, "-c", _CHILD, str(tmp_path)], capture_output=True,
-                       text=True, env=env, cwd=tmp_path, timeout=600)
+    env = dict(
+        os.environ,
+        PYTHONPATH=os.pathsep.join([str(REPO), *filter(None, [os.environ.get("PYTHONPATH")])]),
+    )
+    r = subprocess.run(
+        [sys.executable, "-c", _CHILD, str(tmp_path)],
+        capture_output=True,
+        text=True,
+        env=env,
+        cwd=tmp_path,
+        timeout=600,
+    )
     assert r.returncode == 0, r.stderr[-3000:]
     line = next(ln for ln in r.stdout.splitlines() if ln.startswith("RESULT"))
-    res = json.loads(line[len("RESULT"):])
+    res = json.loads(line[len("RESULT") :])
     assert res["experiment"] == []
     assert len(res["datasets"]) == 4 and all(n > 0 for n in res["datasets"][:3])
     assert res["members"] == 4

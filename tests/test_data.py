@@ -21,10 +21,10 @@ import pytest
 import scipy.stats
 from shapely.geometry import LineString, Point, box
 
-from ntq_jax.experiment import config as C
 from ntq_jax import PlanResult, data, make_env, plan
 from ntq_jax.data import DatasetError
 from ntq_jax.envs import Env
+from ntq_jax.experiment import config as C
 
 REPO = Path(__file__).resolve().parents[1]
 K = 300  # queries per dataset in the main fixture
@@ -32,8 +32,12 @@ TOL = 1e-4  # geometric slack of the oracle (float32 kernels vs float64 shapely)
 
 
 def small_config(**data_overrides) -> C.Config:
-    sets = {"data.k_train": K, "data.chunk": 64, "data.gamma_queries": 200_000,
-            "data.gamma_eval": False}
+    sets = {
+        "data.k_train": K,
+        "data.chunk": 64,
+        "data.gamma_queries": 200_000,
+        "data.gamma_eval": False,
+    }
     sets.update({f"data.{k}": v for k, v in data_overrides.items()})
     return C.load(None, [f"{k}={json.dumps(v)}" for k, v in sets.items()])
 
@@ -42,9 +46,14 @@ def small_config(**data_overrides) -> C.Config:
 def point_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("data")
     env = make_env("point/0")
-    summary = data.generate_datasets(env, C.data_options(small_config(), "point/0"),
-                                     out, env_name="point/0",
-                                     planner="visgraph", progress=False)
+    summary = data.generate_datasets(
+        env,
+        C.data_options(small_config(), "point/0"),
+        out,
+        env_name="point/0",
+        planner="visgraph",
+        progress=False,
+    )
     ds = data.load_datasets(out / "point_0")
     return env, out / "point_0", summary, ds
 
@@ -70,6 +79,7 @@ def _oracle_clearance(env: Env, a: np.ndarray, b: np.ndarray) -> np.ndarray:
 # includeData (Alg. 4)
 # ---------------------------------------------------------------------------
 
+
 def _alg4_reference(env, paths, lengths, prune, padding):
     inputs, targets, pidx = [], [], []
     for p, (path, n) in enumerate(zip(paths, lengths)):
@@ -81,8 +91,11 @@ def _alg4_reference(env, paths, lengths, prune, padding):
             targets.append(nxt)
             pidx.append(p)
     d = env.dim
-    return (np.asarray(inputs, np.float32).reshape(-1, 2 * d),
-            np.asarray(targets, np.float32).reshape(-1, d), np.asarray(pidx, np.int32))
+    return (
+        np.asarray(inputs, np.float32).reshape(-1, 2 * d),
+        np.asarray(targets, np.float32).reshape(-1, d),
+        np.asarray(pidx, np.int32),
+    )
 
 
 def test_include_data_matches_the_sequential_algorithm(point_run):
@@ -98,8 +111,15 @@ def test_include_data_matches_the_sequential_algorithm(point_run):
 
 def test_include_data_prunes_exactly_the_visible_waypoints():
     # one wall; path (1,5) -> (5,9) -> (9,5): the start cannot see the goal, the corner can
-    env = Env.from_json({"name": "wall", "robot": {"kind": "point"},
-                         "bounds": [[0, 10], [0, 10]], "boxes": [[5, 3, 0.5, 3]], "padding": 0.0})
+    env = Env.from_json(
+        {
+            "name": "wall",
+            "robot": {"kind": "point"},
+            "bounds": [[0, 10], [0, 10]],
+            "boxes": [[5, 3, 0.5, 3]],
+            "padding": 0.0,
+        }
+    )
     paths = np.array([[[1, 5], [5, 9], [9, 5]], [[1, 1], [2, 2], [np.nan, np.nan]]], np.float32)
     inp, tgt, pidx = data.include_data(env, paths, [3, 2], prune=False)
     assert inp.shape == (3, 4) and pidx.tolist() == [0, 0, 1]
@@ -115,6 +135,7 @@ def test_include_data_prunes_exactly_the_visible_waypoints():
 # ---------------------------------------------------------------------------
 # The generated datasets: independent checks
 # ---------------------------------------------------------------------------
+
 
 def test_layout_and_metadata(point_run):
     env, env_dir, summary, ds = point_run
@@ -176,8 +197,9 @@ def test_targets_are_the_next_waypoints(point_run):
         assert np.array_equal(goal, paths[pidx, lens[pidx] - 1])
         # the current state is waypoint i of that path and the target waypoint i + 1
         L = paths.shape[1]
-        match = np.all(paths[pidx, :L - 1] == cur[:, None, :], axis=2) & \
-            np.all(paths[pidx, 1:] == tgt[:, None, :], axis=2)
+        match = np.all(paths[pidx, : L - 1] == cur[:, None, :], axis=2) & np.all(
+            paths[pidx, 1:] == tgt[:, None, :], axis=2
+        )
         assert np.all(match.any(axis=1))
         if not d.meta["prune"]:
             assert len(d.inputs) == int((lens - 1).sum())
@@ -221,7 +243,9 @@ def test_query_distribution_of_every_dataset_is_alg2(point_run):
     env, _, _, ds = point_run
     d0, d1, d2, d3 = ds
     # sharing structure
-    assert np.array_equal(d3.queries, d2.queries) and np.array_equal(d3.paths, d2.paths, equal_nan=True)
+    assert np.array_equal(d3.queries, d2.queries) and np.array_equal(
+        d3.paths, d2.paths, equal_nan=True
+    )
     k1 = np.asarray(d1.query_kind)
     nt, un = k1 >= 1, k1 == 0
     assert np.array_equal(d1.queries[un], d0.queries[: un.sum()])
@@ -234,8 +258,11 @@ def test_query_distribution_of_every_dataset_is_alg2(point_run):
         p = d.meta["p_nt"]
         ref, _ = env.sample_queries(jax.random.PRNGKey(1000 + i), 2000, p)
         q = np.asarray(d.queries)
-        for name, f in [("start x", lambda x: x[:, 0, 0]), ("goal y", lambda x: x[:, 1, 1]),
-                        ("distance", lambda x: np.linalg.norm(x[:, 0] - x[:, 1], axis=1))]:
+        for name, f in [
+            ("start x", lambda x: x[:, 0, 0]),
+            ("goal y", lambda x: x[:, 1, 1]),
+            ("distance", lambda x: np.linalg.norm(x[:, 0] - x[:, 1], axis=1)),
+        ]:
             pv = scipy.stats.ks_2samp(f(q), f(ref)).pvalue
             assert pv > 1e-3, (d.meta["name"], name, pv)
         blk = 1 - np.asarray(env.steer_to(q[:, 0], q[:, 1])).mean()
@@ -247,23 +274,34 @@ def test_query_distribution_of_every_dataset_is_alg2(point_run):
 # Edge cases: empty D3, corrupt files
 # ---------------------------------------------------------------------------
 
+
 def straight_line(env, queries, *, padding, seed=0):
     """A fake planner: the straight segment (valid on an obstacle-free map)."""
     q = np.asarray(queries, np.float32)
     k = len(q)
-    return PlanResult(q.copy(), np.full(k, 2, np.int32),
-                                          np.linalg.norm(q[:, 1] - q[:, 0], axis=1),
-                                          np.zeros(k, np.int8), {})
+    return PlanResult(
+        q.copy(),
+        np.full(k, 2, np.int32),
+        np.linalg.norm(q[:, 1] - q[:, 0], axis=1),
+        np.zeros(k, np.int8),
+        {},
+    )
 
 
 def test_obstacle_free_map_gives_an_empty_valid_d3(tmp_path):
-    env = Env.from_json({"name": "empty", "robot": {"kind": "point"},
-                         "bounds": [[0, 10], [0, 10]], "padding": 0.5})
+    env = Env.from_json(
+        {"name": "empty", "robot": {"kind": "point"}, "bounds": [[0, 10], [0, 10]], "padding": 0.5}
+    )
     cfg = C.load(None, ["data.k_train=12", "data.gamma_queries=1000", "sampling.n_max=20"])
     with pytest.warns(RuntimeWarning, match="pruning removed every segment"):
-        s = data.generate_datasets(env, C.data_options(cfg, env.name),
-                                   tmp_path, planner=straight_line, progress=False,
-                                   figure=False)
+        s = data.generate_datasets(
+            env,
+            C.data_options(cfg, env.name),
+            tmp_path,
+            planner=straight_line,
+            progress=False,
+            figure=False,
+        )
     assert s["datasets"]["D3"]["samples"] == 0
     d0, d1, d2, d3 = data.load_datasets(s["env_dir"])  # <out>/empty-<content hash>
     assert d3.inputs.shape == (0, 4) and d3.targets.shape == (0, 2) and d3.path_index.shape == (0,)
@@ -275,8 +313,15 @@ def test_obstacle_free_map_gives_an_empty_valid_d3(tmp_path):
 
 def test_a_custom_planners_paths_are_verified_and_bad_ones_recorded_unsolved(tmp_path):
     """The straight segment through a wall fails verification: unsolved, counted, warned."""
-    env = Env.from_json({"name": "wall", "robot": {"kind": "point"},
-                         "bounds": [[0, 10], [0, 10]], "boxes": [[5, 5, 0.5, 4]], "padding": 0.0})
+    env = Env.from_json(
+        {
+            "name": "wall",
+            "robot": {"kind": "point"},
+            "bounds": [[0, 10], [0, 10]],
+            "boxes": [[5, 5, 0.5, 4]],
+            "padding": 0.0,
+        }
+    )
     cfg = C.load(None, ["data.k_train=40", "data.gamma_queries=1000", "data.gamma_eval=false"])
     returned = []
 
@@ -286,8 +331,9 @@ def test_a_custom_planners_paths_are_verified_and_bad_ones_recorded_unsolved(tmp
         return res
 
     with pytest.warns(RuntimeWarning, match="failed the independent check"):
-        s = data.generate_datasets(env, C.data_options(cfg, env.name),
-                                   tmp_path, planner=keep, progress=False, figure=False)
+        s = data.generate_datasets(
+            env, C.data_options(cfg, env.name), tmp_path, planner=keep, progress=False, figure=False
+        )
     for res, paths, status in returned:  # the planner's arrays are not modified
         assert np.array_equal(res.paths, paths) and np.array_equal(res.status, status)
     for d in data.load_datasets(s["env_dir"]):  # <out>/wall-<content hash>
@@ -371,9 +417,14 @@ _CHILD = textwrap.dedent("""
 
 
 def _child(out, chunk, sleep):
-    return subprocess.Popen([sys.executable, "-c", _CHILD, str(out), str(chunk), str(sleep)],
-                            cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env=dict(os.environ, JAX_PLATFORMS="cpu"))
+    return subprocess.Popen(
+        [sys.executable, "-c", _CHILD, str(out), str(chunk), str(sleep)],
+        cwd=REPO,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=dict(os.environ, JAX_PLATFORMS="cpu"),
+    )
 
 
 def _arrays(env_dir: Path) -> dict[str, bytes]:
@@ -389,7 +440,9 @@ def test_kill9_resume_is_byte_identical_to_an_uninterrupted_run(tmp_path):
         if len(list(work.glob("*/plan_*.npz"))) >= 3 or proc.poll() is not None:
             break
         time.sleep(0.02)
-    assert proc.poll() is None, "the child finished before it could be killed: " + proc.stderr.read()
+    assert proc.poll() is None, (
+        "the child finished before it could be killed: " + proc.stderr.read()
+    )
     os.kill(proc.pid, signal.SIGKILL)
     proc.wait()
     done = len(list(work.glob("*/plan_*.npz")))
@@ -402,19 +455,35 @@ def test_kill9_resume_is_byte_identical_to_an_uninterrupted_run(tmp_path):
         calls.append(len(queries))
         return plan(env, queries, "visgraph", padding=padding, seed=seed)
 
-    cfg5 = C.load(None, ["data.k_train=40", "data.chunk=5", "data.gamma_queries=20000",
-                         "data.gamma_eval=false"])
-    summary = data.generate_datasets(make_env("point/0"), C.data_options(cfg5, "point/0"),
-                                     killed, env_name="point/0",
-                                     planner=slow_visgraph, progress=False, figure=False)
+    cfg5 = C.load(
+        None,
+        ["data.k_train=40", "data.chunk=5", "data.gamma_queries=20000", "data.gamma_eval=false"],
+    )
+    summary = data.generate_datasets(
+        make_env("point/0"),
+        C.data_options(cfg5, "point/0"),
+        killed,
+        env_name="point/0",
+        planner=slow_visgraph,
+        progress=False,
+        figure=False,
+    )
     assert summary["reused_queries"] == 8 * done and not summary["skipped"]
     assert sum(calls) == summary["planned_queries"] - 8 * done  # nothing planned twice
     # an uninterrupted run in this process, chunk size 13
-    cfg = C.load(None, ["data.k_train=40", "data.chunk=13", "data.gamma_queries=20000",
-                        "data.gamma_eval=false"])
-    data.generate_datasets(make_env("point/0"), C.data_options(cfg, "point/0"),
-                           tmp_path / "clean", env_name="point/0",
-                           planner=slow_visgraph, progress=False, figure=False)
+    cfg = C.load(
+        None,
+        ["data.k_train=40", "data.chunk=13", "data.gamma_queries=20000", "data.gamma_eval=false"],
+    )
+    data.generate_datasets(
+        make_env("point/0"),
+        C.data_options(cfg, "point/0"),
+        tmp_path / "clean",
+        env_name="point/0",
+        planner=slow_visgraph,
+        progress=False,
+        figure=False,
+    )
     a, b = _arrays(killed / "point_0"), _arrays(tmp_path / "clean" / "point_0")
     assert len(a) == 4 * 8 and a.keys() == b.keys()
     for k in a:
@@ -424,10 +493,15 @@ def test_kill9_resume_is_byte_identical_to_an_uninterrupted_run(tmp_path):
         mb = json.loads((tmp_path / "clean" / "point_0" / nm / "meta.json").read_text())
         assert ma["stats"] == mb["stats"] and ma["arrays"] == mb["arrays"]
     # a rerun of a complete output does nothing
-    again = data.generate_datasets(make_env("point/0"), C.data_options(cfg, "point/0"),
-                                   tmp_path / "clean",
-                                   env_name="point/0", planner=slow_visgraph, progress=False,
-                                   figure=False)
+    again = data.generate_datasets(
+        make_env("point/0"),
+        C.data_options(cfg, "point/0"),
+        tmp_path / "clean",
+        env_name="point/0",
+        planner=slow_visgraph,
+        progress=False,
+        figure=False,
+    )
     assert again["skipped"]
 
 
@@ -446,10 +520,25 @@ def test_cli_generates_and_rejects_a_bad_key(tmp_path):
     sys.path.insert(0, str(REPO / "scripts"))
     import generate_data
 
-    rc = generate_data.main(["--env", "point/0", "--out", str(tmp_path / "out"), "--no-progress",
-                             "--planner", "visgraph", "--set", "data.k_train=20",
-                             "--set", "data.gamma_queries=5000", "--set", "data.gamma_eval=false",
-                             "--no-figure", "--no-compile-cache"])
+    rc = generate_data.main(
+        [
+            "--env",
+            "point/0",
+            "--out",
+            str(tmp_path / "out"),
+            "--no-progress",
+            "--planner",
+            "visgraph",
+            "--set",
+            "data.k_train=20",
+            "--set",
+            "data.gamma_queries=5000",
+            "--set",
+            "data.gamma_eval=false",
+            "--no-figure",
+            "--no-compile-cache",
+        ]
+    )
     assert rc == 0
     ds = data.load_datasets(tmp_path / "out" / "point_0")
     assert [len(d.queries) for d in ds] == [20] * 4
@@ -459,12 +548,24 @@ def test_cli_generates_and_rejects_a_bad_key(tmp_path):
 def test_custom_dataset_specs_share_pools_by_prefix(tmp_path):
     """Any list of (p_nt, prune): equal specs share their queries, all draw pool prefixes."""
     env = make_env("point/0")
-    cfg = C.load(None, ["data.k_train=50", "data.chunk=64", "data.gamma_queries=20000",
-                        "data.gamma_eval=false",
-                        "data.datasets=[{p_nt: 0.3}, {p_nt: 0.3, prune: true}, {p_nt: 0.8}]"])
-    s = data.generate_datasets(env, C.data_options(cfg, env.name),
-                               tmp_path, planner="visgraph", progress=False,
-                               figure=False)
+    cfg = C.load(
+        None,
+        [
+            "data.k_train=50",
+            "data.chunk=64",
+            "data.gamma_queries=20000",
+            "data.gamma_eval=false",
+            "data.datasets=[{p_nt: 0.3}, {p_nt: 0.3, prune: true}, {p_nt: 0.8}]",
+        ],
+    )
+    s = data.generate_datasets(
+        env,
+        C.data_options(cfg, env.name),
+        tmp_path,
+        planner="visgraph",
+        progress=False,
+        figure=False,
+    )
     a, b, c = data.load_datasets(tmp_path / "point_0")
     assert b.meta["sharing"]["same_queries_as"] == ["D0"]
     assert np.array_equal(a.queries, b.queries)

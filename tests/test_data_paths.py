@@ -9,22 +9,32 @@ from hypothesis import strategies as st
 from shapely.geometry import LineString, box
 
 from ntq_jax import Env, make_env
+from ntq_jax.data.include import include_data
 from ntq_jax.experiment import config
 from ntq_jax.experiment.config import ConfigError
-from ntq_jax.data.include import include_data
-from ntq_jax.planners.path_modes import shape_paths
-from ntq_jax.planners.jobs import planner_options
 from ntq_jax.planners import plan
+from ntq_jax.planners.jobs import planner_options
+from ntq_jax.planners.path_modes import shape_paths
 from ntq_jax.planners.resample import resample_paths
 from ntq_jax.robots.batch import distances
 
-WALLS = {"name": "walls", "robot": {"kind": "point"}, "bounds": [[0, 10], [0, 10]],
-         "boxes": [[3, 3.5, 0.5, 3.5], [7, 6.5, 0.5, 3.5]], "discs": [], "padding": 0.2}
+WALLS = {
+    "name": "walls",
+    "robot": {"kind": "point"},
+    "bounds": [[0, 10], [0, 10]],
+    "boxes": [[3, 3.5, 0.5, 3.5], [7, 6.5, 0.5, 3.5]],
+    "discs": [],
+    "padding": 0.2,
+}
 
 
 def _costs(robot, p, n):
-    return np.array([distances(robot, p[b, :max(n[b] - 1, 0)], p[b, 1:n[b]]).astype(np.float64)
-                     .sum() for b in range(len(n))])
+    return np.array(
+        [
+            distances(robot, p[b, : max(n[b] - 1, 0)], p[b, 1 : n[b]]).astype(np.float64).sum()
+            for b in range(len(n))
+        ]
+    )
 
 
 def test_resampled_segments_never_exceed_the_spacing_and_keep_vertices_and_cost():
@@ -41,17 +51,18 @@ def test_resampled_segments_never_exceed_the_spacing_and_keep_vertices_and_cost(
             assert m[2] == 1 and m[3] == 0 and np.isnan(out[3]).all()
             np.testing.assert_array_equal(out[2, 0], p[2, 0])
             for b in (0, 1, 4):
-                q = out[b, :m[b]]
+                q = out[b, : m[b]]
                 d = distances(env.robot, q[:-1], q[1:])
                 assert d.max() <= spacing * (1 + 1e-5) + 1e-6, (name, spacing, d.max())
-                assert np.isnan(out[b, m[b]:]).all()
+                assert np.isnan(out[b, m[b] :]).all()
                 # every input vertex is kept exactly, in order
-                idx = [int(np.flatnonzero((q == v).all(1))[0]) for v in p[b, :n[b]]]
+                idx = [int(np.flatnonzero((q == v).all(1))[0]) for v in p[b, : n[b]]]
                 assert idx == sorted(idx) and idx[0] == 0 and idx[-1] == m[b] - 1
             if spacing == 100.0:
                 np.testing.assert_array_equal(m, n)  # nothing to insert
-            np.testing.assert_allclose(_costs(env.robot, out, m)[[0, 1, 4]],
-                                       _costs(env.robot, p, n)[[0, 1, 4]], rtol=1e-5)
+            np.testing.assert_allclose(
+                _costs(env.robot, out, m)[[0, 1, 4]], _costs(env.robot, p, n)[[0, 1, 4]], rtol=1e-5
+            )
 
 
 def test_resample_rejects_bad_spacing():
@@ -102,9 +113,17 @@ def _clearance(path):
     """Shapely: ``(n-1, boxes)`` distance of each ``(pi_i, pi_end)`` to each box."""
     polys = [box(cx - hx, cy - hy, cx + hx, cy + hy) for cx, cy, hx, hy in WALLS["boxes"]]
     end = path[-1]
-    return np.array([[LineString([p, end]).distance(b) if not np.array_equal(p, end)
-                      else b.distance(LineString([p, p + 1e-9])) for b in polys]
-                     for p in path[:-1]])
+    return np.array(
+        [
+            [
+                LineString([p, end]).distance(b)
+                if not np.array_equal(p, end)
+                else b.distance(LineString([p, p + 1e-9]))
+                for b in polys
+            ]
+            for p in path[:-1]
+        ]
+    )
 
 
 @settings(max_examples=15, deadline=None)
@@ -122,7 +141,7 @@ def test_pruning_on_a_resampled_path_removes_exactly_the_trivial_samples(seed):
     full = include_data(env, paths, lens, prune=False, padding=env.padding)
     pruned = include_data(env, paths, lens, prune=True, padding=env.padding)
     for j in range(len(rows)):
-        path = paths[j, :lens[j]]
+        path = paths[j, : lens[j]]
         assert (full[2] == j).sum() == lens[j] - 1
         clear = _clearance(path) - env.padding
         if (np.abs(clear) < 1e-4).any():
@@ -148,8 +167,10 @@ def test_config_key_reaches_the_data_planner_and_the_fingerprint():
         assert "smooth" not in planner_options(rigid, "roadmap", evaluation=True)
         assert cfg.hash() != base.hash()
     env = make_env("point/0")
-    opts = [config.data_options(config.load(None, [f"planner.data_paths={m}"]), "point/0")
-            for m in ("raw", "shortcut", 0.4, 0.5)]
+    opts = [
+        config.data_options(config.load(None, [f"planner.data_paths={m}"]), "point/0")
+        for m in ("raw", "shortcut", 0.4, 0.5)
+    ]
     fps = {resolve_run(env, o, "/tmp/x", "point/0", None).fingerprint for o in opts}
     assert len(fps) == 4
     # per environment, and the earlier spelling smooth_data
@@ -173,14 +194,27 @@ def test_a_spacing_too_fine_for_the_map_is_refused_before_any_work(tmp_path, cap
     from script_loader import load_script
 
     from ntq_jax import data
+
     cfg = config.load(None, ["planner.data_paths=1.0e-9"])
     with pytest.raises(ConfigError, match=r"planner\.data_paths 1e-09 for point/0: .* spacing >= "):
-        data.generate_datasets(make_env("point/0"), config.data_options(cfg, "point/0"),
-                               tmp_path / "d", env_name="point/0",
-                               progress=False, figure=False)
+        data.generate_datasets(
+            make_env("point/0"),
+            config.data_options(cfg, "point/0"),
+            tmp_path / "d",
+            env_name="point/0",
+            progress=False,
+            figure=False,
+        )
     assert not (tmp_path / "d").exists()
-    argv = ["--set", "envs=[point/0]", "--set", "planner.data_paths=1.0e-4", "--out",
-            str(tmp_path / "run"), "--no-progress"]
+    argv = [
+        "--set",
+        "envs=[point/0]",
+        "--set",
+        "planner.data_paths=1.0e-4",
+        "--out",
+        str(tmp_path / "run"),
+        "--no-progress",
+    ]
     assert load_script("train_all").main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "planner.data_paths 0.0001 for point/0" in err[0], err
@@ -190,19 +224,30 @@ def test_a_spacing_too_fine_for_the_map_is_refused_before_any_work(tmp_path, cap
 def test_a_roadmap_beyond_memory_is_refused_before_any_work(tmp_path):
     """milestones: 1e12 ran 455 s, then blamed "free space is too small"."""
     from ntq_jax import data
+
     cfg = config.load(None, ["planner.name=roadmap", "planner.milestones=1e12"])
-    with pytest.raises(ConfigError, match=r"planner\.milestones 1,000,000,000,000 for rigid/0: "
-                                          r".* GB\) would not fit .* use at most "):
-        data.generate_datasets(make_env("rigid/0"), config.data_options(cfg, "rigid/0"),
-                               tmp_path / "d", env_name="rigid/0",
-                               progress=False, figure=False)
+    with pytest.raises(
+        ConfigError,
+        match=r"planner\.milestones 1,000,000,000,000 for rigid/0: "
+        r".* GB\) would not fit .* use at most ",
+    ):
+        data.generate_datasets(
+            make_env("rigid/0"),
+            config.data_options(cfg, "rigid/0"),
+            tmp_path / "d",
+            env_name="rigid/0",
+            progress=False,
+            figure=False,
+        )
     assert not (tmp_path / "d").exists()
     from ntq_jax.data.limits import check_roadmap
+
     check_roadmap(make_env("rigid/0"), {"milestones": 20_000, "k": None, "grow_rounds": 2}, "x")
 
 
 def _record_script():
     from script_loader import load_script
+
     return load_script("record_paths")
 
 
@@ -214,39 +259,77 @@ def test_datasets_rebuild_from_a_record_without_planning(tmp_path, monkeypatch):
 
     sets = ["data.k_train=12", "data.gamma_queries=500", "data.gamma_eval=false"]
     rec = tmp_path / "rec"
-    argv = ["--config", "configs/point_small.yaml", "--env", "point/2", "--planner", "astar",
-            "--chunk", "5", "--out", str(rec), "--no-progress"]
+    argv = [
+        "--config",
+        "configs/point_small.yaml",
+        "--env",
+        "point/2",
+        "--planner",
+        "astar",
+        "--chunk",
+        "5",
+        "--out",
+        str(rec),
+        "--no-progress",
+    ]
     assert _record_script().main(argv + [a for s in sets for a in ("--set", s)]) == 0
     assert sorted(p.name for p in (rec / "N").iterdir())[0] == "plan_000000000_000000005.npz"
     env = make_env("point/2")
     plain = config.load("configs/point_small.yaml", sets)
-    data.generate_datasets(env, config.data_options(plain, "point/2"),
-                           tmp_path / "planned", env_name="point/2",
-                           progress=False, figure=False)
+    data.generate_datasets(
+        env,
+        config.data_options(plain, "point/2"),
+        tmp_path / "planned",
+        env_name="point/2",
+        progress=False,
+        figure=False,
+    )
     written = []
     monkeypatch.setattr(planning, "chunk_written", written.append)
-    cfg = config.load("configs/point_small.yaml",
-                      sets + [f"data.per_env=[{{env: point/2, paths_from: '{rec}'}}]"])
-    out = data.generate_datasets(env, config.data_options(cfg, "point/2"),
-                                 tmp_path / "replayed", env_name="point/2",
-                                 progress=False, figure=False)
+    cfg = config.load(
+        "configs/point_small.yaml", sets + [f"data.per_env=[{{env: point/2, paths_from: '{rec}'}}]"]
+    )
+    out = data.generate_datasets(
+        env,
+        config.data_options(cfg, "point/2"),
+        tmp_path / "replayed",
+        env_name="point/2",
+        progress=False,
+        figure=False,
+    )
     assert written == [] and out["reused_queries"] == out["planned_queries"] == 24
     for ds in ("D0", "D1", "D2", "D3"):
         for arr in ("inputs", "targets", "paths", "queries"):
             np.testing.assert_array_equal(
                 np.load(tmp_path / "planned" / "point_2" / ds / f"{arr}.npy"),
-                np.load(tmp_path / "replayed" / "point_2" / ds / f"{arr}.npy"))
-    other = config.load("configs/point_small.yaml", sets + [
-        "seed=1", f"data.per_env=[{{env: point/2, paths_from: '{rec}'}}]"])
+                np.load(tmp_path / "replayed" / "point_2" / ds / f"{arr}.npy"),
+            )
+    other = config.load(
+        "configs/point_small.yaml",
+        sets + ["seed=1", f"data.per_env=[{{env: point/2, paths_from: '{rec}'}}]"],
+    )
     with pytest.raises(ValueError, match="with seed 0, not point/2 at 0.8 with seed 1"):
-        data.generate_datasets(env, config.data_options(other, "point/2"),
-                               tmp_path / "other", env_name="point/2",
-                               progress=False, figure=False)
+        data.generate_datasets(
+            env,
+            config.data_options(other, "point/2"),
+            tmp_path / "other",
+            env_name="point/2",
+            progress=False,
+            figure=False,
+        )
     with pytest.raises(ValueError, match="records point/2"):
-        p1 = config.load("configs/point_small.yaml",
-                         sets + [f"data.per_env=[{{env: point/1, paths_from: '{rec}'}}]"])
-        data.generate_datasets(make_env("point/1"), config.data_options(p1, "point/1"),
-                               tmp_path / "p1", env_name="point/1", progress=False, figure=False)
+        p1 = config.load(
+            "configs/point_small.yaml",
+            sets + [f"data.per_env=[{{env: point/1, paths_from: '{rec}'}}]"],
+        )
+        data.generate_datasets(
+            make_env("point/1"),
+            config.data_options(p1, "point/1"),
+            tmp_path / "p1",
+            env_name="point/1",
+            progress=False,
+            figure=False,
+        )
 
 
 def test_the_committed_bitstar_record_reverifies():
@@ -256,9 +339,10 @@ def test_the_committed_bitstar_record_reverifies():
     costs the sum of its segments in the robot's metric; the status is a PlanStatus."""
     import json
     import re
+    from pathlib import Path
 
     from ntq_jax import PlanStatus
-    from pathlib import Path
+
     rec = Path(__file__).resolve().parent.parent / "results" / "data_paths" / "bitstar" / "rigid_0"
     meta = json.loads((rec / "record.json").read_text())
     env = make_env(meta["env"])
@@ -274,7 +358,7 @@ def test_the_committed_bitstar_record_reverifies():
         assert len(ok) > 0.9 * len(q)
         for i in ok:
             p = paths[i, : n[i]].astype(np.float32)
-            assert n[i] >= 2 and np.isnan(paths[i, n[i]:]).all()
+            assert n[i] >= 2 and np.isnan(paths[i, n[i] :]).all()
             assert np.allclose(p[0], q[i, 0], atol=1e-4) and np.allclose(p[-1], q[i, 1], atol=1e-4)
             assert np.asarray(env.steer_to(p[:-1], p[1:], padding=meta["padding"])).all(), (f, i)
             cost = float(np.asarray(env.distance(p[:-1], p[1:]), np.float64).sum())
@@ -296,6 +380,5 @@ def test_a_direct_connection_stays_its_two_ends_when_resampled():
     assert res.lengths[1] > cut.lengths[1] and info["resample_kept"] == 0
     pr = res.path(1)
     assert (distances(env.robot, pr[:-1], pr[1:]) <= 0.5 * (1 + 1e-5)).all()
-    samples = include_data(env, res.paths[[0]], res.lengths[[0]], prune=False,
-                           padding=env.padding)
+    samples = include_data(env, res.paths[[0]], res.lengths[[0]], prune=False, padding=env.padding)
     assert len(samples[2]) == 1  # one sample: start -> goal

@@ -18,16 +18,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from test_neural_planner import OPTS, ORACLE, SEEKER, STAY, make, optimum, pnet, shapely_free
 
-from ntq_jax.experiment import metrics as M
 from ntq_jax import make_env, models
+from ntq_jax.experiment import metrics as M
 from ntq_jax.models import ModelConfig
 from ntq_jax.neural_planner import PlannerOptions, plan_batch
 from ntq_jax.neural_steps import choose
 from ntq_jax.types import PlanCause
-
-from test_neural_planner import (OPTS, ORACLE, SEEKER, STAY, make, optimum, pnet,
-                                 shapely_free)
 
 FIELDS = ("paths", "lengths", "success", "costs", "cause", "replans")
 
@@ -68,13 +66,16 @@ def _assert_same(a, b, calls_factor):
     np.testing.assert_array_equal(a.pnet_calls * calls_factor, b.pnet_calls)
 
 
-@pytest.mark.parametrize("opts", [OPTS, PlannerOptions(n_plan=12, replan_rounds=2,
-                                                       replan_steps=8, bidirectional=True)],
-                         ids=["forward", "bidirectional"])
+@pytest.mark.parametrize(
+    "opts",
+    [OPTS, PlannerOptions(n_plan=12, replan_rounds=2, replan_steps=8, bidirectional=True)],
+    ids=["forward", "bidirectional"],
+)
 def test_identical_members_equal_the_single_member_stand_in(opts):
     # a noisy seeker walks through the wall: coarse plans, infeasible paths, replanning
-    q = np.asarray([[[2, 5], [8, 5]], [[1, 1], [9, 6]], [[4, 9], [6, 1]], [[2, 2], [8, 8]]],
-                   np.float32)
+    q = np.asarray(
+        [[[2, 5], [8, 5]], [[1, 1], [9, 6]], [[4, 9], [6, 1]], [[2, 2], [8, 8]]], np.float32
+    )
     env, net = make("wall"), pnet("wall", SEEKER, sigma=0.7)
     one = plan_batch(env, net, q, jax.random.key(3), opts)
     ens = plan_batch(env, [net] * 4, q, jax.random.key(3), opts)
@@ -97,21 +98,36 @@ def test_identical_members_equal_the_single_member_pnet():
         ens = _ensemble(dropout)
         p1 = models.member_pnets(ens)[1]
         one = plan_batch(env, p1, q, jax.random.key(7), PNET_OPTS, **PNET_PLAN)
-        _assert_same(one, plan_batch(env, [p1] * 4, q, jax.random.key(7), PNET_OPTS, **PNET_PLAN),
-                     4)
+        _assert_same(
+            one, plan_batch(env, [p1] * 4, q, jax.random.key(7), PNET_OPTS, **PNET_PLAN), 4
+        )
         if dropout == 0.0:  # four members with one member's parameters
-            same = models.Ensemble(ens.graphdef, models.stack_states(
-                [models.unstack_state(ens.params, 1)] * 4), ens.spec)
-            _assert_same(one, plan_batch(env, models.member_pnets(same), q, jax.random.key(7),
-                                         PNET_OPTS, **PNET_PLAN), 4)
+            same = models.Ensemble(
+                ens.graphdef,
+                models.stack_states([models.unstack_state(ens.params, 1)] * 4),
+                ens.spec,
+            )
+            _assert_same(
+                one,
+                plan_batch(
+                    env, models.member_pnets(same), q, jax.random.key(7), PNET_OPTS, **PNET_PLAN
+                ),
+                4,
+            )
 
 
 def test_a_useless_member_does_not_hurt_the_ensemble():
-    q = np.asarray([[[2, 5], [8, 5]], [[1, 1], [9, 6]], [[4, 9], [6, 1]], [[2, 2], [8, 8]]],
-                   np.float32)
+    q = np.asarray(
+        [[[2, 5], [8, 5]], [[1, 1], [9, 6]], [[4, 9], [6, 1]], [[2, 2], [8, 8]]], np.float32
+    )
     env = make("wall")
-    ens = plan_batch(env, [pnet("wall", STAY), pnet("wall", SEEKER), pnet("wall", ORACLE)], q,
-                     jax.random.key(0), OPTS)
+    ens = plan_batch(
+        env,
+        [pnet("wall", STAY), pnet("wall", SEEKER), pnet("wall", ORACLE)],
+        q,
+        jax.random.key(0),
+        OPTS,
+    )
     assert np.all(ens.success)
     np.testing.assert_allclose(ens.costs, optimum("wall", q), rtol=1e-4)
     for i in range(len(q)):
@@ -130,8 +146,9 @@ def test_choose_rule_by_hand():
 
     def pick(cands, steer=True):
         c = jnp.asarray(cands, jnp.float32)[:, None, :]
-        return int(rule(env.robot, env.world, c, cur, tgt, jnp.ones(1, bool), padding=0.0,
-                        steer=steer)[0])
+        return int(
+            rule(env.robot, env.world, c, cur, tgt, jnp.ones(1, bool), padding=0.0, steer=steer)[0]
+        )
 
     # tier 0 (cur -> c -> goal free) beats a closer cost-to-go; cheapest path among tier 0
     assert pick([[4.0, 5.0], [5.0, 9.0], [5.0, 9.5]]) == 1
@@ -149,12 +166,20 @@ def test_choose_rule_by_hand():
 
 def _saved(success, costs, cause, paths, calls):
     k = len(success)
-    return dict(queries=np.zeros((k, 2, 2), np.float32), paths=np.asarray(paths, np.float32),
-                lengths=np.full(k, paths.shape[1], np.int32), success=np.asarray(success),
-                costs=np.asarray(costs, np.float64), cause=np.asarray(cause, np.int8),
-                pnet_calls=np.asarray(calls, np.int32), replans=np.zeros(k, np.int32),
-                ref_costs=np.ones(k), ref_status=np.zeros(k, np.int8), seconds=1.5,
-                compile_seconds=0.5)
+    return dict(
+        queries=np.zeros((k, 2, 2), np.float32),
+        paths=np.asarray(paths, np.float32),
+        lengths=np.full(k, paths.shape[1], np.int32),
+        success=np.asarray(success),
+        costs=np.asarray(costs, np.float64),
+        cause=np.asarray(cause, np.int8),
+        pnet_calls=np.asarray(calls, np.int32),
+        replans=np.zeros(k, np.int32),
+        ref_costs=np.ones(k),
+        ref_status=np.zeros(k, np.int8),
+        seconds=1.5,
+        compile_seconds=0.5,
+    )
 
 
 def test_best_of_never_costlier_than_a_member_and_succeeds_iff_one_does():
@@ -200,11 +225,15 @@ def test_best_of_never_costlier_than_a_member_and_succeeds_iff_one_does():
 
 
 def test_eval_ensemble_option():
-    from ntq_jax.experiment.pipeline import load_config
     from ntq_jax.experiment.config import ConfigError
+    from ntq_jax.experiment.pipeline import load_config
 
     default = load_config(None, [])
-    assert default.eval.ensemble is None and default.eval.ensemble_rows == ("ens", "best", "cascade")
+    assert default.eval.ensemble is None and default.eval.ensemble_rows == (
+        "ens",
+        "best",
+        "cascade",
+    )
     assert "ensemble" not in default.to_dict()["eval"]  # the default config hashes as before
     assert load_config(None, ["eval.ensemble=[best]"]).eval.ensemble_rows == ("best",)
     off = load_config(None, ["eval.ensemble=[]"])
@@ -218,6 +247,7 @@ def test_eval_ensemble_option():
 # Members side by side (plan_members) and as fallbacks (plan_cascade)
 # ---------------------------------------------------------------------------
 
+
 def _assert_equal_results(a, b):
     """Bit for bit, for the reason :func:`_assert_same` gives."""
     for f in FIELDS + ("pnet_calls",):
@@ -226,6 +256,7 @@ def _assert_equal_results(a, b):
 
 def test_group_chunks_of_one_group_are_padded_chunks():
     from ntq_jax.batching import group_chunks, padded_chunks
+
     rows = np.arange(11) * 3
     got = list(group_chunks([rows], 4))
     want = list(padded_chunks([rows], 4))
@@ -235,7 +266,7 @@ def test_group_chunks_of_one_group_are_padded_chunks():
         np.testing.assert_array_equal(idx, pad)
         np.testing.assert_array_equal(mask, mask2)
     # several groups: the longest sets the number of chunks, shorter blocks are padding
-    (lo, idx, mask), = group_chunks([np.array([5, 6]), np.array([], int), np.array([9])], 2)
+    ((lo, idx, mask),) = group_chunks([np.array([5, 6]), np.array([], int), np.array([9])], 2)
     np.testing.assert_array_equal(idx, [5, 6, 0, 0, 9, 0])
     np.testing.assert_array_equal(mask, [1, 1, 0, 0, 1, 0])
 
@@ -245,14 +276,23 @@ def test_plan_members_equals_each_member_alone(real):
     """Members side by side in one batch plan exactly like each member alone, with its key
     (stand-ins: the per-member loop; real PNets of one ensemble: the vmapped members)."""
     from ntq_jax.neural_planner import plan_members
+
     if real:
         env, q = _point2()
         nets = models.member_pnets(_ensemble(0.5))[:3]
         opts, plan = PNET_OPTS, PNET_PLAN
     else:
         env = make("wall")
-        q = np.asarray([[[2, 5], [8, 5]], [[1, 1], [9, 6]], [[4, 9], [6, 1]],
-                        [[2, 2], [8, 8]], [[1, 5], [9, 5]]], np.float32)
+        q = np.asarray(
+            [
+                [[2, 5], [8, 5]],
+                [[1, 1], [9, 6]],
+                [[4, 9], [6, 1]],
+                [[2, 2], [8, 8]],
+                [[1, 5], [9, 5]],
+            ],
+            np.float32,
+        )
         nets = [pnet("wall", SEEKER, sigma=0.7), pnet("wall", STAY), pnet("wall", ORACLE)]
         opts, plan = OPTS, STAND_IN_PLAN
     keys = jnp.stack([jax.random.key(m + 10) for m in range(3)])
@@ -270,9 +310,18 @@ def test_plan_members_equals_each_member_alone(real):
 
 def test_cascade_keeps_the_first_success_and_replans_only_the_failures():
     from ntq_jax.neural_planner import plan_cascade
+
     env = make("wall")
-    q = np.asarray([[[2, 5], [8, 5]], [[1, 1], [9, 6]], [[4, 9], [6, 1]], [[2, 2], [8, 8]],
-                    [[3, 3], [3.5, 3.5]]], np.float32)
+    q = np.asarray(
+        [
+            [[2, 5], [8, 5]],
+            [[1, 1], [9, 6]],
+            [[4, 9], [6, 1]],
+            [[2, 2], [8, 8]],
+            [[3, 3], [3.5, 3.5]],
+        ],
+        np.float32,
+    )
     nets = [pnet("wall", STAY), pnet("wall", SEEKER, sigma=0.7), pnet("wall", ORACLE)]
     key = jax.random.key(2)
     plan = STAND_IN_PLAN  # 5 queries: two chunks of BATCH rows
@@ -281,8 +330,7 @@ def test_cascade_keeps_the_first_success_and_replans_only_the_failures():
     a0 = plan_batch(env, nets[0], q, jax.random.fold_in(key, 0), OPTS, **plan)
     left = np.flatnonzero(~a0.success)
     assert a0.success[4] and len(left) == 4  # the stay-put member solves only the free query
-    a1 = plan_batch(env, nets[1], q[left], jax.random.fold_in(key, 1), OPTS, rows=len(q),
-                    **plan)
+    a1 = plan_batch(env, nets[1], q[left], jax.random.fold_in(key, 1), OPTS, rows=len(q), **plan)
     left2 = left[~a1.success]
     assert res.success.all() and res.member[4] == 0
     np.testing.assert_array_equal(res.member[left[a1.success]], 1)
@@ -304,16 +352,28 @@ def test_cascade_keeps_the_first_success_and_replans_only_the_failures():
             plan_cascade(env, nets, q, key, OPTS, order=bad)
 
 
-
 def test_cascade_compiles_nothing_beyond_its_members_programs():
     """Each attempt plans its (smaller) batch with the whole batch's shapes: once every
     member planned the K queries on its own, the cascade adds no compiled stage."""
     from ntq_jax import neural_steps
     from ntq_jax.neural_planner import plan_cascade
+
     env = make("wall")
-    q = np.asarray([[[2, 5], [8, 5]], [[1, 1], [9, 6]], [[4, 9], [6, 1]], [[2, 2], [8, 8]],
-                    [[3, 3], [3.5, 3.5]], [[1, 8], [9, 2]], [[2, 6], [8, 4]], [[7, 2], [7.5, 2.5]],
-                    [[2, 8], [2.5, 8.5]], [[7, 7], [7.5, 7.5]]], np.float32)
+    q = np.asarray(
+        [
+            [[2, 5], [8, 5]],
+            [[1, 1], [9, 6]],
+            [[4, 9], [6, 1]],
+            [[2, 2], [8, 8]],
+            [[3, 3], [3.5, 3.5]],
+            [[1, 8], [9, 2]],
+            [[2, 6], [8, 4]],
+            [[7, 2], [7.5, 2.5]],
+            [[2, 8], [2.5, 8.5]],
+            [[7, 7], [7.5, 7.5]],
+        ],
+        np.float32,
+    )
     nets = [pnet("wall", SEEKER, sigma=s) for s in (0.05, 0.7, 1.5)]  # 10 queries, then 8 or fewer
     key = jax.random.key(4)
     for net in nets:

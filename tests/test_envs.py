@@ -37,8 +37,14 @@ def test_json_round_trip(tmp_path):
 
 
 def test_user_map_from_json_file(tmp_path):
-    spec = {"name": "mine", "robot": {"kind": "point"}, "bounds": [[0, 10], [0, 5]],
-            "boxes": [[5, 2.5, 1, 1]], "discs": [[2, 2, 0.5]], "padding": 0.1}
+    spec = {
+        "name": "mine",
+        "robot": {"kind": "point"},
+        "bounds": [[0, 10], [0, 5]],
+        "boxes": [[5, 2.5, 1, 1]],
+        "discs": [[2, 2, 0.5]],
+        "padding": 0.1,
+    }
     f = tmp_path / "mine.json"
     f.write_text(json.dumps(spec))
     env = nj.make_env(str(f))
@@ -46,29 +52,44 @@ def test_user_map_from_json_file(tmp_path):
     assert ok.tolist() == [False, True, False, False]
 
 
-@pytest.mark.parametrize("spec, match", [
-    ({"robot": {"kind": "point"}, "bounds": [[0, 1], [0, 1]], "boxez": []}, "unknown key"),
-    ({"robot": {"kind": "car"}, "bounds": [[0, 1], [0, 1]]}, "kind 'car' is unknown"),
-    ({"robot": {"kind": "point"}}, "missing required key 'bounds'"),
-    ({"robot": {"kind": "point"}, "bounds": [[1, 0], [0, 1]]}, "bounds"),
-    ({"robot": {"kind": "point"}, "bounds": [[0, 1], [0, 1]], "boxes": [[0, 0, -1, 1]]}, "half sizes"),
-    ({"robot": {"kind": "point"}, "bounds": [[0, 1], [0, 1]], "padding": -1}, "padding"),
-    ({"robot": {"kind": "rigid_body", "lenght": 1}, "bounds": [[0, 1], [0, 1]]}, "unknown parameter"),
-    ({"robot": {"kind": "nlink", "link_lengths": [1, -2]}, "bounds": [[0, 1], [0, 1]]}, "link_lengths"),
-])
+@pytest.mark.parametrize(
+    "spec, match",
+    [
+        ({"robot": {"kind": "point"}, "bounds": [[0, 1], [0, 1]], "boxez": []}, "unknown key"),
+        ({"robot": {"kind": "car"}, "bounds": [[0, 1], [0, 1]]}, "kind 'car' is unknown"),
+        ({"robot": {"kind": "point"}}, "missing required key 'bounds'"),
+        ({"robot": {"kind": "point"}, "bounds": [[1, 0], [0, 1]]}, "bounds"),
+        (
+            {"robot": {"kind": "point"}, "bounds": [[0, 1], [0, 1]], "boxes": [[0, 0, -1, 1]]},
+            "half sizes",
+        ),
+        ({"robot": {"kind": "point"}, "bounds": [[0, 1], [0, 1]], "padding": -1}, "padding"),
+        (
+            {"robot": {"kind": "rigid_body", "lenght": 1}, "bounds": [[0, 1], [0, 1]]},
+            "unknown parameter",
+        ),
+        (
+            {"robot": {"kind": "nlink", "link_lengths": [1, -2]}, "bounds": [[0, 1], [0, 1]]},
+            "link_lengths",
+        ),
+    ],
+)
 def test_bad_maps_are_one_clear_error(spec, match):
     with pytest.raises(nj.EnvError, match=match):
         nj.Env.from_json(spec)
 
 
-@pytest.mark.parametrize("bounds, boxes, match", [
-    # beyond float32: was [0, inf] (a NumPy warning, then "no valid query" after 272 M draws)
-    ([[0, 1e39], [0, 10]], [], r"bounds\[0\]\[1\] is 1e\+39, beyond float32's range"),
-    # float32 spacing 8 at 1e8: the box would move by 2 (the bounds' top by 4)
-    ([[1e8, 1e8 + 20], [0, 20]], [[1e8 + 10, 5, 1, 1]], r"bounds\[0\]\[1\] .* moved by 4"),
-    ([[-1e6, 1e6], [0, 20]], [[1e6 - 10.3, 5, 1, 1]], None),  # 2 M wide: 0.03 moves pass
-    ([[0, 20], [0, 20]], [[5.123456789, 5, 1, 1]], None),
-])
+@pytest.mark.parametrize(
+    "bounds, boxes, match",
+    [
+        # beyond float32: was [0, inf] (a NumPy warning, then "no valid query" after 272 M draws)
+        ([[0, 1e39], [0, 10]], [], r"bounds\[0\]\[1\] is 1e\+39, beyond float32's range"),
+        # float32 spacing 8 at 1e8: the box would move by 2 (the bounds' top by 4)
+        ([[1e8, 1e8 + 20], [0, 20]], [[1e8 + 10, 5, 1, 1]], r"bounds\[0\]\[1\] .* moved by 4"),
+        ([[-1e6, 1e6], [0, 20]], [[1e6 - 10.3, 5, 1, 1]], None),  # 2 M wide: 0.03 moves pass
+        ([[0, 20], [0, 20]], [[5.123456789, 5, 1, 1]], None),
+    ],
+)
 def test_coordinates_float32_cannot_hold_are_refused(bounds, boxes, match):
     """The world keeps float32 coordinates: a JSON map whose numbers overflow float32, or
     move by more than validation.MAX_FLOAT32_MOVE of the map's size when rounded, is one
@@ -81,8 +102,11 @@ def test_coordinates_float32_cannot_hold_are_refused(bounds, boxes, match):
         warnings.simplefilter("error")  # refused before any overflow warning
         with pytest.raises(nj.EnvError, match=match):
             nj.Env.from_json(spec)
-    three = {"robot": {"kind": "serial_arm", "preset": "panda"},
-             "bounds": [bounds[0], bounds[1], [0, 20]], "spheres": [[b[0], b[1], 5, 1] for b in boxes]}
+    three = {
+        "robot": {"kind": "serial_arm", "preset": "panda"},
+        "bounds": [bounds[0], bounds[1], [0, 20]],
+        "spheres": [[b[0], b[1], 5, 1] for b in boxes],
+    }
     with pytest.raises(nj.EnvError, match=match):
         nj.Env.from_json(three)
 
@@ -123,8 +147,8 @@ def test_padding_selects_the_geometry():
     env = nj.make_env("point/0")
     box = np.asarray(env.world.boxes)[0]
     near = np.array([[box[0] + box[2] + 0.5 * env.padding, box[1]]], np.float32)
-    assert not bool(env.is_valid(near)[0])            # inside the data-generation padding
-    assert bool(env.is_valid(near, padding=0.0)[0])   # free on the evaluation geometry
+    assert not bool(env.is_valid(near)[0])  # inside the data-generation padding
+    assert bool(env.is_valid(near, padding=0.0)[0])  # free on the evaluation geometry
 
 
 def test_sample_queries_kinds_and_validity():
@@ -138,8 +162,9 @@ def test_sample_queries_kinds_and_validity():
 
 
 def test_free_space_too_small_is_a_clear_error():
-    env = nj.Env.from_json({"robot": {"kind": "point"}, "bounds": [[0, 1], [0, 1]],
-                            "boxes": [[0.5, 0.5, 0.6, 0.6]]})
+    env = nj.Env.from_json(
+        {"robot": {"kind": "point"}, "bounds": [[0, 1], [0, 1]], "boxes": [[0.5, 0.5, 0.6, 0.6]]}
+    )
     with pytest.raises(nj.FreeSpaceTooSmall, match="free space"):
         env.sample_states(jax.random.key(0), 5)
 
@@ -165,8 +190,11 @@ def test_preset_gamma_matches_the_paper(name):
 
 def test_export_env_script(tmp_path, script):
     out = tmp_path / "p3.json"
-    r = subprocess.run([sys.executable, str(ROOT / "scripts/export_env.py"), "point/3", "--out",
-                        str(out)], capture_output=True, text=True)
+    r = subprocess.run(
+        [sys.executable, str(ROOT / "scripts/export_env.py"), "point/3", "--out", str(out)],
+        capture_output=True,
+        text=True,
+    )
     assert r.returncode == 0, r.stderr
     assert nj.make_env(str(out)).to_json() == nj.make_env("point/3").to_json()
     r = script("export_env", "point/7")
@@ -175,12 +203,29 @@ def test_export_env_script(tmp_path, script):
 
 def test_measure_gamma_script_json(tmp_path, script):
     out = tmp_path / "g.json"
-    r = script("measure_gamma", "--env", "point/0", "--queries", "2e5", "--seed", "3", "--json", out,
-               "--no-progress")
+    r = script(
+        "measure_gamma",
+        "--env",
+        "point/0",
+        "--queries",
+        "2e5",
+        "--seed",
+        "3",
+        "--json",
+        out,
+        "--no-progress",
+    )
     assert r.returncode == 0, r.stderr
     res = json.loads(out.read_text())
-    assert set(res) >= {"env", "queries", "non_trivial", "gamma", "ci95", "seconds",
-                        "queries_per_second"}
+    assert set(res) >= {
+        "env",
+        "queries",
+        "non_trivial",
+        "gamma",
+        "ci95",
+        "seconds",
+        "queries_per_second",
+    }
     assert res["queries"] == 200_000 and res["env"] == "point/0"
     assert res["ci95"][0] <= res["gamma"] <= res["ci95"][1]
     assert res["non_trivial"] == round(res["gamma"] * res["queries"])
@@ -193,9 +238,14 @@ def test_measure_gamma_script_json(tmp_path, script):
 # Dyadic boxes and coordinates on a 1/16 grid: every product and sum in the exact
 # segment test is exact in float32, so the answers cannot depend on how the
 # compiler rounds (fused multiply-adds) and must agree bit for bit across layouts.
-_DYADIC = {"name": "dyadic", "robot": {"kind": "point"}, "bounds": [[0, 20], [0, 20]],
-           "boxes": [[10, 4, 0.5, 4], [10, 15, 0.5, 5], [4, 10, 4, 0.25], [15, 10, 2.5, 0.75]],
-           "discs": [], "padding": 0.5}
+_DYADIC = {
+    "name": "dyadic",
+    "robot": {"kind": "point"},
+    "bounds": [[0, 20], [0, 20]],
+    "boxes": [[10, 4, 0.5, 4], [10, 15, 0.5, 5], [4, 10, 4, 0.25], [15, 10, 2.5, 0.75]],
+    "discs": [],
+    "padding": 0.5,
+}
 
 
 def _grid_pairs(n, seed, dim=2, lo=-1, hi=21):
@@ -209,7 +259,7 @@ def _unaligned(x, phase):
     """A C-contiguous copy of ``x`` whose data starts ``phase`` bytes past a 64-byte boundary."""
     buf = np.empty(x.nbytes + 128, np.uint8)
     off = -buf.ctypes.data % 64 + phase
-    out = buf[off:off + x.nbytes].view(x.dtype).reshape(x.shape)
+    out = buf[off : off + x.nbytes].view(x.dtype).reshape(x.shape)
     out[...] = x
     return out
 
@@ -218,6 +268,7 @@ def _unaligned(x, phase):
 def small_pieces(monkeypatch):
     """Pieces of 64..256 rows, so that small batches take every route of the split."""
     from ntq_jax.robots import rows
+
     monkeypatch.setattr(rows, "PIECE_MIN", 64)
     monkeypatch.setattr(rows, "PIECE_MAX", 256)
 
@@ -228,6 +279,7 @@ def test_any_input_matches_the_kernel(small_pieces, n):
     piece and an edge (869 rows): the answers of the bare kernels on the whole batch, and
     every phase shares the same few compiled programs."""
     from ntq_jax.robots import batch
+
     env = nj.Env.from_json(_DYADIC)
     a, b = _grid_pairs(n, seed=1)
     programs = [f._cache_size() for f in (batch._steer_masked, batch.is_valid_batch)]
@@ -254,26 +306,30 @@ def test_any_input_matches_the_kernel(small_pieces, n):
             if name == "int":
                 xi, yi = (np.asarray(v, np.float32) for v in (x, y))
                 want_i = np.asarray(batch.steer_to_batch(env.robot, env.world, xi, yi, padding))
-                np.testing.assert_array_equal(np.asarray(env.steer_to(x, y, padding=padding)),
-                                              want_i)
+                np.testing.assert_array_equal(
+                    np.asarray(env.steer_to(x, y, padding=padding)), want_i
+                )
                 continue
             got = env.steer_to(x, y, padding=padding)
             assert isinstance(got, jax.Array) and got.dtype == bool and got.shape == (n,), name
             np.testing.assert_array_equal(np.asarray(got), want, err_msg=name)
-            np.testing.assert_array_equal(np.asarray(env.is_valid(x, padding=padding)), valid,
-                                          err_msg=name)
+            np.testing.assert_array_equal(
+                np.asarray(env.is_valid(x, padding=padding)), valid, err_msg=name
+            )
             np.testing.assert_array_equal(np.asarray(env.distance(x, y)), dist, err_msg=name)
             for v, w in zip((x, y), before):
                 np.testing.assert_array_equal(np.asarray(v), w, err_msg=f"{name}: input modified")
     # pieces of 64..256 rows and one edge bucket per size: a handful of programs for every
     # input kind, phase and padding (two paddings, so at most twice the sizes)
-    grown = [f._cache_size() - c for f, c in zip((batch._steer_masked, batch.is_valid_batch),
-                                                 programs)]
+    grown = [
+        f._cache_size() - c for f, c in zip((batch._steer_masked, batch.is_valid_batch), programs)
+    ]
     assert all(g <= 2 * 5 for g in grown), grown
 
 
 def test_numpy_input_may_be_modified_after_the_call(small_pieces):
     from ntq_jax.robots import batch, rows
+
     env = nj.Env.from_json(_DYADIC)
     a, b = _grid_pairs(3 * 256 + 101, seed=2)
     a = _unaligned(a, 0)
@@ -289,6 +345,7 @@ def test_numpy_input_on_a_preset_and_the_rigid_body(small_pieces):
     # the same elementwise arithmetic in every program, so the answers agree with the
     # bare kernel on the whole batch.
     from ntq_jax.robots import batch
+
     for name in ("point/2", "rigid/0"):
         env = nj.make_env(name)
         s = np.asarray(env.sample_states(jax.random.key(0), 2 * 1000), np.float32)
@@ -317,20 +374,29 @@ def test_varying_batch_sizes_share_compiled_programs():
     80 and 1024 rows, so the test compiles little)."""
     from ntq_jax.batching import fine_bucket_size
     from ntq_jax.robots import batch as B
+
     env = nj.make_env("rigid/0")
     s = np.asarray(env.sample_states(jax.random.key(7), 4200), np.float32)
     a, b = s[:1024], s[2100:3124]
     programs = (B._steer_masked, B.is_valid_batch, B.distance_batch)
     sizes = (65, 77, 80, 1000, 1024)
     before = [f._cache_size() for f in programs]
-    outs = {n: (np.asarray(env.steer_to(a[:n], b[:n])), np.asarray(env.is_valid(a[:n])),
-                np.asarray(env.distance(a[:n], b[:n]))) for n in sizes}
+    outs = {
+        n: (
+            np.asarray(env.steer_to(a[:n], b[:n])),
+            np.asarray(env.is_valid(a[:n])),
+            np.asarray(env.distance(a[:n], b[:n])),
+        )
+        for n in sizes
+    }
     after = [f._cache_size() for f in programs]
     classes = len({fine_bucket_size(n, 64) for n in sizes})  # 80 and 1024
     assert all(x - y <= classes for x, y in zip(after, before)), (before, after)
-    ref = (np.asarray(B.steer_to_batch(env.robot, env.world, a, b, env.padding)),
-           np.asarray(B.is_valid_batch(env.robot, env.world, a, env.padding)),
-           np.asarray(B.distance_batch(env.robot, a, b)))
+    ref = (
+        np.asarray(B.steer_to_batch(env.robot, env.world, a, b, env.padding)),
+        np.asarray(B.is_valid_batch(env.robot, env.world, a, env.padding)),
+        np.asarray(B.distance_batch(env.robot, a, b)),
+    )
     assert ref[0].any() and not ref[0].all()
     for n, got in outs.items():
         for g, r in zip(got, ref):

@@ -23,8 +23,16 @@ from ntq_jax.types import QUERY_KINDS, PlanCause
 def test_metrics_by_hand():
     success = np.array([True, True, True, False, False])
     costs = np.array([2.0, 3.0, 5.0, np.inf, np.inf])
-    cause = np.array([PlanCause.SUCCESS, PlanCause.SUCCESS, PlanCause.SUCCESS, PlanCause.NO_PATH,
-                      PlanCause.INFEASIBLE], np.int8)
+    cause = np.array(
+        [
+            PlanCause.SUCCESS,
+            PlanCause.SUCCESS,
+            PlanCause.SUCCESS,
+            PlanCause.NO_PATH,
+            PlanCause.INFEASIBLE,
+        ],
+        np.int8,
+    )
     ref = np.array([1.0, 2.0, np.inf, 1.0, 1.0])
     status = np.array([0, 0, 2, 0, 0], np.int8)  # the reference timed out on query 2
     opt = np.array([1.0, 1.5, 4.0, 1.0, 1.0])
@@ -41,8 +49,10 @@ def test_metrics_by_hand():
 def test_wilson_interval_contains_truth_at_nominal_rate():
     rng = np.random.default_rng(0)
     p, n = 0.9, 200
-    hits = sum(lo <= p <= hi for lo, hi in
-               (wilson_interval(int(k), n) for k in rng.binomial(n, p, size=2000)))
+    hits = sum(
+        lo <= p <= hi
+        for lo, hi in (wilson_interval(int(k), n) for k in rng.binomial(n, p, size=2000))
+    )
     assert 0.93 <= hits / 2000 <= 0.97
 
 
@@ -63,6 +73,7 @@ class FakeReference:
             lengths = np.full(k, 2, np.int32)
             costs = np.linalg.norm(q[:, 1] - q[:, 0], axis=1).astype(np.float64)
             status = np.zeros(k, np.int8)
+
         return Res()
 
 
@@ -80,8 +91,9 @@ def test_test_queries_are_fresh_cached_and_nontrivial(tmp_path, cfg):
     assert not free.any()  # non-trivial on the evaluation geometry
     again = E.test_queries(env, cfg, "point_1", tmp_path)
     np.testing.assert_array_equal(q["nontrivial"], again["nontrivial"])
-    other = E.test_queries(env, config.load(None, ["eval.k_test=40", "seed=1"]), "point_1",
-                           tmp_path / "b")
+    other = E.test_queries(
+        env, config.load(None, ["eval.k_test=40", "seed=1"]), "point_1", tmp_path / "b"
+    )
     assert not np.allclose(other["uniform"], q["uniform"])
     # disjoint from the training stream: the data stage's uniform pool of the same seed
     train_q, _ = env.sample_queries(jax.random.key(cfg.seed), 40, 0.0)
@@ -107,18 +119,40 @@ def test_reference_is_cached_and_has_the_optimum(tmp_path, cfg):
 
 
 def _row(env, model, kind, steer, s, k=50, cost=1.05):
-    return {"task": "point", "env": env, "env_slug": env.replace("/", "_"), "model": model,
-            "member": int(model[-1]), "query_kind": kind, "steer": steer, "gamma_nt": 0.4,
-            "gamma_nt_ci95": [0.39, 0.41], "reference_planner": "astar",
-            "seconds_per_query": 1e-3, "compile_seconds": 2.0, "reference_seconds_per_query": 1e-2,
-            "paths_file": "x", **M.metrics(np.arange(k) < s, np.full(k, cost), np.zeros(k, np.int8),
-                                           np.ones(k), np.zeros(k, np.int8), np.ones(k))}
+    return {
+        "task": "point",
+        "env": env,
+        "env_slug": env.replace("/", "_"),
+        "model": model,
+        "member": int(model[-1]),
+        "query_kind": kind,
+        "steer": steer,
+        "gamma_nt": 0.4,
+        "gamma_nt_ci95": [0.39, 0.41],
+        "reference_planner": "astar",
+        "seconds_per_query": 1e-3,
+        "compile_seconds": 2.0,
+        "reference_seconds_per_query": 1e-2,
+        "paths_file": "x",
+        **M.metrics(
+            np.arange(k) < s,
+            np.full(k, cost),
+            np.zeros(k, np.int8),
+            np.ones(k),
+            np.zeros(k, np.int8),
+            np.ones(k),
+        ),
+    }
 
 
 def test_report_layout(tmp_path):
-    rows = [_row(e, f"PNet_{m}", kind, steer, 40 + m)
-            for steer in (True, False) for e in ("point/0", "point/3")
-            for m in range(4) for kind in QUERY_KINDS]
+    rows = [
+        _row(e, f"PNet_{m}", kind, steer, 40 + m)
+        for steer in (True, False)
+        for e in ("point/0", "point/3")
+        for m in range(4)
+        for kind in QUERY_KINDS
+    ]
     out = R.write_report(tmp_path, rows, envs=None, meta={"seed": 0})
     assert out and all(Path(f).is_file() for f in out.values())
     md = (tmp_path / "tables.md").read_text()
@@ -174,15 +208,22 @@ def test_npz_roundtrip_rejects_other_fingerprints(tmp_path):
 
 
 def test_recheck_paths_checks_collisions_start_and_goal(tmp_path):
-    env = Env.from_json({"name": "box", "robot": {"kind": "point"}, "bounds": [[0, 10], [0, 10]],
-                         "boxes": [[5.0, 5.0, 1.0, 1.0]], "padding": 0.0})
+    env = Env.from_json(
+        {
+            "name": "box",
+            "robot": {"kind": "point"},
+            "bounds": [[0, 10], [0, 10]],
+            "boxes": [[5.0, 5.0, 1.0, 1.0]],
+            "padding": 0.0,
+        }
+    )
     q = np.array([[[1, 1], [9, 1]]] * 5, np.float32)
     paths = np.full((5, 3, 2), np.nan, np.float32)
-    paths[0, :2] = [[1, 1], [9, 1]]                # good
-    paths[1, :3] = [[1, 1], [5, 5], [9, 1]]        # through the box
-    paths[2, :2] = [[1, 1], [8, 1]]                # does not end at the goal
-    paths[3, :2] = [[1, 2], [9, 1]]                # does not start at the start
-    paths[4, :3] = [[1, 1], [5, 5], [9, 1]]        # through the box, but not a success
+    paths[0, :2] = [[1, 1], [9, 1]]  # good
+    paths[1, :3] = [[1, 1], [5, 5], [9, 1]]  # through the box
+    paths[2, :2] = [[1, 1], [8, 1]]  # does not end at the goal
+    paths[3, :2] = [[1, 2], [9, 1]]  # does not start at the start
+    paths[4, :3] = [[1, 1], [5, 5], [9, 1]]  # through the box, but not a success
     lengths = np.array([2, 3, 2, 2, 3], np.int32)
     success = np.array([True, True, True, True, False])
     f = E.paths_file(tmp_path, "box", 0, "uniform", True)
@@ -190,7 +231,7 @@ def test_recheck_paths_checks_collisions_start_and_goal(tmp_path):
     assert M.recheck_paths(env, f).tolist() == [True, False, False, False, True]
     # without steerTo a success stops within delta of the goal, which it does not reach
     g = E.paths_file(tmp_path, "box", 0, "uniform", False)
-    paths[2, :2] = [[1, 1], [8.5, 1]]              # 0.5 from the goal
+    paths[2, :2] = [[1, 1], [8.5, 1]]  # 0.5 from the goal
     artifacts.save_npz(g, queries=q, paths=paths, lengths=lengths, success=success)
     assert M.recheck_paths(env, g, delta=1.0).tolist() == [True, False, True, False, True]
     assert M.recheck_paths(env, g, delta=0.4).tolist() == [True, False, False, False, True]
@@ -198,29 +239,39 @@ def test_recheck_paths_checks_collisions_start_and_goal(tmp_path):
         M.recheck_paths(env, g)
     # a start already within delta: the one-state path passes if its state is valid
     one = np.full((2, 3, 2), np.nan, np.float32)
-    one[:, 0] = [[1, 1], [4.5, 5]]                 # free; inside the box
+    one[:, 0] = [[1, 1], [4.5, 5]]  # free; inside the box
     q1 = np.array([[[1, 1], [1.5, 1]], [[4.5, 5], [4.5, 5.5]]], np.float32)
     h = E.paths_file(tmp_path, "box", 1, "uniform", False)
-    artifacts.save_npz(h, queries=q1, paths=one, lengths=np.ones(2, np.int32),
-                       success=np.ones(2, bool))
+    artifacts.save_npz(
+        h, queries=q1, paths=one, lengths=np.ones(2, np.int32), success=np.ones(2, bool)
+    )
     assert M.recheck_paths(env, h, delta=1.0).tolist() == [True, False]
     assert M.recheck_paths(env, h, delta=0.4).tolist() == [False, False]
 
 
 def test_recheck_without_steer_to_uses_the_robots_metric(tmp_path):
     """Rigid body: theta pi and -pi are one heading; the angle counts angle_weight (0.5)."""
-    env = Env.from_json({"name": "open", "robot": {"kind": "rigid_body"},
-                         "bounds": [[0, 10], [0, 10]], "boxes": [[9.5, 9.5, 0.1, 0.1]],
-                         "padding": 0.0})
-    q = np.array([[[2, 2, 0], [8, 2, -np.pi]], [[2, 5, 0], [8, 5, 0.0]],
-                  [[2, 8, 0], [8, 8, 0.0]]], np.float32)
+    env = Env.from_json(
+        {
+            "name": "open",
+            "robot": {"kind": "rigid_body"},
+            "bounds": [[0, 10], [0, 10]],
+            "boxes": [[9.5, 9.5, 0.1, 0.1]],
+            "padding": 0.0,
+        }
+    )
+    q = np.array(
+        [[[2, 2, 0], [8, 2, -np.pi]], [[2, 5, 0], [8, 5, 0.0]], [[2, 8, 0], [8, 8, 0.0]]],
+        np.float32,
+    )
     paths = np.full((3, 2, 3), np.nan, np.float32)
-    paths[0] = [[2, 2, 0], [8, 2, np.pi]]          # 0 from the goal, 2 pi in raw coordinates
-    paths[1] = [[2, 5, 0], [7.6, 5, 0.7]]          # 0.4 + 0.35 = 0.75 (Euclidean 0.81)
-    paths[2] = [[2, 8, 0], [7.5, 8, 0.0]]          # 0.5: Euclidean and metric agree
+    paths[0] = [[2, 2, 0], [8, 2, np.pi]]  # 0 from the goal, 2 pi in raw coordinates
+    paths[1] = [[2, 5, 0], [7.6, 5, 0.7]]  # 0.4 + 0.35 = 0.75 (Euclidean 0.81)
+    paths[2] = [[2, 8, 0], [7.5, 8, 0.0]]  # 0.5: Euclidean and metric agree
     f = E.paths_file(tmp_path, "open", 0, "uniform", False)
-    artifacts.save_npz(f, queries=q, paths=paths, lengths=np.full(3, 2, np.int32),
-                       success=np.ones(3, bool))
+    artifacts.save_npz(
+        f, queries=q, paths=paths, lengths=np.full(3, 2, np.int32), success=np.ones(3, bool)
+    )
     assert M.recheck_paths(env, f, delta=0.78).tolist() == [True, True, True]
     assert M.recheck_paths(env, f, delta=0.6).tolist() == [True, False, True]
     assert M.recheck_paths(env, f, delta=0.1).tolist() == [True, False, False]
@@ -263,8 +314,15 @@ def test_timings_are_kept_apart(tmp_path):
     """Issue 52 (rough edge 13): two runs that differ only in wall-clock times write the same
     bytes of results.csv, tables.md and tables.tex; the times are in timings.csv."""
     rows = [_row("point/0", f"PNet_{m}", kind, True, 40) for m in range(2) for kind in QUERY_KINDS]
-    slow = [{**r, "seconds_per_query": 7.5, "compile_seconds": 30.25,
-             "reference_seconds_per_query": 0.125} for r in rows]
+    slow = [
+        {
+            **r,
+            "seconds_per_query": 7.5,
+            "compile_seconds": 30.25,
+            "reference_seconds_per_query": 0.125,
+        }
+        for r in rows
+    ]
     a, b = tmp_path / "a", tmp_path / "b"
     for run, rs in ((a, rows), (b, slow)):
         run.mkdir()
@@ -273,7 +331,9 @@ def test_timings_are_kept_apart(tmp_path):
     for name in ("results.csv", "tables.md", "tables.tex"):
         assert (a / name).read_bytes() == (b / name).read_bytes(), name
     assert "ms / query" not in (a / "tables.md").read_text()
-    assert not set(R.TIMING_FIELDS) & set((a / "results.csv").read_text().splitlines()[0].split(","))
+    assert not set(R.TIMING_FIELDS) & set(
+        (a / "results.csv").read_text().splitlines()[0].split(",")
+    )
     lines = (b / "timings.csv").read_text().strip().splitlines()
     assert lines[0].split(",") == R.TIMING_CSV_FIELDS and len(lines) == 1 + len(rows)
     assert lines[1] == "point,point/0,PNet_0,uniform,True,7.5,30.25,0.125"

@@ -18,10 +18,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ntq_jax.experiment import config as C
 from ntq_jax import data, make_env
-from ntq_jax.planners import jobs as planning
 from ntq_jax.executors import LocalExecutor, RayExecutor, make_executor, worker_env
+from ntq_jax.experiment import config as C
+from ntq_jax.planners import jobs as planning
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "scripts"))
@@ -38,8 +38,11 @@ def _cfg(*extra: str) -> C.Config:
 
 def _files(env_dir: Path) -> dict[str, bytes]:
     """Every dataset file and env.json, by relative path."""
-    out = {p.relative_to(env_dir).as_posix(): p.read_bytes()
-           for p in sorted(env_dir.glob("D*/*")) if p.is_file()}
+    out = {
+        p.relative_to(env_dir).as_posix(): p.read_bytes()
+        for p in sorted(env_dir.glob("D*/*"))
+        if p.is_file()
+    }
     out["env.json"] = (env_dir / "env.json").read_bytes()
     return out
 
@@ -49,8 +52,12 @@ def ray_session():
     ray = pytest.importorskip("ray")
     with warnings.catch_warnings():  # Ray's fork+exec of its own daemons
         warnings.filterwarnings("ignore", message=r"os\.fork\(\) was called")
-        ray.init(num_cpus=2, include_dashboard=False, configure_logging=False,
-                 runtime_env={"env_vars": worker_env(local=True)})
+        ray.init(
+            num_cpus=2,
+            include_dashboard=False,
+            configure_logging=False,
+            runtime_env={"env_vars": worker_env(local=True)},
+        )
     yield ray
     ray.shutdown()
 
@@ -77,6 +84,7 @@ def writes(monkeypatch):
 # No Ray needed
 # ---------------------------------------------------------------------------
 
+
 def test_config_keys_are_validated_and_left_out_of_the_hash():
     base = C.load(None)
     ray_cfg = C.load(None, ["executor=ray", "ray_address=auto"])
@@ -92,8 +100,10 @@ def test_config_keys_are_validated_and_left_out_of_the_hash():
 def test_ray_address_needs_the_ray_executor(capsys):
     import generate_data
 
-    assert generate_data.main(ARGS + ["--env", ENV, "--out", "/nonexistent",
-                                      "--ray-address", "auto"]) == 2
+    assert (
+        generate_data.main(ARGS + ["--env", ENV, "--out", "/nonexistent", "--ray-address", "auto"])
+        == 2
+    )
     assert "--ray-address needs --executor ray" in capsys.readouterr().err
 
 
@@ -101,11 +111,13 @@ def test_missing_ray_is_one_line(monkeypatch, capsys):
     import generate_data
 
     monkeypatch.setitem(sys.modules, "ray", None)  # `import ray` raises ImportError
-    assert generate_data.main(ARGS + ["--env", ENV, "--out", "/tmp/unused",
-                                      "--executor", "ray"]) == 2
+    assert (
+        generate_data.main(ARGS + ["--env", ENV, "--out", "/tmp/unused", "--executor", "ray"]) == 2
+    )
     err = capsys.readouterr().err.strip().splitlines()
-    assert err == ["error: the ray executor needs Ray: pip install -e '.[ray]' "
-                   "(or pip install 'ray>=2.40')"]
+    assert err == [
+        "error: the ray executor needs Ray: pip install -e '.[ray]' (or pip install 'ray>=2.40')"
+    ]
 
 
 def test_local_workers_get_this_process_compilation_cache():
@@ -118,9 +130,12 @@ def test_local_workers_get_this_process_compilation_cache():
     folder = jax.config.jax_compilation_cache_dir
     assert folder, "the suite runs with a compilation cache"
     assert worker_env(local=True) == {
-        "JAX_PLATFORMS": "cpu", "JAX_COMPILATION_CACHE_DIR": folder,
-        "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS":
-            repr(float(jax.config.jax_persistent_cache_min_compile_time_secs))}
+        "JAX_PLATFORMS": "cpu",
+        "JAX_COMPILATION_CACHE_DIR": folder,
+        "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS": repr(
+            float(jax.config.jax_persistent_cache_min_compile_time_secs)
+        ),
+    }
     assert worker_env(local=False) == {"JAX_PLATFORMS": "cpu"}
     jax.config.update("jax_enable_compilation_cache", False)  # nothing compiles meanwhile
     try:
@@ -132,6 +147,7 @@ def test_local_workers_get_this_process_compilation_cache():
 # ---------------------------------------------------------------------------
 # Ray
 # ---------------------------------------------------------------------------
+
 
 def test_generate_data_ray_is_byte_identical_to_local(ray_session, local_run, tmp_path, writes):
     import generate_data
@@ -166,8 +182,7 @@ def _task_workers() -> list[int]:
     return found
 
 
-def test_killed_worker_is_retried_with_identical_output(ray_session, local_run, tmp_path,
-                                                         writes):
+def test_killed_worker_is_retried_with_identical_output(ray_session, local_run, tmp_path, writes):
     """Chunks of 2 (40 tasks, a new shape to compile in each worker: a wide window to catch a
     worker running one); A* does not depend on the chunking, so the arrays are local_run's."""
     ex = RayExecutor()
@@ -176,8 +191,15 @@ def test_killed_worker_is_retried_with_identical_output(ray_session, local_run, 
     def run():
         try:
             opts = C.data_options(_cfg("data.chunk=2"), ENV)
-            out["summary"] = data.generate_datasets(make_env(ENV), opts, tmp_path, env_name=ENV,
-                                                    progress=False, figure=False, executor=ex)
+            out["summary"] = data.generate_datasets(
+                make_env(ENV),
+                opts,
+                tmp_path,
+                env_name=ENV,
+                progress=False,
+                figure=False,
+                executor=ex,
+            )
         except BaseException as e:  # noqa: BLE001 (reported below)
             out["error"] = e
 
@@ -206,8 +228,7 @@ def test_killed_worker_is_retried_with_identical_output(ray_session, local_run, 
     assert out["summary"]["planned_queries"] == 80 and out["summary"]["reused_queries"] == 0
 
 
-def test_local_run_interrupted_then_resumed_with_ray(ray_session, local_run, tmp_path,
-                                                     monkeypatch):
+def test_local_run_interrupted_then_resumed_with_ray(ray_session, local_run, tmp_path, monkeypatch):
     written: list[str] = []
 
     def stop_after_three(p):
@@ -217,15 +238,27 @@ def test_local_run_interrupted_then_resumed_with_ray(ray_session, local_run, tmp
 
     monkeypatch.setattr(planning, "chunk_written", stop_after_three)
     with pytest.raises(KeyboardInterrupt):
-        data.generate_datasets(make_env(ENV), C.data_options(_cfg(), ENV),
-                               tmp_path, env_name=ENV, progress=False,
-                               figure=False, executor=LocalExecutor())
+        data.generate_datasets(
+            make_env(ENV),
+            C.data_options(_cfg(), ENV),
+            tmp_path,
+            env_name=ENV,
+            progress=False,
+            figure=False,
+            executor=LocalExecutor(),
+        )
     assert not (tmp_path / "point_2" / "D0" / "meta.json").exists()
     first = list(written)
     monkeypatch.setattr(planning, "chunk_written", written.append)
-    s = data.generate_datasets(make_env(ENV), C.data_options(_cfg("executor=ray"), ENV),
-                               tmp_path, env_name=ENV,
-                               progress=False, figure=False, executor=RayExecutor())
+    s = data.generate_datasets(
+        make_env(ENV),
+        C.data_options(_cfg("executor=ray"), ENV),
+        tmp_path,
+        env_name=ENV,
+        progress=False,
+        figure=False,
+        executor=RayExecutor(),
+    )
     assert s["reused_queries"] == 30 and not s["skipped"]
     assert len(written) == len(set(written)) == 8 and set(first) <= set(written[:3])
     assert _files(tmp_path / "point_2") == local_run["point_2"]
@@ -236,8 +269,17 @@ def test_reference_roadmap_chunks_match_local(ray_session, tmp_path):
     builds the roadmap) give the single local call's paths and costs."""
     from ntq_jax.experiment.evaluate import reference_plans, test_queries
 
-    cfg = C.load(None, ["envs=[point/2]", "planner.name=roadmap", "planner.milestones=200",
-                        "planner.grow_rounds=0", "eval.k_test=8", "data.chunk=4"])
+    cfg = C.load(
+        None,
+        [
+            "envs=[point/2]",
+            "planner.name=roadmap",
+            "planner.milestones=200",
+            "planner.grow_rounds=0",
+            "eval.k_test=8",
+            "data.chunk=4",
+        ],
+    )
     env = make_env("point/2")
     got = {}
     for name, ex in (("local", LocalExecutor()), ("ray", RayExecutor())):
@@ -255,23 +297,29 @@ def test_reference_roadmap_chunks_match_local(ray_session, tmp_path):
     assert json.dumps(str(a["planner"])) == json.dumps(str(b["planner"]))
 
 
-@pytest.mark.parametrize("address, words", [
-    ("127.0.0.1:1", ["127.0.0.1:1", "no Ray cluster answers"]),
-    ("not-an-address", ["not-an-address", "expected auto"]),
-    ("host:99999", ["host:99999", "expected auto"]),
-    ("auto", ["auto", "no Ray cluster is running"]),
-])
+@pytest.mark.parametrize(
+    "address, words",
+    [
+        ("127.0.0.1:1", ["127.0.0.1:1", "no Ray cluster answers"]),
+        ("not-an-address", ["not-an-address", "expected auto"]),
+        ("host:99999", ["host:99999", "expected auto"]),
+        ("auto", ["auto", "no Ray cluster is running"]),
+    ],
+)
 def test_an_unreachable_ray_cluster_is_one_line_in_seconds_before_anything_is_written(
-        address, words, tmp_path, capsys, monkeypatch):
+    address, words, tmp_path, capsys, monkeypatch
+):
     """--ray-address that cannot be reached: exit 2 within seconds, one error line naming
     the address, no run folder (the probe's 127.0.0.1:1 hung for minutes)."""
     pytest.importorskip("ray")
     import importlib.util
     import time
     from pathlib import Path
+
     monkeypatch.delenv("RAY_ADDRESS", raising=False)
     monkeypatch.setattr("tempfile.tempdir", str(tmp_path))  # no ray_current_cluster there
     import ntq_jax.executors as X
+
     if address == "auto" and X._ray_current_cluster() is not None:
         pytest.skip("a Ray cluster is running on this machine")
     root = Path(__file__).resolve().parents[1]
@@ -290,6 +338,7 @@ def test_an_unreachable_ray_cluster_is_one_line_in_seconds_before_anything_is_wr
 def _serve(answer):
     """A TCP server on 127.0.0.1 that answers each connection with ``answer(conn)``; its port."""
     import socket
+
     srv = socket.socket()
     srv.bind(("127.0.0.1", 0))
     srv.listen()
@@ -313,6 +362,7 @@ def test_a_port_that_answers_but_is_not_ray_is_one_line_in_seconds(tmp_path, cap
 
     from ntq_jax.errors import UsageError
     from ntq_jax.executors import check_ray_address
+
     class Quiet(http.server.SimpleHTTPRequestHandler):
         def log_message(self, *args):
             pass
@@ -320,6 +370,7 @@ def test_a_port_that_answers_but_is_not_ray_is_one_line_in_seconds(tmp_path, cap
     http_server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), Quiet)
     threading.Thread(target=http_server.serve_forever, daemon=True).start()
     import train_all
+
     out = tmp_path / "run"
     t0 = time.perf_counter()
     address = f"127.0.0.1:{http_server.server_address[1]}"
@@ -328,14 +379,33 @@ def test_a_port_that_answers_but_is_not_ray_is_one_line_in_seconds(tmp_path, cap
     assert len(err) == 1 and address in err[0] and "not a Ray cluster's head" in err[0], err
     assert time.perf_counter() - t0 < 30 and not out.exists()
     import reproduce  # it made its run folder before the check
-    assert reproduce.main(["--config", "configs/point_small.yaml", "--env", "point/2",
-                           "--executor", "ray", "--ray-address", address, "--runs",
-                           str(tmp_path / "runs"), "--results", str(tmp_path / "res")]) == 2
+
+    assert (
+        reproduce.main(
+            [
+                "--config",
+                "configs/point_small.yaml",
+                "--env",
+                "point/2",
+                "--executor",
+                "ray",
+                "--ray-address",
+                address,
+                "--runs",
+                str(tmp_path / "runs"),
+                "--results",
+                str(tmp_path / "res"),
+            ]
+        )
+        == 2
+    )
     assert "not a Ray cluster's head" in capsys.readouterr().err
     assert not (tmp_path / "runs" / "point").exists()
     http_server.shutdown()
-    for answer, words in ((lambda c: None, "closed the connection"),
-                          (lambda c: time.sleep(2), "no answer")):
+    for answer, words in (
+        (lambda c: None, "closed the connection"),
+        (lambda c: time.sleep(2), "no answer"),
+    ):
         with pytest.raises(UsageError, match=words):
             check_ray_address(f"127.0.0.1:{_serve(answer)}", timeout=0.5)
     settings = bytes([0, 0, 0, 4, 0, 0, 0, 0, 0])  # a gRPC server's first frame
@@ -344,4 +414,5 @@ def test_a_port_that_answers_but_is_not_ray_is_one_line_in_seconds(tmp_path, cap
 
 def test_a_ray_head_passes_the_address_check(ray_session):
     from ntq_jax.executors import check_ray_address
+
     check_ray_address(ray_session.get_runtime_context().gcs_address)

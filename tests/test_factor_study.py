@@ -21,11 +21,15 @@ def test_every_cell_has_a_config_that_varies_one_factor(monkeypatch):
     # the point maps' dense data modes are queued last, then their 100-epoch checks
     tail = [c for c in cells if fs.task_of(c.map) == "point" and c.data in fs.COSTLY]
     checks = [fs.Cell(m, "density" + fs.FULL_EPOCHS, "ours") for m in ("point/0", "point/3")]
-    assert tail and cells[-len(tail) - 2:] == tail + checks
+    assert tail and cells[-len(tail) - 2 :] == tail + checks
     from ntq_jax.experiment.paper import MAPS as PAPER_MAPS
+
     # every map of Tables I-IV is re-run by the queue (its default cell)
-    assert {c.map for c in cells if c.data == fs.default_data(c.map) and c.budget == "ours"
-            and not c.train_seed} == set(PAPER_MAPS)
+    assert {
+        c.map
+        for c in cells
+        if c.data == fs.default_data(c.map) and c.budget == "ours" and not c.train_seed
+    } == set(PAPER_MAPS)
     for c in cells:
         cfg, sets = fs.cell_config(c)
         assert list(cfg.envs) == [c.map]
@@ -52,8 +56,11 @@ def test_every_cell_has_a_config_that_varies_one_factor(monkeypatch):
             assert cfg.train.seed == c.train_seed and cfg.data == base.data
         # the point maps' dense cells train fewer epochs (more optimizer steps than the
         # default's 100 epochs); every other cell trains the task config's epochs
-        costly = (fs.task_of(c.map) == "point" and mode in fs.COSTLY
-                  and not c.data.endswith(fs.FULL_EPOCHS))
+        costly = (
+            fs.task_of(c.map) == "point"
+            and mode in fs.COSTLY
+            and not c.data.endswith(fs.FULL_EPOCHS)
+        )
         assert cfg.train.epochs == (fs.COSTLY_EPOCHS if costly else base.train.epochs), c.key
         if c.data.endswith(fs.FULL_EPOCHS):  # the same data as the 10-epoch cell
             short, _ = fs.cell_config(fs.Cell(c.map, mode, "ours"))
@@ -70,12 +77,19 @@ def test_next_workers_claim_distinct_cells(tmp_path):
 
     fs = _script()
     cell = fs.cells()[0]
-    code = ("import importlib.util,sys; from pathlib import Path\n"
-            f"spec = importlib.util.spec_from_file_location('fs', {str(ROOT / 'scripts/factor_study.py')!r})\n"
-            "fs = importlib.util.module_from_spec(spec); spec.loader.exec_module(fs)\n"
-            f"print(fs.claim(fs.cells()[0], Path({str(tmp_path)!r})), flush=True); sys.stdin.read()")
-    p = subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE,
-                         stdout=subprocess.PIPE, text=True, cwd=ROOT)
+    code = (
+        "import importlib.util,sys; from pathlib import Path\n"
+        f"spec = importlib.util.spec_from_file_location('fs', {str(ROOT / 'scripts/factor_study.py')!r})\n"
+        "fs = importlib.util.module_from_spec(spec); spec.loader.exec_module(fs)\n"
+        f"print(fs.claim(fs.cells()[0], Path({str(tmp_path)!r})), flush=True); sys.stdin.read()"
+    )
+    p = subprocess.Popen(
+        [sys.executable, "-c", code],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+        cwd=ROOT,
+    )
     try:
         assert p.stdout.readline().strip() == "True"
         assert not fs.claim(cell, tmp_path)  # held by the other worker
@@ -105,6 +119,7 @@ def test_next_claims_only_the_cell_it_runs(tmp_path, monkeypatch):
 def _list(fs, runs, results) -> dict[str, str]:
     import contextlib
     import io
+
     buf = io.StringIO()
     with contextlib.redirect_stdout(buf):
         assert fs.main(["--list", "--runs", str(runs), "--results", str(results)]) == 0
@@ -112,7 +127,8 @@ def _list(fs, runs, results) -> dict[str, str]:
 
 
 def test_a_damaged_cell_is_pending_redone_first_and_stops_a_report_with_one_line(
-        tmp_path, monkeypatch, capsys):
+    tmp_path, monkeypatch, capsys
+):
     """A corrupt paired.json or summary.json: --list shows the cell pending (naming the
     file), --next redoes it first, and a report says so in one line instead of a traceback."""
     import json
@@ -120,9 +136,11 @@ def test_a_damaged_cell_is_pending_redone_first_and_stops_a_report_with_one_line
     fs = _script()
     cells, results = fs.cells(), tmp_path / "results"
     good = {"cell": cells[0]._asdict(), "paired": []}
-    for c, paired, summary in ((cells[0], json.dumps(good), "{}"),
-                               (cells[3], json.dumps(good), '{"env": '),
-                               (cells[4], '{"cell": {"map"', None)):
+    for c, paired, summary in (
+        (cells[0], json.dumps(good), "{}"),
+        (cells[3], json.dumps(good), '{"env": '),
+        (cells[4], '{"cell": {"map"', None),
+    ):
         (results / c.key).mkdir(parents=True)
         (results / c.key / "paired.json").write_text(paired)
         if summary is not None:
@@ -150,10 +168,22 @@ def test_report_shows_each_p_with_its_benjamini_hochberg_q(tmp_path):
     for data, p in (("shortcut", 2e-5), ("bitstar", 0.03)):
         folder = tmp_path / "rigid_0" / data / "ours"
         folder.mkdir(parents=True)
-        rows = [{"model": "PNet_3", "baseline": "PNet_0", "query_kind": "nontrivial",
-                 "steer": True, "band": b, "n": 100, "success": 0.6, "baseline_success": 0.5,
-                 "success_diff": 0.1, "success_diff_ci95": [0.05, 0.15], "mcnemar_p": p}
-                for b in F.BANDS]
+        rows = [
+            {
+                "model": "PNet_3",
+                "baseline": "PNet_0",
+                "query_kind": "nontrivial",
+                "steer": True,
+                "band": b,
+                "n": 100,
+                "success": 0.6,
+                "baseline_success": 0.5,
+                "success_diff": 0.1,
+                "success_diff_ci95": [0.05, 0.15],
+                "mcnemar_p": p,
+            }
+            for b in F.BANDS
+        ]
         cell = {"map": "rigid/0", "data": data, "budget": "ours", "train_seed": 0}
         (folder / "paired.json").write_text(json.dumps({"cell": cell, "sets": [], "paired": rows}))
     text = fs.report(tmp_path).read_text()

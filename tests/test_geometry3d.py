@@ -18,7 +18,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, Phase, given, settings, strategies as st
+from hypothesis import HealthCheck, Phase, given, settings
+from hypothesis import strategies as st
 
 from ntq_jax import geometry as G
 from ntq_jax.geometry import World3D
@@ -28,9 +29,13 @@ coal = pytest.importorskip("coal")
 
 BAND = 1e-5
 N_CASES = 256
-SETTINGS = settings(max_examples=3, deadline=None, database=None,
-                    phases=(Phase.explicit, Phase.reuse, Phase.generate),
-                    suppress_health_check=list(HealthCheck))
+SETTINGS = settings(
+    max_examples=3,
+    deadline=None,
+    database=None,
+    phases=(Phase.explicit, Phase.reuse, Phase.generate),
+    suppress_health_check=list(HealthCheck),
+)
 seeds = st.integers(0, 2**32 - 1)
 BOUNDS = [[-1, 1], [-1, 1], [0, 2]]
 
@@ -38,6 +43,7 @@ BOUNDS = [[-1, 1], [-1, 1], [0, 2]]
 # ---------------------------------------------------------------------------
 # Random obstacles (float32 rows) and their coal twins
 # ---------------------------------------------------------------------------
+
 
 def f32(a):
     return np.asarray(a, np.float32)
@@ -84,9 +90,14 @@ def coal_dist(shape, p, radius=0.0):
     """Signed distance between the ball ``(p, radius)`` and a coal shape."""
     req = coal.DistanceRequest()
     req.enable_signed_distance = True
-    return coal.distance(shape[0], shape[1], coal.Sphere(float(radius)),
-                         coal.Transform3s(np.eye(3), np.asarray(p, np.float64)), req,
-                         coal.DistanceResult())
+    return coal.distance(
+        shape[0],
+        shape[1],
+        coal.Sphere(float(radius)),
+        coal.Transform3s(np.eye(3), np.asarray(p, np.float64)),
+        req,
+        coal.DistanceResult(),
+    )
 
 
 def points_near(rng, rows, kind):
@@ -104,15 +115,18 @@ def points_near(rng, rows, kind):
     return f32(r[:, :3] + t * (r[:, 3:6] - r[:, :3]) + d * rng.uniform(0, 2 * r[:, 6:7] + 0.1))
 
 
-KERNELS = {"sphere": jax.jit(jax.vmap(G.point_sphere_dist)),
-           "cuboid": jax.jit(jax.vmap(G.point_cuboid_dist)),
-           "capsule": jax.jit(jax.vmap(G.point_capsule_dist))}
+KERNELS = {
+    "sphere": jax.jit(jax.vmap(G.point_sphere_dist)),
+    "cuboid": jax.jit(jax.vmap(G.point_cuboid_dist)),
+    "capsule": jax.jit(jax.vmap(G.point_capsule_dist)),
+}
 CLEARANCE = jax.jit(G.spheres_clearance)
 
 
 # ---------------------------------------------------------------------------
 # Signed distances and clearances against coal
 # ---------------------------------------------------------------------------
+
 
 @pytest.mark.parametrize("kind", ["sphere", "cuboid", "capsule"])
 @SETTINGS
@@ -131,8 +145,11 @@ def test_point_distances_match_coal(kind, seed):
     assert bad.size == 0, [(rows[i].tolist(), pts[i].tolist(), got[i], want[i]) for i in bad[:3]]
 
 
-@pytest.mark.parametrize("counts", [(2, 3, 2), (0, 66, 0), (65, 0, 67)],
-                         ids=["unrolled", "looped-cuboids", "looped-spheres-capsules"])
+@pytest.mark.parametrize(
+    "counts",
+    [(2, 3, 2), (0, 66, 0), (65, 0, 67)],
+    ids=["unrolled", "looped-cuboids", "looped-spheres-capsules"],
+)
 @SETTINGS
 @given(seed=seeds, padding=st.sampled_from([0.0, 0.05]))
 def test_spheres_clearance_matches_coal(counts, seed, padding):
@@ -147,8 +164,9 @@ def test_spheres_clearance_matches_coal(counts, seed, padding):
     # the stored rotations are the nearest rotations of the given ones: use the world's rows
     stored = {"sphere": world.spheres, "cuboid": world.cuboids, "capsule": world.capsules}
     shapes = [coal_shape(kd, r) for kd in kinds for r in np.asarray(stored[kd])]
-    want = np.array([min(coal_dist(s, c, r) for s in shapes) - padding
-                     for c, r in zip(centers, radii)])
+    want = np.array(
+        [min(coal_dist(s, c, r) for s in shapes) - padding for c, r in zip(centers, radii)]
+    )
     # coal's ball-vs-solid distance is dist(centre) - radius outside; compare outside the band
     sure = want > BAND
     assert np.all(np.abs(got[sure] - want[sure]) <= BAND), (got[sure], want[sure])
@@ -159,8 +177,12 @@ def test_spheres_clearance_matches_coal(counts, seed, padding):
 
 def test_sphere_clearance_is_the_one_ball_case():
     rng = np.random.default_rng(0)
-    world = World3D.create(BOUNDS, rand_rows(rng, "sphere", 2), rand_rows(rng, "cuboid", 2),
-                           rand_rows(rng, "capsule", 2))
+    world = World3D.create(
+        BOUNDS,
+        rand_rows(rng, "sphere", 2),
+        rand_rows(rng, "cuboid", 2),
+        rand_rows(rng, "capsule", 2),
+    )
     c, r = f32([0.2, -0.1, 0.4]), np.float32(0.1)
     one = jax.jit(G.sphere_clearance)(c, r, world, 0.02)
     assert one.shape == ()
@@ -184,6 +206,7 @@ def test_exact_values_by_hand():
 # Edge cases: no obstacles, NaN/inf input, degenerate solids
 # ---------------------------------------------------------------------------
 
+
 def test_no_obstacles_is_finite_and_clear():
     world = World3D.create(BOUNDS)
     c = G.spheres_clearance(f32([[0, 0, 0], [1, 1, 1]]), f32([0.1, 5.0]), world, 0.3)
@@ -195,8 +218,12 @@ def test_no_obstacles_is_finite_and_clear():
 
 def test_non_finite_input_is_not_clear():
     rng = np.random.default_rng(1)
-    world = World3D.create(BOUNDS, rand_rows(rng, "sphere", 1), rand_rows(rng, "cuboid", 1),
-                           rand_rows(rng, "capsule", 1))
+    world = World3D.create(
+        BOUNDS,
+        rand_rows(rng, "sphere", 1),
+        rand_rows(rng, "cuboid", 1),
+        rand_rows(rng, "capsule", 1),
+    )
     centers = f32([[np.nan, 0, 0], [0, np.inf, 0], [0.5, 0.5, 0.5], [5, 5, 5]])
     radii = f32([0.1, 0.1, np.nan, 0.1])
     c = np.asarray(CLEARANCE(centers, radii, world, 0.0))
@@ -225,21 +252,26 @@ def test_degenerate_solids_have_no_nan():
 EYE = np.eye(3).ravel().tolist()
 
 
-@pytest.mark.parametrize("kwargs, message", [
-    ({"bounds": [[-1, 1], [-1, 1]]}, "three rows"),
-    ({"bounds": [[-1, 1], [-1, 1], [2, 2]]}, "bounds[2]"),
-    ({"spheres": [[0, 0, 0]]}, "spheres[0]"),
-    ({"spheres": [[0, 0, 0, 1], [0, 0, float("nan"), 1]]}, "spheres[1]"),
-    ({"spheres": [[0, 0, 0, -1]]}, "radius must be >= 0"),
-    ({"cuboids": [[0, 0, 0, 1, 1, 1, *EYE[:-1]]]}, "cuboids[0]"),
-    ({"cuboids": [[0, 0, 0, 1, -1, 1, *EYE]]}, "half extents"),
-    ({"cuboids": [[0, 0, 0, 1, 1, 1, *EYE], [0, 0, 0, 1, 1, 1, *(2 * np.eye(3)).ravel()]]},
-     "cuboids[1] has rotation"),
-    ({"cuboids": [[0, 0, 0, 1, 1, 1, *np.diag([1.0, 1, -1]).ravel()]]}, "det +1"),
-    ({"capsules": [[0, 0, 0, 1, 1, 1, float("inf")]]}, "capsules[0]"),
-    ({"capsules": [[0, 0, 0, 1, 1, 1, True]]}, "capsules[0]"),
-    ({"capsules": [[0, 0, 0, 1, 1, 1, -0.1]]}, "radius must be >= 0"),
-])
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"bounds": [[-1, 1], [-1, 1]]}, "three rows"),
+        ({"bounds": [[-1, 1], [-1, 1], [2, 2]]}, "bounds[2]"),
+        ({"spheres": [[0, 0, 0]]}, "spheres[0]"),
+        ({"spheres": [[0, 0, 0, 1], [0, 0, float("nan"), 1]]}, "spheres[1]"),
+        ({"spheres": [[0, 0, 0, -1]]}, "radius must be >= 0"),
+        ({"cuboids": [[0, 0, 0, 1, 1, 1, *EYE[:-1]]]}, "cuboids[0]"),
+        ({"cuboids": [[0, 0, 0, 1, -1, 1, *EYE]]}, "half extents"),
+        (
+            {"cuboids": [[0, 0, 0, 1, 1, 1, *EYE], [0, 0, 0, 1, 1, 1, *(2 * np.eye(3)).ravel()]]},
+            "cuboids[1] has rotation",
+        ),
+        ({"cuboids": [[0, 0, 0, 1, 1, 1, *np.diag([1.0, 1, -1]).ravel()]]}, "det +1"),
+        ({"capsules": [[0, 0, 0, 1, 1, 1, float("inf")]]}, "capsules[0]"),
+        ({"capsules": [[0, 0, 0, 1, 1, 1, True]]}, "capsules[0]"),
+        ({"capsules": [[0, 0, 0, 1, 1, 1, -0.1]]}, "radius must be >= 0"),
+    ],
+)
 def test_create_refuses(kwargs, message):
     kwargs = {"bounds": BOUNDS, **kwargs}
     with pytest.raises(ValueError) as e:
@@ -258,33 +290,62 @@ def test_create_stores_the_nearest_rotation():
 
 def test_json_round_trip_and_quaternion_form():
     rng = np.random.default_rng(2)
-    w = World3D.create(BOUNDS, rand_rows(rng, "sphere", 2), rand_rows(rng, "cuboid", 2),
-                       rand_rows(rng, "capsule", 1))
+    w = World3D.create(
+        BOUNDS,
+        rand_rows(rng, "sphere", 2),
+        rand_rows(rng, "cuboid", 2),
+        rand_rows(rng, "capsule", 1),
+    )
     back = World3D.from_json(w.to_json())
     for key in ("bounds", "spheres", "cuboids", "capsules"):
         np.testing.assert_allclose(getattr(back, key), getattr(w, key), atol=1e-7)
     q = [0.0, 0.0, math.sin(0.25), math.cos(0.25)]
-    data = {"bounds": BOUNDS, "cuboids": [{"center": [1, 2, 3], "half_extents": [0.1, 0.2, 0.3],
-                                           "quat_xyzw": q}, [0, 0, 0, 1, 1, 1, *EYE]]}
+    data = {
+        "bounds": BOUNDS,
+        "cuboids": [
+            {"center": [1, 2, 3], "half_extents": [0.1, 0.2, 0.3], "quat_xyzw": q},
+            [0, 0, 0, 1, 1, 1, *EYE],
+        ],
+    }
     w = World3D.from_json(data)
     np.testing.assert_allclose(w.cuboids[0, :6], [1, 2, 3, 0.1, 0.2, 0.3], rtol=1e-6)
-    np.testing.assert_allclose(np.asarray(w.cuboids[0, 6:]).reshape(3, 3),
-                               [[math.cos(0.5), -math.sin(0.5), 0], [math.sin(0.5),
-                                                                     math.cos(0.5), 0], [0, 0, 1]],
-                               atol=1e-6)
+    np.testing.assert_allclose(
+        np.asarray(w.cuboids[0, 6:]).reshape(3, 3),
+        [[math.cos(0.5), -math.sin(0.5), 0], [math.sin(0.5), math.cos(0.5), 0], [0, 0, 1]],
+        atol=1e-6,
+    )
     assert World3D.from_json({"bounds": BOUNDS}).num_obstacles == 0
 
 
-@pytest.mark.parametrize("data, message", [
-    ({"bounds": BOUNDS, "boxes": []}, "unknown World3D key"),
-    ({"spheres": []}, "needs 'bounds'"),
-    ({"bounds": BOUNDS, "cuboids": [{"center": [0, 0, 0], "half_extents": [1, 1, 1]}]},
-     "cuboids[0] has keys"),
-    ({"bounds": BOUNDS, "cuboids": [{"center": [0, 0, 0], "half_extents": [1, 1, 1],
-                                     "quat_xyzw": [0, 0, 0, 2]}]}, "unit quaternion"),
-    ({"bounds": BOUNDS, "cuboids": [{"center": [0, 0], "half_extents": [1, 1, 1],
-                                     "quat_xyzw": [0, 0, 0, 1]}]}, "cuboids[0].center"),
-])
+@pytest.mark.parametrize(
+    "data, message",
+    [
+        ({"bounds": BOUNDS, "boxes": []}, "unknown World3D key"),
+        ({"spheres": []}, "needs 'bounds'"),
+        (
+            {"bounds": BOUNDS, "cuboids": [{"center": [0, 0, 0], "half_extents": [1, 1, 1]}]},
+            "cuboids[0] has keys",
+        ),
+        (
+            {
+                "bounds": BOUNDS,
+                "cuboids": [
+                    {"center": [0, 0, 0], "half_extents": [1, 1, 1], "quat_xyzw": [0, 0, 0, 2]}
+                ],
+            },
+            "unit quaternion",
+        ),
+        (
+            {
+                "bounds": BOUNDS,
+                "cuboids": [
+                    {"center": [0, 0], "half_extents": [1, 1, 1], "quat_xyzw": [0, 0, 0, 1]}
+                ],
+            },
+            "cuboids[0].center",
+        ),
+    ],
+)
 def test_from_json_refuses(data, message):
     with pytest.raises(ValueError) as e:
         World3D.from_json(data)

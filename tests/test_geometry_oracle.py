@@ -37,7 +37,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 import shapely
-from hypothesis import HealthCheck, Phase, assume, given, settings, strategies as st
+from hypothesis import HealthCheck, Phase, assume, given, settings
+from hypothesis import strategies as st
 
 from ntq_jax import geometry as G
 from ntq_jax.geometry import World
@@ -45,17 +46,23 @@ from ntq_jax.robots import NLinkArm, PointRobot, RigidBody
 from ntq_jax.robots.batch import is_valid_batch, steer_to_batch
 
 EPS32 = float(np.finfo(np.float32).eps)
-N_CASES = 4096          # cases per hypothesis example
-N_EXAMPLES = 4          # examples per (kernel, padding mode): >= 1.6e4 cases each
+N_CASES = 4096  # cases per hypothesis example
+N_EXAMPLES = 4  # examples per (kernel, padding mode): >= 1.6e4 cases each
 # No shrinking: every failure message already lists the disagreeing cases verbatim, and
 # shrinking would recompile the kernels for every candidate padding.
 PHASES = (Phase.explicit, Phase.reuse, Phase.generate)
-SETTINGS = settings(max_examples=N_EXAMPLES, deadline=None, database=None, phases=PHASES,
-                    suppress_health_check=list(HealthCheck))
+SETTINGS = settings(
+    max_examples=N_EXAMPLES,
+    deadline=None,
+    database=None,
+    phases=PHASES,
+    suppress_health_check=list(HealthCheck),
+)
 
 seeds = st.integers(0, 2**32 - 1)
-random_padding = st.floats(0.0, 1.5, allow_nan=False, allow_infinity=False,
-                           allow_subnormal=False).filter(lambda p: p > 0.0)
+random_padding = st.floats(
+    0.0, 1.5, allow_nan=False, allow_infinity=False, allow_subnormal=False
+).filter(lambda p: p > 0.0)
 PAD_MODES = {"zero": st.just(0.0), "random": random_padding}
 
 
@@ -73,18 +80,27 @@ def f32(a):
 # over (case, obstacle) pairs and only the padding is static.
 # ---------------------------------------------------------------------------
 
+
 def _logu(rng, lo, hi, n):
     return np.exp(rng.uniform(math.log(lo), math.log(hi), n))
 
 
 def rand_boxes(rng, n):
-    return f32(np.stack([rng.uniform(0, 20, n), rng.uniform(0, 20, n),
-                         _logu(rng, 0.05, 5, n), _logu(rng, 0.05, 5, n)], 1))
+    return f32(
+        np.stack(
+            [
+                rng.uniform(0, 20, n),
+                rng.uniform(0, 20, n),
+                _logu(rng, 0.05, 5, n),
+                _logu(rng, 0.05, 5, n),
+            ],
+            1,
+        )
+    )
 
 
 def rand_discs(rng, n):
-    return f32(np.stack([rng.uniform(0, 20, n), rng.uniform(0, 20, n),
-                         _logu(rng, 0.05, 4, n)], 1))
+    return f32(np.stack([rng.uniform(0, 20, n), rng.uniform(0, 20, n), _logu(rng, 0.05, 4, n)], 1))
 
 
 def tangency_offsets(rng, n, pad):
@@ -122,8 +138,10 @@ def disc_anchor(rng, discs, s):
 def box_region(rng, boxes, pad):
     b = boxes.astype(np.float64)
     m = pad + 2.0
-    return (rng.uniform(b[:, 0] - b[:, 2] - m, b[:, 0] + b[:, 2] + m),
-            rng.uniform(b[:, 1] - b[:, 3] - m, b[:, 1] + b[:, 3] + m))
+    return (
+        rng.uniform(b[:, 0] - b[:, 2] - m, b[:, 0] + b[:, 2] + m),
+        rng.uniform(b[:, 1] - b[:, 3] - m, b[:, 1] + b[:, 3] + m),
+    )
 
 
 def disc_region(rng, discs, pad):
@@ -145,14 +163,23 @@ def tangent_segments(rng, px, py, nx, ny):
     """``(n, 4)`` segments through the points ``(px, py)`` along the tangent of the outward
     normal ``(nx, ny)`` (slightly tilted in 70 % of cases), the point at an end or inside."""
     n = len(px)
-    tilt = np.where(rng.random(n) < 0.3, 0.0, rng.choice([-1, 1], n) * 10 ** rng.uniform(-6, -0.5, n))
+    tilt = np.where(
+        rng.random(n) < 0.3, 0.0, rng.choice([-1, 1], n) * 10 ** rng.uniform(-6, -0.5, n)
+    )
     tx = -ny * np.cos(tilt) - nx * np.sin(tilt)
     ty = nx * np.cos(tilt) - ny * np.sin(tilt)
     length = 10 ** rng.uniform(-3, 1.2, n)
     u = rng.choice([0.0, 1.0, 0.5], n, p=[0.2, 0.2, 0.6])
     u = np.where(u == 0.5, rng.random(n), u)
-    tangent = np.stack([px - u * length * tx, py - u * length * ty,
-                        px + (1 - u) * length * tx, py + (1 - u) * length * ty], 1)
+    tangent = np.stack(
+        [
+            px - u * length * tx,
+            py - u * length * ty,
+            px + (1 - u) * length * tx,
+            py + (1 - u) * length * ty,
+        ],
+        1,
+    )
     return tangent
 
 
@@ -216,14 +243,17 @@ def rect_polygons(cases):
     c = cases.astype(np.float64)
     x, y, th, hl, hw = c.T
     co, si = np.cos(th), np.sin(th)
-    pts = [np.stack([x + a * hl * co - b * hw * si, y + a * hl * si + b * hw * co], 1)
-           for a, b in ((1, 1), (-1, 1), (-1, -1), (1, -1))]
+    pts = [
+        np.stack([x + a * hl * co - b * hw * si, y + a * hl * si + b * hw * co], 1)
+        for a, b in ((1, 1), (-1, 1), (-1, -1), (1, -1))
+    ]
     return np.stack(pts, 1)  # (n, 4, 2)
 
 
 # ---------------------------------------------------------------------------
 # Oracle
 # ---------------------------------------------------------------------------
+
 
 def box_polys(boxes, shrink=0.0):
     b = boxes.astype(np.float64)
@@ -253,10 +283,14 @@ def assert_agrees(hit, dist, pad, scale, what, inputs, min_counted=0.6):
     counted = np.abs(dist - pad) > tol
     bad = np.flatnonzero(counted & (hit != (dist <= pad)))
     if bad.size:
-        rows = "\n".join(f"  inputs={inputs[i].tolist()} kernel_hit={hit[i]} oracle_dist={dist[i]!r}"
-                         for i in bad[:5])
-        pytest.fail(f"{what} (padding={pad!r}): {bad.size} disagreements outside the tangency band, "
-                    f"e.g.\n{rows}")
+        rows = "\n".join(
+            f"  inputs={inputs[i].tolist()} kernel_hit={hit[i]} oracle_dist={dist[i]!r}"
+            for i in bad[:5]
+        )
+        pytest.fail(
+            f"{what} (padding={pad!r}): {bad.size} disagreements outside the tangency band, "
+            f"e.g.\n{rows}"
+        )
     assert counted.mean() >= min_counted, f"{what}: only {counted.mean():.2f} of the cases counted"
     # the cases must exercise both outcomes
     assert 0.05 < hit[counted].mean() < 0.95, f"{what}: degenerate case mix {hit[counted].mean()}"
@@ -266,6 +300,7 @@ def assert_agrees(hit, dist, pad, scale, what, inputs, min_counted=0.6):
 # ---------------------------------------------------------------------------
 # Per-obstacle kernels
 # ---------------------------------------------------------------------------
+
 
 @functools.lru_cache(maxsize=None)
 def _kernel(name: str, padding: float):
@@ -300,8 +335,9 @@ def _run_kernel_case(shape: str, kind: str, pad: float, seed: int):
 
 
 @pytest.mark.parametrize("pad_mode", sorted(PAD_MODES))
-@pytest.mark.parametrize("shape, kind", [(s, k) for s in ("point", "segment", "rect")
-                                         for k in ("box", "disc")])
+@pytest.mark.parametrize(
+    "shape, kind", [(s, k) for s in ("point", "segment", "rect") for k in ("box", "disc")]
+)
 def test_kernel_matches_shapely(shape, kind, pad_mode):
     counted = []
 
@@ -321,8 +357,10 @@ def test_kernel_matches_shapely(shape, kind, pad_mode):
 BOUNDS = np.array([[0.0, 20.0], [0.0, 20.0]])
 coord = st.floats(0.0, 20.0, width=32)
 half = st.floats(0.125, 4.0, width=32)
-world_st = st.tuples(st.lists(st.tuples(coord, coord, half, half), min_size=3, max_size=3),
-                     st.lists(st.tuples(coord, coord, half), min_size=2, max_size=2))
+world_st = st.tuples(
+    st.lists(st.tuples(coord, coord, half, half), min_size=3, max_size=3),
+    st.lists(st.tuples(coord, coord, half), min_size=2, max_size=2),
+)
 
 
 def _world_arrays(world_spec):
@@ -340,8 +378,9 @@ def _world_dists(geoms, boxes, discs, tol):
 def _bounds_excess(pts, bounds):
     """Largest amount by which any of the points ``(N, k, 2)`` leaves the closed bounds."""
     b = np.asarray(bounds, np.float64)
-    e = np.maximum.reduce([b[0, 0] - pts[..., 0], pts[..., 0] - b[0, 1],
-                           b[1, 0] - pts[..., 1], pts[..., 1] - b[1, 1]])
+    e = np.maximum.reduce(
+        [b[0, 0] - pts[..., 0], pts[..., 0] - b[0, 1], b[1, 0] - pts[..., 1], pts[..., 1] - b[1, 1]]
+    )
     return e.max(axis=-1)
 
 
@@ -356,10 +395,14 @@ def assert_world_agrees(free, dists, excess, pad, tol, what, inputs, min_counted
     sure_free = (dists > pad + tol[:, None]).all(1) & (excess < -tol)
     bad = np.flatnonzero((sure_hit & free) | (sure_free & ~free))
     if bad.size:
-        rows = "\n".join(f"  inputs={inputs[i].tolist()} kernel_free={free[i]} "
-                         f"oracle_dists={dists[i].tolist()} bounds_excess={excess[i]!r}"
-                         for i in bad[:5])
-        pytest.fail(f"{what} (padding={pad!r}): {bad.size} disagreements outside the band, e.g.\n{rows}")
+        rows = "\n".join(
+            f"  inputs={inputs[i].tolist()} kernel_free={free[i]} "
+            f"oracle_dists={dists[i].tolist()} bounds_excess={excess[i]!r}"
+            for i in bad[:5]
+        )
+        pytest.fail(
+            f"{what} (padding={pad!r}): {bad.size} disagreements outside the band, e.g.\n{rows}"
+        )
     counted = sure_hit | sure_free
     assert counted.mean() >= min_counted, f"{what}: only {counted.mean():.2f} counted"
     return np.array([counted.sum(), sure_free.sum()])
@@ -409,7 +452,9 @@ def test_point_robot_is_valid_and_steer_to_match_shapely(pad_mode):
         tol = band(np.max(np.abs(pts), 1) + 20.0 + pad)
         dists = _world_dists(geoms, boxes, discs, tol)
         excess = _bounds_excess(pts.astype(np.float64)[:, None], BOUNDS)
-        counted["valid"] += assert_world_agrees(free, dists, excess, pad, tol, "PointRobot.is_valid", pts)
+        counted["valid"] += assert_world_agrees(
+            free, dists, excess, pad, tol, "PointRobot.is_valid", pts
+        )
         # segments: tangent to a padded obstacle at the anchor, or between two random points
         length = 10 ** rng.uniform(-2, 1.3, n)
         u = rng.random(n)
@@ -426,8 +471,9 @@ def test_point_robot_is_valid_and_steer_to_match_shapely(pad_mode):
         tol = band(np.max(np.abs(segs), (1, 2)) + 20.0 + pad)
         dists = _world_dists(shapely.linestrings(segs), boxes, discs, tol)
         excess = _bounds_excess(segs, BOUNDS)
-        counted["steer"] += assert_world_agrees(ok, dists, excess, pad, tol, "PointRobot.steer_to",
-                                                np.concatenate([a, b], 1))
+        counted["steer"] += assert_world_agrees(
+            ok, dists, excess, pad, tol, "PointRobot.steer_to", np.concatenate([a, b], 1)
+        )
 
     check()
     assert_enough(counted["valid"])
@@ -442,8 +488,12 @@ def test_rigid_body_is_valid_matches_shapely(pad_mode):
     counted = [np.zeros(2, int)]
 
     @SETTINGS
-    @given(world_spec=world_st, pad=PAD_MODES[pad_mode], seed=seeds,
-           robot=st.sampled_from(RIGID_BODIES))
+    @given(
+        world_spec=world_st,
+        pad=PAD_MODES[pad_mode],
+        seed=seeds,
+        robot=st.sampled_from(RIGID_BODIES),
+    )
     def check(world_spec, pad, seed, robot):
         rng = np.random.default_rng(seed)
         boxes, discs = _world_arrays(world_spec)
@@ -457,7 +507,9 @@ def test_rigid_body_is_valid_matches_shapely(pad_mode):
         h = hl * np.abs(nx * c + ny * s) + hw * np.abs(-nx * s + ny * c)
         q = f32(np.stack([px + h * nx, py + h * ny, th], 1))
         free = is_valid_batch(robot, world, jnp.asarray(q), pad)
-        cases = np.concatenate([q, np.full((n, 1), hl, np.float32), np.full((n, 1), hw, np.float32)], 1)
+        cases = np.concatenate(
+            [q, np.full((n, 1), hl, np.float32), np.full((n, 1), hw, np.float32)], 1
+        )
         corners = rect_polygons(cases)
         tol = band(np.max(np.abs(q[:, :2]), 1) + 20.0 + pad)
         dists = _world_dists(shapely.polygons(corners), boxes, discs, tol)
@@ -471,6 +523,7 @@ def test_rigid_body_is_valid_matches_shapely(pad_mode):
 # ---------------------------------------------------------------------------
 # Arm: forward kinematics and link checks
 # ---------------------------------------------------------------------------
+
 
 def numpy_fk(robot: NLinkArm, q):
     """Brute-force float64 forward kinematics: joint positions ``(N, n + 1, 2)``."""
@@ -510,8 +563,11 @@ def _arm_fk(link_lengths, base, q):
 
 
 @settings(max_examples=12, deadline=None, database=None, phases=PHASES)
-@given(lengths=st.lists(st.floats(0.125, 5.0, width=32), min_size=1, max_size=6),
-       base=st.tuples(st.floats(-5, 5, width=32), st.floats(-5, 5, width=32)), seed=seeds)
+@given(
+    lengths=st.lists(st.floats(0.125, 5.0, width=32), min_size=1, max_size=6),
+    base=st.tuples(st.floats(-5, 5, width=32), st.floats(-5, 5, width=32)),
+    seed=seeds,
+)
 def test_arm_forward_kinematics_matches_numpy(lengths, base, seed):
     robot = NLinkArm(tuple(lengths), base=base)
     rng = np.random.default_rng(seed)
@@ -521,19 +577,33 @@ def test_arm_forward_kinematics_matches_numpy(lengths, base, seed):
 
 
 arm_world_st = st.tuples(
-    st.lists(st.tuples(st.floats(-9, 9, width=32), st.floats(-9, 9, width=32), half, half),
-             min_size=3, max_size=3),
-    st.lists(st.tuples(st.floats(-9, 9, width=32), st.floats(-9, 9, width=32), half),
-             min_size=1, max_size=1))
+    st.lists(
+        st.tuples(st.floats(-9, 9, width=32), st.floats(-9, 9, width=32), half, half),
+        min_size=3,
+        max_size=3,
+    ),
+    st.lists(
+        st.tuples(st.floats(-9, 9, width=32), st.floats(-9, 9, width=32), half),
+        min_size=1,
+        max_size=1,
+    ),
+)
 
 
 @pytest.mark.parametrize("pad_mode", sorted(PAD_MODES))
 def test_arm_is_valid_matches_shapely_links(pad_mode):
     counted = [np.zeros(2, int)]
 
-    @settings(max_examples=3, deadline=None, database=None, phases=PHASES,
-              suppress_health_check=list(HealthCheck))
-    @given(world_spec=arm_world_st, pad=PAD_MODES[pad_mode], seed=seeds, robot=st.sampled_from(ARMS))
+    @settings(
+        max_examples=3,
+        deadline=None,
+        database=None,
+        phases=PHASES,
+        suppress_health_check=list(HealthCheck),
+    )
+    @given(
+        world_spec=arm_world_st, pad=PAD_MODES[pad_mode], seed=seeds, robot=st.sampled_from(ARMS)
+    )
     def check(world_spec, pad, seed, robot):
         rng = np.random.default_rng(seed)
         boxes, discs = _world_arrays(world_spec)
@@ -560,8 +630,11 @@ def test_arm_is_valid_matches_shapely_links(pad_mode):
         joint_out = np.any(np.abs(q) > np.float32(np.pi), 1)
         assert not free[joint_out].any()
         excess = np.where(joint_out, 1.0, excess)
-        counted.append(assert_world_agrees(free, dists, excess, pad, tol, f"{robot}.is_valid", q,
-                                           min_counted=0.6))
+        counted.append(
+            assert_world_agrees(
+                free, dists, excess, pad, tol, f"{robot}.is_valid", q, min_counted=0.6
+            )
+        )
 
     check()
     assert_enough(sum(counted))
@@ -571,7 +644,7 @@ def test_arm_is_valid_matches_shapely_links(pad_mode):
 # Degenerate cases with exact (dyadic) arithmetic: touching is a collision
 # ---------------------------------------------------------------------------
 
-EXACT_BOX = np.array([10.0, 10.0, 2.0, 1.0], np.float32)    # x in [8, 12], y in [9, 11]
+EXACT_BOX = np.array([10.0, 10.0, 2.0, 1.0], np.float32)  # x in [8, 12], y in [9, 11]
 EXACT_DISC = np.array([10.0, 10.0, 2.0], np.float32)
 
 
@@ -582,7 +655,9 @@ def _exact_kernel(name, pad, cases, obstacle):
     cases = np.asarray(cases, np.float32)
     padded = np.concatenate([cases, np.repeat(cases[:1], N_CASES - len(cases), 0)])
     obst = np.tile(np.asarray(obstacle, np.float32), (N_CASES, 1))
-    return np.asarray(_kernel(name, pad)(jnp.asarray(padded), jnp.asarray(obst)))[:len(cases)].tolist()
+    return np.asarray(_kernel(name, pad)(jnp.asarray(padded), jnp.asarray(obst)))[
+        : len(cases)
+    ].tolist()
 
 
 @pytest.mark.parametrize("pad", [0.0, 0.5, 0.25])
@@ -590,48 +665,58 @@ def test_exact_touching_counts_as_collision(pad):
     p = pad
     # (segment, expected hit)
     cases = [
-        ((8.0 - p, 9.5, 8.0 - p, 10.5), True),      # along the left edge, offset = padding
-        ((9.0, 11.0 + p, 11.0, 11.0 + p), True),    # along the top edge (horizontal)
-        ((5.0, 11.0 + p, 15.0, 11.0 + p), True),    # along the top edge, longer than the box
-        ((12.0 + p, 0.0, 12.0 + p, 20.0), True),    # vertical, spanning the whole map
+        ((8.0 - p, 9.5, 8.0 - p, 10.5), True),  # along the left edge, offset = padding
+        ((9.0, 11.0 + p, 11.0, 11.0 + p), True),  # along the top edge (horizontal)
+        ((5.0, 11.0 + p, 15.0, 11.0 + p), True),  # along the top edge, longer than the box
+        ((12.0 + p, 0.0, 12.0 + p, 20.0), True),  # vertical, spanning the whole map
         ((12.0 + p + 2**-10, 0.0, 12.0 + p + 2**-10, 20.0), False),
         ((9.0, 11.0 + p + 2**-10, 11.0, 11.0 + p + 2**-10), False),
-        ((10.0, 10.0, 10.0, 10.0), True),           # zero length, inside
-        ((12.0 + p, 10.0, 12.0 + p, 10.0), True),   # zero length, on the padded edge
+        ((10.0, 10.0, 10.0, 10.0), True),  # zero length, inside
+        ((12.0 + p, 10.0, 12.0 + p, 10.0), True),  # zero length, on the padded edge
         ((12.0 + p + 2**-10, 10.0, 12.0 + p + 2**-10, 10.0), False),
-        ((13.0 + p, 10.0, 12.0 + p, 10.0), True),   # ends on the padded edge
-        ((9.0, 12.5 + p, 15.0, 12.5 + p), False),   # parallel, clear
-        ((0.0, 0.0, 20.0, 20.0), True),             # through the box
-        ((8.0, 9.0 - p, 8.0, 9.0 - p), True),       # zero length, below the corner by the padding
+        ((13.0 + p, 10.0, 12.0 + p, 10.0), True),  # ends on the padded edge
+        ((9.0, 12.5 + p, 15.0, 12.5 + p), False),  # parallel, clear
+        ((0.0, 0.0, 20.0, 20.0), True),  # through the box
+        ((8.0, 9.0 - p, 8.0, 9.0 - p), True),  # zero length, below the corner by the padding
     ]
     got = _exact_kernel("segment_box", pad, [c for c, _ in cases], EXACT_BOX)
     assert got == [e for _, e in cases]
     # touching the disc exactly (padding grows its radius)
     r = 2.0 + p
-    dcases = [((8.0, 10.0 + r, 12.0, 10.0 + r), True), ((10.0 + r, 10.0, 15.0, 10.0), True),
-              ((10.0 + r, 5.0, 10.0 + r, 15.0), True), ((10.0 + r + 2**-10, 5.0, 10.0 + r + 2**-10, 15.0), False),
-              ((10.0, 10.0, 10.0, 10.0), True), ((10.0, 10.0 + r, 10.0, 10.0 + r), True)]
+    dcases = [
+        ((8.0, 10.0 + r, 12.0, 10.0 + r), True),
+        ((10.0 + r, 10.0, 15.0, 10.0), True),
+        ((10.0 + r, 5.0, 10.0 + r, 15.0), True),
+        ((10.0 + r + 2**-10, 5.0, 10.0 + r + 2**-10, 15.0), False),
+        ((10.0, 10.0, 10.0, 10.0), True),
+        ((10.0, 10.0 + r, 10.0, 10.0 + r), True),
+    ]
     got = _exact_kernel("segment_disc", pad, [c for c, _ in dcases], EXACT_DISC)
     assert got == [e for _, e in dcases]
     # points
     pts = [[12.0 + p, 10.0], [10.0, 9.0 - p], [12.0 + p + 2**-10, 10.0]]
     assert _exact_kernel("point_box", pad, pts, EXACT_BOX) == [True, True, False]
     # rectangles at theta = 0: edge-to-edge contact with the box at exactly the padding
-    rects = [[13.0 + p, 10.0, 0.0, 1.0, 0.5],      # left edge x = 12 + p
-             [10.0, 11.5 + p, 0.0, 1.0, 0.5],      # bottom edge y = 11 + p
-             [13.0 + p + 2**-10, 10.0, 0.0, 1.0, 0.5]]
+    rects = [
+        [13.0 + p, 10.0, 0.0, 1.0, 0.5],  # left edge x = 12 + p
+        [10.0, 11.5 + p, 0.0, 1.0, 0.5],  # bottom edge y = 11 + p
+        [13.0 + p + 2**-10, 10.0, 0.0, 1.0, 0.5],
+    ]
     assert _exact_kernel("rect_box", pad, rects, EXACT_BOX) == [True, True, False]
 
 
 def test_workspace_bounds_are_closed():
     world = World.create(BOUNDS, [[10, 10, 1, 1]])
     pts = np.array([[0, 0], [20, 20], [0, 5], [20.0, 5], [-1e-3, 5], [5, 20.001]], np.float32)
-    assert np.asarray(is_valid_batch(PointRobot(), world, jnp.asarray(pts), 0.0)).tolist() == [
-        True] * 4 + [False] * 2
+    assert (
+        np.asarray(is_valid_batch(PointRobot(), world, jnp.asarray(pts), 0.0)).tolist()
+        == [True] * 4 + [False] * 2
+    )
     a = np.array([[0, 0], [0, 20], [0, 0]], np.float32)
     b = np.array([[0, 20], [20, 20], [0, 20.001]], np.float32)
-    assert np.asarray(steer_to_batch(PointRobot(), world, jnp.asarray(a), jnp.asarray(b), 0.0)).tolist() == [
-        True, True, False]
+    assert np.asarray(
+        steer_to_batch(PointRobot(), world, jnp.asarray(a), jnp.asarray(b), 0.0)
+    ).tolist() == [True, True, False]
 
 
 # ---------------------------------------------------------------------------
@@ -642,8 +727,9 @@ BAD_VALUES = [np.nan, np.inf, -np.inf]
 
 
 @pytest.mark.parametrize("pad", [0.0, 0.8])
-@pytest.mark.parametrize("robot", [PointRobot(), RigidBody(), NLinkArm((3.0, 3.0))],
-                         ids=lambda r: r.kind)
+@pytest.mark.parametrize(
+    "robot", [PointRobot(), RigidBody(), NLinkArm((3.0, 3.0))], ids=lambda r: r.kind
+)
 def test_non_finite_states_are_invalid_and_blocked(robot, pad):
     world = World.create([[-10, 10], [-10, 10]], [[5, 5, 1, 1]], [[-5, -5, 1]])
     d = robot.dim
@@ -666,10 +752,18 @@ def test_non_finite_states_are_invalid_and_blocked(robot, pad):
     goods = np.repeat(good, len(bad), 0)  # the good state in every row: one shape, one program
     assert np.asarray(is_valid_batch(robot, world, jnp.asarray(goods), pad)).all()
     assert not np.asarray(is_valid_batch(robot, world, jnp.asarray(bad), pad)).any()
-    assert np.asarray(steer_to_batch(robot, world, jnp.asarray(goods), jnp.asarray(goods), pad)).all()
-    assert not np.asarray(steer_to_batch(robot, world, jnp.asarray(goods), jnp.asarray(bad), pad)).any()
-    assert not np.asarray(steer_to_batch(robot, world, jnp.asarray(bad), jnp.asarray(goods), pad)).any()
-    assert not np.asarray(steer_to_batch(robot, world, jnp.asarray(bad), jnp.asarray(bad), pad)).any()
+    assert np.asarray(
+        steer_to_batch(robot, world, jnp.asarray(goods), jnp.asarray(goods), pad)
+    ).all()
+    assert not np.asarray(
+        steer_to_batch(robot, world, jnp.asarray(goods), jnp.asarray(bad), pad)
+    ).any()
+    assert not np.asarray(
+        steer_to_batch(robot, world, jnp.asarray(bad), jnp.asarray(goods), pad)
+    ).any()
+    assert not np.asarray(
+        steer_to_batch(robot, world, jnp.asarray(bad), jnp.asarray(bad), pad)
+    ).any()
 
 
 @pytest.mark.parametrize("pad", [0.0, 0.8])
@@ -677,7 +771,9 @@ def test_non_finite_inputs_make_the_free_kernels_false(pad):
     world = World.create([[0, 20], [0, 20]], [[5, 5, 1, 1]], [[15, 15, 1]])
     vals = [np.nan, np.inf, -np.inf]
     pts = np.array([[v, 10.0] for v in vals] + [[10.0, v] for v in vals], np.float32)
-    assert not np.asarray(jax.jit(jax.vmap(lambda p: G.point_free(p, world, pad)))(jnp.asarray(pts))).any()
+    assert not np.asarray(
+        jax.jit(jax.vmap(lambda p: G.point_free(p, world, pad)))(jnp.asarray(pts))
+    ).any()
     good = jnp.asarray(np.tile(np.array([10.0, 10.0], np.float32), (len(pts), 1)))
     seg = jax.jit(jax.vmap(lambda a, b: G.segment_free(a, b, world, pad)))
     assert not np.asarray(seg(jnp.asarray(pts), good)).any()
@@ -685,12 +781,15 @@ def test_non_finite_inputs_make_the_free_kernels_false(pad):
     seg_nb = jax.jit(jax.vmap(lambda a, b: G.segment_free(a, b, world, pad, check_bounds=False)))
     assert not np.asarray(seg_nb(jnp.asarray(pts), good)).any()
     poses = np.array([[v, 10.0, 0.0] for v in vals] + [[10.0, 10.0, v] for v in vals], np.float32)
-    assert not np.asarray(jax.jit(jax.vmap(lambda q: G.rect_free(q, 0.6, 0.2, world, pad)))(jnp.asarray(poses))).any()
+    assert not np.asarray(
+        jax.jit(jax.vmap(lambda q: G.rect_free(q, 0.6, 0.2, world, pad)))(jnp.asarray(poses))
+    ).any()
 
 
 # ---------------------------------------------------------------------------
 # Rasterisation against the same oracle (cell centres)
 # ---------------------------------------------------------------------------
+
 
 @settings(max_examples=4, deadline=None, database=None, phases=PHASES)
 @given(world_spec=world_st, pad=st.one_of(st.just(0.0), random_padding))
@@ -704,4 +803,6 @@ def test_rasterize_matches_cell_centre_oracle(world_spec, pad):
     tol = np.full(len(centres), band(25.0))
     dists = _world_dists(shapely.points(centres), boxes, discs, tol)
     excess = _bounds_excess(centres[:, None], BOUNDS)
-    assert_world_agrees(~occ.ravel(), dists, excess, pad, tol, "rasterize", centres, min_counted=0.9)
+    assert_world_agrees(
+        ~occ.ravel(), dists, excess, pad, tol, "rasterize", centres, min_counted=0.9
+    )

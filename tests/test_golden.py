@@ -73,29 +73,74 @@ ROOT = Path(__file__).resolve().parents[1]
 GOLDEN = ROOT / "tests" / "golden.json"
 GOLDEN_PARAMS = ROOT / "tests" / "golden_params.npz"
 LOCAL = ROOT / "tests" / ".golden_local.json"
-TINY = ["envs=[point/2]", "data.k_train=40", "data.gamma_queries=2000", "data.gamma_eval=false",
-        "train.epochs=2", "model.hidden=[32,32]", "eval.k_test=16", "eval.n_plan=20",
-        "eval.replan_rounds=2", "eval.replan_steps=6", "eval.gamma_queries=2000"]
-ARM = ["envs=[nlink/2]", "data.k_train=30", "data.gamma_queries=2000", "planner.name=astar",
-       "planner.resolution=0.05"]
+TINY = [
+    "envs=[point/2]",
+    "data.k_train=40",
+    "data.gamma_queries=2000",
+    "data.gamma_eval=false",
+    "train.epochs=2",
+    "model.hidden=[32,32]",
+    "eval.k_test=16",
+    "eval.n_plan=20",
+    "eval.replan_rounds=2",
+    "eval.replan_steps=6",
+    "eval.gamma_queries=2000",
+]
+ARM = [
+    "envs=[nlink/2]",
+    "data.k_train=30",
+    "data.gamma_queries=2000",
+    "planner.name=astar",
+    "planner.resolution=0.05",
+]
 #: Max |trained parameter - golden parameter| accepted across machines (see the module doc).
 PARAMS_ATOL = 1e-4
 #: XLA flags that simulate a foreign CPU in ``test_golden_check_under_foreign_codegen``:
 #: a narrower vector unit changes the trained parameters' bits, not the data's.
 FOREIGN_XLA_FLAGS = "--xla_cpu_prefer_vector_width=128"
-TIME_KEYS = {"seconds", "compile_seconds", "seconds_per_query", "reference_seconds_per_query",
-             "time", "timings"}
+TIME_KEYS = {
+    "seconds",
+    "compile_seconds",
+    "seconds_per_query",
+    "reference_seconds_per_query",
+    "time",
+    "timings",
+}
 # the CPU features that change what XLA's CPU compiler emits (vector width, FMA, dot units)
-_ISA = {"sse4_1", "sse4_2", "avx", "avx2", "fma", "f16c", "avx512f", "avx512dq", "avx512bw",
-        "avx512vl", "avx512cd", "avx512ifma", "avx512vbmi", "avx512_vnni", "avx512_bf16",
-        "avx512_fp16", "avx_vnni", "amx_tile", "amx_bf16", "amx_int8", "asimd", "fphp",
-        "asimdhp", "sve", "sve2"}
+_ISA = {
+    "sse4_1",
+    "sse4_2",
+    "avx",
+    "avx2",
+    "fma",
+    "f16c",
+    "avx512f",
+    "avx512dq",
+    "avx512bw",
+    "avx512vl",
+    "avx512cd",
+    "avx512ifma",
+    "avx512vbmi",
+    "avx512_vnni",
+    "avx512_bf16",
+    "avx512_fp16",
+    "avx_vnni",
+    "amx_tile",
+    "amx_bf16",
+    "amx_int8",
+    "asimd",
+    "fphp",
+    "asimdhp",
+    "sve",
+    "sve2",
+}
 _NO_FMA_ISAS = {"SSE4_2", "AVX"}  # --xla_cpu_max_isa values below FMA
 
 
 # ---------------------------------------------------------------------------
 # Numerics fingerprint
 # ---------------------------------------------------------------------------
+
 
 def _cpuinfo() -> dict:
     info: dict = {}
@@ -110,8 +155,9 @@ def _cpuinfo() -> dict:
             continue
         k, v = (s.strip() for s in line.split(":", 1))
         info.setdefault(k, v)
-    cpu = " ".join(info.get(k, "") for k in ("vendor_id", "cpu family", "model", "CPU implementer",
-                                             "CPU part")).split()
+    cpu = " ".join(
+        info.get(k, "") for k in ("vendor_id", "cpu family", "model", "CPU implementer", "CPU part")
+    ).split()
     flags = set((info.get("flags") or info.get("Features") or "").split())
     return {"cpu": " ".join(cpu) or platform.processor() or "unknown", "flags": flags}
 
@@ -129,9 +175,14 @@ def numerics_fingerprint() -> dict:
     import jaxlib
 
     ci = _cpuinfo()
-    return {"jax": jax.__version__, "jaxlib": jaxlib.__version__, "arch": platform.machine(),
-            "cpu": ci["cpu"], "isa": sorted(ci["flags"] & _ISA),
-            "xla_flags": " ".join(os.environ.get("XLA_FLAGS", "").split())}
+    return {
+        "jax": jax.__version__,
+        "jaxlib": jaxlib.__version__,
+        "arch": platform.machine(),
+        "cpu": ci["cpu"],
+        "isa": sorted(ci["flags"] & _ISA),
+        "xla_flags": " ".join(os.environ.get("XLA_FLAGS", "").split()),
+    }
 
 
 def numerics_key(fp: dict) -> str:
@@ -153,6 +204,7 @@ def data_class(fp: dict) -> str:
 # Fingerprints of a run
 # ---------------------------------------------------------------------------
 
+
 def _h(*arrays) -> str:
     h = hashlib.sha256()
     for a in arrays:
@@ -169,8 +221,11 @@ def _datasets(root: Path) -> dict:
 def _numbers(obj):
     """The JSON tree without wall-clock fields and file paths."""
     if isinstance(obj, dict):
-        return {k: _numbers(v) for k, v in sorted(obj.items())
-                if k not in TIME_KEYS and not k.endswith("_file")}
+        return {
+            k: _numbers(v)
+            for k, v in sorted(obj.items())
+            if k not in TIME_KEYS and not k.endswith("_file")
+        }
     if isinstance(obj, list):
         return [_numbers(v) for v in obj]
     return obj
@@ -183,17 +238,21 @@ def trained_params(model_dir: Path) -> dict[str, np.ndarray]:
     from ntq_jax.training import load_ensemble
 
     ens = load_ensemble(model_dir)
-    return {jax.tree_util.keystr(p): np.asarray(v)
-            for p, v in jax.tree_util.tree_leaves_with_path(ens.params)}
+    return {
+        jax.tree_util.keystr(p): np.asarray(v)
+        for p, v in jax.tree_util.tree_leaves_with_path(ens.params)
+    }
 
 
 def _paths(run: Path) -> dict:
     out = {}
     for f in sorted((run / "paths").rglob("*.npz")) + sorted((run / "eval").rglob("*.npz")):
         z = np.load(f)
-        out[str(f.relative_to(run))] = {k: _h(z[k]) for k in sorted(z.files)
-                                        if k not in TIME_KEYS and k != "fingerprint"
-                                        and not k.endswith("_seconds")}
+        out[str(f.relative_to(run))] = {
+            k: _h(z[k])
+            for k in sorted(z.files)
+            if k not in TIME_KEYS and k != "fingerprint" and not k.endswith("_seconds")
+        }
     return out
 
 
@@ -213,15 +272,24 @@ def _run_all(tmp: Path, run: Path | None = None) -> tuple[dict, dict[str, np.nda
         cfg = load_config(None, TINY)
         run_pipeline(cfg, prepare_run(cfg, run), progress=False, log=lambda _: None)
     cfg = config.load(None, ARM)
-    data.generate_datasets(make_env("nlink/2"), config.data_options(cfg, "nlink/2"),
-                           tmp / "arm", env_name="nlink/2",
-                           progress=False, figure=False)
+    data.generate_datasets(
+        make_env("nlink/2"),
+        config.data_options(cfg, "nlink/2"),
+        tmp / "arm",
+        env_name="nlink/2",
+        progress=False,
+        figure=False,
+    )
     params = trained_params(run / "models" / "point_2")
     rows = _numbers(json.loads((run / "results.json").read_text())["rows"])
-    got = {"portable": {"pipeline": _datasets(run / "data"), "arm": _datasets(tmp / "arm")},
-           "machine": {"params": {k: _h(v) for k, v in params.items()}, "paths": _paths(run),
-                       "rows_sha": hashlib.sha256(json.dumps(rows, sort_keys=True).encode()
-                                                  ).hexdigest()[:20]}}
+    got = {
+        "portable": {"pipeline": _datasets(run / "data"), "arm": _datasets(tmp / "arm")},
+        "machine": {
+            "params": {k: _h(v) for k, v in params.items()},
+            "paths": _paths(run),
+            "rows_sha": hashlib.sha256(json.dumps(rows, sort_keys=True).encode()).hexdigest()[:20],
+        },
+    }
     return got, params
 
 
@@ -229,13 +297,12 @@ def _run_all(tmp: Path, run: Path | None = None) -> tuple[dict, dict[str, np.nda
 # Comparison
 # ---------------------------------------------------------------------------
 
+
 def params_deviation(params: dict[str, np.ndarray], reference: dict[str, np.ndarray]) -> float:
     """Max |params - reference| over every array (inf if their keys or shapes differ)."""
-    if set(params) != set(reference) or any(params[k].shape != reference[k].shape
-                                            for k in params):
+    if set(params) != set(reference) or any(params[k].shape != reference[k].shape for k in params):
         return float("inf")
-    return max(float(np.max(np.abs(params[k].astype(np.float64) - reference[k])))
-               for k in params)
+    return max(float(np.max(np.abs(params[k].astype(np.float64) - reference[k]))) for k in params)
 
 
 def _diff(got: dict, want: dict, prefix: str) -> list[str]:
@@ -250,9 +317,14 @@ def _diff(got: dict, want: dict, prefix: str) -> list[str]:
     return bad
 
 
-def compare(got: dict, params: dict[str, np.ndarray], golden: dict,
-            reference: dict[str, np.ndarray] | None, local: dict | None, fp: dict
-            ) -> tuple[list[str], list[str]]:
+def compare(
+    got: dict,
+    params: dict[str, np.ndarray],
+    golden: dict,
+    reference: dict[str, np.ndarray] | None,
+    local: dict | None,
+    fp: dict,
+) -> tuple[list[str], list[str]]:
     """Holds a run's fingerprints to the records; ``(failures, records to take)``.
 
     Args:
@@ -280,10 +352,15 @@ def compare(got: dict, params: dict[str, np.ndarray], golden: dict,
         if cls == golden.get("params_class") and reference is not None:
             dev = params_deviation(params, reference)
             if not dev <= PARAMS_ATOL:
-                failures.append(f"params: max |difference| {dev:.3g} from golden_params.npz "
-                                f"exceeds {PARAMS_ATOL:g}")
-    records = [r for r in (golden.get("machines", {}).get(key), local.get("machines", {}).get(key))
-               if r is not None]
+                failures.append(
+                    f"params: max |difference| {dev:.3g} from golden_params.npz "
+                    f"exceeds {PARAMS_ATOL:g}"
+                )
+    records = [
+        r
+        for r in (golden.get("machines", {}).get(key), local.get("machines", {}).get(key))
+        if r is not None
+    ]
     if not records:
         take.append("machine")
     for r in records:
@@ -331,36 +408,50 @@ def _load_reference() -> dict[str, np.ndarray] | None:
 # Tests
 # ---------------------------------------------------------------------------
 
+
 def test_outputs_match_golden(tmp_path, tiny_run):
     """The suite's tiny run (conftest.py: the pipeline of TINY, shared with other files) and
     the arm data generated here, against the records."""
     assert tiny_run.config == TINY
     got, params = _run_all(tmp_path, tiny_run.path)
     fp = numerics_fingerprint()
-    failures, take = compare(got, params, json.loads(GOLDEN.read_text()), _load_reference(),
-                             load_local(), fp)
+    failures, take = compare(
+        got, params, json.loads(GOLDEN.read_text()), _load_reference(), load_local(), fp
+    )
     assert not failures, "differs from the golden record:\n" + "\n".join(failures)
     if take:
         record_local(got, fp, take)
-        warnings.warn(f"golden: no {' or '.join(take)} record for this machine's numerics "
-                      f"({data_class(fp)}, {numerics_key(fp)}); took one in {LOCAL.name}: "
-                      "later runs here are compared with it bit for bit")
+        warnings.warn(
+            f"golden: no {' or '.join(take)} record for this machine's numerics "
+            f"({data_class(fp)}, {numerics_key(fp)}); took one in {LOCAL.name}: "
+            "later runs here are compared with it bit for bit"
+        )
 
 
 def _fake_run(scale: float = 1.0):
-    got = {"portable": {"pipeline": {"a.npy": "1"}, "arm": {"b.npy": "2"}},
-           "machine": {"params": {"w": "3"}, "paths": {"p.npz": {"x": "4"}}, "rows_sha": "5"}}
+    got = {
+        "portable": {"pipeline": {"a.npy": "1"}, "arm": {"b.npy": "2"}},
+        "machine": {"params": {"w": "3"}, "paths": {"p.npz": {"x": "4"}}, "rows_sha": "5"},
+    }
     return got, {"w": np.full((2, 3), 0.5 * scale, np.float32)}
 
 
 def test_compare_holds_each_part_to_its_record():
     """Portable parts strict, parameters within the tolerance, machine parts per fingerprint."""
-    fp = {"jax": "1", "jaxlib": "1", "arch": "x86_64", "cpu": "c", "isa": ["avx2", "fma"],
-          "xla_flags": ""}
+    fp = {
+        "jax": "1",
+        "jaxlib": "1",
+        "arch": "x86_64",
+        "cpu": "c",
+        "isa": ["avx2", "fma"],
+        "xla_flags": "",
+    }
     got, params = _fake_run()
-    golden = {"portable": {"x86_64-fma": {"datasets": got["portable"]}},
-              "params_class": "x86_64-fma",
-              "machines": {numerics_key(fp): {"record": got["machine"]}}}
+    golden = {
+        "portable": {"x86_64-fma": {"datasets": got["portable"]}},
+        "params_class": "x86_64-fma",
+        "machines": {numerics_key(fp): {"record": got["machine"]}},
+    }
     ref = {"w": params["w"] + np.float32(PARAMS_ATOL / 2)}
     assert compare(got, params, golden, ref, None, fp) == ([], [])
     # a dataset byte: fails on every machine of the class, whatever its numerics
@@ -370,22 +461,27 @@ def test_compare_holds_each_part_to_its_record():
     fails, take = compare(bad, params, golden, ref, None, other)
     assert fails == ["portable[x86_64-fma]/arm/b.npy"] and take == ["machine"]
     # parameters beyond the tolerance fail anywhere; within it they pass on a new machine
-    assert compare(got, {"w": params["w"] + np.float32(2 * PARAMS_ATOL)}, golden, ref, None,
-                   other)[0][0].startswith("params: max |difference|")
+    assert compare(got, {"w": params["w"] + np.float32(2 * PARAMS_ATOL)}, golden, ref, None, other)[
+        0
+    ][0].startswith("params: max |difference|")
     assert compare(got, params, golden, ref, None, other) == ([], ["machine"])
     # a machine part differs from this machine's record (committed or local): fails
     bad = json.loads(json.dumps(got))
     bad["machine"]["paths"]["p.npz"]["x"] = "changed"
     assert compare(bad, params, golden, ref, None, fp)[0] == [
-        f"machine[{numerics_key(fp)}]/paths/p.npz"]
+        f"machine[{numerics_key(fp)}]/paths/p.npz"
+    ]
     local = {"machines": {numerics_key(other): {"record": got["machine"]}}}
     assert compare(bad, params, golden, ref, local, other)[0] == [
-        f"machine[{numerics_key(other)}]/paths/p.npz"]
+        f"machine[{numerics_key(other)}]/paths/p.npz"
+    ]
     # without FMA the data class changes: its portable record is taken, parameters not compared
     nofma = dict(fp, xla_flags="--xla_cpu_max_isa=AVX")
     assert data_class(nofma) == "x86_64-nofma"
     assert compare(got, {"w": params["w"] + 1}, golden, ref, None, nofma)[1] == [
-        "portable", "machine"]
+        "portable",
+        "machine",
+    ]
 
 
 def test_numerics_fingerprint_sees_xla_flags(monkeypatch):
@@ -407,29 +503,40 @@ def simulate(tmp: Path) -> dict:
     and holds that too. Returns both outcomes (JSON-ready).
     """
     from ntq_jax import data, make_env, training
-    from ntq_jax.experiment import config
     from ntq_jax.artifacts import npy_sha256
+    from ntq_jax.experiment import config
     from ntq_jax.experiment.pipeline import load_config
 
     cfg = load_config(None, TINY)
-    data.generate_datasets(make_env("point/2"), config.data_options(cfg, "point/2"),
-                           tmp / "data", env_name="point/2",
-                           progress=False, figure=False)
+    data.generate_datasets(
+        make_env("point/2"),
+        config.data_options(cfg, "point/2"),
+        tmp / "data",
+        env_name="point/2",
+        progress=False,
+        figure=False,
+    )
     arm = config.data_options(config.load(None, ARM), "nlink/2")
-    data.generate_datasets(make_env("nlink/2"), arm, tmp / "arm", env_name="nlink/2",
-                           progress=False, figure=False)
+    data.generate_datasets(
+        make_env("nlink/2"), arm, tmp / "arm", env_name="nlink/2", progress=False, figure=False
+    )
     golden, reference = json.loads(GOLDEN.read_text()), _load_reference()
     cls = golden["params_class"]
 
     def check(tag: str) -> dict:
-        training.train_from_folder(tmp / "data" / "point_2", tmp / f"models_{tag}",
-                                   progress=False, **config.train_args(cfg))
+        training.train_from_folder(
+            tmp / "data" / "point_2",
+            tmp / f"models_{tag}",
+            progress=False,
+            **config.train_args(cfg),
+        )
         params = trained_params(tmp / f"models_{tag}")
         got = {"pipeline": _datasets(tmp / "data"), "arm": _datasets(tmp / "arm")}
-        return {"datasets_differ": _diff(got, golden["portable"][cls]["datasets"], "portable"),
-                "params_deviation": params_deviation(params, reference),
-                "params_bit_identical": all(np.array_equal(params[k], reference[k])
-                                            for k in reference)}
+        return {
+            "datasets_differ": _diff(got, golden["portable"][cls]["datasets"], "portable"),
+            "params_deviation": params_deviation(params, reference),
+            "params_bit_identical": all(np.array_equal(params[k], reference[k]) for k in reference),
+        }
 
     clean = check("clean")
     f = tmp / "data" / "point_2" / "D0" / "inputs.npy"
@@ -440,8 +547,12 @@ def simulate(tmp: Path) -> dict:
     meta = json.loads(meta_file.read_text())
     meta["arrays"]["inputs"]["sha256"] = npy_sha256(arr)
     meta_file.write_text(json.dumps(meta))
-    return {"numerics": numerics_fingerprint(), "data_class": data_class(numerics_fingerprint()),
-            "clean": clean, "changed_byte": check("changed")}
+    return {
+        "numerics": numerics_fingerprint(),
+        "data_class": data_class(numerics_fingerprint()),
+        "clean": clean,
+        "changed_byte": check("changed"),
+    }
 
 
 def test_golden_check_under_foreign_codegen(tmp_path):
@@ -450,8 +561,13 @@ def test_golden_check_under_foreign_codegen(tmp_path):
     byte fails it, in the datasets and, after training, in the parameters."""
     env = dict(os.environ, XLA_FLAGS=FOREIGN_XLA_FLAGS, JAX_PLATFORMS="cpu")
     out = tmp_path / "simulated.json"
-    proc = subprocess.run([sys.executable, str(Path(__file__)), "--simulate", str(tmp_path),
-                           str(out)], env=env, capture_output=True, text=True, timeout=900)
+    proc = subprocess.run(
+        [sys.executable, str(Path(__file__)), "--simulate", str(tmp_path), str(out)],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
     assert proc.returncode == 0, proc.stderr[-3000:]
     r = json.loads(out.read_text())
     assert r["data_class"] == json.loads(GOLDEN.read_text())["params_class"]
@@ -474,9 +590,12 @@ def record(tmp: Path, *, local_only: bool) -> None:
         print(f"recorded {LOCAL} ({data_class(fp)}, {numerics_key(fp)})")
         return
     cls = data_class(fp)
-    golden = {"format": 2, "params_class": cls,
-              "portable": {cls: {"datasets": got["portable"]}},
-              "machines": {numerics_key(fp): {"numerics": fp, "record": got["machine"]}}}
+    golden = {
+        "format": 2,
+        "params_class": cls,
+        "portable": {cls: {"datasets": got["portable"]}},
+        "machines": {numerics_key(fp): {"numerics": fp, "record": got["machine"]}},
+    }
     np.savez(GOLDEN_PARAMS, **params)
     _write_json(GOLDEN, golden)
     LOCAL.unlink(missing_ok=True)

@@ -10,7 +10,8 @@ own cost.
 import jax
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 
@@ -72,28 +73,35 @@ def _metric_cost(metric, a, b):
     """``metric`` in float64 (the kernel's heuristic without its slack)."""
     x = b - a
     x = np.where(metric.periodic, (x + np.pi) % (2 * np.pi) - np.pi, x) * metric.weights
-    return sum(np.sqrt((x[..., metric.groups == g] ** 2).sum(-1))
-               for g in np.unique(metric.groups))
+    return sum(np.sqrt((x[..., metric.groups == g] ** 2).sum(-1)) for g in np.unique(metric.groups))
 
 
-METRICS = {"euclid": G.HeuristicMetric(np.ones(2), np.zeros(2, bool), np.zeros(2, np.int64)),
-           "se2": G.HeuristicMetric(np.array([1.0, 1.0, 0.5]), np.array([False, False, True]),
-                                    np.array([0, 0, 1])),
-           "zero": G.HeuristicMetric(np.zeros(2), np.zeros(2, bool), np.zeros(2, np.int64))}
+METRICS = {
+    "euclid": G.HeuristicMetric(np.ones(2), np.zeros(2, bool), np.zeros(2, np.int64)),
+    "se2": G.HeuristicMetric(
+        np.array([1.0, 1.0, 0.5]), np.array([False, False, True]), np.array([0, 0, 1])
+    ),
+    "zero": G.HeuristicMetric(np.zeros(2), np.zeros(2, bool), np.zeros(2, np.int64)),
+}
 
 
 @settings(max_examples=40, deadline=None)
-@given(n=st.integers(2, 40), density=st.floats(0.02, 0.4), nq=st.integers(1, 6),
-       metric=st.sampled_from(sorted(METRICS)), seed=st.integers(0, 2**31 - 1),
-       ties=st.booleans())
+@given(
+    n=st.integers(2, 40),
+    density=st.floats(0.02, 0.4),
+    nq=st.integers(1, 6),
+    metric=st.sampled_from(sorted(METRICS)),
+    seed=st.integers(0, 2**31 - 1),
+    ties=st.booleans(),
+)
 def test_astar_cost_equals_dijkstra_on_random_graphs(n, density, nq, metric, seed, ties):
     rng = np.random.default_rng(seed)
     m = METRICS[metric]
     d = len(m.weights)
     # integer grid states with unit-ish costs make many equal-cost paths
-    pts = (rng.integers(0, 4, (n + 2 * nq, d)) if ties else rng.uniform(-4, 4, (n + 2 * nq, d)))
+    pts = rng.integers(0, 4, (n + 2 * nq, d)) if ties else rng.uniform(-4, 4, (n + 2 * nq, d))
     pts = pts.astype(np.float64)
-    states, starts, goals = pts[:n], pts[n:n + nq], pts[n + nq:]
+    states, starts, goals = pts[:n], pts[n : n + nq], pts[n + nq :]
     i, j = np.triu_indices(n, 1)
     keep = rng.random(len(i)) < density
     edges = np.stack([i[keep], j[keep]], 1)
@@ -108,8 +116,9 @@ def test_astar_cost_equals_dijkstra_on_random_graphs(n, density, nq, metric, see
             rows[key][2].extend(_metric_cost(m, end, states[nodes]) * (1 + rng.random(len(nodes))))
     d_row = np.flatnonzero(rng.random(nq) < 0.3)
     d_c = _metric_cost(m, starts[d_row], goals[d_row]) * 1.5
-    qe = G.QueryEdges.from_rows(nq, *(np.asarray(a) for a in rows["s"]),
-                                *(np.asarray(a) for a in rows["g"]), d_row, d_c)
+    qe = G.QueryEdges.from_rows(
+        nq, *(np.asarray(a) for a in rows["s"]), *(np.asarray(a) for a in rows["g"]), d_row, d_c
+    )
     _check(n, edges, costs, states, goals, qe, m)
 
 
@@ -122,9 +131,17 @@ def test_unreachable_goal_and_unattached_ends_are_no_path():
     # query 0: start on component {0,1}, goal on {2,3}: unreachable
     # query 1: the start reaches no milestone; query 2: no milestone reaches the goal
     # query 3: start -> 0 -> 1 -> goal
-    qe = G.QueryEdges.from_rows(4, np.array([0, 2, 3]), np.array([0, 2, 0]), np.ones(3),
-                                np.array([0, 1, 3]), np.array([3, 3, 1]), np.ones(3),
-                                np.zeros(0, np.int64), np.zeros(0))
+    qe = G.QueryEdges.from_rows(
+        4,
+        np.array([0, 2, 3]),
+        np.array([0, 2, 0]),
+        np.ones(3),
+        np.array([0, 1, 3]),
+        np.array([3, 3, 1]),
+        np.ones(3),
+        np.zeros(0, np.int64),
+        np.zeros(0),
+    )
     got, seqs = _check(4, edges, costs, states, goals, qe, m)
     assert [s is None for s in seqs] == [True, True, True, False]
     assert seqs[3].tolist() == [0, 1] and got[3] == 3.0
@@ -134,9 +151,17 @@ def test_unreachable_goal_and_unattached_ends_are_no_path():
 def test_direct_edge_only_path_is_empty_and_zero_costs_are_raised():
     m = METRICS["euclid"]
     states = np.zeros((2, 2))
-    qe = G.QueryEdges.from_rows(1, np.array([0]), np.array([0]), np.zeros(1),
-                                np.array([0]), np.array([1]), np.zeros(1),
-                                np.array([0]), np.array([0.5]))
+    qe = G.QueryEdges.from_rows(
+        1,
+        np.array([0]),
+        np.array([0]),
+        np.zeros(1),
+        np.array([0]),
+        np.array([1]),
+        np.zeros(1),
+        np.array([0]),
+        np.array([0.5]),
+    )
     got, seqs = _check(2, np.array([[0, 1]]), np.zeros(1), states, np.zeros((1, 2)), qe, m)
     assert seqs[0].tolist() == [0, 1] and got[0] == pytest.approx(3 * G.MIN_EDGE_COST)
 
@@ -150,8 +175,12 @@ def test_heuristic_metric_is_the_robots_metric(name):
     m = G.heuristic_metric(env.robot)
     got = _metric_cost(m, a.astype(np.float64), b.astype(np.float64))
     np.testing.assert_allclose(got, ref, rtol=2e-6, atol=1e-6)
-    kernel = np.array([G._h(a.astype(np.float64), i, b[i].astype(np.float64), m.weights,
-                            m.periodic, m.groups) for i in range(20)])
+    kernel = np.array(
+        [
+            G._h(a.astype(np.float64), i, b[i].astype(np.float64), m.weights, m.periodic, m.groups)
+            for i in range(20)
+        ]
+    )
     np.testing.assert_allclose(kernel, got[:20] * (1 - G.HEURISTIC_SLACK), rtol=1e-12)
 
 
@@ -159,19 +188,27 @@ def test_heuristic_metric_is_the_robots_metric(name):
 def test_roadmap_search_cost_equals_dijkstra(name):
     env = nj.make_env(name)
     padding = env.resolve_padding(None)
-    rm = R.roadmap_for(env, padding, milestones=1500, k=R.prm_star_k(1500, env.dim),
-                       roadmap_seed=0)
+    rm = R.roadmap_for(env, padding, milestones=1500, k=R.prm_star_k(1500, env.dim), roadmap_seed=0)
     q, _ = env.sample_queries(jax.random.key(0), 60, p_nt=0.7)
     q = np.asarray(q, np.float32)
     index = R.MetricIndex(env.robot, env.world, rm.milestones)
-    qe = RE.query_edges(env.robot, env.world, rm, index, q, R.prm_star_k(1500, env.dim), padding,
-                        "discretized").edges
-    got, _ = _check(len(rm.milestones), rm.edges, rm.costs, rm.milestones, q[:, 1], qe,
-                    G.heuristic_metric(env.robot))
+    qe = RE.query_edges(
+        env.robot, env.world, rm, index, q, R.prm_star_k(1500, env.dim), padding, "discretized"
+    ).edges
+    got, _ = _check(
+        len(rm.milestones),
+        rm.edges,
+        rm.costs,
+        rm.milestones,
+        q[:, 1],
+        qe,
+        G.heuristic_metric(env.robot),
+    )
     assert np.isfinite(got).mean() > 0.8
     assert R._graph_for(rm) is R._graph_for(rm)  # built once per roadmap
-    paths = R._search(env.robot, env.world, rm, q, R.prm_star_k(1500, env.dim), padding, 2,
-                      "discretized")
+    paths = R._search(
+        env.robot, env.world, rm, q, R.prm_star_k(1500, env.dim), padding, 2, "discretized"
+    )
     for i, p in enumerate(paths):
         assert (p is None) == np.isinf(got[i])
         if p is not None:
@@ -186,9 +223,17 @@ def test_paths_longer_than_the_first_pass_cap():
     states = np.stack([np.arange(n, dtype=np.float64), np.zeros(n)], 1)
     edges = np.stack([np.arange(n - 1), np.arange(1, n)], 1)  # a chain
     goals = np.array([[n, 0.0], [3.5, 0.0]])
-    qe = G.QueryEdges.from_rows(2, np.array([0, 1]), np.array([0, 0]), np.ones(2),
-                                np.array([0, 1]), np.array([n - 1, 3]), np.array([1.0, 0.5]),
-                                np.zeros(0, np.int64), np.zeros(0))
+    qe = G.QueryEdges.from_rows(
+        2,
+        np.array([0, 1]),
+        np.array([0, 0]),
+        np.ones(2),
+        np.array([0, 1]),
+        np.array([n - 1, 3]),
+        np.array([1.0, 0.5]),
+        np.zeros(0, np.int64),
+        np.zeros(0),
+    )
     got, seqs = _check(n, edges, np.ones(n - 1), states, goals, qe, m)
     assert seqs[0].tolist() == list(range(n)) and got[0] == n + 1
     assert seqs[1].tolist() == [0, 1, 2, 3] and got[1] == 4.5

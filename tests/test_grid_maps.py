@@ -11,8 +11,10 @@ from pathlib import Path
 import jax
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
-from shapely.geometry import LineString, Point, box as shapely_box
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from shapely.geometry import LineString, Point
+from shapely.geometry import box as shapely_box
 from shapely.ops import unary_union
 
 import ntq_jax as nj
@@ -20,7 +22,8 @@ from ntq_jax import broadphase, grid_maps
 from ntq_jax.envs import Env, EnvError
 from ntq_jax.geometry import World
 from ntq_jax.grid_maps import GridMapError, rectangle_cover
-from ntq_jax.robots import batch as _batch, robot_from_json
+from ntq_jax.robots import batch as _batch
+from ntq_jax.robots import robot_from_json
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -43,15 +46,24 @@ def test_movingai_parses_crlf_and_terrain(tmp_path):
     assert env.world.num_boxes == len(rectangle_cover(g.occupied)) and env.robot.kind == "point"
 
 
-@pytest.mark.parametrize("text, match", [
-    ("type octile\nheight 2\nwidth 3\nmap\n...\n..\n", "line 6 has 2 characters, expected width 3"),
-    ("type octile\nheight 3\nwidth 3\nmap\n...\n...\n", "has 2 map rows .* expected height 3"),
-    ("type octile\nwidth 3\nheight 2\nmap\n...\n...\n", "line 2 is 'width 3': expected 'height <value>'"),
-    ("type grid\nheight 1\nwidth 1\nmap\n.\n", "type 'grid' is not supported"),
-    ("type octile\nheight x\nwidth 1\nmap\n.\n", "height 'x' must be a positive integer"),
-    ("type octile\nheight 1\nwidth 1\nmap\n.\n.\n", "line 6: unexpected content"),
-    ("", "ended before the 'type' header line"),
-])
+@pytest.mark.parametrize(
+    "text, match",
+    [
+        (
+            "type octile\nheight 2\nwidth 3\nmap\n...\n..\n",
+            "line 6 has 2 characters, expected width 3",
+        ),
+        ("type octile\nheight 3\nwidth 3\nmap\n...\n...\n", "has 2 map rows .* expected height 3"),
+        (
+            "type octile\nwidth 3\nheight 2\nmap\n...\n...\n",
+            "line 2 is 'width 3': expected 'height <value>'",
+        ),
+        ("type grid\nheight 1\nwidth 1\nmap\n.\n", "type 'grid' is not supported"),
+        ("type octile\nheight x\nwidth 1\nmap\n.\n", "height 'x' must be a positive integer"),
+        ("type octile\nheight 1\nwidth 1\nmap\n.\n.\n", "line 6: unexpected content"),
+        ("", "ended before the 'type' header line"),
+    ],
+)
 def test_movingai_errors_name_the_line(tmp_path, text, match):
     p = tmp_path / "bad.map"
     p.write_text(text)
@@ -70,8 +82,10 @@ PIXELS = np.array([[0, 254, 205, 254], [254, 254, 0, 100], [230, 205, 254, 0]], 
 
 
 def _yaml(path, image, negate=0, extra="", crlf=False):
-    text = (f"# a map\nimage: {image}\nresolution: 0.5   # m/cell\norigin: [-1.0, 2.0, 0.0]\n"
-            f"negate: {negate}\noccupied_thresh: 0.65\nfree_thresh: 0.196\n{extra}")
+    text = (
+        f"# a map\nimage: {image}\nresolution: 0.5   # m/cell\norigin: [-1.0, 2.0, 0.0]\n"
+        f"negate: {negate}\noccupied_thresh: 0.65\nfree_thresh: 0.196\n{extra}"
+    )
     if crlf:
         text = text.replace("\n", "\r\n")
     path.write_bytes(text.encode())
@@ -80,8 +94,11 @@ def _yaml(path, image, negate=0, extra="", crlf=False):
 
 def _pgm_p5(path, px, comment=True):
     h, w = px.shape
-    head = b"P5\n" + (b"# CREATOR: map_saver.cpp 0.050 m/pix\n" if comment else b"") + \
-        f"{w} {h}\n255\n".encode()
+    head = (
+        b"P5\n"
+        + (b"# CREATOR: map_saver.cpp 0.050 m/pix\n" if comment else b"")
+        + f"{w} {h}\n255\n".encode()
+    )
     path.write_bytes(head + px.tobytes())
 
 
@@ -109,6 +126,7 @@ def test_ros_map_trinary_formats(tmp_path, fmt):
         _pgm_p2(img, PIXELS)
     else:
         from PIL import Image
+
         im = Image.fromarray(PIXELS, "L")
         (im if fmt == "png_l" else im.convert("RGB")).save(img)
     y = _yaml(tmp_path / "m.yaml", img.name, crlf=(fmt == "p2"))
@@ -133,18 +151,27 @@ def test_ros_map_negate_and_world(tmp_path):
 
 
 def _ros_yaml(path, image, resolution, origin):
-    path.write_text(f"image: {image}\nresolution: {resolution}\norigin: {origin}\nnegate: 0\n"
-                    "occupied_thresh: 0.65\nfree_thresh: 0.196\n")
+    path.write_text(
+        f"image: {image}\nresolution: {resolution}\norigin: {origin}\nnegate: 0\n"
+        "occupied_thresh: 0.65\nfree_thresh: 0.196\n"
+    )
     return path
 
 
-@pytest.mark.parametrize("resolution, origin, match", [
-    ("1.0e+300", "[0.0, 0.0, 0.0]", r"float32 world coordinates cannot hold"),  # inf bounds
-    ("1.0e-300", "[0.0, 0.0, 0.0]", r"float32 world coordinates cannot hold"),  # zero width
-    ("1.0e+38", "[0.0, 0.0, 0.0]", r"float32 world coordinates cannot hold"),  # 4e38 > max
-    ("0.05", "[500000.0, 4000000.0, 0.0]", r"move its cell edges by up to .* cells.*origin to "
-                                          r"\[0, 0, 0\]"),  # UTM: float32 spacing 3 cm > cells/100
-])
+@pytest.mark.parametrize(
+    "resolution, origin, match",
+    [
+        ("1.0e+300", "[0.0, 0.0, 0.0]", r"float32 world coordinates cannot hold"),  # inf bounds
+        ("1.0e-300", "[0.0, 0.0, 0.0]", r"float32 world coordinates cannot hold"),  # zero width
+        ("1.0e+38", "[0.0, 0.0, 0.0]", r"float32 world coordinates cannot hold"),  # 4e38 > max
+        (
+            "0.05",
+            "[500000.0, 4000000.0, 0.0]",
+            r"move its cell edges by up to .* cells.*origin to "
+            r"\[0, 0, 0\]",
+        ),  # UTM: float32 spacing 3 cm > cells/100
+    ],
+)
 def test_map_geometry_float32_cannot_hold_is_refused(tmp_path, resolution, origin, match, script):
     _pgm_p5(tmp_path / "m.pgm", PIXELS)
     y = _ros_yaml(tmp_path / "m.yaml", "m.pgm", resolution, origin)
@@ -171,11 +198,14 @@ def test_map_geometry_float32_keeps_cell_edges_within_a_hundredth_of_a_cell(tmp_
     assert np.array_equal(env.rasterize(0.05, padding=0.0), g.occupied)
 
 
-@pytest.mark.parametrize("extra, match", [
-    ("resolution: 0\n", None),  # duplicate key: yaml keeps the last -> resolution 0
-    ("mode: scale\n", "mode 'scale' is not supported"),
-    ("foo: 1\n", r"unknown field\(s\) \['foo'\]"),
-])
+@pytest.mark.parametrize(
+    "extra, match",
+    [
+        ("resolution: 0\n", None),  # duplicate key: yaml keeps the last -> resolution 0
+        ("mode: scale\n", "mode 'scale' is not supported"),
+        ("foo: 1\n", r"unknown field\(s\) \['foo'\]"),
+    ],
+)
 def test_ros_map_field_errors(tmp_path, extra, match):
     _pgm_p5(tmp_path / "m.pgm", PIXELS)
     y = _yaml(tmp_path / "m.yaml", "m.pgm", extra=extra)
@@ -183,21 +213,36 @@ def test_ros_map_field_errors(tmp_path, extra, match):
         grid_maps.read_ros_map(y)
 
 
-@pytest.mark.parametrize("text, match", [
-    ("image: m.pgm\norigin: [0, 0, 0]\noccupied_thresh: 0.65\nfree_thresh: 0.2\nnegate: 0\n",
-     "missing required field 'resolution'"),
-    ("image: m.pgm\nresolution: 0.1\norigin: [0, 0]\noccupied_thresh: 0.65\nfree_thresh: 0.2\n",
-     r"origin is \[0, 0\]: expected \[x, y, yaw\]"),
-    ("image: m.pgm\nresolution: 0.1\norigin: [0, 0, 0.5]\noccupied_thresh: 0.65\nfree_thresh: 0.2\n",
-     "origin yaw is 0.5: only yaw 0"),
-    ("image: m.pgm\nresolution: 0.1\norigin: [0, 0, 0]\noccupied_thresh: 0.1\nfree_thresh: 0.2\n",
-     "free_thresh 0.2 must be < occupied_thresh 0.1"),
-    ("image: nothere.pgm\nresolution: 0.1\norigin: [0, 0, 0]\noccupied_thresh: 0.65\nfree_thresh: 0.2\n",
-     "map image .*nothere.pgm.* does not exist"),
-    ("image: m.pgm\nresolution: 0.1\norigin: [0, 0, 0]\nnegate: 2\noccupied_thresh: 0.65\nfree_thresh: 0.2\n",
-     "negate must be 0 or 1"),
-    ("image: m.pgm\nresolution: 0.1: 2\norigin: [0, 0, 0]\n", "line 2: not valid YAML"),
-])
+@pytest.mark.parametrize(
+    "text, match",
+    [
+        (
+            "image: m.pgm\norigin: [0, 0, 0]\noccupied_thresh: 0.65\nfree_thresh: 0.2\nnegate: 0\n",
+            "missing required field 'resolution'",
+        ),
+        (
+            "image: m.pgm\nresolution: 0.1\norigin: [0, 0]\noccupied_thresh: 0.65\nfree_thresh: 0.2\n",
+            r"origin is \[0, 0\]: expected \[x, y, yaw\]",
+        ),
+        (
+            "image: m.pgm\nresolution: 0.1\norigin: [0, 0, 0.5]\noccupied_thresh: 0.65\nfree_thresh: 0.2\n",
+            "origin yaw is 0.5: only yaw 0",
+        ),
+        (
+            "image: m.pgm\nresolution: 0.1\norigin: [0, 0, 0]\noccupied_thresh: 0.1\nfree_thresh: 0.2\n",
+            "free_thresh 0.2 must be < occupied_thresh 0.1",
+        ),
+        (
+            "image: nothere.pgm\nresolution: 0.1\norigin: [0, 0, 0]\noccupied_thresh: 0.65\nfree_thresh: 0.2\n",
+            "map image .*nothere.pgm.* does not exist",
+        ),
+        (
+            "image: m.pgm\nresolution: 0.1\norigin: [0, 0, 0]\nnegate: 2\noccupied_thresh: 0.65\nfree_thresh: 0.2\n",
+            "negate must be 0 or 1",
+        ),
+        ("image: m.pgm\nresolution: 0.1: 2\norigin: [0, 0, 0]\n", "line 2: not valid YAML"),
+    ],
+)
 def test_ros_yaml_errors(tmp_path, text, match):
     _pgm_p5(tmp_path / "m.pgm", PIXELS)
     y = tmp_path / "m.yaml"
@@ -223,8 +268,9 @@ def test_pgm_errors(tmp_path):
 # Rectangle cover
 # ---------------------------------------------------------------------------
 
+
 @settings(max_examples=60, deadline=None)
-@given(st.integers(1, 24), st.integers(1, 24), st.floats(0.0, 1.0), st.integers(0, 2 ** 31))
+@given(st.integers(1, 24), st.integers(1, 24), st.floats(0.0, 1.0), st.integers(0, 2**31))
 def test_rectangle_cover_is_exact(h, w, density, seed):
     occ = np.random.default_rng(seed).random((h, w)) < density
     rects = rectangle_cover(occ)
@@ -249,6 +295,7 @@ def test_rectangle_cover_merges():
 # Wrapper JSON, import_map.py, make_env arguments
 # ---------------------------------------------------------------------------
 
+
 def test_wrapper_json_and_import_script(tmp_path, script):
     (tmp_path / "maps").mkdir()
     grid_maps.write_movingai(tmp_path / "maps" / "maze.map", grid_maps.maze_grid(32, 2, seed=3))
@@ -260,28 +307,57 @@ def test_wrapper_json_and_import_script(tmp_path, script):
     direct = nj.make_env(tmp_path / "maps" / "maze.map", robot=robot, padding=0.1, scale=0.5)
     assert direct.content_hash() == env.content_hash()
     out = tmp_path / "converted.json"
-    r = subprocess.run([sys.executable, str(ROOT / "scripts" / "import_map.py"),
-                        str(tmp_path / "maps" / "maze.map"), "--robot", json.dumps(robot),
-                        "--padding", "0.1", "--scale", "0.5", "--name", "maze", "--out", str(out)],
-                       capture_output=True, text=True)
+    r = subprocess.run(
+        [
+            sys.executable,
+            str(ROOT / "scripts" / "import_map.py"),
+            str(tmp_path / "maps" / "maze.map"),
+            "--robot",
+            json.dumps(robot),
+            "--padding",
+            "0.1",
+            "--scale",
+            "0.5",
+            "--name",
+            "maze",
+            "--out",
+            str(out),
+        ],
+        capture_output=True,
+        text=True,
+    )
     assert r.returncode == 0, r.stderr
     assert "boxes" in r.stdout
     assert nj.make_env(out).content_hash() == env.content_hash()
     r = script("import_map", tmp_path / "maps" / "maze.map", "--robot", "{bad")
-    assert r.returncode == 2 and r.stderr.count("\n") == 1 and "--robot is not valid JSON" in r.stderr
+    assert (
+        r.returncode == 2 and r.stderr.count("\n") == 1 and "--robot is not valid JSON" in r.stderr
+    )
     r = script("import_map", tmp_path / "maps" / "maze.map", "--out", tmp_path)
     assert r.returncode == 2 and r.stderr.count("\n") == 1
     assert f"--out {tmp_path} is a folder; give a file name" in r.stderr
 
 
-@pytest.mark.parametrize("spec, match", [
-    ({"grid": "m.map", "robot": {"kind": "point"}, "boxes": []}, r"unknown key\(s\) \['boxes'\]"),
-    ({"grid": "m.map"}, "missing required key 'robot'"),
-    ({"grid": "m.map", "robot": {"kind": "point"}, "unknown": "free"}, "'unknown' is for ROS maps"),
-    ({"grid": "m.map", "robot": {"kind": "point"}, "scale": -1}, "scale must be a finite number > 0"),
-    ({"grid": "nothere.map", "robot": {"kind": "point"}}, "cannot read map file"),
-    ({"grid": 3, "robot": {"kind": "point"}}, "grid must be the path"),
-])
+@pytest.mark.parametrize(
+    "spec, match",
+    [
+        (
+            {"grid": "m.map", "robot": {"kind": "point"}, "boxes": []},
+            r"unknown key\(s\) \['boxes'\]",
+        ),
+        ({"grid": "m.map"}, "missing required key 'robot'"),
+        (
+            {"grid": "m.map", "robot": {"kind": "point"}, "unknown": "free"},
+            "'unknown' is for ROS maps",
+        ),
+        (
+            {"grid": "m.map", "robot": {"kind": "point"}, "scale": -1},
+            "scale must be a finite number > 0",
+        ),
+        ({"grid": "nothere.map", "robot": {"kind": "point"}}, "cannot read map file"),
+        ({"grid": 3, "robot": {"kind": "point"}}, "grid must be the path"),
+    ],
+)
 def test_wrapper_json_errors(tmp_path, spec, match):
     (tmp_path / "m.map").write_text("type octile\nheight 1\nwidth 2\nmap\n.@\n")
     (tmp_path / "w.json").write_text(json.dumps(spec))
@@ -298,13 +374,18 @@ def test_make_env_grid_arguments_only_for_grids():
 # Kernels: looped and indexed against unrolled, and against a per-cell reference
 # ---------------------------------------------------------------------------
 
-ROBOTS = [({"kind": "point"}, 0.3), ({"kind": "rigid_body", "length": 1.0, "width": 0.4}, 0.2),
-          ({"kind": "nlink", "link_lengths": [5.0, 5.0], "base": [25.0, 25.0]}, 0.2)]
+ROBOTS = [
+    ({"kind": "point"}, 0.3),
+    ({"kind": "rigid_body", "length": 1.0, "width": 0.4}, 0.2),
+    ({"kind": "nlink", "link_lengths": [5.0, 5.0], "base": [25.0, 25.0]}, 0.2),
+]
 
 
 def _random_world(n, seed=1):
     rng = np.random.default_rng(seed)
-    return World.create([[0, 50], [0, 50]], np.c_[rng.uniform(0, 50, (n, 2)), rng.uniform(0.1, 0.8, (n, 2))])
+    return World.create(
+        [[0, 50], [0, 50]], np.c_[rng.uniform(0, 50, (n, 2)), rng.uniform(0.1, 0.8, (n, 2))]
+    )
 
 
 def _shared_world():
@@ -371,18 +452,21 @@ def test_looped_and_indexed_equal_unrolled(robot, pad, monkeypatch):
     point = robot["kind"] == "point"
 
     def answers(e):
-        return [np.asarray(e.is_valid(a, pad))] + ([np.asarray(e.steer_to(a, b, pad))] if point else [])
+        return [np.asarray(e.is_valid(a, pad))] + (
+            [np.asarray(e.steer_to(a, b, pad))] if point else []
+        )
 
     def kernels():  # new functions: traced afresh, with the UNROLL_MAX of the moment
         r = env.robot
         return [lambda w, x, y: jax.vmap(r.is_valid, in_axes=(1, None, None))(x.T, w, pad)] + (
-            [lambda w, x, y: r.steer_to_batch(x.T, y.T, w, pad)] if point else [])
+            [lambda w, x, y: r.steer_to_batch(x.T, y.T, w, pad)] if point else []
+        )
 
     got = answers(env)
     looped = Env("x", env.robot, world, pad)
     object.__setattr__(looped, "world", world)
     got_looped = answers(looped)
-    monkeypatch.setattr(broadphase, "UNROLL_MAX", 10 ** 6)
+    monkeypatch.setattr(broadphase, "UNROLL_MAX", 10**6)
     unrolled = Env("x", env.robot, world, pad)
     assert unrolled.world.index is None
     # the reference: its own programs, traced while every box unrolls; the compiled
@@ -410,8 +494,12 @@ def test_imported_grid_agrees_with_cells(tmp_path, pad):
     assert env.world.num_boxes > broadphase.UNROLL_MAX and env.world.index is not None
     g = env.grid
     assert np.array_equal(g.occupied, occ)
-    cells = unary_union([shapely_box(-1 + c * 0.5, 2 + r * 0.5, -1 + (c + 1) * 0.5, 2 + (r + 1) * 0.5)
-                         for r, c in zip(*np.nonzero(occ))])
+    cells = unary_union(
+        [
+            shapely_box(-1 + c * 0.5, 2 + r * 0.5, -1 + (c + 1) * 0.5, 2 + (r + 1) * 0.5)
+            for r, c in zip(*np.nonzero(occ))
+        ]
+    )
     (x0, x1), (y0, y1) = g.bounds
     pts = np.c_[rng.uniform(x0, x1, 600), rng.uniform(y0, y1, 600)].astype(np.float32)
     valid = np.asarray(env.is_valid(pts))
@@ -421,8 +509,12 @@ def test_imported_grid_agrees_with_cells(tmp_path, pad):
     b = (a + rng.normal(0, 2.0, a.shape)).astype(np.float32)
     free = np.asarray(env.steer_to(a, b))
     inside = lambda p: x0 <= p[0] <= x1 and y0 <= p[1] <= y1  # noqa: E731
-    ref = np.array([inside(p) and inside(q) and cells.distance(LineString([p, q])) > pad
-                    for p, q in zip(a.astype(np.float64), b.astype(np.float64))])
+    ref = np.array(
+        [
+            inside(p) and inside(q) and cells.distance(LineString([p, q])) > pad
+            for p, q in zip(a.astype(np.float64), b.astype(np.float64))
+        ]
+    )
     np.testing.assert_array_equal(free, ref)
     assert 0 < free.sum() < len(free)
 
@@ -431,6 +523,7 @@ def test_astar_plans_on_the_maps_own_grid(tmp_path):
     p = grid_maps.write_movingai(tmp_path / "m.map", grid_maps.maze_grid(33, 3, seed=1))
     env = nj.make_env(p)
     from ntq_jax.planners.astar import config_grid
+
     assert np.array_equal(config_grid(env, 1.0, 0.0).occ, env.grid.occupied)
     s = env.sample_states(jax.random.key(0), 8)
     res = nj.plan(env, np.stack([s[:4], s[4:]], 1), "astar", padding=0.0, resolution=0.1)
@@ -447,6 +540,7 @@ def _big_map(tmp_path):
 def test_make_env_takes_a_robot_kind_and_refuses_what_it_cannot_use(tmp_path):
     from ntq_jax import make_env
     from ntq_jax.envs import EnvError
+
     p = tmp_path / "m.map"
     p.write_bytes(MOVINGAI.encode())
     assert make_env(str(p), robot="point").robot.kind == "point"  # the CLI's kind strings
@@ -462,16 +556,21 @@ def test_ros_exponents_bom_and_p2_pixel_range(tmp_path):
     no content; P2 pixels outside [0, maxval] are refused."""
     _pgm_p5(tmp_path / "m.pgm", PIXELS)
     y = tmp_path / "m.yaml"
-    y.write_bytes(("\ufeffimage: m.pgm\nresolution: 5e-2\n"
-                   "origin: [-1e0, 2.0, 0.0]\nnegate: 0\noccupied_thresh: 0.65\n"
-                   "free_thresh: 0.196\n").encode())
+    y.write_bytes(
+        (
+            "\ufeffimage: m.pgm\nresolution: 5e-2\n"
+            "origin: [-1e0, 2.0, 0.0]\nnegate: 0\noccupied_thresh: 0.65\n"
+            "free_thresh: 0.196\n"
+        ).encode()
+    )
     g = grid_maps.read_ros_map(y)
     assert g.resolution == 0.05 and g.origin == (-1.0, 2.0)
     np.testing.assert_array_equal(g.occupied, _expected(PIXELS))
     m = tmp_path / "bom.map"
     m.write_bytes(("\ufeff" + MOVINGAI).encode())
-    np.testing.assert_array_equal(grid_maps.read_movingai(m).occupied,
-                                  grid_maps.read_movingai(_plain(tmp_path)).occupied)
+    np.testing.assert_array_equal(
+        grid_maps.read_movingai(m).occupied, grid_maps.read_movingai(_plain(tmp_path)).occupied
+    )
     for bad in ("256", "-1"):
         img = tmp_path / f"bad{bad}.pgm"
         img.write_text(f"P2\n2 1\n255\n0 {bad}\n")
@@ -489,15 +588,16 @@ def test_large_maps_are_drawn_as_one_image_matching_the_boxes(monkeypatch):
     """Above IMAGE_MAP_BOXES boxes draw_map draws one image (no patch per box): every pixel
     whose square lies inside a box is dark, every pixel farther than the padding light."""
     import matplotlib
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
     from ntq_jax import plotting
 
     occ = grid_maps.maze_grid(40, 1, 0)
     g = grid_maps.OccupancyGrid(occ, 1.0)
     boxes = grid_maps.cover_boxes(g)
-    spec = {"robot": {"kind": "point"}, "bounds": g.bounds, "boxes": boxes.tolist(),
-            "padding": 0.1}
+    spec = {"robot": {"kind": "point"}, "bounds": g.bounds, "boxes": boxes.tolist(), "padding": 0.1}
     monkeypatch.setattr(plotting, "IMAGE_MAP_BOXES", len(boxes) - 1)
     monkeypatch.setattr(plotting, "IMAGE_PIXELS", 400)
     fig, ax = plt.subplots()

@@ -8,7 +8,8 @@
 * no function of theirs has over 60 statements (every statement of its body,
   nested ones included, its docstring aside): statements, not lines, so packing
   two onto one line gains nothing;
-* no script or benchmark edits ``sys.path`` (they run against the installed package).
+* no script or benchmark edits ``sys.path`` (they run against the installed package);
+* the tree passes ruff's lint and format check (the settings in ``pyproject.toml``).
 * the suite hands its files to the xdist workers heaviest first.
 """
 
@@ -16,6 +17,8 @@ from __future__ import annotations
 
 import ast
 import re
+import subprocess
+import sys
 import warnings
 from pathlib import Path
 
@@ -47,8 +50,11 @@ def _statements(fn: ast.AST) -> int:
     """The statements of a function's body, nested ones included, its docstring aside."""
     body = fn.body
     first = body[0]
-    doc = (isinstance(first, ast.Expr) and isinstance(first.value, ast.Constant)
-           and isinstance(first.value.value, str))
+    doc = (
+        isinstance(first, ast.Expr)
+        and isinstance(first.value, ast.Constant)
+        and isinstance(first.value.value, str)
+    )
     return sum(1 for node in ast.walk(fn) if isinstance(node, ast.stmt) and node is not fn) - doc
 
 
@@ -58,22 +64,35 @@ def test_the_core_never_imports_the_experiment_layer():
         if "experiment" in f.relative_to(PACKAGE).parts:
             continue
         names = _imported(ast.parse(f.read_text(encoding="utf-8")))
-        back += [f"{f.relative_to(REPO)} imports {n}" for n in sorted(names)
-                 if n == "ntq_jax.experiment" or n.startswith("ntq_jax.experiment.")]
+        back += [
+            f"{f.relative_to(REPO)} imports {n}"
+            for n in sorted(names)
+            if n == "ntq_jax.experiment" or n.startswith("ntq_jax.experiment.")
+        ]
     assert not back, "\n".join(back)
 
 
 def test_the_layers_are_where_the_docs_say():
     experiment = {p.stem for p in (PACKAGE / "experiment").glob("*.py")}
-    assert {"config", "pipeline", "evaluate", "report", "summaries", "reproduction", "curve",
-            "cli"} <= experiment
+    assert {
+        "config",
+        "pipeline",
+        "evaluate",
+        "report",
+        "summaries",
+        "reproduction",
+        "curve",
+        "cli",
+    } <= experiment
     assert not any((PACKAGE / f"{m}.py").exists() for m in experiment if m != "__init__")
 
 
 @pytest.mark.parametrize("folder", ["ntq_jax", "scripts", "benchmarks"])
 def test_no_module_is_over_800_lines(folder):
-    sizes = {f"{f.relative_to(REPO)}": len(f.read_text(encoding="utf-8").splitlines())
-             for f in _files(folder)}
+    sizes = {
+        f"{f.relative_to(REPO)}": len(f.read_text(encoding="utf-8").splitlines())
+        for f in _files(folder)
+    }
     for name, n in sizes.items():
         if SOFT_MODULE_LINES < n <= MAX_MODULE_LINES:
             warnings.warn(f"{name}: {n} lines: does it hold a second concept to split out?")
@@ -93,15 +112,18 @@ def test_no_function_is_over_60_statements(folder):
 
 
 def test_statements_not_lines_are_counted():
-    packed = ast.parse("def f():\n    \"\"\"Doc.\"\"\"\n    a = 1; b = 2\n    if a:\n        c = 3\n")
+    packed = ast.parse('def f():\n    """Doc."""\n    a = 1; b = 2\n    if a:\n        c = 3\n')
     assert _statements(packed.body[0]) == 4  # two on one line, the if and the one inside it
 
 
 @pytest.mark.parametrize("folder", ["scripts", "benchmarks"])
 def test_no_script_edits_sys_path(folder):
     edit = re.compile(r"sys\.path\s*(\.(insert|append|extend)\b|\[.*\]\s*=|\+?=)")
-    edits = [str(f.relative_to(REPO)) for f in _files(folder)
-             if edit.search(f.read_text(encoding="utf-8"))]
+    edits = [
+        str(f.relative_to(REPO))
+        for f in _files(folder)
+        if edit.search(f.read_text(encoding="utf-8"))
+    ]
     assert not edits, edits
 
 
@@ -123,5 +145,24 @@ def test_the_suite_hands_out_the_heaviest_files_first(tmp_path, monkeypatch):
     ids = ["tests/a.py::x", "tests/new.py::y", "tests/b.py::z", "tests/a.py::w", "tests/b.py::v"]
     items = [SimpleNamespace(nodeid=i) for i in ids]
     conftest.pytest_collection_modifyitems(None, None, items)
-    assert [i.nodeid for i in items] == ["tests/b.py::z", "tests/b.py::v", "tests/a.py::x",
-                                         "tests/a.py::w", "tests/new.py::y"]
+    assert [i.nodeid for i in items] == [
+        "tests/b.py::z",
+        "tests/b.py::v",
+        "tests/a.py::x",
+        "tests/a.py::w",
+        "tests/new.py::y",
+    ]
+
+
+@pytest.mark.parametrize("mode", ["check", "format"])
+def test_the_tree_passes_ruff(mode):
+    pytest.importorskip("ruff")  # in the test extra
+    args = ["check", "--no-cache"] if mode == "check" else ["format", "--check", "--no-cache"]
+    out = subprocess.run(
+        [sys.executable, "-m", "ruff", *args, "ntq_jax", "scripts", "benchmarks", "tests", "docs"],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert out.returncode == 0, (out.stdout + out.stderr)[-4000:]

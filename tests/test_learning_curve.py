@@ -21,15 +21,26 @@ from ntq_jax.experiment.curve import prefix_dataset, run_curve
 from ntq_jax.experiment.pipeline import load_config
 
 ROOT = Path(__file__).resolve().parents[1]
-TINY = ["envs=[point/2]", "data.k_train=40", "data.gamma_queries=2000", "data.gamma_eval=false",
-        "train.epochs=2", "model.hidden=[32,32]", "eval.k_test=16", "eval.n_plan=20",
-        "eval.replan_rounds=2", "eval.replan_steps=6", "eval.gamma_queries=2000"]
+TINY = [
+    "envs=[point/2]",
+    "data.k_train=40",
+    "data.gamma_queries=2000",
+    "data.gamma_eval=false",
+    "train.epochs=2",
+    "model.hidden=[32,32]",
+    "eval.k_test=16",
+    "eval.n_plan=20",
+    "eval.replan_rounds=2",
+    "eval.replan_steps=6",
+    "eval.gamma_queries=2000",
+]
 SIZES = [20, 40]
 
 
 def _script():
-    spec = importlib.util.spec_from_file_location("learning_curve",
-                                                  ROOT / "scripts" / "learning_curve.py")
+    spec = importlib.util.spec_from_file_location(
+        "learning_curve", ROOT / "scripts" / "learning_curve.py"
+    )
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     return mod
@@ -47,8 +58,9 @@ def test_one_row_per_size_dataset_kind(curve):
     _, out, files = curve
     doc = json.loads((out / "curve.json").read_text())
     keys = [(r["size"], r["dataset"], r["kind"]) for r in doc["rows"]]
-    assert sorted(keys) == sorted((k, f"D{i}", kind) for k in SIZES for i in range(4)
-                                  for kind in ("uniform", "nontrivial"))
+    assert sorted(keys) == sorted(
+        (k, f"D{i}", kind) for k in SIZES for i in range(4) for kind in ("uniform", "nontrivial")
+    )
     for r in doc["rows"]:
         assert r["k_test"] == 16 and 0.0 <= r["success"] <= 1.0
         assert r["ci95"][0] <= r["success"] <= r["ci95"][1]
@@ -70,12 +82,24 @@ def test_sizes_are_prefixes_and_equal_a_run_at_that_size(curve, tmp_path):
         np.testing.assert_array_equal(s["targets"], d.targets[:n])
     # a run with data.k_train=20 writes exactly these datasets
     direct_cfg = load_config(None, TINY + ["data.k_train=20"])
-    summ = data.generate_datasets(make_env("point/2"), C.data_options(direct_cfg, "point/2"),
-                                  tmp_path / "d20",
-                                  env_name="point/2", progress=False, figure=False)
+    summ = data.generate_datasets(
+        make_env("point/2"),
+        C.data_options(direct_cfg, "point/2"),
+        tmp_path / "d20",
+        env_name="point/2",
+        progress=False,
+        figure=False,
+    )
     for s, d in zip(small, data.load_datasets(summ["env_dir"])):
-        for name in ("inputs", "targets", "path_index", "path_lengths", "queries",
-                     "query_kind", "solved"):
+        for name in (
+            "inputs",
+            "targets",
+            "path_index",
+            "path_lengths",
+            "queries",
+            "query_kind",
+            "solved",
+        ):
             np.testing.assert_array_equal(s[name], getattr(d, name), err_msg=name)
         np.testing.assert_array_equal(s["paths"], d.paths)
 
@@ -93,11 +117,23 @@ def test_rerun_reuses_finished_sizes(curve):
     assert (ens.stat().st_mtime_ns, res.stat().st_mtime_ns) == before
 
 
-@pytest.mark.parametrize("sizes, why", [("20,80", "larger than the config's k_train"),
-                                        ("0,20", "not positive"), ("20,x", "not an integer")])
+@pytest.mark.parametrize(
+    "sizes, why",
+    [
+        ("20,80", "larger than the config's k_train"),
+        ("0,20", "not positive"),
+        ("20,x", "not an integer"),
+    ],
+)
 def test_bad_size_is_one_error_line(tmp_path, capsys, sizes, why):
-    args = ["--sizes", sizes, "--out", str(tmp_path / "c"), "--no-progress",
-            "--no-compile-cache"] + [a for s in TINY for a in ("--set", s)]
+    args = [
+        "--sizes",
+        sizes,
+        "--out",
+        str(tmp_path / "c"),
+        "--no-progress",
+        "--no-compile-cache",
+    ] + [a for s in TINY for a in ("--set", s)]
     assert _script().main(args) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("error: ") and why in err[0]

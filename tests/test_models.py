@@ -54,8 +54,9 @@ def test_normalisation_round_trip(rigid):
     net = _net(spec)
     lo, hi = np.array(spec.lo), np.array(spec.hi)
     q = np.array([[1.0, 2.0, 0.5], [9.0, 0.1, -3.0]], np.float32)
-    n_lo, n_hi, back = _jit(net, lambda n: (n.normalize(lo), n.normalize(hi),
-                                            n.denormalize(n.normalize(q))))
+    n_lo, n_hi, back = _jit(
+        net, lambda n: (n.normalize(lo), n.normalize(hi), n.denormalize(n.normalize(q)))
+    )
     np.testing.assert_allclose(n_lo, -1.0, atol=1e-6)
     np.testing.assert_allclose(n_hi, 1.0, atol=1e-6)
     np.testing.assert_allclose(back, q, atol=1e-5)
@@ -86,8 +87,9 @@ def test_shortest_arc_loss_for_angles_only():
         lo, hi = np.array(spec.lo), np.array(spec.hi)
         _constant_output(net, (2 * (pred - lo) / (hi - lo) - 1)[0])
         inputs = jnp.zeros((1, 2 * d))
-        loss = float(_jit(net, lambda n: n.loss(inputs, target, jnp.ones(1), None,
-                                                deterministic=True)))
+        loss = float(
+            _jit(net, lambda n: n.loss(inputs, target, jnp.ones(1), None, deterministic=True))
+        )
         short, long = 0.02 / math.pi, 2.0 - 0.02 / math.pi  # normalised errors
         expect = (short if periodic else long) ** 2 / d
         assert loss == pytest.approx(expect, rel=1e-3), env.name
@@ -101,9 +103,13 @@ def test_masked_loss_ignores_padding(point):
     y = rng.uniform(0, 20, (6, 2)).astype(np.float32)
     garbage_y = y.copy()
     garbage_y[4:] = 1e6
-    a, b = _jit(net, lambda n: (
-        n.loss(x[:4], y[:4], jnp.ones(4), None, deterministic=True),
-        n.loss(x, garbage_y, jnp.array([1, 1, 1, 1, 0, 0.0]), None, deterministic=True)))
+    a, b = _jit(
+        net,
+        lambda n: (
+            n.loss(x[:4], y[:4], jnp.ones(4), None, deterministic=True),
+            n.loss(x, garbage_y, jnp.array([1, 1, 1, 1, 0, 0.0]), None, deterministic=True),
+        ),
+    )
     np.testing.assert_allclose(a, b, rtol=1e-6)
 
 
@@ -141,8 +147,13 @@ def test_predictor_dropout_active_and_members_consistent(point):
     def run(key, other_key):
         out = models.predictor(ens)(key, cur, goal)
         det = models.predictor(ens, 1, deterministic=True)
-        return (out, models.predictor(ens)(other_key, cur, goal),
-                models.predictor(ens, 3)(key, cur, goal), det(key, cur, goal), det(other_key, cur, goal))
+        return (
+            out,
+            models.predictor(ens)(other_key, cur, goal),
+            models.predictor(ens, 3)(key, cur, goal),
+            det(key, cur, goal),
+            det(other_key, cur, goal),
+        )
 
     out, other, one, det_a, det_b = run(jax.random.key(7), jax.random.key(8))
     assert out.shape == (4, 32, 2)
@@ -155,7 +166,9 @@ def test_predictor_dropout_active_and_members_consistent(point):
 
 
 def test_no_dropout_layers_is_deterministic(point):
-    spec = models.ModelSpec.from_env(point, ModelConfig(hidden=(8, 8), dropout=0.5, dropout_layers=0))
+    spec = models.ModelSpec.from_env(
+        point, ModelConfig(hidden=(8, 8), dropout=0.5, dropout_layers=0)
+    )
     ens = models.init_ensemble(spec, 0, num_members=2)
     fn = jax.jit(models.predictor(ens))
     c = jnp.ones((3, 2))

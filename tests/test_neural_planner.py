@@ -22,9 +22,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from jax.tree_util import Partial
-from shapely.geometry import LineString, Point, box as shapely_box
+from shapely.geometry import LineString, Point
+from shapely.geometry import box as shapely_box
 from shapely.ops import unary_union
 
 from ntq_jax import Env
@@ -53,8 +55,15 @@ NOSTEER = PlannerOptions(n_plan=12, steer=False, delta=1.0)
 
 
 def make(name):
-    return Env.from_json({"name": name, "robot": {"kind": "point"}, "bounds": BOUNDS,
-                          "boxes": MAPS[name], "padding": 0.0})
+    return Env.from_json(
+        {
+            "name": name,
+            "robot": {"kind": "point"},
+            "bounds": BOUNDS,
+            "boxes": MAPS[name],
+            "padding": 0.0,
+        }
+    )
 
 
 def _fmix(x):
@@ -76,7 +85,7 @@ def _normal(key, shape):
         h = _fmix(h ^ _fmix(w + np.uint32(0x7F4A7C15)))
     size = int(np.prod(shape))
     x = _fmix(jnp.arange(2 * size, dtype=jnp.uint32) * np.uint32(0x9E3779B1) + h)
-    u = ((x >> 8).astype(jnp.float32) + 0.5) * np.float32(2.0 ** -24)  # in (0, 1)
+    u = ((x >> 8).astype(jnp.float32) + 0.5) * np.float32(2.0**-24)  # in (0, 1)
     z = jnp.sqrt(-2.0 * jnp.log(u[:size])) * jnp.cos(np.float32(2 * np.pi) * u[size:])
     return z.reshape(shape)
 
@@ -92,8 +101,9 @@ def _stand_in(mode, nodes, dist, world, jump, sigma, key, cur, goal):
     # current -> goal, current -> seek): one motion check in every compiled stage, not four
     a = jnp.concatenate([jnp.repeat(cur, v, 0), tile, cur, cur])
     b = jnp.concatenate([tile, jnp.repeat(goal, v, 0), goal, seek])
-    vis_c, vis_g, direct, ok = jnp.split(steer_to_cm(robot, world, a.T, b.T, 0.0),
-                                         [n * v, 2 * n * v, 2 * n * v + n])
+    vis_c, vis_g, direct, ok = jnp.split(
+        steer_to_cm(robot, world, a.T, b.T, 0.0), [n * v, 2 * n * v, 2 * n * v + n]
+    )
     vis_c, vis_g = vis_c.reshape(n, v), vis_g.reshape(n, v)
     dg = jnp.where(vis_g, jnp.linalg.norm(nodes[None] - goal[:, None], axis=-1), jnp.inf)
     h = jnp.min(dist[None] + dg[:, None, :], axis=-1)
@@ -103,12 +113,18 @@ def _stand_in(mode, nodes, dist, world, jump, sigma, key, cur, goal):
     seek_noisy = seek + sigma * _normal(key, cur.shape)
     cautious = jnp.where(ok[:, None], seek, cur)
     broken = oracle
-    for rule in jump:  # (from, towards, to): jump straight to ``to`` from ``from`` towards ``towards``
+    for (
+        rule
+    ) in jump:  # (from, towards, to): jump straight to ``to`` from ``from`` towards ``towards``
         hit = (jnp.linalg.norm(cur - rule[0], axis=1) < 1e-6) & (
-            jnp.linalg.norm(goal - rule[1], axis=1) < 1e-6)
+            jnp.linalg.norm(goal - rule[1], axis=1) < 1e-6
+        )
         broken = jnp.where(hit[:, None], rule[2], broken)
-    return jnp.select([mode == ORACLE, mode == SEEKER, mode == CAUTIOUS, mode == BROKEN],
-                      [oracle, seek_noisy, cautious, broken], cur)
+    return jnp.select(
+        [mode == ORACLE, mode == SEEKER, mode == CAUTIOUS, mode == BROKEN],
+        [oracle, seek_noisy, cautious, broken],
+        cur,
+    )
 
 
 ENV_ROBOT = make("straight").robot
@@ -131,8 +147,15 @@ def pnet(name, mode, jump=(NO_JUMP, NO_JUMP), sigma=0.0):
         nodes[: g.num_nodes], dist[: g.num_nodes, : g.num_nodes] = g.nodes, g.dist
         _GRAPHS[name] = (g, jnp.asarray(nodes), jnp.asarray(dist))
     _, nodes, dist = _GRAPHS[name]
-    return Partial(_stand_in, jnp.int32(mode), nodes, dist, env.world,
-                   jnp.asarray(jump, jnp.float32), jnp.float32(sigma))
+    return Partial(
+        _stand_in,
+        jnp.int32(mode),
+        nodes,
+        dist,
+        env.world,
+        jnp.asarray(jump, jnp.float32),
+        jnp.float32(sigma),
+    )
 
 
 def optimum(name, queries):
@@ -143,8 +166,9 @@ def optimum(name, queries):
 
 def shapely_free(name, path):
     """Independent float64 check: in bounds and no segment touches a (closed) box."""
-    obst = unary_union([shapely_box(cx - hw, cy - hh, cx + hw, cy + hh)
-                        for cx, cy, hw, hh in MAPS[name]])
+    obst = unary_union(
+        [shapely_box(cx - hw, cy - hh, cx + hw, cy + hh) for cx, cy, hw, hh in MAPS[name]]
+    )
     p = np.asarray(path, np.float64)
     if not (np.all(np.isfinite(p)) and np.all((p >= 0) & (p <= 10))):
         return False
@@ -189,7 +213,9 @@ def test_one_wall_oracle_finds_the_optimum():
 def test_one_wall_seeker_walks_through_and_is_infeasible():
     q, res = run("wall", SEEKER, [[[2, 5], [8, 5]]])
     assert not np.any(res.success)
-    assert np.all(res.cause == PlanCause.INFEASIBLE)  # reached the goal, through the wall; no repair
+    assert np.all(
+        res.cause == PlanCause.INFEASIBLE
+    )  # reached the goal, through the wall; no repair
     assert np.all(res.replans == OPTS.replan_rounds)
 
 
@@ -218,8 +244,13 @@ def test_replanning_repairs_a_broken_path():
 def test_one_round_repairs_every_blocked_segment():
     s, g, j1, j2 = (1.0, 5.0), (9.0, 5.0), (5.0, 5.0), (8.5, 5.0)  # s -> j1 -> j2 cross both walls
     kw = dict(jump=((s, g, j1), (j1, g, j2)))
-    q, res = run("twowalls", BROKEN, [[s, g]], opts=PlannerOptions(n_plan=12, replan_rounds=0,
-                                                                  replan_steps=8), **kw)
+    q, res = run(
+        "twowalls",
+        BROKEN,
+        [[s, g]],
+        opts=PlannerOptions(n_plan=12, replan_rounds=0, replan_steps=8),
+        **kw,
+    )
     assert np.all(res.cause == PlanCause.INFEASIBLE)
     np.testing.assert_allclose(res.paths[0, :4], [s, j1, j2, g])
     q, res = run("twowalls", BROKEN, [[s, g]], **kw)
@@ -252,9 +283,15 @@ RIGID_NOSTEER = PlannerOptions(n_plan=12, steer=False, delta=0.1)
 
 
 def _rigid_env():
-    return Env.from_json({"name": "rigid-open", "robot": {"kind": "rigid_body"},
-                          "bounds": BOUNDS, "boxes": [[5.0, 5.0, 0.5, 0.5]] + DUMMY,
-                          "padding": 0.0})
+    return Env.from_json(
+        {
+            "name": "rigid-open",
+            "robot": {"kind": "rigid_body"},
+            "bounds": BOUNDS,
+            "boxes": [[5.0, 5.0, 0.5, 0.5]] + DUMMY,
+            "padding": 0.0,
+        }
+    )
 
 
 def test_without_steer_to_delta_is_in_the_robots_metric():
@@ -275,6 +312,7 @@ def test_without_steer_to_the_papers_goal_test_and_unchecked_paths():
     """delta_norm="l2" is the paper's ||pi_end - x_g||_2 on the raw vector (angles not
     wrapped); nosteer_check=False is its "lines 8 and 9 only" (segments not checked)."""
     from ntq_jax.experiment import config
+
     env = _rigid_env()
     q = np.asarray([[[2, 2, 0], [8, 2, -np.pi]]], np.float32)
     l2 = dataclasses.replace(RIGID_NOSTEER, delta_norm="l2")
@@ -283,12 +321,17 @@ def test_without_steer_to_the_papers_goal_test_and_unchecked_paths():
     wall = np.asarray([[[2, 5], [8, 5]]], np.float32)
     net = pnet("wall", SEEKER)
     checked = plan_batch(make("wall"), net, wall, jax.random.key(0), NOSTEER, rows=BATCH)
-    loose = plan_batch(make("wall"), net, wall, jax.random.key(0),
-                       PlannerOptions(n_plan=12, steer=False, delta=1.0, nosteer_check=False),
-                       rows=BATCH)
+    loose = plan_batch(
+        make("wall"),
+        net,
+        wall,
+        jax.random.key(0),
+        PlannerOptions(n_plan=12, steer=False, delta=1.0, nosteer_check=False),
+        rows=BATCH,
+    )
     assert checked.cause[0] == PlanCause.INFEASIBLE and not checked.success[0]
     assert loose.cause[0] == PlanCause.SUCCESS and loose.success[0]
-    np.testing.assert_array_equal(loose.path(0), checked.paths[0, :checked.lengths[0]])
+    np.testing.assert_array_equal(loose.path(0), checked.paths[0, : checked.lengths[0]])
     assert not shapely_free("wall", loose.path(0))  # through the wall, as the option says
     # from the config (null: ours, left out of the hash)
     cfg = config.load(None, ["eval.delta_norm=l2", "eval.nosteer_check=false"])
@@ -307,12 +350,19 @@ def test_without_steer_to_replan_runs_lines_10_to_14():
     it gets the goal appended and is then contracted, checked and repaired as with steerTo
     (the broken jump through the wall lands within delta of the goal)."""
     from ntq_jax.experiment import config
+
     s, g, jump = (2.0, 5.0), (8.0, 5.0), (7.3, 5.0)
     kw = dict(jump=((s, g, jump), NO_JUMP))
 
     def nosteer(check, rounds=2):
-        return PlannerOptions(n_plan=12, steer=False, delta=1.0, nosteer_check=check,
-                              replan_rounds=rounds, replan_steps=8)
+        return PlannerOptions(
+            n_plan=12,
+            steer=False,
+            delta=1.0,
+            nosteer_check=check,
+            replan_rounds=rounds,
+            replan_steps=8,
+        )
 
     # nosteer(True) but for its replanning settings, unused without repairs
     _, checked = run("wall", BROKEN, [[s, g]], opts=NOSTEER, **kw)
@@ -338,20 +388,33 @@ def test_without_steer_to_states_checks_the_waypoints_only():
     the seeker's waypoints 1 apart step over both thin walls (success), and on the thick wall
     one lands inside it (infeasible), where the unchecked variant calls both a success."""
     from ntq_jax.experiment import config
+
     net, env = pnet("twowalls", SEEKER), make("twowalls")
     q = np.asarray([[[2.5, 5], [8.5, 5]]], np.float32)
-    run = {c: plan_batch(env, net, q, jax.random.key(0),
-                         PlannerOptions(n_plan=12, steer=False, delta=1.0, nosteer_check=c),
-                         rows=BATCH)
-           for c in ("states", True, False)}
+    run = {
+        c: plan_batch(
+            env,
+            net,
+            q,
+            jax.random.key(0),
+            PlannerOptions(n_plan=12, steer=False, delta=1.0, nosteer_check=c),
+            rows=BATCH,
+        )
+        for c in ("states", True, False)
+    }
     path = run["states"].path(0)
     assert np.asarray(env.is_valid(path)).all() and not shapely_free("twowalls", path)
     assert run["states"].success[0] and run[False].success[0]
     assert run[True].cause[0] == PlanCause.INFEASIBLE
     wall = np.asarray([[[2, 5], [8, 5]]], np.float32)
-    inside = plan_batch(make("wall"), pnet("wall", SEEKER), wall, jax.random.key(0),
-                        PlannerOptions(n_plan=12, steer=False, delta=1.0, nosteer_check="states"),
-                        rows=BATCH)
+    inside = plan_batch(
+        make("wall"),
+        pnet("wall", SEEKER),
+        wall,
+        jax.random.key(0),
+        PlannerOptions(n_plan=12, steer=False, delta=1.0, nosteer_check="states"),
+        rows=BATCH,
+    )
     assert not np.asarray(make("wall").is_valid(inside.path(0))).all()
     assert inside.cause[0] == PlanCause.INFEASIBLE and not inside.success[0]
     cfg = config.load(None, ["eval.nosteer_check=states"])
@@ -372,21 +435,26 @@ def test_without_steer_to_a_start_within_delta_is_solved():
     np.testing.assert_array_equal(res.costs, 0.0)
     # the same in the rigid body's metric: theta pi and -pi at one position
     env = _rigid_env()
-    rq = np.asarray([[[2, 2, np.pi], [2, 2, -np.pi]], [[2, 8, 0.1], [2.2, 8, -0.1]],
-                     [[5, 5, 0], [5.3, 5, 0]]], np.float32)
+    rq = np.asarray(
+        [[[2, 2, np.pi], [2, 2, -np.pi]], [[2, 8, 0.1], [2.2, 8, -0.1]], [[5, 5, 0], [5.3, 5, 0]]],
+        np.float32,
+    )
     res = plan_batch(env, _stay, rq, jax.random.key(0), nosteer)
     assert res.success[:2].all() and np.all(res.lengths[:2] == 1)
     # a start inside the box stays an invalid query, however close the goal
     assert res.cause[2] == PlanCause.INVALID_QUERY and not res.success[2]
     # with steerTo the same start gets the goal appended: two states
-    res = plan_batch(env, _stay, rq[:2], jax.random.key(0), PlannerOptions(n_plan=12, replan_rounds=0))
+    res = plan_batch(
+        env, _stay, rq[:2], jax.random.key(0), PlannerOptions(n_plan=12, replan_rounds=0)
+    )
     assert res.success.all() and np.all(res.lengths == 2)
 
 
 def test_bidirectional_and_invalid_queries():
     bi = PlannerOptions(n_plan=12, replan_rounds=2, replan_steps=8, bidirectional=True)
-    q, res = run("deadend", ORACLE, [[[5, 4], [5, 9]], [[4, 3], [6, 8]], [[5, 6.2], [1, 1]]],
-                 opts=bi)
+    q, res = run(
+        "deadend", ORACLE, [[[5, 4], [5, 9]], [[4, 3], [6, 8]], [[5, 6.2], [1, 1]]], opts=bi
+    )
     assert res.success[0] and res.success[1]
     assert np.all(res.costs[:2] >= optimum("deadend", q[:2]) * (1 - 1e-4))
     assert res.cause[2] == PlanCause.INVALID_QUERY  # the start is inside the cup's top wall
@@ -397,8 +465,7 @@ def test_batched_equals_one_by_one_and_noise_is_keyed():
     env = make("deadend")
     net = pnet("deadend", ORACLE)
     full = plan_batch(env, net, np.asarray(queries, np.float32), jax.random.key(0), OPTS)
-    single = plan_batch(env, net, np.asarray(queries, np.float32), jax.random.key(0), OPTS,
-                        chunk=1)
+    single = plan_batch(env, net, np.asarray(queries, np.float32), jax.random.key(0), OPTS, chunk=1)
     np.testing.assert_array_equal(full.success, single.success)
     np.testing.assert_allclose(full.costs, single.costs, rtol=1e-6)
     # a noisy model: same key -> same paths, another key -> different paths
@@ -440,17 +507,16 @@ def test_repair_windows_cover_every_blocked_segment_without_overlap(data):
     ok = np.array(data.draw(st.lists(st.booleans(), min_size=length, max_size=length)))
     ok[0] = ok[n - 1] = True  # the planner only repairs paths between valid start and goal
     ok[n:] = False
-    blocked = np.array(data.draw(st.lists(st.booleans(), min_size=length - 1,
-                                          max_size=length - 1)))
-    blocked[n - 1:] = False
+    blocked = np.array(data.draw(st.lists(st.booleans(), min_size=length - 1, max_size=length - 1)))
+    blocked[n - 1 :] = False
     blocked |= ~ok[:-1] | ~ok[1:]  # a segment touching a state in collision is blocked
-    blocked[n - 1:] = False
+    blocked[n - 1 :] = False
     wins = repair_windows(blocked, ok, n)
     for k in np.flatnonzero(blocked):
         assert any(ia <= k < ib for ia, ib in wins), (k, wins)
     for ia, ib in wins:
         assert 0 <= ia < ib <= n - 1 and ok[ia] and ok[ib]
-        assert not ok[ia + 1:ib].any()
+        assert not ok[ia + 1 : ib].any()
     for (ia1, _), (_, ib2) in zip(wins, wins[1:]):
         assert ib2 <= ia1
 
@@ -473,13 +539,17 @@ def _stay(key, current, goal):
 
 def test_compiled_stages_are_bounded(monkeypatch):
     from ntq_jax import neural_steps
+
     monkeypatch.setattr(neural_steps, "COMPILED_CACHE_SIZE", 2)
     env = make("straight")
     q = np.asarray([[[1, 2], [9, 8]]], np.float32)
     # three option sets the tests above compile too (stand-ins, BATCH rows): the bound is
     # checked on the cache's entries, whichever the options, without compiling anything new
-    sets = (PlannerOptions(n_plan=12, replan_rounds=0, replan_steps=8), OPTS,
-            PlannerOptions(n_plan=12, replan_rounds=2, replan_steps=8, bidirectional=True))
+    sets = (
+        PlannerOptions(n_plan=12, replan_rounds=0, replan_steps=8),
+        OPTS,
+        PlannerOptions(n_plan=12, replan_rounds=2, replan_steps=8, bidirectional=True),
+    )
     # their check stage reads none of the fields they differ in: one program for the three
     assert len({o.for_stage("check") for o in sets}) == 1
     assert len({o.for_stage("coarse") for o in sets}) == 3
@@ -489,13 +559,15 @@ def test_compiled_stages_are_bounded(monkeypatch):
     # the least recently used went first: the first two coarse stages
     assert [s[:3] for s in neural_steps._COMPILED] == [
         ("coarse", env.robot, sets[2].for_stage("coarse")),
-        ("check", env.robot, sets[0].for_stage("check"))]
+        ("check", env.robot, sets[0].for_stage("check")),
+    ]
 
 
 def test_check_stage_compiles_once_for_every_batch_size():
     """The contraction and feasibility check run on CHECK_ROWS paths per call, so batches of
     other sizes (the cascade's fallbacks) reuse its one compilation; results are per row."""
     from ntq_jax import neural_steps
+
     env = make("wall")
     opts = PlannerOptions(n_plan=12, replan_rounds=0, replan_steps=8)  # as the tests above
     rng = np.random.default_rng(3)
@@ -533,8 +605,13 @@ def test_each_stage_reads_only_the_options_in_its_compile_key(monkeypatch):
     planner: steerTo, each nosteer_check, bidirectional, the l2 goal test, no contraction."""
     from ntq_jax import neural_steps
     from ntq_jax.neural_options import STAGE_FIELDS
-    cores = {"coarse": neural_steps.coarse_core, "valid": neural_steps.valid_core,
-             "connect": neural_steps.connect_core, "check": neural_steps.check_core}
+
+    cores = {
+        "coarse": neural_steps.coarse_core,
+        "valid": neural_steps.valid_core,
+        "connect": neural_steps.connect_core,
+        "check": neural_steps.check_core,
+    }
     for_stage, compiled = PlannerOptions.for_stage, neural_steps._compiled
     reads = {name: set() for name in cores}
 
@@ -549,13 +626,22 @@ def test_each_stage_reads_only_the_options_in_its_compile_key(monkeypatch):
     s, g = (2.0, 5.0), (8.0, 5.0)
     kw = dict(jump=((s, g, (7.3, 5.0)), NO_JUMP))
     nosteer = dict(n_plan=12, steer=False, delta=1.0)
-    for opts in (OPTS, NOSTEER, PlannerOptions(**nosteer, nosteer_check="states"),
-                 PlannerOptions(**nosteer, nosteer_check="replan", replan_rounds=2, replan_steps=8),
-                 PlannerOptions(**nosteer, nosteer_check=False, delta_norm="l2"),
-                 PlannerOptions(n_plan=12, replan_rounds=2, replan_steps=8, bidirectional=True),
-                 PlannerOptions(n_plan=12, replan_rounds=2, replan_steps=8, contract=False)):
-        plan_batch(make("wall"), pnet("wall", BROKEN, **kw), np.asarray([[s, g]] * BATCH, np.float32),
-                   jax.random.key(0), opts)
+    for opts in (
+        OPTS,
+        NOSTEER,
+        PlannerOptions(**nosteer, nosteer_check="states"),
+        PlannerOptions(**nosteer, nosteer_check="replan", replan_rounds=2, replan_steps=8),
+        PlannerOptions(**nosteer, nosteer_check=False, delta_norm="l2"),
+        PlannerOptions(n_plan=12, replan_rounds=2, replan_steps=8, bidirectional=True),
+        PlannerOptions(n_plan=12, replan_rounds=2, replan_steps=8, contract=False),
+    ):
+        plan_batch(
+            make("wall"),
+            pnet("wall", BROKEN, **kw),
+            np.asarray([[s, g]] * BATCH, np.float32),
+            jax.random.key(0),
+            opts,
+        )
     assert all(reads.values()), reads  # every stage ran
     for name, fields in reads.items():
         assert fields <= set(STAGE_FIELDS[name]), (name, fields - set(STAGE_FIELDS[name]))

@@ -22,18 +22,29 @@ from ntq_jax.types import PlanStatus
 #: checks: one compilation).
 POOL = 256
 
-needs_ompl = pytest.mark.skipif(importlib.util.find_spec("ompl") is None,
-                                reason="the PyPI package ompl is not installed")
+needs_ompl = pytest.mark.skipif(
+    importlib.util.find_spec("ompl") is None, reason="the PyPI package ompl is not installed"
+)
 
 # A user map with discs (the presets have only boxes), for every robot kind.
-_OBSTACLES = {"bounds": [[-10, 10], [-10, 10]],
-              "boxes": [[5, 4, 1, 1], [-4, 5, 1.5, 0.5], [2, -6, 0.5, 2]],
-              "discs": [[-5, -4, 1.2], [6, -3, 0.7], [0, 8, 1.0]]}
+_OBSTACLES = {
+    "bounds": [[-10, 10], [-10, 10]],
+    "boxes": [[5, 4, 1, 1], [-4, 5, 1.5, 0.5], [2, -6, 0.5, 2]],
+    "discs": [[-5, -4, 1.2], [6, -3, 0.7], [0, 8, 1.0]],
+}
 CUSTOM = {
-    "disc-rigid": {"name": "disc-rigid", "padding": 0.3, **_OBSTACLES,
-                   "robot": {"kind": "rigid_body", "length": 1.5, "width": 0.5}},
-    "disc-arm": {"name": "disc-arm", "padding": 0.5, **_OBSTACLES,
-                 "robot": {"kind": "nlink", "link_lengths": [3, 2.5, 2], "base": [0.5, -0.5]}},
+    "disc-rigid": {
+        "name": "disc-rigid",
+        "padding": 0.3,
+        **_OBSTACLES,
+        "robot": {"kind": "rigid_body", "length": 1.5, "width": 0.5},
+    },
+    "disc-arm": {
+        "name": "disc-arm",
+        "padding": 0.5,
+        **_OBSTACLES,
+        "robot": {"kind": "nlink", "link_lengths": [3, 2.5, 2], "base": [0.5, -0.5]},
+    },
     "disc-point": {"name": "disc-point", "padding": 0.4, **_OBSTACLES, "robot": {"kind": "point"}},
 }
 
@@ -65,8 +76,9 @@ def _near_tangency(env, state, padding, delta=1e-5):
     ref = ch.is_valid(state)
     rng = np.random.default_rng(0)
     x = np.asarray(state, np.float64)
-    return hi != ref or any(ch.is_valid(x + delta * rng.uniform(-1, 1, x.shape)) != ref
-                            for _ in range(64))
+    return hi != ref or any(
+        ch.is_valid(x + delta * rng.uniform(-1, 1, x.shape)) != ref for _ in range(64)
+    )
 
 
 @pytest.mark.parametrize("name", ["rigid/0", "nlink/4", "disc-rigid", "disc-arm", "disc-point"])
@@ -77,8 +89,12 @@ def test_numpy_checker_equals_jax_is_valid(name):
         # env.is_valid in slices of CHECK_CHUNK states: each runs the shared chunk program
         # (valid_states', which the planners run too) instead of one 16384-row bucket
         # program per robot, map and padding; the same kernel per state
-        ref = np.concatenate([np.asarray(env.is_valid(states[i:i + CHECK_CHUNK], padding=padding))
-                              for i in range(0, len(states), CHECK_CHUNK)])
+        ref = np.concatenate(
+            [
+                np.asarray(env.is_valid(states[i : i + CHECK_CHUNK], padding=padding))
+                for i in range(0, len(states), CHECK_CHUNK)
+            ]
+        )
         assert 0.05 < ref.mean() < 0.98, "the sample must contain valid and invalid states"
         ch = NumpyChecker.from_env(env, padding)
         one = np.array([ch.is_valid(s) for s in states.astype(np.float64)])
@@ -102,10 +118,12 @@ def test_a_worker_process_does_not_load_jax(tmp_path):
 
     payload = tmp_path / "payload.pkl"
     payload.write_bytes(pickle.dumps((worker_main, NumpyChecker.from_env(_env("nlink/4")))))
-    code = (f"import pickle, sys; fn, ch = pickle.loads(open({str(payload)!r}, 'rb').read()); "
-            "print(sorted(m for m in sys.modules if m == 'jax' or m.startswith('jax.'))[:3]); "
-            "assert ch.dim == 4 and callable(fn); "
-            "import ntq_jax; env = ntq_jax.make_env('point/0'); print('jax' in sys.modules)")
+    code = (
+        f"import pickle, sys; fn, ch = pickle.loads(open({str(payload)!r}, 'rb').read()); "
+        "print(sorted(m for m in sys.modules if m == 'jax' or m.startswith('jax.'))[:3]); "
+        "assert ch.dim == 4 and callable(fn); "
+        "import ntq_jax; env = ntq_jax.make_env('point/0'); print('jax' in sys.modules)"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.split() == ["[]", "True"], out.stdout
@@ -134,8 +152,12 @@ def test_numpy_steer_to_equals_jax_steer_to(name):
     lo, hi = (np.asarray(v) for v in env.robot.config_bounds(env.world))
     # short and long edges, some ending exactly on the configuration bounds; for SE(2)
     # angle differences across +-pi too (shortest arc)
-    b = np.concatenate([a[:500] + rng.normal(size=(500, env.dim)) * 0.05 * (hi - lo),
-                        _valid_states(env, 500, seed=2)])
+    b = np.concatenate(
+        [
+            a[:500] + rng.normal(size=(500, env.dim)) * 0.05 * (hi - lo),
+            _valid_states(env, 500, seed=2),
+        ]
+    )
     a, b = np.asarray(a, np.float32), np.clip(b, lo, hi).astype(np.float32)
     ref = np.asarray(env.steer_to(a, b))
     assert 0.05 < ref.mean() < 0.95
@@ -156,6 +178,7 @@ def test_query_seeds_are_deterministic_and_positive():
 # ---------------------------------------------------------------------------
 # Planning (worker processes)
 # ---------------------------------------------------------------------------
+
 
 def _easy_queries(env, n_trivial, n_short, seed):
     """Random valid queries: ``n_trivial`` with a feasible straight connection, then the
@@ -195,11 +218,13 @@ def _check_result(env, queries, res, padding=None):
     b = np.concatenate([res.path(i)[1:] for i in solved])
     m = len(a)
     fill = np.repeat(a[:1], max(POOL, m) - m, 0)  # one compiled shape
-    ok = np.asarray(env.steer_to(np.concatenate([a, fill]), np.concatenate([b, fill]),
-                                 padding=pad))[:m]
+    ok = np.asarray(
+        env.steer_to(np.concatenate([a, fill]), np.concatenate([b, fill]), padding=pad)
+    )[:m]
     assert ok.all()
-    d = np.asarray(env.distance(np.concatenate([a, fill]), np.concatenate([b, fill])),
-                   np.float64)[:m]
+    d = np.asarray(env.distance(np.concatenate([a, fill]), np.concatenate([b, fill])), np.float64)[
+        :m
+    ]
     lengths = [res.lengths[i] - 1 for i in solved]
     costs = np.add.reduceat(d, np.cumsum([0] + lengths[:-1]))
     # float32 distances (XLA may round differently for different batch shapes)
@@ -219,8 +244,10 @@ def rigid_batch():
     env = nj.make_env("rigid/0")
     q = _easy_queries(env, n_trivial=3, n_short=3, seed=11)
     states = _uniform_states(env, 400, seed=5)
-    blocked = states[NumpyChecker.from_env(env, 0.0).is_valid_many(states)
-                     & ~NumpyChecker.from_env(env).is_valid_many(states)][0]
+    blocked = states[
+        NumpyChecker.from_env(env, 0.0).is_valid_many(states)
+        & ~NumpyChecker.from_env(env).is_valid_many(states)
+    ][0]
     q = np.concatenate([q, [[blocked, q[0, 1]], [q[1, 0], [np.nan, 1.0, 0.0]]]])
     res = plan_bitstar(env, q, time_budget=1.0, workers=2, stop_on_first=True, seed=2)
     return env, q, res
@@ -231,8 +258,9 @@ def test_bitstar_solves_easy_rigid_queries_and_flags_invalid_ones(rigid_batch):
     env, q, res = rigid_batch
     assert res.status.dtype == np.int8 and res.costs.dtype == np.float64
     assert res.status.tolist() == [PlanStatus.SOLVED] * 6 + [PlanStatus.INVALID] * 2, res.info
-    assert res.info["bitstar_status"].tolist() == ([BridgeOutcome.EXACT] * 6
-                                                   + [BridgeOutcome.BAD_QUERY] * 2)
+    assert res.info["bitstar_status"].tolist() == (
+        [BridgeOutcome.EXACT] * 6 + [BridgeOutcome.BAD_QUERY] * 2
+    )
     assert res.path(6) is None and res.path(7) is None
     _check_result(env, q, res)
     assert res.lengths[:3].tolist() == [2, 2, 2]  # direct connections
@@ -278,8 +306,16 @@ def test_a_killed_worker_does_not_lose_the_batch(rigid_batch):
     env, q, ref = rigid_batch
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        res = plan_bitstar(env, q, time_budget=1.0, workers=2, stop_on_first=True, seed=2,
-                           chunk_size=2, _crash_on={1: 1, 4: 2})
+        res = plan_bitstar(
+            env,
+            q,
+            time_budget=1.0,
+            workers=2,
+            stop_on_first=True,
+            seed=2,
+            chunk_size=2,
+            _crash_on={1: 1, 4: 2},
+        )
     assert not [w for w in caught if "plan_bitstar" in str(w.message)]
     expected = ref.info["bitstar_status"].copy()
     expected[4] = BridgeOutcome.CRASHED
@@ -302,8 +338,18 @@ def test_kept_workers_are_reused_with_the_same_results(rigid_batch):
     (``stop_on_first``, seeded per query); other settings stop the idle workers."""
     env, q, ref = rigid_batch
     try:
-        calls = [plan_bitstar(env, q[:4], time_budget=1.0, workers=1, stop_on_first=True,
-                              seed=2, keep_workers=True) for _ in range(2)]
+        calls = [
+            plan_bitstar(
+                env,
+                q[:4],
+                time_budget=1.0,
+                workers=1,
+                stop_on_first=True,
+                seed=2,
+                keep_workers=True,
+            )
+            for _ in range(2)
+        ]
         assert calls[0].info["workers"] == 1 and "workers_reused" not in calls[0].info
         assert calls[1].info["workers"] == 0 and calls[1].info["workers_reused"] == 1
         for res in calls:
@@ -311,8 +357,9 @@ def test_kept_workers_are_reused_with_the_same_results(rigid_batch):
                 np.testing.assert_array_equal(res.path(i), ref.path(i))
         kept = [w for ws in ompl_bridge._IDLE.values() for w in ws]
         assert len(kept) == 1 and kept[0].proc.is_alive()
-        other = plan_bitstar(env, q[:1], time_budget=0.5, workers=1, stop_on_first=True,
-                             keep_workers=True)
+        other = plan_bitstar(
+            env, q[:1], time_budget=0.5, workers=1, stop_on_first=True, keep_workers=True
+        )
         assert other.info["workers"] == 1 and not kept[0].proc.is_alive()
     finally:
         for ws in ompl_bridge._IDLE.values():
@@ -328,9 +375,14 @@ def test_no_path_is_a_status_not_an_exception():
     # free space), so the package's checks run rigid/0's compiled programs; the goal keeps
     # 0.5 of clearance from the wall and 0.6 from the bounds at this padding
     rigid0 = nj.make_env("rigid/0")
-    spec = {"name": "sealed", "robot": rigid0.robot.to_json(),
-            "bounds": [[0, 10], [0, 10]], "padding": rigid0.padding,
-            "boxes": [[7.5, 5, 0.2, 5]] * 3, "discs": []}
+    spec = {
+        "name": "sealed",
+        "robot": rigid0.robot.to_json(),
+        "bounds": [[0, 10], [0, 10]],
+        "padding": rigid0.padding,
+        "boxes": [[7.5, 5, 0.2, 5]] * 3,
+        "discs": [],
+    }
     env = nj.Env.from_json(spec)
     q = np.array([[[2, 5, 0], [8.8, 5, 0]], [[2, 2, 0], [4, 8, 1]]], np.float32)
     res = plan_bitstar(env, q, time_budget=0.3, workers=1, stop_on_first=True)
@@ -367,7 +419,10 @@ def test_a_found_path_that_fails_the_check_is_rejected_by_finalize():
     results.paths[1] = np.stack([a, through, b]).astype(np.float64)
     res = ompl_bridge._verified_result(env, q, env.padding, results, query_seeds(0, 3), 1.0)
     assert res.status.tolist() == [PlanStatus.SOLVED, PlanStatus.NO_PATH, PlanStatus.NO_PATH]
-    assert res.info["bitstar_status"].tolist() == [BridgeOutcome.EXACT, BridgeOutcome.REJECTED,
-                                                   BridgeOutcome.CRASHED]
+    assert res.info["bitstar_status"].tolist() == [
+        BridgeOutcome.EXACT,
+        BridgeOutcome.REJECTED,
+        BridgeOutcome.CRASHED,
+    ]
     assert res.info["rejected"] == 1 and res.lengths.tolist() == [2, 0, 0]
     _check_result(env, q, res)

@@ -28,10 +28,22 @@ def _run_folder(root, k=40, seed=0):
             costs = np.where(success, ref_costs * rng.uniform(1, 1.2, k), np.inf)
             cause = np.where(success, 0, rng.integers(1, 4, k)).astype(np.uint8)
             f = f"paths/{slug}/{m}_{kind}.npz"
-            np.savez(root / f, success=success, costs=costs, cause=cause, ref_costs=ref_costs,
-                     ref_status=ref_status)
-            row = {"env": "point/0", "env_slug": slug, "model": m, "query_kind": kind,
-                   "steer": True, "paths_file": f}
+            np.savez(
+                root / f,
+                success=success,
+                costs=costs,
+                cause=cause,
+                ref_costs=ref_costs,
+                ref_status=ref_status,
+            )
+            row = {
+                "env": "point/0",
+                "env_slug": slug,
+                "model": m,
+                "query_kind": kind,
+                "steer": True,
+                "paths_file": f,
+            }
             row.update(metrics(success, costs, cause, ref_costs, ref_status))
             rows.append(row)
     (root / "results.json").write_text(json.dumps({"rows": rows}))
@@ -40,6 +52,7 @@ def _run_folder(root, k=40, seed=0):
 
 def test_outcomes_recompute_every_count_of_a_summary(tmp_path, capsys):
     from ntq_jax.stats import mcnemar_exact
+
     run, out = tmp_path / "run", tmp_path / "results" / "point" / "point_0"
     rows = _run_folder(run)
     by = {(r["model"], r["query_kind"]): r for r in rows}
@@ -48,10 +61,21 @@ def test_outcomes_recompute_every_count_of_a_summary(tmp_path, capsys):
         a = np.load(run / by[("PNet_1", kind)]["paths_file"])["success"]
         b = np.load(run / by[("PNet_0", kind)]["paths_file"])["success"]
         oa, ob = int((a & ~b).sum()), int((~a & b).sum())
-        comps.append({"model": "PNet_1", "baseline": "PNet_0", "query_kind": kind, "steer": True,
-                      "n": len(a), "both": int((a & b).sum()), "only_a": oa, "only_b": ob,
-                      "neither": int((~a & ~b).sum()), "success_diff": (oa - ob) / len(a),
-                      "mcnemar_p": mcnemar_exact(oa, ob)})
+        comps.append(
+            {
+                "model": "PNet_1",
+                "baseline": "PNet_0",
+                "query_kind": kind,
+                "steer": True,
+                "n": len(a),
+                "both": int((a & b).sum()),
+                "only_a": oa,
+                "only_b": ob,
+                "neither": int((~a & ~b).sum()),
+                "success_diff": (oa - ob) / len(a),
+                "mcnemar_p": mcnemar_exact(oa, ob),
+            }
+        )
     out.mkdir(parents=True)
     (out / "summary.json").write_text(json.dumps({"rows": rows, "comparisons": comps}))
     path = O.write(run, "point/0", out, train_seed=2)

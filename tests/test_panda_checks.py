@@ -26,7 +26,8 @@ REPO = Path(__file__).resolve().parent.parent
 @pytest.fixture(scope="module")
 def ref():
     spec = importlib.util.spec_from_file_location(
-        "panda_reference", REPO / "benchmarks" / "panda_reference.py")
+        "panda_reference", REPO / "benchmarks" / "panda_reference.py"
+    )
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module

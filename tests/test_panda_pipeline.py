@@ -7,7 +7,8 @@ replanning (fewer programs to compile; the certified check of the neural planner
 check stage is tested on its own below, on a planar arm). Asserts what the run made:
 every dataset's queries and paths are 7-D, each solved path runs from its query's start
 to its goal with waypoints at most ``planner.data_paths`` apart (a direct connection
-stays its two ends) and every segment free by the environment's check; D0..D3 hold K_train queries each, D0 uniform, D2 and D3
+stays its two ends) and every segment free by the environment's check; D0..D3 hold K_train
+queries each, D0 uniform, D2 and D3
 non-trivial, D3 no more samples than D2; the table has PNet_0..PNet_3 on both query kinds.
 """
 
@@ -27,10 +28,21 @@ from ntq_jax.neural_motions import segments, steer
 ROOT = Path(__file__).resolve().parents[1]
 ENV = "panda/box/1"
 K = 6
-TINY = [f"envs=[{ENV}]", f"data.k_train={K}", "data.gamma_queries=500", "planner.milestones=150",
-        "planner.grow_rounds=0", "model.hidden=[16,16]", "train.epochs=1", "eval.k_test=4",
-        "eval.n_plan=8", "eval.replan_rounds=0", "eval.motion_check=discretized",
-        "eval.ensemble=[]", "eval.gamma_queries=500"]
+TINY = [
+    f"envs=[{ENV}]",
+    f"data.k_train={K}",
+    "data.gamma_queries=500",
+    "planner.milestones=150",
+    "planner.grow_rounds=0",
+    "model.hidden=[16,16]",
+    "train.epochs=1",
+    "eval.k_test=4",
+    "eval.n_plan=8",
+    "eval.replan_rounds=0",
+    "eval.motion_check=discretized",
+    "eval.ensemble=[]",
+    "eval.gamma_queries=500",
+]
 
 
 @pytest.fixture(scope="module")
@@ -52,7 +64,7 @@ def test_datasets_hold_valid_7d_paths(run):
         assert d.queries.shape == (K, 2, 7) and d.inputs.shape[1] == 14
         assert d.targets.shape[1] == 7 and len(d.inputs) == len(d.targets)
         for j, p in enumerate(np.flatnonzero(d.solved)):  # paths: the solved queries' in order
-            path = d.paths[j, :int(d.path_lengths[j])]
+            path = d.paths[j, : int(d.path_lengths[j])]
             assert path.shape[1] == 7 and len(path) >= 2
             np.testing.assert_array_equal(path[0], d.queries[p, 0])
             np.testing.assert_array_equal(path[-1], d.queries[p, 1])
@@ -70,7 +82,8 @@ def test_table_has_the_four_pnets(run):
     out, cfg = run
     rows = json.loads((out / "results.json").read_text())["rows"]
     assert {(r["model"], r["query_kind"]) for r in rows} == {
-        (f"PNet_{m}", k) for m in range(4) for k in ("uniform", "nontrivial")}
+        (f"PNet_{m}", k) for m in range(4) for k in ("uniform", "nontrivial")
+    }
     for r in rows:
         assert r["task"] == "serial_arm" and r["env"] == ENV and r["k_test"] == 4
         assert 0.0 <= r["success_ratio"] <= 1.0
@@ -87,19 +100,29 @@ def test_gathered_certified_segments_equal_the_whole_buffer():
     env = nj.make_env("point/0")
     rng = np.random.default_rng(0)
     n_paths, length = 48, 12
-    p = (rng.uniform(0, 20, (n_paths, 1, 2))
-         + np.cumsum(rng.uniform(-2, 2, (n_paths, length, 2)), axis=1)).astype(np.float32)
+    p = (
+        rng.uniform(0, 20, (n_paths, 1, 2))
+        + np.cumsum(rng.uniform(-2, 2, (n_paths, length, 2)), axis=1)
+    ).astype(np.float32)
     n = rng.integers(1, length + 1, n_paths).astype(np.int32)
     mask = rng.random(n_paths) < 0.8
 
     def whole(p, n, m):
         seg = (jnp.arange(length - 1)[None, :] < (n - 1)[:, None]) & m[:, None]
-        free = steer(env.robot, env.world, p[:, :-1].reshape(-1, 2), p[:, 1:].reshape(-1, 2),
-                     0.0, seg.reshape(-1), "certified")
+        free = steer(
+            env.robot,
+            env.world,
+            p[:, :-1].reshape(-1, 2),
+            p[:, 1:].reshape(-1, 2),
+            0.0,
+            seg.reshape(-1),
+            "certified",
+        )
         return free.reshape(n_paths, length - 1), seg
 
-    got, seg = jax.jit(lambda p, n, m: segments(env.robot, env.world, p, n, 0.0, m,
-                                                "certified", chunk=64))(p, n, mask)
+    got, seg = jax.jit(
+        lambda p, n, m: segments(env.robot, env.world, p, n, 0.0, m, "certified", chunk=64)
+    )(p, n, mask)
     want, _ = jax.jit(whole)(p, n, mask)
     assert 0 < int(np.sum(np.asarray(got))) < int(np.sum(np.asarray(seg)))  # both answers occur
     np.testing.assert_array_equal(np.asarray(got), np.asarray(want))

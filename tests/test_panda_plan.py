@@ -31,8 +31,9 @@ def _assert_paths(env, q, res, check):
         np.testing.assert_array_equal(p[0], q[i, 0])
         np.testing.assert_array_equal(p[-1], q[i, 1])
         assert np.asarray(env.steer_to(p[:-1], p[1:], check=check)).all()
-        assert res.costs[i] == pytest.approx(float(np.linalg.norm(np.diff(p, axis=0), axis=1)
-                                                   .sum()), rel=1e-5)
+        assert res.costs[i] == pytest.approx(
+            float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum()), rel=1e-5
+        )
 
 
 def test_roadmap_plans_panda_queries_with_certified_segments(box):
@@ -85,8 +86,16 @@ def test_finalize_fallback_puts_back_what_a_failed_shortcut_skipped():
     raw = np.stack([[a[i], m[i], b[i]], [a[j], b[j], [np.nan, np.nan]]]).astype(np.float32)
     status = np.full(2, PlanStatus.SOLVED, np.int8)
     info = {}
-    res = finalize(q, q.copy(), np.array([2, 2]), status, info, env, env.padding,
-                   fallback=(raw, np.array([3, 2]), np.array([[0, 2], [0, 1]])))
+    res = finalize(
+        q,
+        q.copy(),
+        np.array([2, 2]),
+        status,
+        info,
+        env,
+        env.padding,
+        fallback=(raw, np.array([3, 2]), np.array([[0, 2], [0, 1]])),
+    )
     assert res.solved.all() and info["repaired"] == 1 and info["rejected"] == 0
     np.testing.assert_array_equal(res.path(0), raw[0])
     np.testing.assert_array_equal(res.path(1), q[1])
@@ -99,8 +108,11 @@ def test_finalize_fallback_puts_back_what_a_failed_shortcut_skipped():
 def test_cuboid_euler_xyz_rebuilds_the_rotation():
     def rot(axis, t):
         c, s = np.cos(t), np.sin(t)
-        m = {"x": [[1, 0, 0], [0, c, -s], [0, s, c]], "y": [[c, 0, s], [0, 1, 0], [-s, 0, c]],
-             "z": [[c, -s, 0], [s, c, 0], [0, 0, 1]]}[axis]
+        m = {
+            "x": [[1, 0, 0], [0, c, -s], [0, s, c]],
+            "y": [[c, 0, s], [0, 1, 0], [-s, 0, c]],
+            "z": [[c, -s, 0], [s, c, 0], [0, 0, 1]],
+        }[axis]
         return np.array(m)
 
     rng = np.random.default_rng(0)
@@ -111,8 +123,10 @@ def test_cuboid_euler_xyz_rebuilds_the_rotation():
         np.testing.assert_allclose(rot("z", ez) @ rot("y", ey) @ rot("x", ex), r, atol=1e-9)
 
 
-@pytest.mark.skipif(importlib.util.find_spec("vamp") is None,
-                    reason="vamp is not installed (its build fetches sources from GitHub)")
+@pytest.mark.skipif(
+    importlib.util.find_spec("vamp") is None,
+    reason="vamp is not installed (its build fetches sources from GitHub)",
+)
 def test_vamp_plans_the_problem_and_the_package_checks_it(box):
     res = nj.plan(box, box.query[None], "vamp")
     assert res.solved[0]

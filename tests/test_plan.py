@@ -7,10 +7,9 @@ of the planners' own verification.
 
 import math
 
+import jax
 import numpy as np
 import pytest
-
-import jax
 
 import ntq_jax
 from ntq_jax import Env, PlanResult, make_env, plan, register_planner
@@ -51,7 +50,7 @@ def assert_contract(env, q, res: PlanResult, padding):
     # independent re-check of every segment with the exact kernel, and of the costs
     a, b, owner = [], [], []
     for i in idx:
-        p = res.paths[i, :res.lengths[i]]
+        p = res.paths[i, : res.lengths[i]]
         a.append(p[:-1]), b.append(p[1:]), owner.append(np.full(len(p) - 1, i))
     if idx.size:
         a, b, owner = np.concatenate(a), np.concatenate(b), np.concatenate(owner)
@@ -61,8 +60,9 @@ def assert_contract(env, q, res: PlanResult, padding):
         # the same kernel per pair, and the answers do not depend on the route
         m = len(a)
         fill = np.repeat(a[:1], max(0, BUCKET_MIN_ROWS + 1 - m), axis=0)
-        free = np.asarray(env.steer_to(np.concatenate([a, fill]), np.concatenate([b, fill]),
-                                       padding=padding))[:m]
+        free = np.asarray(
+            env.steer_to(np.concatenate([a, fill]), np.concatenate([b, fill]), padding=padding)
+        )[:m]
         assert free.all(), f"blocked segments in queries {np.unique(owner[~free])}"
         seg = np.asarray(env.distance(a, b), np.float64)
         cost = np.bincount(owner, seg, minlength=k)[idx]
@@ -88,7 +88,10 @@ def test_smoothed_astar_vs_exact_optimum(point3, queries):
     ratio = ast.costs[both] / vis.costs[both]
     assert np.all(ast.costs[both] >= vis.costs[both] - eps_bound - 1e-6)
     assert np.mean(ratio) < 1.02 and np.percentile(ratio, 90) < 1.05 and ratio.max() < 1.12, (
-        np.mean(ratio), np.percentile(ratio, 90), ratio.max())
+        np.mean(ratio),
+        np.percentile(ratio, 90),
+        ratio.max(),
+    )
     # straight queries (visible start -> goal) come back as the straight segment
     direct = both & (vis.lengths == 2)
     np.testing.assert_array_equal(ast.lengths[direct], 2)
@@ -96,23 +99,37 @@ def test_smoothed_astar_vs_exact_optimum(point3, queries):
 
 def wall_env():
     """point/3-sized map (9 boxes, so compiled kernels are shared) with a wall splitting it."""
-    boxes = [[10.0, 10.0, 0.5, 10.5]] + [[1.5 + 2 * i, 1.0, 0.2, 0.2] for i in range(4)] \
+    boxes = (
+        [[10.0, 10.0, 0.5, 10.5]]
+        + [[1.5 + 2 * i, 1.0, 0.2, 0.2] for i in range(4)]
         + [[12.5 + 2 * i, 19.0, 0.2, 0.2] for i in range(4)]
-    return Env.from_json({"name": "wall", "robot": {"kind": "point"}, "bounds": [[0, 20], [0, 20]],
-                          "boxes": boxes, "padding": 0.8})
+    )
+    return Env.from_json(
+        {
+            "name": "wall",
+            "robot": {"kind": "point"},
+            "bounds": [[0, 20], [0, 20]],
+            "boxes": boxes,
+            "padding": 0.8,
+        }
+    )
 
 
 @pytest.mark.parametrize("planner", ["astar", "visgraph"])
 def test_invalid_and_unreachable_queries_are_statuses_not_exceptions(planner):
     env = wall_env()
-    q = np.array([[[5, 10], [15, 10]],       # across the wall: no path
-                  [[10, 10], [15, 10]],      # start inside the wall
-                  [[5, 10], [np.nan, 3]],    # NaN goal
-                  [[-1, 10], [5, 12]],       # start out of bounds
-                  [[5, 10], [9.2, 5]],       # goal within the padding (0.8) of the wall
-                  [[3, 5], [6, 15]],         # solvable
-                  [[4, 4], [4, 4]]],         # start == goal
-                 np.float32)
+    q = np.array(
+        [
+            [[5, 10], [15, 10]],  # across the wall: no path
+            [[10, 10], [15, 10]],  # start inside the wall
+            [[5, 10], [np.nan, 3]],  # NaN goal
+            [[-1, 10], [5, 12]],  # start out of bounds
+            [[5, 10], [9.2, 5]],  # goal within the padding (0.8) of the wall
+            [[3, 5], [6, 15]],  # solvable
+            [[4, 4], [4, 4]],
+        ],  # start == goal
+        np.float32,
+    )
     res = plan(env, q, planner)
     S, N, I = PlanStatus.SOLVED, PlanStatus.NO_PATH, PlanStatus.INVALID
     assert res.status.tolist() == [N, I, I, I, I, S, S]
@@ -170,9 +187,13 @@ def test_register_custom_planner(point3):
     def straight(env, q, *, padding, seed, scale=1.0):
         calls.update(padding=padding, seed=seed, scale=scale)
         k = len(q)
-        return PlanResult(q.copy(), np.full(k, 2, np.int32),
-                          np.linalg.norm(q[:, 1] - q[:, 0], axis=1).astype(np.float64),
-                          np.zeros(k, np.int8), {})
+        return PlanResult(
+            q.copy(),
+            np.full(k, 2, np.int32),
+            np.linalg.norm(q[:, 1] - q[:, 0], axis=1).astype(np.float64),
+            np.zeros(k, np.int8),
+            {},
+        )
 
     register_planner("straight_test", straight)
     assert "straight_test" in available_planners()
@@ -192,7 +213,7 @@ def test_no_recompilation_across_batch_sizes(point3, queries):
     before = [f._cache_size() for f in fns]
     longest = int(np.argmax(plan(point3, queries, "astar", smooth=False).lengths))
     for k in (1, 17, 96):
-        plan(point3, np.concatenate([queries[longest:longest + 1], queries[:k]]), "astar")
+        plan(point3, np.concatenate([queries[longest : longest + 1], queries[:k]]), "astar")
     assert [f._cache_size() for f in fns] == before
 
 
@@ -220,13 +241,18 @@ def test_planner_caches_are_bounded_and_do_not_keep_environments_alive():
     assert built == [1, 2, 3, 2]  # at most 2 settings per env, least recently used dropped
 
 
-@pytest.mark.parametrize("name, planners", [("point/0", ["astar", "visgraph", "roadmap",
-                                                         "bitstar"]),
-                                            ("rigid/0", ["roadmap", "bitstar"])])
+@pytest.mark.parametrize(
+    "name, planners",
+    [("point/0", ["astar", "visgraph", "roadmap", "bitstar"]), ("rigid/0", ["roadmap", "bitstar"])],
+)
 def test_no_queries_give_an_empty_result_on_every_planner(name, planners):
     env = make_env(name)
     for p in planners:
-        r = plan(env, np.zeros((0, 2, env.dim), np.float32), p,
-                 **({"milestones": 300} if p == "roadmap" else {}))
+        r = plan(
+            env,
+            np.zeros((0, 2, env.dim), np.float32),
+            p,
+            **({"milestones": 300} if p == "roadmap" else {}),
+        )
         assert r.paths.shape[0] == r.lengths.shape[0] == r.costs.shape[0] == 0, p
         assert r.status.shape == (0,) and r.paths.shape[2] == env.dim, p

@@ -17,7 +17,8 @@ import pytest
 from scipy import stats
 
 import ntq_jax as nj
-from ntq_jax import prng, queries as Q
+from ntq_jax import prng
+from ntq_jax import queries as Q
 
 P_MIN = 1e-3
 N = 1_000_000
@@ -122,7 +123,9 @@ def _threefry_gamma(env, key, n, padding):
         u = np.asarray(jax.random.uniform(jax.random.fold_in(key, i), (1 << 20, 2 * d)))
         a = (lo + u[:, :d] * (hi - lo)).astype(np.float32)
         b = (lo + u[:, d:] * (hi - lo)).astype(np.float32)
-        ok = np.asarray(env.is_valid(a, padding=padding)) & np.asarray(env.is_valid(b, padding=padding))
+        ok = np.asarray(env.is_valid(a, padding=padding)) & np.asarray(
+            env.is_valid(b, padding=padding)
+        )
         free = np.asarray(env.steer_to(a[ok], b[ok], padding=padding))
         blocked.append(~free)
         total += len(free)
@@ -181,7 +184,9 @@ def test_uniform_prefix_is_jax_random_uniform_bit_for_bit(monkeypatch):
             np.testing.assert_array_equal(got.view(np.uint32), want.view(np.uint32))
     seen = []
     real = jax.random.uniform
-    monkeypatch.setattr(jax.random, "uniform", lambda k, shape: seen.append(shape) or real(k, shape))
+    monkeypatch.setattr(
+        jax.random, "uniform", lambda k, shape: seen.append(shape) or real(k, shape)
+    )
     for n in (65, 100, 128):
         prng.uniform_prefix(jax.random.key(1), n)
     assert seen == [(128,)] * 3

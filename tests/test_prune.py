@@ -13,31 +13,56 @@ import json
 import numpy as np
 import pytest
 
-from ntq_jax.experiment import config as C
 from ntq_jax import Env, data, make_env
-from ntq_jax.experiment.config import ConfigError
 from ntq_jax.data.include import prune_rng
+from ntq_jax.experiment import config as C
+from ntq_jax.experiment.config import ConfigError
 
 K = 150
-ARRAYS = ("inputs", "targets", "path_index", "paths", "path_lengths", "queries", "query_kind",
-          "solved")
-SPECS = [{"p_nt": 1.0}, {"p_nt": 1.0, "prune": True}, {"p_nt": 1.0, "prune": 0.0},
-         {"p_nt": 1.0, "prune": 1}, {"p_nt": 1.0, "prune": 0.5},
-         {"name": "D5", "p_nt": 1.0, "prune": "gamma"},
-         {"name": "D6", "p_nt": 1.0, "prune": "keep_last"}]
+ARRAYS = (
+    "inputs",
+    "targets",
+    "path_index",
+    "paths",
+    "path_lengths",
+    "queries",
+    "query_kind",
+    "solved",
+)
+SPECS = [
+    {"p_nt": 1.0},
+    {"p_nt": 1.0, "prune": True},
+    {"p_nt": 1.0, "prune": 0.0},
+    {"p_nt": 1.0, "prune": 1},
+    {"p_nt": 1.0, "prune": 0.5},
+    {"name": "D5", "p_nt": 1.0, "prune": "gamma"},
+    {"name": "D6", "p_nt": 1.0, "prune": "keep_last"},
+]
 
 
 def _config(chunk=64, seed=0):
-    sets = {"seed": seed, "data.k_train": K, "data.chunk": chunk, "data.gamma_queries": 20_000,
-            "data.gamma_eval": False, "planner.name": "astar", "data.datasets": SPECS}
+    sets = {
+        "seed": seed,
+        "data.k_train": K,
+        "data.chunk": chunk,
+        "data.gamma_queries": 20_000,
+        "data.gamma_eval": False,
+        "planner.name": "astar",
+        "data.datasets": SPECS,
+    }
     return C.load(None, [f"{k}={json.dumps(v)}" for k, v in sets.items()])
 
 
 def _generate(out, **kw):
     env = make_env("point/2")
-    data.generate_datasets(env, C.data_options(_config(**kw), "point/2"),
-                           out, env_name="point/2", progress=False,
-                           figure=False)
+    data.generate_datasets(
+        env,
+        C.data_options(_config(**kw), "point/2"),
+        out,
+        env_name="point/2",
+        progress=False,
+        figure=False,
+    )
     return env, data.load_datasets(out / "point_2")
 
 
@@ -74,8 +99,12 @@ def _free(env, d):
 def _check_partial(env, full, part, p):
     """``part`` = ``full`` minus some free samples; returns the kept fraction of free ones."""
     a, b = np.asarray(full.inputs), np.asarray(part.inputs)
-    rows_a = {r.tobytes(): i for i, r in enumerate(np.concatenate(
-        [a, np.asarray(full.targets), np.asarray(full.path_index)[:, None]], 1))}
+    rows_a = {
+        r.tobytes(): i
+        for i, r in enumerate(
+            np.concatenate([a, np.asarray(full.targets), np.asarray(full.path_index)[:, None]], 1)
+        )
+    }
     rows_b = np.concatenate([b, np.asarray(part.targets), np.asarray(part.path_index)[:, None]], 1)
     kept = np.array([rows_a[r.tobytes()] for r in rows_b])  # every kept sample is one of D2's
     assert np.all(np.diff(kept) > 0)  # in D2's order
@@ -84,8 +113,11 @@ def _check_partial(env, full, part, p):
     mask[kept] = True
     assert np.all(mask[~free])  # non-trivial samples are never pruned
     for name in ("paths", "path_lengths", "queries", "query_kind", "solved"):
-        assert np.array_equal(np.asarray(getattr(full, name)), np.asarray(getattr(part, name)),
-                              equal_nan=name == "paths")
+        assert np.array_equal(
+            np.asarray(getattr(full, name)),
+            np.asarray(getattr(part, name)),
+            equal_nan=name == "paths",
+        )
     return mask[free].mean(), int(free.sum())
 
 
@@ -118,7 +150,9 @@ def test_keep_last_is_pruning_plus_each_paths_step_into_the_goal(run):
     last = np.r_[pidx[1:] != pidx[:-1], True]  # samples are in path order: a path's last row
     want = ~_free(env, full) | last
     for name in ("inputs", "targets", "path_index"):
-        assert np.array_equal(np.asarray(getattr(part, name)), np.asarray(getattr(full, name))[want])
+        assert np.array_equal(
+            np.asarray(getattr(part, name)), np.asarray(getattr(full, name))[want]
+        )
     assert np.array_equal(np.asarray(part.paths), np.asarray(full.paths), equal_nan=True)
     assert last.sum() == len(np.unique(pidx)) and (last & _free(env, full)).sum() > 0
     # D3 (prune: true) is D6 without the free last steps
@@ -130,8 +164,16 @@ def test_keep_last_is_pruning_plus_each_paths_step_into_the_goal(run):
 def test_keep_last_on_a_hand_made_path():
     """A path of 4 waypoints on an empty map: every waypoint sees the goal, so pruning keeps
     nothing and keep_last keeps the one step into the goal."""
-    env = Env.from_json({"name": "empty", "robot": {"kind": "point"}, "bounds": [[0, 10], [0, 10]],
-                         "boxes": [], "discs": [], "padding": 0.0})
+    env = Env.from_json(
+        {
+            "name": "empty",
+            "robot": {"kind": "point"},
+            "bounds": [[0, 10], [0, 10]],
+            "boxes": [],
+            "discs": [],
+            "padding": 0.0,
+        }
+    )
     path = np.array([[[1, 1], [2, 2], [3, 3], [4, 4]]], np.float32)
     i0, t0, _ = data.include_data(env, path, [4], prune=True)
     i1, t1, p1 = data.include_data(env, path, [4], prune=True, keep_last=True)
@@ -145,8 +187,11 @@ def test_the_draws_depend_on_seed_env_and_name_only():
     assert np.array_equal(u, prune_rng(0, "point_2", "D4").random(1000))
     # a prefix of the samples gets a prefix of the draws
     assert np.array_equal(u[:300], prune_rng(0, "point_2", "D4").random(300))
-    for other in (prune_rng(1, "point_2", "D4"), prune_rng(0, "point_3", "D4"),
-                  prune_rng(0, "point_2", "D5")):
+    for other in (
+        prune_rng(1, "point_2", "D4"),
+        prune_rng(0, "point_3", "D4"),
+        prune_rng(0, "point_2", "D5"),
+    ):
         assert not np.array_equal(u, other.random(1000))
 
 
@@ -166,11 +211,17 @@ def test_include_data_needs_rng_for_a_probability():
         data.include_data(env, paths, [2], prune=1.5)
 
 
-@pytest.mark.parametrize("value, msg", [
-    ("1.5", "must be in [0, 1]"), ("-0.2", "must be in [0, 1]"), ("gama", "'gamma'"),
-    ("keep_first", "'keep_last'"),
-    ("null", "got null"), ("[0.5]", "expected bool or float or str"),
-])
+@pytest.mark.parametrize(
+    "value, msg",
+    [
+        ("1.5", "must be in [0, 1]"),
+        ("-0.2", "must be in [0, 1]"),
+        ("gama", "'gamma'"),
+        ("keep_first", "'keep_last'"),
+        ("null", "got null"),
+        ("[0.5]", "expected bool or float or str"),
+    ],
+)
 def test_bad_prune_values_name_the_key(value, msg):
     with pytest.raises(ConfigError) as e:
         C.load(None, [f"data.datasets=[{{p_nt: 1.0, prune: {value}}}]"])
@@ -178,13 +229,22 @@ def test_bad_prune_values_name_the_key(value, msg):
 
 
 def test_config_syntax_and_name_check():
-    cfg = C.load(None, ["data.datasets=[{p_nt: 0.0}, {p_nt: 0.5}, {p_nt: 1.0}, "
-                        "{p_nt: 1.0, prune: true}, {name: D4, p_nt: 1.0, prune: gamma}]"])
+    cfg = C.load(
+        None,
+        [
+            "data.datasets=[{p_nt: 0.0}, {p_nt: 0.5}, {p_nt: 1.0}, "
+            "{p_nt: 1.0, prune: true}, {name: D4, p_nt: 1.0, prune: gamma}]"
+        ],
+    )
     assert [d.prune for d in cfg.data.datasets] == [False, False, False, True, "gamma"]
     assert C.load(None, ["data.datasets=[{p_nt: 1, prune: 0.3}]"]).data.datasets[0].prune == 0.3
     with pytest.raises(ConfigError, match=r"datasets\[1\].name.*entry 1 is D1"):
         C.load(None, ["data.datasets=[{p_nt: 0.0}, {name: D4, p_nt: 1.0, prune: gamma}]"])
     # the default config (and its hash) is the paper's four datasets, unchanged
     d = C.load().to_dict()["data"]["datasets"]
-    assert d == [{"p_nt": 0.0, "prune": False}, {"p_nt": 0.5, "prune": False},
-                 {"p_nt": 1.0, "prune": False}, {"p_nt": 1.0, "prune": True}]
+    assert d == [
+        {"p_nt": 0.0, "prune": False},
+        {"p_nt": 0.5, "prune": False},
+        {"p_nt": 1.0, "prune": False},
+        {"p_nt": 1.0, "prune": True},
+    ]

@@ -16,11 +16,13 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 import shapely
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy import stats
 
 import ntq_jax as nj
-from ntq_jax import prng, queries as Q
+from ntq_jax import prng
+from ntq_jax import queries as Q
 from ntq_jax.geometry import World
 from ntq_jax.robots import PointRobot, RigidBody
 from ntq_jax.robots.batch import is_valid_batch, steer_to_batch
@@ -32,6 +34,7 @@ P_MIN = 1e-3  # significance threshold of every statistical test (fixed seeds: d
 # ---------------------------------------------------------------------------
 # (a) replay_nontrivial == a plain sequential Alg. 3
 # ---------------------------------------------------------------------------
+
 
 def sequential_alg3(blocked, n_max, attempts=0):
     """The paper's Alg. 3 run call after call over one stream of candidate queries.
@@ -118,10 +121,17 @@ class Oracle:
     def __init__(self, bounds, boxes, discs, pad):
         self.bounds, self.pad = np.asarray(bounds, np.float64), float(pad)
         b = np.asarray(boxes, np.float64).reshape(-1, 4)
-        self.obstacles = np.concatenate([
-            shapely.box(b[:, 0] - b[:, 2], b[:, 1] - b[:, 3], b[:, 0] + b[:, 2], b[:, 1] + b[:, 3]),
-            shapely.points(np.asarray(discs, np.float64).reshape(-1, 3)[:, :2])])
-        self.radii = np.concatenate([np.zeros(len(b)), np.asarray(discs, np.float64).reshape(-1, 3)[:, 2]])
+        self.obstacles = np.concatenate(
+            [
+                shapely.box(
+                    b[:, 0] - b[:, 2], b[:, 1] - b[:, 3], b[:, 0] + b[:, 2], b[:, 1] + b[:, 3]
+                ),
+                shapely.points(np.asarray(discs, np.float64).reshape(-1, 3)[:, :2]),
+            ]
+        )
+        self.radii = np.concatenate(
+            [np.zeros(len(b)), np.asarray(discs, np.float64).reshape(-1, 3)[:, 2]]
+        )
 
     def margin(self, geoms):
         """``min over obstacles (distance - padding)`` per geometry: > 0 means clear."""
@@ -132,8 +142,12 @@ class Oracle:
     def inside(self, pts):
         pts = np.asarray(pts, np.float64).reshape(-1, 2)
         b = self.bounds
-        return ((pts[:, 0] >= b[0, 0]) & (pts[:, 0] <= b[0, 1])
-                & (pts[:, 1] >= b[1, 0]) & (pts[:, 1] <= b[1, 1]))
+        return (
+            (pts[:, 0] >= b[0, 0])
+            & (pts[:, 0] <= b[0, 1])
+            & (pts[:, 1] >= b[1, 0])
+            & (pts[:, 1] <= b[1, 1])
+        )
 
     def valid(self, pts):
         pts = np.asarray(pts, np.float64).reshape(-1, 2)
@@ -195,9 +209,14 @@ def features(q):
     """1D summaries of a query set for two-sample KS tests."""
     q = np.asarray(q, np.float64)
     d = q[:, 1] - q[:, 0]
-    return {"start x": q[:, 0, 0], "start y": q[:, 0, 1], "goal x": q[:, 1, 0],
-            "goal y": q[:, 1, 1], "length": np.hypot(d[:, 0], d[:, 1]),
-            "direction": np.arctan2(d[:, 1], d[:, 0])}
+    return {
+        "start x": q[:, 0, 0],
+        "start y": q[:, 0, 1],
+        "goal x": q[:, 1, 0],
+        "goal y": q[:, 1, 1],
+        "length": np.hypot(d[:, 0], d[:, 1]),
+        "direction": np.arctan2(d[:, 1], d[:, 0]),
+    }
 
 
 def assert_same_distribution(a, b, what):
@@ -222,7 +241,9 @@ def nt_samples():
     """Package and brute-force non-trivial samples, for a large and a small N_max."""
     out = {}
     for n_max, seed in ((Q.DEFAULT_N_MAX, 0), (2, 1)):
-        q, exh = Q.sample_nontrivial_queries(ROBOT, WORLD, jax.random.PRNGKey(seed), N_STAT, PAD, n_max)
+        q, exh = Q.sample_nontrivial_queries(
+            ROBOT, WORLD, jax.random.PRNGKey(seed), N_STAT, PAD, n_max
+        )
         bq, bexh = brute_force_nontrivial(np.random.default_rng(100 + seed), N_STAT, n_max)
         out[n_max] = (q, exh, bq, bexh)
     return out
@@ -231,6 +252,7 @@ def nt_samples():
 # ---------------------------------------------------------------------------
 # (b) the non-trivial sampler has the distribution of the sequential rejection sampler
 # ---------------------------------------------------------------------------
+
 
 def test_nontrivial_matches_brute_force_sequential_sampler(nt_samples):
     q, exh, bq, bexh = nt_samples[Q.DEFAULT_N_MAX]
@@ -319,11 +341,22 @@ def _rect_margin(robot, world, pad):
         x, y, th = states.T
         c, s = np.cos(th), np.sin(th)
         hl, hw = robot.length / 2, robot.width / 2
-        corners = np.stack([np.stack([x + a * hl * c - e * hw * s, y + a * hl * s + e * hw * c], 1)
-                            for a, e in ((1, 1), (-1, 1), (-1, -1), (1, -1))], 1)
+        corners = np.stack(
+            [
+                np.stack([x + a * hl * c - e * hw * s, y + a * hl * s + e * hw * c], 1)
+                for a, e in ((1, 1), (-1, 1), (-1, -1), (1, -1))
+            ],
+            1,
+        )
         d = shapely.distance(shapely.polygons(corners)[:, None], boxes[None]).min(1) - pad
-        inside = np.minimum.reduce([corners[..., 0] - bounds[0, 0], bounds[0, 1] - corners[..., 0],
-                                    corners[..., 1] - bounds[1, 0], bounds[1, 1] - corners[..., 1]]).min(1)
+        inside = np.minimum.reduce(
+            [
+                corners[..., 0] - bounds[0, 0],
+                bounds[0, 1] - corners[..., 0],
+                corners[..., 1] - bounds[1, 0],
+                bounds[1, 1] - corners[..., 1],
+            ]
+        ).min(1)
         return np.minimum(d, inside)
 
     return margin
@@ -337,12 +370,20 @@ def _arm_margin(robot, world, pad):
     def margin(states):
         phi = np.cumsum(states, 1)
         L = np.asarray(robot.link_lengths)
-        x = robot.base[0] + np.concatenate([np.zeros((len(states), 1)), np.cumsum(L * np.cos(phi), 1)], 1)
-        y = robot.base[1] + np.concatenate([np.zeros((len(states), 1)), np.cumsum(L * np.sin(phi), 1)], 1)
-        segs = np.stack([np.stack([x[:, :-1], y[:, :-1]], -1), np.stack([x[:, 1:], y[:, 1:]], -1)], 2)
+        x = robot.base[0] + np.concatenate(
+            [np.zeros((len(states), 1)), np.cumsum(L * np.cos(phi), 1)], 1
+        )
+        y = robot.base[1] + np.concatenate(
+            [np.zeros((len(states), 1)), np.cumsum(L * np.sin(phi), 1)], 1
+        )
+        segs = np.stack(
+            [np.stack([x[:, :-1], y[:, :-1]], -1), np.stack([x[:, 1:], y[:, 1:]], -1)], 2
+        )
         d = shapely.distance(shapely.linestrings(segs.reshape(-1, 2, 2))[:, None], boxes[None])
         d = d.min(1).reshape(len(states), -1).min(1) - pad
-        inside = np.minimum.reduce([x - bounds[0, 0], bounds[0, 1] - x, y - bounds[1, 0], bounds[1, 1] - y]).min(1)
+        inside = np.minimum.reduce(
+            [x - bounds[0, 0], bounds[0, 1] - x, y - bounds[1, 0], bounds[1, 1] - y]
+        ).min(1)
         return np.minimum(d, inside)  # interpolated joints stay within the endpoints' limits
 
     return margin
@@ -369,6 +410,7 @@ def test_nontrivial_queries_of_discretised_robots_are_blocked(name):
 # (d) the p_nt mixture of Alg. 2
 # ---------------------------------------------------------------------------
 
+
 def test_sample_queries_kinds_follow_p_nt():
     n, p_nt = 3000, 0.3
     q, kind = Q.sample_queries(ROBOT, WORLD, jax.random.PRNGKey(21), n, p_nt, PAD)
@@ -379,7 +421,9 @@ def test_sample_queries_kinds_follow_p_nt():
     assert ORACLE.valid(q.reshape(-1, 2)).all()
     # the uniform part is uniform, the non-trivial part blocked
     uni = q[kind == Q.UNIFORM]
-    assert_same_distribution(uni, brute_force_uniform(np.random.default_rng(9), len(uni)), "uniform part")
+    assert_same_distribution(
+        uni, brute_force_uniform(np.random.default_rng(9), len(uni)), "uniform part"
+    )
     nt = q[kind == Q.NON_TRIVIAL]
     margin = ORACLE.segment_margin(nt[:, 0], nt[:, 1])
     assert (margin[np.abs(margin) > BAND] < 0).all()
@@ -401,6 +445,7 @@ def test_p_nt_outside_unit_interval_raises(p_nt):
 # ---------------------------------------------------------------------------
 # (e) determinism and stream extension
 # ---------------------------------------------------------------------------
+
 
 def test_same_key_same_queries_and_more_queries_extend_the_stream():
     key = jax.random.PRNGKey(31)
@@ -427,6 +472,7 @@ def test_same_key_same_queries_and_more_queries_extend_the_stream():
 # ---------------------------------------------------------------------------
 # (f) gamma_nt and the Wilson interval
 # ---------------------------------------------------------------------------
+
 
 def test_gamma_nt_agrees_with_brute_force_monte_carlo(gamma_ref):
     n = 1_000_000
@@ -475,18 +521,36 @@ def test_gamma_nt_small_n_read_lane_by_lane_equals_whole_chunks(monkeypatch):
     monkeypatch.setattr(Q, "SMALL_ROWS", 0)  # whole chunks only
     whole = [ENV.gamma_nt(key, n, chunk=chunk) for n in ns]
     for n, a, b in zip(ns, small, whole):
-        assert (a.queries, a.non_trivial, a.candidates) == (b.queries, b.non_trivial, b.candidates), n
+        assert (a.queries, a.non_trivial, a.candidates) == (
+            b.queries,
+            b.non_trivial,
+            b.candidates,
+        ), n
     # rows too few for n: the lane-by-lane attempt gives up and whole chunks count it
     monkeypatch.setattr(Q, "SMALL_ROWS", 8)
     assert Q._small_estimate(ROBOT, WORLD, prng.stream_seeds(key, 0), PAD, chunk, 10**6) is None
     # (no padding: the lane program test_free_space_too_small_is_raised runs on its one-box
     # map; the 0.4-wide free border holds ~12 valid pairs among those 512 lanes, not 250)
     nearly_empty = World.create(BOUNDS, np.array([[5.0, 5.0, 4.6, 4.6]]), np.zeros((0, 3)))
-    assert Q._small_estimate(ROBOT, nearly_empty, prng.stream_seeds(key, 0), 0.0, chunk, 250) is None
+    assert (
+        Q._small_estimate(ROBOT, nearly_empty, prng.stream_seeds(key, 0), 0.0, chunk, 250) is None
+    )
 
 
-@pytest.mark.parametrize("k, n", [(0, 1), (1, 1), (0, 10), (3, 10), (10, 10), (1, 1000),
-                                  (500, 1000), (311_000, 1_000_000), (7, 10**9)])
+@pytest.mark.parametrize(
+    "k, n",
+    [
+        (0, 1),
+        (1, 1),
+        (0, 10),
+        (3, 10),
+        (10, 10),
+        (1, 1000),
+        (500, 1000),
+        (311_000, 1_000_000),
+        (7, 10**9),
+    ],
+)
 def test_wilson_interval_matches_scipy_and_the_textbook(k, n):
     lo, hi = wilson_interval(k, n)
     ref = stats.binomtest(k, n).proportion_ci(0.95, method="wilson")
@@ -504,6 +568,7 @@ def test_wilson_interval_matches_scipy_and_the_textbook(k, n):
 # ---------------------------------------------------------------------------
 # (g) a fully covered map
 # ---------------------------------------------------------------------------
+
 
 def test_free_space_too_small_is_raised():
     world = World.create(BOUNDS, [[5.0, 5.0, 5.0, 5.0]])  # the box covers the whole map

@@ -17,8 +17,17 @@ from ntq_jax import make_env
 from ntq_jax.experiment import config
 
 SETS = ["data.k_train=12", "data.gamma_queries=500", "data.gamma_eval=false"]
-ARGS = ["--config", "configs/point_small.yaml", "--env", "point/2", "--planner", "astar",
-        "--chunk", "5", "--no-progress"] + [a for s in SETS for a in ("--set", s)]
+ARGS = [
+    "--config",
+    "configs/point_small.yaml",
+    "--env",
+    "point/2",
+    "--planner",
+    "astar",
+    "--chunk",
+    "5",
+    "--no-progress",
+] + [a for s in SETS for a in ("--set", s)]
 
 
 def _record(out, *extra) -> int:
@@ -41,8 +50,11 @@ def rec(recorded, tmp_path):
 
 
 def _files(folder):
-    return {p.relative_to(folder).as_posix(): p.read_bytes() for p in sorted(folder.rglob("*"))
-            if p.is_file() and p.name != ".lock"}
+    return {
+        p.relative_to(folder).as_posix(): p.read_bytes()
+        for p in sorted(folder.rglob("*"))
+        if p.is_file() and p.name != ".lock"
+    }
 
 
 def _one_error(capsys) -> str:
@@ -62,8 +74,11 @@ def test_a_record_refuses_other_arguments_and_another_planner(rec, capsys):
     naming the difference, the record untouched; its own arguments resume it (another
     worker count too), and --pools X is one line."""
     before = _files(rec)
-    for extra, word in ((["--set", "seed=1"], "seed"), (["--planner", "roadmap"], "planner"),
-                        (["--set", "data.k_train=20"], "overrides")):
+    for extra, word in (
+        (["--set", "seed=1"], "seed"),
+        (["--planner", "roadmap"], "planner"),
+        (["--set", "data.k_train=20"], "overrides"),
+    ):
         argv = ARGS + ["--out", str(rec)] + extra
         assert load_script("record_paths").main(argv) == 2
         line = _one_error(capsys)
@@ -72,16 +87,23 @@ def test_a_record_refuses_other_arguments_and_another_planner(rec, capsys):
     assert _record(rec, "--pools", "X") == 2 and "--pools X" in _one_error(capsys)
     assert _record(rec, "--workers", "2") == 0
     assert {k: v for k, v in _files(rec).items() if k != "record.json"} == {
-        k: v for k, v in before.items() if k != "record.json"}
+        k: v for k, v in before.items() if k != "record.json"
+    }
 
 
 def test_a_record_is_one_recorder_and_a_killed_ones_temporary_files_go(rec, capsys):
     stale = rec / "N" / ".plan_000000010_000000012.npz.tmp-99999"
     stale.write_bytes(b"partial")
-    code = ("import fcntl, sys; f = open(sys.argv[1], 'a+'); fcntl.flock(f, fcntl.LOCK_EX); "
-            "print('locked', flush=True); sys.stdin.read()")
-    holder = subprocess.Popen([sys.executable, "-c", code, str(rec / ".lock")],
-                              stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    code = (
+        "import fcntl, sys; f = open(sys.argv[1], 'a+'); fcntl.flock(f, fcntl.LOCK_EX); "
+        "print('locked', flush=True); sys.stdin.read()"
+    )
+    holder = subprocess.Popen(
+        [sys.executable, "-c", code, str(rec / ".lock")],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
     try:
         assert holder.stdout.readline().strip() == "locked"
         assert _record(rec) == 2
@@ -114,6 +136,7 @@ def test_a_damaged_chunk_is_one_line_naming_it(damage, rec, capsys):
     line = _one_error(capsys)
     assert str(f) in line and "delete it" in line
     from ntq_jax.data import records
+
     with pytest.raises(records.RecordError, match="plan_000000005_000000010.npz.*paths_from"):
         _generate(rec, rec.parent / "data")
 
@@ -124,23 +147,45 @@ def test_a_corrupt_record_json_is_one_line_naming_it(rec, capsys):
     assert str(rec / "record.json") in _one_error(capsys)
     gen = load_script("generate_data")
     cfg = rec.parent / "c.yaml"
-    cfg.write_text("envs: [point/2]\ndata:\n  k_train: 12\n  per_env: [{env: point/2, "
-                   f"paths_from: '{rec}'}}]\n")
-    assert gen.main(["--config", str(cfg), "--out", str(rec.parent / "d"), "--no-progress",
-                     "--no-figures", "--no-compile-cache"]) == 2
+    cfg.write_text(
+        "envs: [point/2]\ndata:\n  k_train: 12\n  per_env: [{env: point/2, "
+        f"paths_from: '{rec}'}}]\n"
+    )
+    assert (
+        gen.main(
+            [
+                "--config",
+                str(cfg),
+                "--out",
+                str(rec.parent / "d"),
+                "--no-progress",
+                "--no-figures",
+                "--no-compile-cache",
+            ]
+        )
+        == 2
+    )
     assert str(rec / "record.json") in _one_error(capsys)
 
 
 def _cfg(rec, *extra):
-    return config.load("configs/point_small.yaml", SETS + [
-        f"data.per_env=[{{env: point/2, paths_from: '{rec}'}}]", *extra])
+    return config.load(
+        "configs/point_small.yaml",
+        SETS + [f"data.per_env=[{{env: point/2, paths_from: '{rec}'}}]", *extra],
+    )
 
 
 def _generate(rec, out):
     from ntq_jax import data
-    return data.generate_datasets(make_env("point/2"), config.data_options(_cfg(rec), "point/2"),
-                                  out, env_name="point/2",
-                                  progress=False, figure=False)
+
+    return data.generate_datasets(
+        make_env("point/2"),
+        config.data_options(_cfg(rec), "point/2"),
+        out,
+        env_name="point/2",
+        progress=False,
+        figure=False,
+    )
 
 
 def test_recorded_paths_are_verified_before_they_enter_the_datasets(rec):
@@ -153,18 +198,18 @@ def test_recorded_paths_are_verified_before_they_enter_the_datasets(rec):
     centre = np.asarray(env.world.boxes)[0, :2]  # a waypoint in the middle of an obstacle
     n = int(z["lengths"][i])
     z["paths"] = np.concatenate([z["paths"], np.full_like(z["paths"][:, :1], np.nan)], axis=1)
-    z["paths"][i, 1:n + 1] = z["paths"][i, 0:n].copy()
+    z["paths"][i, 1 : n + 1] = z["paths"][i, 0:n].copy()
     z["paths"][i, 1] = centre
     z["lengths"][i] = n + 1
     np.savez(f, **z)
     with warnings.catch_warnings(record=True) as got:
         warnings.simplefilter("always")
-        out = _generate(rec, rec.parent / "data")
+        _generate(rec, rec.parent / "data")
     assert any("1 of them from" in str(w.message) for w in got), [str(w.message) for w in got]
     d2 = np.load(rec.parent / "data" / "point_2" / "D2" / "paths.npy")
     lens = np.load(rec.parent / "data" / "point_2" / "D2" / "path_lengths.npy")
     for p, n in zip(d2, lens):
-        assert np.asarray(env.steer_to(p[:n - 1], p[1:n])).all()
+        assert np.asarray(env.steer_to(p[: n - 1], p[1:n])).all()
     meta = json.loads((rec.parent / "data" / "point_2" / "D2" / "meta.json").read_text())
     assert meta["planner"]["paths_from"]["record"] == str(rec)
     assert meta["planner"]["paths_from"]["planner"] == "astar"

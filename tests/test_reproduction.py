@@ -25,42 +25,84 @@ REPO = Path(__file__).resolve().parent.parent
 PAPER_ROOT = REPO / "results" / "paper"
 
 K = PA.PAPER_K_TEST
-GAMMA = {"point/0": 0.31, "point/1": 0.40, "point/2": 0.41, "point/3": 0.63, "rigid/0": 0.50,
-         "rigid/1": 0.66, "rigid/2": 0.56, "rigid/3": 0.69, "nlink/2": 0.22, "nlink/4": 0.37,
-         "nlink/6": 0.61}
+GAMMA = {
+    "point/0": 0.31,
+    "point/1": 0.40,
+    "point/2": 0.41,
+    "point/3": 0.63,
+    "rigid/0": 0.50,
+    "rigid/1": 0.66,
+    "rigid/2": 0.56,
+    "rigid/3": 0.69,
+    "nlink/2": 0.22,
+    "nlink/4": 0.37,
+    "nlink/6": 0.61,
+}
 
 
 def _row(env, model, kind, steer, successes, cost=1.01, gamma=None):
     p = successes / K
-    return {"task": env.split("/")[0], "env": env, "env_slug": env.replace("/", "_"),
-            "model": model, "query_kind": kind, "steer": steer,
-            "gamma_nt": GAMMA[env] if gamma is None else gamma,
-            "gamma_nt_ci95": [GAMMA[env] - 0.002, GAMMA[env] + 0.002],
-            "reference_planner": "roadmap", "data_planner": "roadmap",
-            "seconds_per_query": 0.002, "reference_seconds_per_query": 0.01, "k_test": K,
-            "successes": successes, "success_ratio": p,
-            "success_ci95": [max(0.0, p - 0.04), min(1.0, p + 0.04)],
-            "cost_ratio": cost, "cost_ratio_n": successes}
+    return {
+        "task": env.split("/")[0],
+        "env": env,
+        "env_slug": env.replace("/", "_"),
+        "model": model,
+        "query_kind": kind,
+        "steer": steer,
+        "gamma_nt": GAMMA[env] if gamma is None else gamma,
+        "gamma_nt_ci95": [GAMMA[env] - 0.002, GAMMA[env] + 0.002],
+        "reference_planner": "roadmap",
+        "data_planner": "roadmap",
+        "seconds_per_query": 0.002,
+        "reference_seconds_per_query": 0.01,
+        "k_test": K,
+        "successes": successes,
+        "success_ratio": p,
+        "success_ci95": [max(0.0, p - 0.04), min(1.0, p + 0.04)],
+        "cost_ratio": cost,
+        "cost_ratio_n": successes,
+    }
 
 
 def _comp(env, model, baseline, kind, steer, only_a, only_b, both=300, ci=None):
     d = (only_a - only_b) / K
-    return {"task": env.split("/")[0], "env": env, "steer": steer, "query_kind": kind,
-            "model": model, "baseline": baseline, "baseline_rule": None, "n": K, "both": both,
-            "only_a": only_a, "only_b": only_b, "neither": K - both - only_a - only_b,
-            "success_diff": d, "success_diff_ci95": ci or [d - 0.04, d + 0.04],
-            "mcnemar_p": mcnemar_exact(only_a, only_b), "cost_n": both,
-            "cost_ratio_diff": 0.001, "cost_ratio_diff_ci95": [-0.01, 0.012],
-            "wilcoxon_p": 0.5}
+    return {
+        "task": env.split("/")[0],
+        "env": env,
+        "steer": steer,
+        "query_kind": kind,
+        "model": model,
+        "baseline": baseline,
+        "baseline_rule": None,
+        "n": K,
+        "both": both,
+        "only_a": only_a,
+        "only_b": only_b,
+        "neither": K - both - only_a - only_b,
+        "success_diff": d,
+        "success_diff_ci95": ci or [d - 0.04, d + 0.04],
+        "mcnemar_p": mcnemar_exact(only_a, only_b),
+        "cost_n": both,
+        "cost_ratio_diff": 0.001,
+        "cost_ratio_diff_ci95": [-0.01, 0.012],
+        "wilcoxon_p": 0.5,
+    }
 
 
 def _config(env):
     task = env.split("/")[0]
-    return {"task": task, "envs": [env], "seed": 0,
-            "data": {"k_train": PA.PAPER_K_TRAIN[env], "per_env": [],
-                     "datasets": [dict(d) for d in PA.PAPER_DATASETS]},
-            "model": {"hidden": [64, 32]},
-            "eval": {"k_test": K, "steer": [True, False] if task == "rigid" else [True]}}
+    return {
+        "task": task,
+        "envs": [env],
+        "seed": 0,
+        "data": {
+            "k_train": PA.PAPER_K_TRAIN[env],
+            "per_env": [],
+            "datasets": [dict(d) for d in PA.PAPER_DATASETS],
+        },
+        "model": {"hidden": [64, 32]},
+        "eval": {"k_test": K, "steer": [True, False] if task == "rigid" else [True]},
+    }
 
 
 def make_summary(env, successes=None, comparisons=(), train_seed=0, gamma=None):
@@ -69,19 +111,35 @@ def make_summary(env, successes=None, comparisons=(), train_seed=0, gamma=None):
     successes = successes or {}
     task = env.split("/")[0]
     steers = (True, False) if task == "rigid" else (True,)
-    rows = [_row(env, m, k, s, successes.get((m, k, s), 400), gamma=gamma)
-            for s in steers for m in PA.MEMBERS for k in PA.KINDS]
-    rows += [_row(env, m, k, s, n, gamma=gamma) for (m, k, s), n in successes.items()
-             if m not in PA.MEMBERS]
-    return {"schema": 1, "task": task, "env": env, "env_slug": env.replace("/", "_"),
-            "seed": 0, "train_seed": train_seed, "package_version": "0.1.0",
-            "config_hash": "0123456789abcdef", "config": _config(env),
-            "padding": PA.PAPER_PADDING[task], "rows": rows, "comparisons": list(comparisons),
-            "fingerprints": {"datasets": {f"D{i}": f"{i}" * 64 for i in range(4)},
-                             "models": "f" * 64},
-            "timings": {"data": 10.0, "train": 20.0, "eval": 5.5},
-            "finished": "2026-12-01T20:00:00",
-            "command": f"python scripts/reproduce.py --env {env}"}
+    rows = [
+        _row(env, m, k, s, successes.get((m, k, s), 400), gamma=gamma)
+        for s in steers
+        for m in PA.MEMBERS
+        for k in PA.KINDS
+    ]
+    rows += [
+        _row(env, m, k, s, n, gamma=gamma)
+        for (m, k, s), n in successes.items()
+        if m not in PA.MEMBERS
+    ]
+    return {
+        "schema": 1,
+        "task": task,
+        "env": env,
+        "env_slug": env.replace("/", "_"),
+        "seed": 0,
+        "train_seed": train_seed,
+        "package_version": "0.1.0",
+        "config_hash": "0123456789abcdef",
+        "config": _config(env),
+        "padding": PA.PAPER_PADDING[task],
+        "rows": rows,
+        "comparisons": list(comparisons),
+        "fingerprints": {"datasets": {f"D{i}": f"{i}" * 64 for i in range(4)}, "models": "f" * 64},
+        "timings": {"data": 10.0, "train": 20.0, "eval": 5.5},
+        "finished": "2026-12-01T20:00:00",
+        "command": f"python scripts/reproduce.py --env {env}",
+    }
 
 
 def write_summary(root, summary, seed_dir=None):
@@ -95,8 +153,11 @@ def write_summary(root, summary, seed_dir=None):
 
 
 def _find(claims, claim_start, scope_start):
-    got = [c for c in claims if c["claim"].startswith(claim_start)
-           and c["scope"].startswith(scope_start)]
+    got = [
+        c
+        for c in claims
+        if c["claim"].startswith(claim_start) and c["scope"].startswith(scope_start)
+    ]
     assert got, (claim_start, scope_start)
     return got[0]
 
@@ -109,8 +170,10 @@ def _find(claims, claim_start, scope_start):
 def test_paper_tables_transcribed():
     assert sum(len(envs) for envs in PA.PAPER.values()) == 15
     assert all(set(e["models"]) == set(PA.MEMBERS) for t in PA.PAPER.values() for e in t.values())
-    assert PA.PAPER["I"]["point/0"]["models"]["PNet_0"]["uniform"] == {"success": 0.970,
-                                                                       "cost": 1.004}
+    assert PA.PAPER["I"]["point/0"]["models"]["PNet_0"]["uniform"] == {
+        "success": 0.970,
+        "cost": 1.004,
+    }
     assert PA.PAPER["II"]["rigid/1"]["gamma_nt"] == 0.659
     assert PA.PAPER["III"]["rigid/0"]["models"]["PNet_3"]["uniform"]["success"] == 0.228
     assert PA.PAPER["IV"]["nlink/4"]["models"]["PNet_3"]["nontrivial"]["success"] == 0.82
@@ -128,9 +191,11 @@ def test_paper_tables_transcribed():
 
 
 def test_render_is_deterministic_and_puts_the_paper_next_to_ours(tmp_path):
-    s = make_summary("point/0", {("PNet_0", "uniform", True): 452,
-                                 ("PNet_ens", "nontrivial", True): 470},
-                     [_comp("point/0", "PNet_3", "PNet_0", "nontrivial", True, 40, 10)])
+    s = make_summary(
+        "point/0",
+        {("PNet_0", "uniform", True): 452, ("PNet_ens", "nontrivial", True): 470},
+        [_comp("point/0", "PNet_3", "PNet_0", "nontrivial", True, 40, 10)],
+    )
     write_summary(tmp_path, s)
     text = R.render(tmp_path)
     assert text == R.render(tmp_path)
@@ -173,8 +238,14 @@ def test_load_summaries_order(tmp_path):
     write_summary(tmp_path, make_summary("point/0", train_seed=2), seed_dir=2)
     write_summary(tmp_path, make_summary("point/0", train_seed=1), seed_dir=1)
     got = [(s["env"], s["train_seed"], S.is_seed_run(s)) for s in S.load_summaries(tmp_path)]
-    assert got == [("point/0", 0, False), ("point/0", 1, True), ("point/0", 2, True),
-                   ("point/1", 0, False), ("rigid/0", 0, False), ("nlink/4", 0, False)]
+    assert got == [
+        ("point/0", 0, False),
+        ("point/0", 1, True),
+        ("point/0", 2, True),
+        ("point/1", 0, False),
+        ("rigid/0", 0, False),
+        ("nlink/4", 0, False),
+    ]
 
 
 # ---------------------------------------------------------------------------
@@ -182,13 +253,22 @@ def test_load_summaries_order(tmp_path):
 # ---------------------------------------------------------------------------
 
 
-def write_seeds(root, env, per_seed, kind="nontrivial", steer=True, model="PNet_3",
-                baseline="PNet_0", successes=None):
+def write_seeds(
+    root,
+    env,
+    per_seed,
+    kind="nontrivial",
+    steer=True,
+    model="PNet_3",
+    baseline="PNet_0",
+    successes=None,
+):
     """One summary per training seed of ``env``, each with the paired comparison
     ``model - baseline`` given by its discordant pairs ``(only_a, only_b)``."""
     for seed, (a, b) in enumerate(per_seed):
-        s = make_summary(env, successes, [_comp(env, model, baseline, kind, steer, a, b)],
-                         train_seed=seed)
+        s = make_summary(
+            env, successes, [_comp(env, model, baseline, kind, steer, a, b)], train_seed=seed
+        )
         write_summary(root, s, seed_dir=None if seed == 0 else seed)
 
 
@@ -222,18 +302,23 @@ def test_claim_verdicts_with_training_seeds(tmp_path):
     assert _find(cs, text, "point, pooled")["verdict"] == CL.NOT_RUN
     # Holm over every p-value the verdicts use (the lines' and the paper's size tests)
     fam = [c["p"] for c in cs if c["p"] is not None] + [
-        c["p_paper"] for c in cs if c["p_paper"] is not None]
+        c["p_paper"] for c in cs if c["p_paper"] is not None
+    ]
     assert CL.family_size(cs) == len(fam)
     assert all(c["p_holm"] >= c["p"] for c in cs if c["p"] is not None)
     from ntq_jax.stats import holm
+
     assert c0["p_holm"] == pytest.approx(holm(fam)[fam.index(c0["p"])])
 
 
 def test_a_null_effect_that_excludes_the_papers_size(tmp_path):
     # rigid/0: the paper's PNet_3 - PNet_0 is +0.128; ours is about 0 in three seeds
     write_seeds(tmp_path, "rigid/0", [(30, 30), (32, 30), (28, 30)])
-    c = _find(CL.claims(S.load_summaries(tmp_path)), "PNet_3 >= PNet_0 in success on non-trivial",
-              "rigid/0")
+    c = _find(
+        CL.claims(S.load_summaries(tmp_path)),
+        "PNet_3 >= PNet_0 in success on non-trivial",
+        "rigid/0",
+    )
     assert c["verdict"] == CL.MAGNITUDE and c["p_paper_holm"] < 0.05 and c["p_holm"] > 0.05
     assert c["paper_effect"] == pytest.approx(0.128)
 
@@ -248,20 +333,24 @@ def test_one_seed_maps_borrow_their_robots_spread(tmp_path):
     e2, e4 = c2["estimate"], c4["estimate"]
     assert e2.borrowed and e2.seeds == 1 and "1 seed, sd borrowed" in c2["effect"]
     # the borrowed variance is nlink/4's between-seed variance, with its 2 df
-    assert e2.seed_part == pytest.approx((e4.spread ** 2, 2))
+    assert e2.seed_part == pytest.approx((e4.spread**2, 2))
     p0 = _find(cs, text, "point/0")
     assert p0["verdict"] == CL.UNRESOLVED and p0["p"] is None
     assert "between-seed variance is unknown" in p0["evidence"]
 
 
 def test_pooled_claim_is_the_mean_of_the_maps(tmp_path):
-    for env, seeds in zip(PA.PAPER_TABLES["IV"]["envs"], [[(20, 10), (30, 10)], [(15, 10)],
-                                                          [(15, 10), (25, 10), (20, 10)]]):
+    for env, seeds in zip(
+        PA.PAPER_TABLES["IV"]["envs"],
+        [[(20, 10), (30, 10)], [(15, 10)], [(15, 10), (25, 10), (20, 10)]],
+    ):
         write_seeds(tmp_path, env, seeds)
     cs = CL.claims(S.load_summaries(tmp_path))
     c = _find(cs, "PNet_3 >= PNet_0 in success on non-trivial", "nlink, pooled")
-    maps = [_find(cs, "PNet_3 >= PNet_0 in success on non-trivial", e)["estimate"]
-            for e in PA.PAPER_TABLES["IV"]["envs"]]
+    maps = [
+        _find(cs, "PNet_3 >= PNet_0 in success on non-trivial", e)["estimate"]
+        for e in PA.PAPER_TABLES["IV"]["envs"]
+    ]
     assert c["estimate"].estimate == pytest.approx(sum(m.estimate for m in maps) / 3)
     assert c["estimate"].variance == pytest.approx(sum(m.variance for m in maps) / 9)
     assert c["seeds"] == 6 and "mean diff +0.093; PNet_3 ahead in 3 of 3" in c["paper"]
@@ -270,20 +359,29 @@ def test_pooled_claim_is_the_mean_of_the_maps(tmp_path):
 def test_without_steer_pnet3_worst(tmp_path):
     low = {("PNet_3", k, False): 150 for k in PA.KINDS}
     low.update({(m, k, False): 300 for m in ("PNet_0", "PNet_1", "PNet_2") for k in PA.KINDS})
-    write_seeds(tmp_path, "rigid/0", [(10, 160), (12, 158), (9, 161)], kind="uniform",
-                steer=False, successes=low)
+    write_seeds(
+        tmp_path,
+        "rigid/0",
+        [(10, 160), (12, 158), (9, 161)],
+        kind="uniform",
+        steer=False,
+        successes=low,
+    )
     high = dict(low)
     high[("PNet_3", "uniform", False)] = 400  # above PNet_1 and PNet_2 (unpaired rows)
-    write_seeds(tmp_path, "rigid/1", [(0, 0)] * 2, kind="nontrivial", steer=False,
-                successes=high)
+    write_seeds(tmp_path, "rigid/1", [(0, 0)] * 2, kind="nontrivial", steer=False, successes=high)
     cs = CL.claims(S.load_summaries(tmp_path))
     c = _find(cs, "without steerTo PNet_3 is the worst", "rigid/0, uniform")
     assert c["verdict"] == CL.HOLDS  # below each of PNet_0 (paired), PNet_1, PNet_2 (rows)
     assert "vs PNet_0 -0.299" in c["evidence"] and "vs PNet_1 -0.300" in c["evidence"]
-    assert _find(cs, "without steerTo PNet_3 is the worst",
-                 "rigid/1, uniform")["verdict"] == CL.CONTRADICTED
-    assert _find(cs, "without steerTo PNet_3 is the worst",
-                 "rigid/2, uniform")["verdict"] == CL.NOT_RUN
+    assert (
+        _find(cs, "without steerTo PNet_3 is the worst", "rigid/1, uniform")["verdict"]
+        == CL.CONTRADICTED
+    )
+    assert (
+        _find(cs, "without steerTo PNet_3 is the worst", "rigid/2, uniform")["verdict"]
+        == CL.NOT_RUN
+    )
     assert _find(cs, "the success of every model falls", "rigid, PNet_0")["verdict"] == CL.NOT_RUN
 
 
@@ -292,8 +390,12 @@ def test_success_falls_with_gamma_within_robots(tmp_path):
     for table in ("I", "II", "IV"):
         for i, env in enumerate(PA.PAPER_TABLES[table]["envs"]):
             n = 480 - 30 * sorted(PA.PAPER_TABLES[table]["envs"], key=GAMMA.get).index(env)
-            write_summary(tmp_path, make_summary(env, {(m, k, s): n for m in PA.MEMBERS
-                                                       for k in PA.KINDS for s in (True, False)}))
+            write_summary(
+                tmp_path,
+                make_summary(
+                    env, {(m, k, s): n for m in PA.MEMBERS for k in PA.KINDS for s in (True, False)}
+                ),
+            )
     cs = CL.claims(S.load_summaries(tmp_path))
     c = _find(cs, "success falls as gamma_nt rises (uniform", "point")
     assert c["effect"].startswith("Kendall tau -1.00 over 4 maps (4 maps: the smallest")
@@ -319,11 +421,18 @@ def test_six_link_25_percent(tmp_path):
 def test_point_over_90_percent(tmp_path):
     def seeds(env, succ):
         for seed in range(3):
-            write_summary(tmp_path, make_summary(env, succ, train_seed=seed),
-                          seed_dir=None if seed == 0 else seed)
+            write_summary(
+                tmp_path,
+                make_summary(env, succ, train_seed=seed),
+                seed_dir=None if seed == 0 else seed,
+            )
+
     seeds("point/0", {(m, k, True): 490 for m in PA.MEMBERS for k in PA.KINDS})
-    seeds("point/1", {(m, k, True): 490 for m in PA.MEMBERS for k in PA.KINDS}
-          | {("PNet_2", "nontrivial", True): 400})
+    seeds(
+        "point/1",
+        {(m, k, True): 490 for m in PA.MEMBERS for k in PA.KINDS}
+        | {("PNet_2", "nontrivial", True): 400},
+    )
     seeds("point/2", {(m, k, True): 455 for m in PA.MEMBERS for k in PA.KINDS})
     cs = CL.claims(S.load_summaries(tmp_path))
     text = "every model succeeds on over 90%"
@@ -381,8 +490,11 @@ def test_seed_variance_mean_and_range(tmp_path):
         s = make_summary("nlink/4", {("PNet_3", "nontrivial", True): n}, train_seed=seed)
         write_summary(tmp_path, s, seed_dir=None if seed == 0 else seed)
     # a seeds/ copy of the main run's seed counts once
-    write_summary(tmp_path, make_summary("nlink/4", {("PNet_3", "nontrivial", True): 1},
-                                         train_seed=0), seed_dir=0)
+    write_summary(
+        tmp_path,
+        make_summary("nlink/4", {("PNet_3", "nontrivial", True): 1}, train_seed=0),
+        seed_dir=0,
+    )
     summaries = S.load_summaries(tmp_path)
     st = {(x["model"], x["query_kind"]): x for x in R.seed_variance(summaries, "nlink/4")}
     x = st[("PNet_3", "nontrivial")]
@@ -392,23 +504,28 @@ def test_seed_variance_mean_and_range(tmp_path):
     assert st[("PNet_0", "uniform")]["success_min"] == st[("PNet_0", "uniform")]["success_max"]
     text = R.render(tmp_path)
     assert "| PNet_3 | yes | non-trivial | 3 | 0.800 | [0.700, 0.900] |" in text
-    assert ("Training seeds per map (the same data; `seeds/train_seed_<k>`): "
-            "nlink/4 3 (0, 1, 2).") in text
+    assert (
+        "Training seeds per map (the same data; `seeds/train_seed_<k>`): nlink/4 3 (0, 1, 2)."
+    ) in text
     # the main tables use the main run only
     assert "| PNet_3 | 0.800 [0.760, 0.840] |" in text
 
 
 def test_seed_variance_of_paired_differences(tmp_path):
     for seed, (a, b) in ((0, (40, 10)), (1, (20, 10)), (2, (30, 10))):
-        s = make_summary("rigid/0", train_seed=seed, comparisons=[
-            _comp("rigid/0", "PNet_3", "PNet_0", "nontrivial", True, a, b)])
+        s = make_summary(
+            "rigid/0",
+            train_seed=seed,
+            comparisons=[_comp("rigid/0", "PNet_3", "PNet_0", "nontrivial", True, a, b)],
+        )
         write_summary(tmp_path, s, seed_dir=None if seed == 0 else seed)
     (d,) = R.seed_variance_diffs(S.load_summaries(tmp_path), "rigid/0")
     assert d["seeds"] == [0, 1, 2] and d["diff_mean"] == pytest.approx(0.04)
     assert (d["diff_min"], d["diff_max"]) == (0.02, 0.06)
     assert d["significant"] == 2  # 40/10 and 30/10; 20/10 has p 0.099
     assert "| PNet_3 | PNet_0 | yes | non-trivial | 3 | +0.040 | [+0.020, +0.060] | 2 |" in (
-        R.render(tmp_path))
+        R.render(tmp_path)
+    )
 
 
 def test_check_seed_runs(tmp_path):
@@ -424,7 +541,8 @@ def test_check_seed_runs(tmp_path):
         "point/point_0/seeds/train_seed_1/summary.json: no main run of point/0",
         "rigid/rigid_0/seeds/train_seed_2/summary.json: train_seed 3 but folder train_seed_2",
         "rigid/rigid_0/seeds/train_seed_2/summary.json: dataset fingerprints differ from the "
-        "main run of rigid/0"]
+        "main run of rigid/0",
+    ]
     assert "Seed-run problems: " in R.render(tmp_path)
 
 
@@ -473,7 +591,8 @@ def test_check_summary_per_env_k_train_and_datasets():
     s["rows"][0]["k_test"] = 100
     assert any("rows with k_test [100]" in p for p in S.check_summary(s))
     assert S.check_summary(dict(make_summary("point/0"), env="point/9")) == [
-        "env 'point/9' is not one of the paper's maps"]
+        "env 'point/9' is not one of the paper's maps"
+    ]
 
 
 # ---------------------------------------------------------------------------
@@ -522,9 +641,12 @@ def _committed(root):
 def test_committed_reproduction_md_is_current(root):
     _committed(root)
     doc = root / R.DOC_NAME
-    assert doc.exists(), f"{root}/REPRODUCTION.md missing: python scripts/reproduce.py --report-only --results {root}"
+    assert doc.exists(), (
+        f"{root}/REPRODUCTION.md missing: python scripts/reproduce.py --report-only --results {root}"
+    )
     assert doc.read_text(encoding="utf-8") == R.render(root), (
-        f"{root}/REPRODUCTION.md is stale: python scripts/reproduce.py --report-only --results {root}")
+        f"{root}/REPRODUCTION.md is stale: python scripts/reproduce.py --report-only --results {root}"
+    )
 
 
 def test_the_shortcut_path_reproduction_is_complete():
@@ -552,8 +674,10 @@ def test_render_tolerates_missing_values(tmp_path):
     write_summary(tmp_path, s)
     text = R.render(tmp_path)
     assert "| point/3 | - | 12.0 | - | 12.0 |" in text
-    assert ("| PNet_1 | 0.800 [0.760, 0.840] | 0.958 | 1.010 | 1.069 | 0.000 [0.000, 0.040] | "
-            "0.896 | - | 1.167 |") in text
+    assert (
+        "| PNet_1 | 0.800 [0.760, 0.840] | 0.958 | 1.010 | 1.069 | 0.000 [0.000, 0.040] | "
+        "0.896 | - | 1.167 |"
+    ) in text
     probs = S.check_summary(S.load_summaries(tmp_path)[0])
     assert "dataset fingerprints missing: D3" in probs
     assert "timings of data/train/eval missing" in probs
@@ -563,12 +687,15 @@ def test_models_fingerprint_hashes_the_weights_not_the_files(tmp_path):
     """Equal weights saved twice (Orbax files with other timestamps) fingerprint the same;
     other weights do not."""
     import time
+
     from ntq_jax import make_env, models
-    from ntq_jax.models import ModelConfig
     from ntq_jax.experiment.summaries import models_fingerprint
+    from ntq_jax.models import ModelConfig
     from ntq_jax.training import save_ensemble
 
-    spec = models.ModelSpec.from_env(make_env("point/2"), ModelConfig(hidden=(8,), dropout_layers=1))
+    spec = models.ModelSpec.from_env(
+        make_env("point/2"), ModelConfig(hidden=(8,), dropout_layers=1)
+    )
     ens = models.init_ensemble(spec, 0, 2)
     save_ensemble(ens, tmp_path / "a" / "ensemble")
     time.sleep(1.1)
@@ -581,8 +708,10 @@ def test_models_fingerprint_hashes_the_weights_not_the_files(tmp_path):
 
 def test_render_shows_each_maps_datasets(tmp_path):
     s = make_summary("rigid/0")
-    s["datasets"] = {f"D{i}": {"paths": 5000, "samples": 1000 * (i + 1),
-                               "states_per_path": 14.84} for i in range(4)}
+    s["datasets"] = {
+        f"D{i}": {"paths": 5000, "samples": 1000 * (i + 1), "states_per_path": 14.84}
+        for i in range(4)
+    }
     s["config"]["planner"] = {"data_paths": 0.6}
     write_summary(tmp_path, s)
     text = R.render(tmp_path)

@@ -10,7 +10,8 @@ import time
 import jax
 import numpy as np
 import pytest
-from shapely.geometry import LineString, box as shapely_box
+from shapely.geometry import LineString
+from shapely.geometry import box as shapely_box
 from shapely.ops import unary_union
 
 import ntq_jax as nj
@@ -36,14 +37,16 @@ def test_point_costs_near_the_visibility_graph_optimum_and_paths_collision_free(
     assert ratio.min() >= 1.0 - 1e-5  # never shorter than the optimum
     assert np.median(ratio) <= 1.03
     spec = env.to_json()
-    obst = unary_union([shapely_box(cx - hw, cy - hh, cx + hw, cy + hh)
-                        for cx, cy, hw, hh in spec["boxes"]])
+    obst = unary_union(
+        [shapely_box(cx - hw, cy - hh, cx + hw, cy + hh) for cx, cy, hw, hh in spec["boxes"]]
+    )
     for i in np.flatnonzero(res.solved)[:60]:
         p = res.path(i).astype(np.float64)
         assert np.array_equal(res.path(i)[0], q[i, 0]) and np.array_equal(res.path(i)[-1], q[i, 1])
         assert not LineString(p).intersects(obst)
-        assert res.costs[i] == pytest.approx(np.linalg.norm(np.diff(p, axis=0), axis=1).sum(),
-                                             rel=1e-6)
+        assert res.costs[i] == pytest.approx(
+            np.linalg.norm(np.diff(p, axis=0), axis=1).sum(), rel=1e-6
+        )
 
 
 @pytest.mark.parametrize("name", ["rigid/0", "nlink/4"])
@@ -60,9 +63,16 @@ def test_every_path_passes_steer_to_at_the_planning_padding(name):
 
 
 def _walled_env():
-    return nj.envs.Env.from_json({"name": "split", "robot": {"kind": "point"},
-                                  "bounds": [[0, 10], [0, 10]],
-                                  "boxes": [[5, 5, 0.3, 5.5]], "discs": [], "padding": 0.2})
+    return nj.envs.Env.from_json(
+        {
+            "name": "split",
+            "robot": {"kind": "point"},
+            "bounds": [[0, 10], [0, 10]],
+            "boxes": [[5, 5, 0.3, 5.5]],
+            "discs": [],
+            "padding": 0.2,
+        }
+    )
 
 
 def test_split_map_crossing_queries_are_no_path_in_bounded_time():
@@ -93,7 +103,7 @@ def test_same_seed_same_paths_and_independent_of_the_batch():
     c = nj.plan(env, q[:7], "roadmap", milestones=M)
     np.testing.assert_array_equal(a.status, b.status[::-1])
     np.testing.assert_array_equal(a.lengths, b.lengths[::-1])
-    np.testing.assert_array_equal(a.paths[:, :a.lengths.max()], b.paths[::-1, :a.lengths.max()])
+    np.testing.assert_array_equal(a.paths[:, : a.lengths.max()], b.paths[::-1, : a.lengths.max()])
     np.testing.assert_array_equal(a.costs[:7], c.costs)
     d = nj.plan(env, q, "roadmap", milestones=M, roadmap_seed=1)
     assert not np.array_equal(np.nan_to_num(a.paths[:, :3]), np.nan_to_num(d.paths[:, :3]))
@@ -126,7 +136,7 @@ def test_metric_index_matches_brute_force_under_the_rigid_metric():
     x = env.sample_states(jax.random.key(1), 50)
     idx, dist = R.MetricIndex(env.robot, env.world, pts, oversample=4).query(x, 5)
     for i in range(len(x)):
-        d = np.asarray(env.distance(np.repeat(x[i:i + 1], len(pts), 0), pts), np.float64)
+        d = np.asarray(env.distance(np.repeat(x[i : i + 1], len(pts), 0), pts), np.float64)
         np.testing.assert_allclose(np.sort(d)[:5], dist[i], rtol=1e-6)
 
 

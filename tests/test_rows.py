@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from ntq_jax.batching import fine_bucket_size
 from ntq_jax.robots.rows import RowPlan, plan_rows

@@ -9,26 +9,40 @@ import textwrap
 from pathlib import Path
 
 import pytest
+from script_loader import load_script
 
 from ntq_jax import artifacts
 
-from script_loader import load_script
-
 ROOT = Path(__file__).resolve().parents[1]
-TINY = ["envs=[point/2]", "data.k_train=40", "data.gamma_queries=2000", "data.gamma_eval=false",
-        "train.epochs=2", "model.hidden=[32,32]", "eval.k_test=16"]
+TINY = [
+    "envs=[point/2]",
+    "data.k_train=40",
+    "data.gamma_queries=2000",
+    "data.gamma_eval=false",
+    "train.epochs=2",
+    "model.hidden=[32,32]",
+    "eval.k_test=16",
+]
 
 
 def _holder(run: Path, how: str) -> subprocess.Popen:
     """A process that takes ``run`` (``how``: 'prepare_run' or 'lock') and waits on stdin."""
-    take = (f"from ntq_jax.experiment.pipeline import load_config, prepare_run\n"
-            f"prepare_run(load_config(None, {TINY!r}), {str(run)!r})"
-            if how == "prepare_run" else
-            f"from ntq_jax import artifacts\nartifacts.lock_folder({str(run)!r})")
+    take = (
+        f"from ntq_jax.experiment.pipeline import load_config, prepare_run\n"
+        f"prepare_run(load_config(None, {TINY!r}), {str(run)!r})"
+        if how == "prepare_run"
+        else f"from ntq_jax import artifacts\nartifacts.lock_folder({str(run)!r})"
+    )
     code = textwrap.dedent(take) + "\nprint('held', flush=True)\nimport sys; sys.stdin.read()\n"
     env = dict(os.environ, PYTHONPATH=str(ROOT), JAX_PLATFORMS="cpu")
-    p = subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE,
-                         stdout=subprocess.PIPE, text=True, env=env, cwd=ROOT)
+    p = subprocess.Popen(
+        [sys.executable, "-c", code],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+        env=env,
+        cwd=ROOT,
+    )
     assert p.stdout.readline().strip() == "held"
     return p
 
@@ -56,6 +70,7 @@ def test_second_run_on_a_folder_in_use_is_one_line_naming_the_pid(tmp_path, caps
         holder.wait()
     # a killed holder leaves no stale lock: the folder is usable at once
     from ntq_jax.experiment.pipeline import load_config, prepare_run
+
     assert prepare_run(load_config(None, TINY), run) == run
     assert f"pid {os.getpid()} " in (run / ".lock").read_text()
     artifacts.unlock_folder(run)

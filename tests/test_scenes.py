@@ -16,8 +16,16 @@ import tarfile
 import numpy as np
 import pytest
 
-from ntq_jax.scenes import (JOINT_NAMES, SCENES, SceneFormatError, load_problem, load_scene,
-                            mbm, read_request, read_scene)
+from ntq_jax.scenes import (
+    JOINT_NAMES,
+    SCENES,
+    SceneFormatError,
+    load_problem,
+    load_scene,
+    mbm,
+    read_request,
+    read_scene,
+)
 
 S = math.sqrt(0.5)
 
@@ -103,19 +111,30 @@ def test_request_joints_in_the_callers_order(files):
     assert req.bounds == ((-1, 1), (-2, 2), (-3, 3))
 
 
-@pytest.mark.parametrize("old, new, message", [
-    ("type: sphere", "type: cone", "collision object 2 ('ball').primitives[0].type is 'cone'"),
-    ("[0.2, 0.4, 0.6]", "[0.2, 0.4]", "collision object 0 ('shelf').primitives[0].dimensions"),
-    ("[0.4, 0.05]", "[0.4, -0.05]", "('can').primitives[0].dimensions is [0.4, -0.05]"),
-    ("      primitive_poses:\n        - position: [0.5, 0, 0]\n"
-     "          orientation: [0, 0, 0, 1]\n", "", "('shelf'): missing field 'primitive_poses'"),
-    ("orientation: [0, 0, 0, 1]}", "orientation: [0, 0, 0, 2]}", "('ball').primitive_poses[0]"
-     ".orientation is [0.0, 0.0, 0.0, 2.0]: expected a unit quaternion"),
-    ("position: {x: 0, y: 0, z: 1}", "position: {x: 0, y: 0}", "('ball').pose.position"),
-    ("    - id: can\n", "    - idd: can\n", "collision object 1: missing field 'id'"),
-    ("[0.1]}", "[0.1]", "not valid YAML"),
-    ("world:", "wrld:", "missing field 'world'"),
-])
+@pytest.mark.parametrize(
+    "old, new, message",
+    [
+        ("type: sphere", "type: cone", "collision object 2 ('ball').primitives[0].type is 'cone'"),
+        ("[0.2, 0.4, 0.6]", "[0.2, 0.4]", "collision object 0 ('shelf').primitives[0].dimensions"),
+        ("[0.4, 0.05]", "[0.4, -0.05]", "('can').primitives[0].dimensions is [0.4, -0.05]"),
+        (
+            "      primitive_poses:\n        - position: [0.5, 0, 0]\n"
+            "          orientation: [0, 0, 0, 1]\n",
+            "",
+            "('shelf'): missing field 'primitive_poses'",
+        ),
+        (
+            "orientation: [0, 0, 0, 1]}",
+            "orientation: [0, 0, 0, 2]}",
+            "('ball').primitive_poses[0]"
+            ".orientation is [0.0, 0.0, 0.0, 2.0]: expected a unit quaternion",
+        ),
+        ("position: {x: 0, y: 0, z: 1}", "position: {x: 0, y: 0}", "('ball').pose.position"),
+        ("    - id: can\n", "    - idd: can\n", "collision object 1: missing field 'id'"),
+        ("[0.1]}", "[0.1]", "not valid YAML"),
+        ("world:", "wrld:", "missing field 'world'"),
+    ],
+)
 def test_broken_scene_error_lines(files, old, new, message):
     assert old in SCENE
     files[0].write_text(SCENE.replace(old, new, 1))
@@ -125,17 +144,32 @@ def test_broken_scene_error_lines(files, old, new, message):
     assert text.startswith(str(files[0])) and message in text and "\n" not in text, text
 
 
-@pytest.mark.parametrize("old, new, message", [
-    ("name: [j1, j2, j3, finger]", "name: [j1, j2, j2, finger]",
-     "start_state.joint_state: joint 'j2' appears 2 times"),
-    ("name: [j1, j2, j3, finger]", "name: [j1, j2, jx, finger]",
-     "start_state.joint_state: joint 'j3' appears 0 times"),
-    ("{joint_name: j1, position: -1}", "{joint_name: j1, position: .nan}",
-     "the goal position of 'j1' must be a finite number"),
-    ("{joint_name: j2, position: -2}", "{joint_name: j2}",
-     "goal_constraints[0].joint_constraints[2]: missing field 'position'"),
-    ("max_corner: [1, 2, 3]", "max_corner: [1, 2, -3]", "workspace_parameters: min_corner"),
-])
+@pytest.mark.parametrize(
+    "old, new, message",
+    [
+        (
+            "name: [j1, j2, j3, finger]",
+            "name: [j1, j2, j2, finger]",
+            "start_state.joint_state: joint 'j2' appears 2 times",
+        ),
+        (
+            "name: [j1, j2, j3, finger]",
+            "name: [j1, j2, jx, finger]",
+            "start_state.joint_state: joint 'j3' appears 0 times",
+        ),
+        (
+            "{joint_name: j1, position: -1}",
+            "{joint_name: j1, position: .nan}",
+            "the goal position of 'j1' must be a finite number",
+        ),
+        (
+            "{joint_name: j2, position: -2}",
+            "{joint_name: j2}",
+            "goal_constraints[0].joint_constraints[2]: missing field 'position'",
+        ),
+        ("max_corner: [1, 2, 3]", "max_corner: [1, 2, -3]", "workspace_parameters: min_corner"),
+    ],
+)
 def test_broken_request_error_lines(files, old, new, message):
     files[1].write_text(REQUEST.replace(old, new, 1))
     with pytest.raises(SceneFormatError) as e:
@@ -147,6 +181,7 @@ def test_broken_request_error_lines(files, old, new, message):
 # ---------------------------------------------------------------------------
 # MotionBenchMaker
 # ---------------------------------------------------------------------------
+
 
 @pytest.fixture(scope="module")
 def problems():
@@ -164,7 +199,8 @@ def raw_counts():
                 text = tar.extractfile(m).read().decode()
                 out[(match.group(1), int(match.group(2)))] = (
                     len(re.findall(r"^\s*(?:- )?id: ", text, re.M)),
-                    len(re.findall(r"type: cylinder", text)))
+                    len(re.findall(r"type: cylinder", text)),
+                )
     return out
 
 
@@ -190,9 +226,19 @@ def test_one_request_against_its_text(problems):
     """Problem box/1's start and goal, read from the archive's text by hand."""
     ps = problems["box"][0]
     np.testing.assert_allclose(ps.start, [0, -0.785, 0, -2.356, 0, 1.571, 0.785], atol=1e-7)
-    np.testing.assert_allclose(ps.goal, [0.4534448383669427, 1.7628, 0.1941262264518609,
-                                         -0.8667848896139277, -0.3798524112731043,
-                                         2.606927984171601, -0.1898611792470702], atol=1e-6)
+    np.testing.assert_allclose(
+        ps.goal,
+        [
+            0.4534448383669427,
+            1.7628,
+            0.1941262264518609,
+            -0.8667848896139277,
+            -0.3798524112731043,
+            2.606927984171601,
+            -0.1898611792470702,
+        ],
+        atol=1e-6,
+    )
 
 
 def test_load_problem_is_cached_and_checked(problems):

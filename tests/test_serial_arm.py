@@ -35,7 +35,6 @@ from scipy.spatial.transform import Rotation
 
 from ntq_jax.geometry import World3D
 from ntq_jax.robots import SerialArm
-from ntq_jax.robots import batch
 from ntq_jax.robots.urdf import read_arm
 
 DATA = Path(__file__).parent / "data"
@@ -56,6 +55,7 @@ def _cuboid(center, half, rotvec):
 # Shared arms, worlds and compiled programs (module level: each compiles once)
 # ---------------------------------------------------------------------------
 
+
 @pytest.fixture(scope="module")
 def panda():
     return SerialArm.panda()
@@ -73,12 +73,15 @@ def programs():
         "fk": jax.jit(lambda arm, q: jax.vmap(arm.forward_kinematics)(q), static_argnums=0),
         "tip": jax.jit(lambda arm, q: jax.vmap(arm.tip_pose)(q), static_argnums=0),
         "centers": jax.jit(lambda arm, q: jax.vmap(arm.sphere_centers)(q), static_argnums=0),
-        "valid": jax.jit(lambda arm, q, w, p: jax.vmap(arm.is_valid, in_axes=(0, None, None))(
-            q, w, p), static_argnums=(0, 3)),
-        "parts": jax.jit(lambda arm, q, w, p: jax.vmap(arm.part_clearances, in_axes=(
-            0, None, None))(q, w, p), static_argnums=(0, 3)),
-        "sweep": jax.jit(lambda arm, a, b: jax.vmap(arm.part_sweep_bounds)(a, b),
-                         static_argnums=0),
+        "valid": jax.jit(
+            lambda arm, q, w, p: jax.vmap(arm.is_valid, in_axes=(0, None, None))(q, w, p),
+            static_argnums=(0, 3),
+        ),
+        "parts": jax.jit(
+            lambda arm, q, w, p: jax.vmap(arm.part_clearances, in_axes=(0, None, None))(q, w, p),
+            static_argnums=(0, 3),
+        ),
+        "sweep": jax.jit(lambda arm, a, b: jax.vmap(arm.part_sweep_bounds)(a, b), static_argnums=0),
     }
 
 
@@ -95,8 +98,16 @@ def _uniform(arm, rng, n, widen=0.0):
 # Franka's modified DH (Craig): a_{i-1}, d_i, alpha_{i-1} for joints 1..7 and the flange
 DH_A = [0.0, 0.0, 0.0, 0.0825, -0.0825, 0.0, 0.088, 0.0]
 DH_D = [0.333, 0.0, 0.316, 0.0, 0.384, 0.0, 0.0, 0.107]
-DH_ALPHA = [0.0, -math.pi / 2, math.pi / 2, math.pi / 2, -math.pi / 2, math.pi / 2,
-            math.pi / 2, 0.0]
+DH_ALPHA = [
+    0.0,
+    -math.pi / 2,
+    math.pi / 2,
+    math.pi / 2,
+    -math.pi / 2,
+    math.pi / 2,
+    math.pi / 2,
+    0.0,
+]
 
 
 def _dh_frames(q):
@@ -106,10 +117,14 @@ def _dh_frames(q):
     for i, theta in enumerate(list(q) + [0.0]):
         ca, sa = math.cos(DH_ALPHA[i]), math.sin(DH_ALPHA[i])
         ct, st = math.cos(theta), math.sin(theta)
-        t = t @ np.array([[ct, -st, 0, DH_A[i]],
-                          [st * ca, ct * ca, -sa, -DH_D[i] * sa],
-                          [st * sa, ct * sa, ca, DH_D[i] * ca],
-                          [0, 0, 0, 1]])
+        t = t @ np.array(
+            [
+                [ct, -st, 0, DH_A[i]],
+                [st * ca, ct * ca, -sa, -DH_D[i] * sa],
+                [st * sa, ct * sa, ca, DH_D[i] * ca],
+                [0, 0, 0, 1],
+            ]
+        )
         out.append(t)
     hand = np.eye(4)
     hand[:3, :3] = Rotation.from_euler("z", -math.pi / 4).as_matrix()
@@ -125,8 +140,9 @@ def test_panda_model(panda):
     assert {"panda_hand", "panda_leftfinger", "panda_rightfinger"} <= links
     assert panda.periodic == (False,) * 7 and panda.metric_weights == (1.0,) * 7
     assert panda.resolution == 1 / 32
-    assert math.isclose(panda.longest_motion(EMPTY),
-                        math.dist(panda.lower, panda.upper), rel_tol=1e-12)
+    assert math.isclose(
+        panda.longest_motion(EMPTY), math.dist(panda.lower, panda.upper), rel_tol=1e-12
+    )
     lo, hi = panda.config_bounds(EMPTY)
     assert lo.dtype == jnp.float32 and np.allclose(hi, panda.upper)
     assert panda.to_json() == {"kind": "serial_arm", "preset": "panda", "resolution": 1 / 32}
@@ -134,8 +150,15 @@ def test_panda_model(panda):
     # the SRDF pairs and the adjacent / same-body links are never checked
     checked = {(panda.sphere_links[i], panda.sphere_links[k]) for i, k in panda.self_pairs}
     assert ("panda_link5", "panda_hand") in checked
-    assert not {("panda_link6", "panda_hand"), ("panda_link3", "panda_link5"),
-                ("panda_link7", "panda_hand"), ("panda_link0", "panda_link1")} & checked
+    assert (
+        not {
+            ("panda_link6", "panda_hand"),
+            ("panda_link3", "panda_link5"),
+            ("panda_link7", "panda_hand"),
+            ("panda_link0", "panda_link1"),
+        }
+        & checked
+    )
 
 
 def test_panda_fk_matches_modified_dh(panda, programs):
@@ -156,8 +179,10 @@ def test_panda_self_collision(panda, programs):
     s = panda.num_spheres
     assert np.all(parts[0] > 0)
     assert np.all(parts[1, :s] > 0)  # no obstacle: only pairs collide, the hand with links 1-2
-    hit = {(panda.sphere_links[panda.self_pairs[p][0]], panda.sphere_links[panda.self_pairs[p][1]])
-           for p in np.flatnonzero(parts[1, s:] <= 0)}
+    hit = {
+        (panda.sphere_links[panda.self_pairs[p][0]], panda.sphere_links[panda.self_pairs[p][1]])
+        for p in np.flatnonzero(parts[1, s:] <= 0)
+    }
     assert {("panda_link1", "panda_hand"), ("panda_link2", "panda_hand")} <= hit
 
 
@@ -166,19 +191,31 @@ def test_panda_self_collision(panda, programs):
 # ---------------------------------------------------------------------------
 
 # (origin xyz, origin rpy, axis, type) of j1..j4, as in tests/data/tiny_arm.urdf
-TINY_JOINTS = [((0, 0, 0.1), (0, 0, 0), (0, 0, 1), "revolute"),
-               ((0, 0, 0.15), (0.2, 0, 0), (0, 1, 0), "revolute"),
-               ((0.25, 0, 0), (0, 0, 0), (1, 0, 0), "prismatic"),
-               ((0.1, 0, 0), (0, 0, 0.5), (1, 1, 0), "continuous")]
+TINY_JOINTS = [
+    ((0, 0, 0.1), (0, 0, 0), (0, 0, 1), "revolute"),
+    ((0, 0, 0.15), (0.2, 0, 0), (0, 1, 0), "revolute"),
+    ((0.25, 0, 0), (0, 0, 0), (1, 0, 0), "prismatic"),
+    ((0.1, 0, 0), (0, 0, 0.5), (1, 1, 0), "continuous"),
+]
 TINY_TOOL = ((0.05, 0, 0), (0, math.pi / 2, 0))  # fixed wrist -> tool
 # (link, frame, centre in the link frame, radius); the tool's link frame is TINY_TOOL
-TINY_SPHERES = [("base", 0, (0, 0, 0.03), 0.06), ("link1", 1, (0, 0, 0.08), 0.04),
-                ("link2", 2, (0.1, 0, 0), 0.04), ("link2", 2, (0.2, 0, 0), 0.035),
-                ("link3", 3, (0.05, 0, 0), 0.03), ("tool", 4, (0, 0.04, 0), 0.025),
-                ("tool", 4, (0, -0.04, 0.02), 0.025)]
+TINY_SPHERES = [
+    ("base", 0, (0, 0, 0.03), 0.06),
+    ("link1", 1, (0, 0, 0.08), 0.04),
+    ("link2", 2, (0.1, 0, 0), 0.04),
+    ("link2", 2, (0.2, 0, 0), 0.035),
+    ("link3", 3, (0.05, 0, 0), 0.03),
+    ("tool", 4, (0, 0.04, 0), 0.025),
+    ("tool", 4, (0, -0.04, 0.02), 0.025),
+]
 # link pairs checked for self-collision: not adjacent, not in the SRDF, not one body
-TINY_CHECKED = {("base", "link3"), ("base", "tool"), ("link1", "tool"), ("link2", "tool"),
-                ("link3", "tool")}
+TINY_CHECKED = {
+    ("base", "link3"),
+    ("base", "tool"),
+    ("link1", "tool"),
+    ("link2", "tool"),
+    ("link3", "tool"),
+}
 TINY_LIMITS = [(-2.5, 2.5), (-2.2, 2.2), (0.0, 0.15), (-math.pi, math.pi)]
 
 
@@ -216,8 +253,12 @@ def _tiny_centers(q):
 
 def _pairs(links, checked):
     """Sphere index pairs ``(i, k)``, ``i < k``, of the link pairs ``checked`` (either order)."""
-    return [(i, k) for i in range(len(links)) for k in range(i + 1, len(links))
-            if (links[i], links[k]) in checked or (links[k], links[i]) in checked]
+    return [
+        (i, k)
+        for i in range(len(links))
+        for k in range(i + 1, len(links))
+        if (links[i], links[k]) in checked or (links[k], links[i]) in checked
+    ]
 
 
 TINY_PAIRS = _pairs([s[0] for s in TINY_SPHERES], TINY_CHECKED)
@@ -252,10 +293,14 @@ def _within(arm, q):
 @pytest.fixture(scope="module")
 def tiny_world():
     return World3D.create(
-        BOUNDS, spheres=[[0.3, 0.2, 0.3, 0.08], [-0.2, 0.3, 0.4, 0.1], [0.1, -0.35, 0.2, 0.06]],
-        cuboids=[_cuboid((0.35, -0.1, 0.5), (0.1, 0.05, 0.08), (0.3, 0.5, 0.1)),
-                 _cuboid((0, 0, -0.1), (1, 1, 0.02), (0, 0, 0)),
-                 _cuboid((-0.3, -0.2, 0.15), (0.05, 0.2, 0.1), (0, 0, 0.7))])
+        BOUNDS,
+        spheres=[[0.3, 0.2, 0.3, 0.08], [-0.2, 0.3, 0.4, 0.1], [0.1, -0.35, 0.2, 0.06]],
+        cuboids=[
+            _cuboid((0.35, -0.1, 0.5), (0.1, 0.05, 0.08), (0.3, 0.5, 0.1)),
+            _cuboid((0, 0, -0.1), (1, 1, 0.02), (0, 0, 0)),
+            _cuboid((-0.3, -0.2, 0.15), (0.05, 0.2, 0.1), (0, 0, 0.7)),
+        ],
+    )
 
 
 def test_tiny_model(tiny):
@@ -268,10 +313,16 @@ def test_tiny_model(tiny):
     assert checked == TINY_CHECKED and set(tiny.self_pairs) == set(TINY_PAIRS)
     # the default tip is the last movable joint's child; the tool beyond it keeps its spheres
     as_tool = SerialArm.from_urdf(TINY_URDF, TINY_SRDF, tip="tool")
-    assert dataclasses.replace(as_tool, tip_transform=tiny.tip_transform,
-                               source=tiny.source) == tiny
-    assert tiny.to_json() == {"kind": "serial_arm", "urdf": str(TINY_URDF),
-                              "srdf": str(TINY_SRDF), "tip": None, "resolution": 1 / 32}
+    assert (
+        dataclasses.replace(as_tool, tip_transform=tiny.tip_transform, source=tiny.source) == tiny
+    )
+    assert tiny.to_json() == {
+        "kind": "serial_arm",
+        "urdf": str(TINY_URDF),
+        "srdf": str(TINY_SRDF),
+        "tip": None,
+        "resolution": 1 / 32,
+    }
 
 
 def test_tiny_fk_by_hand_and_by_matrices(tiny, programs):
@@ -281,8 +332,15 @@ def test_tiny_fk_by_hand_and_by_matrices(tiny, programs):
         ((0, 0, 0, 0), 2, (0.1, 0, 0.25)),
         ((math.pi / 2, 0, 0.1, 0), 4, (0, 0.40, 0.25)),  # link3's sphere, turned to +y
         ((0, -math.pi / 2, 0, 0), 4, (0, -0.30 * s2, 0.25 + 0.30 * c2)),  # up the tilted z
-        ((0, 0, 0, 0), 5, (0.35 + 0.05 * c5 - 0.04 * s5, (0.05 * s5 + 0.04 * c5) * c2,
-                           0.25 + (0.05 * s5 + 0.04 * c5) * s2)),
+        (
+            (0, 0, 0, 0),
+            5,
+            (
+                0.35 + 0.05 * c5 - 0.04 * s5,
+                (0.05 * s5 + 0.04 * c5) * c2,
+                0.25 + (0.05 * s5 + 0.04 * c5) * s2,
+            ),
+        ),
     ]
     q = np.array([c[0] for c in cases], np.float32)
     got = np.asarray(programs["centers"](tiny, q))
@@ -292,8 +350,9 @@ def test_tiny_fk_by_hand_and_by_matrices(tiny, programs):
     np.testing.assert_allclose(programs["centers"](tiny, q), _tiny_centers(q), atol=1e-5)
     # the tool frame as the tip: the wrist frame, then the fixed tool joint
     tool = SerialArm.from_urdf(TINY_URDF, TINY_SRDF, tip="tool")
-    np.testing.assert_allclose(programs["tip"](tool, q), _tiny_frames(q)[-1] @ _tf(*TINY_TOOL),
-                               atol=1e-5)
+    np.testing.assert_allclose(
+        programs["tip"](tool, q), _tiny_frames(q)[-1] @ _tf(*TINY_TOOL), atol=1e-5
+    )
     np.testing.assert_allclose(programs["fk"](tiny, q), np.stack(_tiny_frames(q), 1), atol=1e-5)
 
 
@@ -313,9 +372,14 @@ def test_tiny_is_valid_matches_oracle(tiny, tiny_world, programs, padding):
 
 def test_panda_is_valid_matches_oracle(panda, programs):
     """The obstacle and pair logic on the Panda's 59 spheres (centres from the DH-checked FK)."""
-    world = World3D.create(BOUNDS, spheres=[[0.4, 0.0, 0.5, 0.12], [0.0, 0.45, 0.3, 0.1]],
-                           cuboids=[_cuboid((0.5, -0.3, 0.2), (0.1, 0.15, 0.2), (0.2, 0, 0.4)),
-                                    _cuboid((0, 0, -0.2), (1, 1, 0.05), (0, 0, 0))])
+    world = World3D.create(
+        BOUNDS,
+        spheres=[[0.4, 0.0, 0.5, 0.12], [0.0, 0.45, 0.3, 0.1]],
+        cuboids=[
+            _cuboid((0.5, -0.3, 0.2), (0.1, 0.15, 0.2), (0.2, 0, 0.4)),
+            _cuboid((0, 0, -0.2), (1, 1, 0.05), (0, 0, 0)),
+        ],
+    )
     q = _uniform(panda, np.random.default_rng(3), 96, widen=0.02)
     got = np.asarray(programs["valid"](panda, q, world, 0.02))
     centers = programs["centers"](panda, q)
@@ -329,8 +393,9 @@ def test_panda_is_valid_matches_oracle(panda, programs):
 
 def test_invalid_input_and_parts(tiny, tiny_world, programs):
     q = _uniform(tiny, np.random.default_rng(4), 64)
-    bad = np.array([[np.nan, 0, 0, 0], [0, 0, np.inf, 0], [3.0, 0, 0, 0], [0, 0, 0.2, 0]],
-                   np.float32)
+    bad = np.array(
+        [[np.nan, 0, 0, 0], [0, 0, np.inf, 0], [3.0, 0, 0, 0], [0, 0, 0.2, 0]], np.float32
+    )
     states = np.concatenate([q, bad])
     ok = np.asarray(programs["valid"](tiny, states, tiny_world, 0.0))
     parts = np.asarray(programs["parts"](tiny, states, tiny_world, 0.0))
@@ -338,22 +403,27 @@ def test_invalid_input_and_parts(tiny, tiny_world, programs):
     assert not ok[-4:].any() and np.all(parts[-4:] == -1.0)
     assert np.array_equal(ok, np.all(parts > 0, axis=1))
     clearance = jax.jit(jax.vmap(tiny.clearance, in_axes=(0, None, None)), static_argnums=2)(
-        q, tiny_world, 0.0)
-    np.testing.assert_allclose(clearance, parts[:64, :tiny.num_spheres].min(axis=1), atol=1e-6)
+        q, tiny_world, 0.0
+    )
+    np.testing.assert_allclose(clearance, parts[:64, : tiny.num_spheres].min(axis=1), atol=1e-6)
 
 
 # ---------------------------------------------------------------------------
 # Sweep bounds and the certified check
 # ---------------------------------------------------------------------------
 
+
 @pytest.mark.parametrize("name", ["tiny", "panda"])
 def test_sweep_bounds_are_sound(name, request, programs):
     arm = request.getfixturevalue(name)
     rng = np.random.default_rng(5)
     a = _uniform(arm, rng, 24)
-    b = np.concatenate([_uniform(arm, rng, 12),  # long motions and short ones
-                        np.clip(a[12:] + rng.normal(0, 0.2, (12, arm.dim)), arm.lower,
-                                arm.upper)]).astype(np.float32)
+    b = np.concatenate(
+        [
+            _uniform(arm, rng, 12),  # long motions and short ones
+            np.clip(a[12:] + rng.normal(0, 0.2, (12, arm.dim)), arm.lower, arm.upper),
+        ]
+    ).astype(np.float32)
     t = np.linspace(0, 1, 200, dtype=np.float32)
     states = (a[:, None] + t[None, :, None] * (b - a)[:, None]).reshape(-1, arm.dim)
     c = np.asarray(programs["centers"](arm, states), np.float64).reshape(24, 200, -1, 3)
@@ -379,16 +449,19 @@ def test_certified_never_frees_a_blocked_motion(tiny, tiny_world):
 
     @jax.jit
     def checks(a, b):  # coordinate-major, as the batched entry points call them
-        return (tiny.certified_steer_to_batch(a.T, b.T, tiny_world, 0.0),
-                tiny.steer_to_batch(a.T, b.T, tiny_world, 0.0))
+        return (
+            tiny.certified_steer_to_batch(a.T, b.T, tiny_world, 0.0),
+            tiny.steer_to_batch(a.T, b.T, tiny_world, 0.0),
+        )
 
     cert, disc = map(np.asarray, checks(a, b))
     assert 0 < cert.sum() < len(a) and np.all(~cert | disc)
     t = np.linspace(0, 1, 400)[:, None]
     for k in np.flatnonzero(cert):
         dense = a[k].astype(np.float64) + t * (b[k] - a[k])
-        margin = _oracle_margin(_tiny_centers(dense), tiny.sphere_radii, TINY_PAIRS, tiny_world,
-                                0.0)
+        margin = _oracle_margin(
+            _tiny_centers(dense), tiny.sphere_radii, TINY_PAIRS, tiny_world, 0.0
+        )
         assert margin.min() > 0, (k, margin.min())
 
 
@@ -399,18 +472,24 @@ def test_certified_never_frees_a_blocked_motion(tiny, tiny_world):
 TINY_TEXT = TINY_URDF.read_text()
 
 REFUSALS = [  # (replace this, by this, a fragment of the message)
-    ('<limit lower="-2.5" upper="2.5" effort="10" velocity="1"/>', "",
-     "has no <limit lower= upper=>"),
+    (
+        '<limit lower="-2.5" upper="2.5" effort="10" velocity="1"/>',
+        "",
+        "has no <limit lower= upper=>",
+    ),
     ('name="j2" type="revolute"', 'name="j2" type="floating"', "has type 'floating'"),
     ('<sphere radius="0.03"/>', '<box size="0.1 0.1 0.1"/>', "is a <box>"),
-    ('<mesh filename="wrist.stl"/></geometry></collision>',
-     '<mesh filename="wrist.stl"/></geometry></collision>'
-     '<collision><geometry><sphere radius="0.01"/></geometry></collision>', "mixes 1 spheres"),
+    (
+        '<mesh filename="wrist.stl"/></geometry></collision>',
+        '<mesh filename="wrist.stl"/></geometry></collision>'
+        '<collision><geometry><sphere radius="0.01"/></geometry></collision>',
+        "mixes 1 spheres",
+    ),
     ('<parent link="link2"/>', '<parent link="nope"/>', "which is not a <link>"),
     ('lower="-2.2" upper="2.2"', 'lower="2.2" upper="-2.2"', "lower must be below upper"),
     ('<origin xyz="0.25 0 0"/>', '<origin xyz="0.25 0"/>', "give 3 finite numbers"),
     ('<sphere radius="0.06"/>', '<sphere radius="0"/>', "give a radius > 0"),
-    ('<sphere radius="0.06"/>', '<sphere/>', "has no radius="),
+    ('<sphere radius="0.06"/>', "<sphere/>", "has no radius="),
     ("</robot>", '<link name="loose"/></robot>', "2 links are no joint's child"),
     ('<axis xyz="1 0 0"/>', '<axis xyz="1 0 0"/><mimic joint="j2"/>', "with <mimic>"),
     ('<axis xyz="1 0 0"/>', '<axis xyz="0 0 0"/>', "has the zero axis"),

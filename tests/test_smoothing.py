@@ -8,28 +8,36 @@ A* grid paths: start and goal kept exactly, every kept segment free under the
 exact kernel, cost never increases.
 """
 
+import jax
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-
-import jax
 
 from ntq_jax import Env, make_env, plan
 from ntq_jax.planners import check_paths
 from ntq_jax.planners.smoothing import shortcut, shortcut_paths, shortcut_reference
 from ntq_jax.robots import batch as steer_batch
 
-SET = settings(max_examples=8, deadline=None, derandomize=True,
-               suppress_health_check=[HealthCheck.too_slow])
+SET = settings(
+    max_examples=8, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow]
+)
 
 
 def random_env(seed: int, n_boxes: int = 6, padding: float = 0.0) -> Env:
     rng = np.random.default_rng(seed)
-    boxes = np.concatenate([rng.uniform(2, 18, (n_boxes, 2)), rng.uniform(0.4, 2.5, (n_boxes, 2))], 1)
-    return Env.from_json({"name": f"rand{seed}", "robot": {"kind": "point"},
-                          "bounds": [[0, 20], [0, 20]], "boxes": boxes.round(3).tolist(),
-                          "padding": padding})
+    boxes = np.concatenate(
+        [rng.uniform(2, 18, (n_boxes, 2)), rng.uniform(0.4, 2.5, (n_boxes, 2))], 1
+    )
+    return Env.from_json(
+        {
+            "name": f"rand{seed}",
+            "robot": {"kind": "point"},
+            "bounds": [[0, 20], [0, 20]],
+            "boxes": boxes.round(3).tolist(),
+            "padding": padding,
+        }
+    )
 
 
 def reference_batch(env, paths, lengths, padding):
@@ -41,7 +49,9 @@ def reference_batch(env, paths, lengths, padding):
     vis = np.asarray(env.steer_to(a, c, padding=padding)).reshape(b, l, l)
     out = []
     for p, n, v in zip(paths, lengths, vis):
-        table = {(p[i].tobytes(), p[j].tobytes()): bool(v[i, j]) for i in range(n) for j in range(n)}
+        table = {
+            (p[i].tobytes(), p[j].tobytes()): bool(v[i, j]) for i in range(n) for j in range(n)
+        }
         out.append(shortcut_reference(lambda x, y, t=table: t[(x.tobytes(), y.tobytes())], p[:n]))
     return out
 
@@ -64,9 +74,9 @@ def test_matches_plain_python_reference_on_random_polylines(seed, padding):
     ref = reference_batch(env, paths, lengths, padding)
     for i, (rp, rok) in enumerate(ref):
         assert n_out[i] == len(rp), (i, n_out[i], len(rp))
-        np.testing.assert_array_equal(out[i, :n_out[i]], rp)
+        np.testing.assert_array_equal(out[i, : n_out[i]], rp)
         assert ok[i] == rok
-        assert np.isnan(out[i, n_out[i]:]).all()
+        assert np.isnan(out[i, n_out[i] :]).all()
 
 
 def test_astar_paths_properties_and_reference():
@@ -89,7 +99,7 @@ def test_astar_paths_properties_and_reference():
     # same waypoints as the plain-Python rule
     ref = reference_batch(env, raw.paths[:16], raw.lengths[:16], env.padding)
     for i, (rp, rok) in enumerate(ref):
-        np.testing.assert_array_equal(paths[i, :lengths[i]], rp)
+        np.testing.assert_array_equal(paths[i, : lengths[i]], rp)
         assert rok
 
 
@@ -142,8 +152,8 @@ def test_host_rounds_equal_the_traced_core():
     o2, n2, ok2 = (np.asarray(x) for x in shortcut(env.robot, env.world, paths, lengths, 0.3))
     np.testing.assert_array_equal(n, n2)
     np.testing.assert_array_equal(ok, ok2)
-    np.testing.assert_array_equal(out, o2[:, :out.shape[1]])
-    assert np.isnan(o2[:, out.shape[1]:]).all()
+    np.testing.assert_array_equal(out, o2[:, : out.shape[1]])
+    assert np.isnan(o2[:, out.shape[1] :]).all()
 
 
 def test_bad_shapes_rejected():

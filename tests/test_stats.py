@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 from scipy.stats import binomtest, wilcoxon
 
-from ntq_jax.experiment import report as R
 from ntq_jax import stats as S
 from ntq_jax.artifacts import save_npz
+from ntq_jax.experiment import report as R
 
 # ---------------------------------------------------------------------------
 # McNemar
@@ -24,7 +24,7 @@ from ntq_jax.artifacts import save_npz
 
 
 def test_mcnemar_exact_known_tables():
-    assert S.mcnemar_exact(5, 0) == pytest.approx(2 * 0.5 ** 5)  # = 0.0625
+    assert S.mcnemar_exact(5, 0) == pytest.approx(2 * 0.5**5)  # = 0.0625
     assert S.mcnemar_exact(0, 5) == pytest.approx(0.0625)
     assert S.mcnemar_exact(10, 2) == pytest.approx(binomtest(10, 12, 0.5).pvalue)
     # by hand: P(X <= 2 | 12, 1/2) = (1 + 12 + 66) / 4096, doubled
@@ -152,13 +152,18 @@ def test_wilcoxon_with_zeros_or_ties_is_scipys_exact_sign_flip_test():
 def test_paired_comparison_uses_queries_both_solve_with_a_reference():
     k = 8
     inf = np.inf
-    a = {"success": np.array([1, 1, 1, 1, 1, 0, 0, 1], bool),
-         "costs": np.array([2.0, 3.0, 4.0, 5.0, 6.0, inf, inf, 9.0]),
-         "ref_costs": np.array([1.0, 1.0, 2.0, 2.0, inf, 1.0, 1.0, 3.0]),
-         "ref_status": np.array([0, 0, 0, 0, 2, 0, 0, 0], np.int8),
-         "queries": np.zeros((k, 2, 2), np.float32)}
-    b = dict(a, success=np.array([1, 1, 0, 1, 1, 1, 0, 1], bool),
-             costs=np.array([1.5, 3.0, inf, 4.0, 5.0, 2.0, inf, 6.0]))
+    a = {
+        "success": np.array([1, 1, 1, 1, 1, 0, 0, 1], bool),
+        "costs": np.array([2.0, 3.0, 4.0, 5.0, 6.0, inf, inf, 9.0]),
+        "ref_costs": np.array([1.0, 1.0, 2.0, 2.0, inf, 1.0, 1.0, 3.0]),
+        "ref_status": np.array([0, 0, 0, 0, 2, 0, 0, 0], np.int8),
+        "queries": np.zeros((k, 2, 2), np.float32),
+    }
+    b = dict(
+        a,
+        success=np.array([1, 1, 0, 1, 1, 1, 0, 1], bool),
+        costs=np.array([1.5, 3.0, inf, 4.0, 5.0, 2.0, inf, 6.0]),
+    )
     got = S.paired_comparison(a, b, n_boot=200)
     # both solve: 0, 1, 3, 4, 7; query 4 has no reference cost
     assert got["cost_n"] == 4
@@ -184,21 +189,47 @@ def _synthetic_run(tmp_path):
     hard = rng.random(K)
     rows = []
     # PNet_0 solves 50%, PNet_1 60%, PNet_2 70%, PNet_3 95%, the ensemble 100%
-    for model, p in (("PNet_0", 0.5), ("PNet_1", 0.6), ("PNet_2", 0.7), ("PNet_3", 0.95),
-                     ("PNet_ens", 1.01)):
+    for model, p in (
+        ("PNet_0", 0.5),
+        ("PNet_1", 0.6),
+        ("PNet_2", 0.7),
+        ("PNet_3", 0.95),
+        ("PNet_ens", 1.01),
+    ):
         for kind in ("uniform", "nontrivial"):
             success = hard < p
             cost = np.where(success, ref * (1.2 if model == "PNet_0" else 1.1), np.inf)
             f = f"paths/point_0/{model}_{kind}.npz"
-            save_npz(tmp_path / f, queries=queries, success=success, costs=cost, ref_costs=ref,
-                     ref_status=np.zeros(K, np.int8))
+            save_npz(
+                tmp_path / f,
+                queries=queries,
+                success=success,
+                costs=cost,
+                ref_costs=ref,
+                ref_status=np.zeros(K, np.int8),
+            )
             lo_hi = S.wilson_interval(int(success.sum()), K)
-            rows.append({"task": "point", "env": "point/0", "model": model, "query_kind": kind,
-                         "steer": True, "k_test": K, "successes": int(success.sum()),
-                         "success_ratio": success.mean(), "success_ci95": list(lo_hi),
-                         "cost_ratio": 1.1, "seconds_per_query": 1e-3, "compile_seconds": 1.0,
-                         "failures": {}, "reference_failed": 0, "reference_planner": "astar",
-                         "gamma_nt": 0.4, "paths_file": f})
+            rows.append(
+                {
+                    "task": "point",
+                    "env": "point/0",
+                    "model": model,
+                    "query_kind": kind,
+                    "steer": True,
+                    "k_test": K,
+                    "successes": int(success.sum()),
+                    "success_ratio": success.mean(),
+                    "success_ci95": list(lo_hi),
+                    "cost_ratio": 1.1,
+                    "seconds_per_query": 1e-3,
+                    "compile_seconds": 1.0,
+                    "failures": {},
+                    "reference_failed": 0,
+                    "reference_planner": "astar",
+                    "gamma_nt": 0.4,
+                    "paths_file": f,
+                }
+            )
     return rows
 
 
@@ -240,8 +271,10 @@ def test_comparisons_leave_out_what_they_cannot_pair(tmp_path):
     with pytest.warns(UserWarning, match="1 paths file"):
         comps = R.comparisons(tmp_path, rows, n_boot=100)
     assert {(c["model"], c["query_kind"]) for c in comps} == {
-        (f"PNet_{m}", "nontrivial") for m in (1, 2, 3)} | {  # the ensemble vs PNet_3: both kinds
-        ("PNet_ens", k) for k in ("uniform", "nontrivial")}
+        (f"PNet_{m}", "nontrivial") for m in (1, 2, 3)
+    } | {  # the ensemble vs PNet_3: both kinds
+        ("PNet_ens", k) for k in ("uniform", "nontrivial")
+    }
     # a baseline absent from the rows, and a model against itself: nothing
     assert R.comparisons(tmp_path, rows, [("PNet_1", "PNet_9"), ("PNet_1", "PNet_1")]) == []
     assert R.best_member({r["model"]: r for r in rows if r["query_kind"] == "uniform"}) == "PNet_3"

@@ -20,13 +20,20 @@ import pytest
 
 from ntq_jax import make_env, models
 from ntq_jax import training as T
+from ntq_jax.data import straight_line_rows
 from ntq_jax.models import ModelConfig
 from ntq_jax.training.config import TrainConfig
-from ntq_jax.data import straight_line_rows
 
 MODEL = ModelConfig(hidden=(32, 32), dropout=0.1, dropout_layers=1)
-TRAIN = TrainConfig(epochs=6, batch_size=32, learning_rate=0.05, val_fraction=0.2,
-                    steps_per_call=4, eval_every=4, checkpoint_every=16)
+TRAIN = TrainConfig(
+    epochs=6,
+    batch_size=32,
+    learning_rate=0.05,
+    val_fraction=0.2,
+    steps_per_call=4,
+    eval_every=4,
+    checkpoint_every=16,
+)
 PATHS = (30, 24, 18, 10)  # paths per dataset: unequal sizes (D3 smallest, as in the paper)
 SEED = 3
 # A sharded program is partitioned and fused differently from the one-device one; after the
@@ -53,8 +60,9 @@ def datasets():
 @pytest.fixture(scope="module")
 def full_run(env, datasets, tmp_path_factory):
     out = tmp_path_factory.mktemp("full")
-    ens, hist = T.train_ensemble(datasets, env, MODEL, TRAIN, seed=SEED, ckpt_dir=out,
-                                 progress=False)
+    ens, hist = T.train_ensemble(
+        datasets, env, MODEL, TRAIN, seed=SEED, ckpt_dir=out, progress=False
+    )
     return out, ens, hist
 
 
@@ -91,10 +99,12 @@ def test_schedule_counts_epochs_per_member():
 def test_vmapped_step_equals_members_trained_alone(env, datasets, full_run):
     _, ens, hist = full_run
     for m in (0, 3):  # the largest and the smallest dataset (finishes first, then masked)
-        alone, h1 = T.train_ensemble([datasets[m]], env, MODEL, TRAIN, seed=SEED,
-                                     member_ids=[m], progress=False)
-        _assert_trees_close(models.unstack_state(ens.params, m),
-                            models.unstack_state(alone.params, 0))
+        alone, h1 = T.train_ensemble(
+            [datasets[m]], env, MODEL, TRAIN, seed=SEED, member_ids=[m], progress=False
+        )
+        _assert_trees_close(
+            models.unstack_state(ens.params, m), models.unstack_state(alone.params, 0)
+        )
         n = len(h1.step)
         np.testing.assert_allclose(hist.train_loss[1:n, m], h1.train_loss[1:, 0], rtol=1e-5)
         np.testing.assert_allclose(hist.val_loss[:n, m], h1.val_loss[:, 0], rtol=1e-5)
@@ -141,6 +151,7 @@ def test_load_ensemble_for_planning(full_run):
 
 def test_corrupt_saved_ensemble_is_a_clear_error(full_run, tmp_path):
     import shutil
+
     out, _, _ = full_run
     bad = tmp_path / "ensemble"
     shutil.copytree(out / "ensemble", bad)
@@ -156,37 +167,46 @@ def test_corrupt_saved_ensemble_is_a_clear_error(full_run, tmp_path):
 
 def test_resume_gives_the_uninterrupted_result(env, datasets, full_run, tmp_path):
     _, ens, hist = full_run
-    partial, _ = T.train_ensemble(datasets, env, MODEL, TRAIN, seed=SEED, ckpt_dir=tmp_path,
-                                  progress=False, stop_after=16)
+    partial, _ = T.train_ensemble(
+        datasets, env, MODEL, TRAIN, seed=SEED, ckpt_dir=tmp_path, progress=False, stop_after=16
+    )
     assert (tmp_path / "checkpoints" / "16").is_dir() and not (tmp_path / "ensemble").exists()
     with pytest.raises(T.CheckpointError, match="not finished"):
         T.load_ensemble(tmp_path)
-    resumed, h2 = T.train_ensemble(datasets, env, MODEL, TRAIN, seed=SEED, ckpt_dir=tmp_path,
-                                   progress=False)
+    resumed, h2 = T.train_ensemble(
+        datasets, env, MODEL, TRAIN, seed=SEED, ckpt_dir=tmp_path, progress=False
+    )
     _assert_trees_close(resumed.params, ens.params, rtol=0, atol=0)
     np.testing.assert_array_equal(h2.train_loss, hist.train_loss)
     # a finished run re-run is a no-op that returns the same result
-    again, _ = T.train_ensemble(datasets, env, MODEL, TRAIN, seed=SEED, ckpt_dir=tmp_path,
-                                progress=False)
+    again, _ = T.train_ensemble(
+        datasets, env, MODEL, TRAIN, seed=SEED, ckpt_dir=tmp_path, progress=False
+    )
     _assert_trees_close(again.params, ens.params, rtol=0, atol=0)
 
 
 def test_mismatched_and_corrupt_checkpoints_are_clear_errors(env, datasets, tmp_path):
-    T.train_ensemble(datasets, env, MODEL, TRAIN, seed=SEED, ckpt_dir=tmp_path, progress=False,
-                     stop_after=4)
+    T.train_ensemble(
+        datasets, env, MODEL, TRAIN, seed=SEED, ckpt_dir=tmp_path, progress=False, stop_after=4
+    )
     other = TrainConfig(**{**TRAIN.__dict__, "learning_rate": 0.1})
     with pytest.raises(T.CheckpointError, match="different run(.|\n)*learning_rate"):
-        T.train_ensemble(datasets, env, MODEL, other, seed=SEED, ckpt_dir=tmp_path,
-                         progress=False)
+        T.train_ensemble(datasets, env, MODEL, other, seed=SEED, ckpt_dir=tmp_path, progress=False)
     with pytest.raises(T.CheckpointError, match="different run(.|\n)*data"):
-        T.train_ensemble(datasets[:3] + [datasets[0]], env, MODEL, TRAIN, seed=SEED,
-                         ckpt_dir=tmp_path, progress=False)
+        T.train_ensemble(
+            datasets[:3] + [datasets[0]],
+            env,
+            MODEL,
+            TRAIN,
+            seed=SEED,
+            ckpt_dir=tmp_path,
+            progress=False,
+        )
     for f in (tmp_path / "checkpoints" / "4" / "state").rglob("*"):
         if f.is_file() and f.stat().st_size > 0:
             f.write_bytes(b"\x00garbage" * 10)
     with pytest.raises(T.CheckpointError, match="corrupt|unreadable"):
-        T.train_ensemble(datasets, env, MODEL, TRAIN, seed=SEED, ckpt_dir=tmp_path,
-                         progress=False)
+        T.train_ensemble(datasets, env, MODEL, TRAIN, seed=SEED, ckpt_dir=tmp_path, progress=False)
 
 
 _CHILD_COMMON = """
@@ -232,10 +252,18 @@ def _run_child(code: str, env_extra: dict | None = None, prelude: str = "", **po
     """A Python child running ``prelude`` (before any JAX operation), the common setup,
     then ``code``."""
     env = dict(os.environ, JAX_PLATFORMS="cpu", **(env_extra or {}))
-    src = textwrap.dedent(_CHILD_COMMON.format(tests=str(Path(__file__).parent),
-                                               prelude=prelude)) + code
-    return subprocess.Popen([sys.executable, "-c", src], env=env, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, **popen)
+    src = (
+        textwrap.dedent(_CHILD_COMMON.format(tests=str(Path(__file__).parent), prelude=prelude))
+        + code
+    )
+    return subprocess.Popen(
+        [sys.executable, "-c", src],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        **popen,
+    )
 
 
 def test_sharded_run_agrees_and_resumes_after_kill9(env, datasets, full_run, tmp_path):
@@ -246,7 +274,8 @@ def test_sharded_run_agrees_and_resumes_after_kill9(env, datasets, full_run, tmp
     uninterrupted result."""
     _, ens, _ = full_run
     out_file, run_dir = tmp_path / "sharded.npz", tmp_path / "run"
-    child = _run_child(textwrap.dedent(f"""
+    child = _run_child(
+        textwrap.dedent(f"""
         sharded_run(4, {str(out_file)!r})  # shard=None: automatic with >= 4 devices
         def hook(step):
             print("CHECKPOINT", step, flush=True)
@@ -254,7 +283,9 @@ def test_sharded_run_agrees_and_resumes_after_kill9(env, datasets, full_run, tmp
         T.train_ensemble(datasets, env, MODEL, TRAIN, seed=SEED, ckpt_dir={str(run_dir)!r},
                          progress=False, on_checkpoint=hook)
         print("FINISHED", flush=True)
-    """), {"XLA_FLAGS": "--xla_force_host_platform_device_count=4"})
+    """),
+        {"XLA_FLAGS": "--xla_force_host_platform_device_count=4"},
+    )
     try:
         line = child.stdout.readline()
         if not line.startswith("CHECKPOINT"):
@@ -269,14 +300,17 @@ def test_sharded_run_agrees_and_resumes_after_kill9(env, datasets, full_run, tmp
     _assert_saved_params_close(out_file, ens)  # sharded == unsharded
     assert (run_dir / "checkpoints" / str(TRAIN.checkpoint_every)).is_dir()
     assert not (run_dir / "ensemble").exists()
-    resumed, _ = T.train_ensemble(datasets, env, MODEL, TRAIN, seed=SEED, ckpt_dir=run_dir,
-                                  progress=False)
+    resumed, _ = T.train_ensemble(
+        datasets, env, MODEL, TRAIN, seed=SEED, ckpt_dir=run_dir, progress=False
+    )
     _assert_trees_close(resumed.params, ens.params, rtol=1e-5, atol=SHARD_ATOL)
     assert T.load_ensemble(run_dir).num_members == 4
 
 
-@pytest.mark.parametrize("members, devices, size", [
-    (4, 1, 1), (4, 2, 2), (4, 3, 2), (4, 4, 4), (4, 8, 4), (3, 2, 1), (3, 4, 3), (1, 4, 1)])
+@pytest.mark.parametrize(
+    "members, devices, size",
+    [(4, 1, 1), (4, 2, 2), (4, 3, 2), (4, 4, 4), (4, 8, 4), (3, 2, 1), (3, 4, 3), (1, 4, 1)],
+)
 def test_mesh_size_gives_every_device_an_equal_share(members, devices, size):
     assert T.mesh_size(members, devices) == size
 
@@ -287,7 +321,8 @@ def test_two_cpu_devices_hold_two_members_each(env, datasets, full_run, tmp_path
     afterwards the device count can no longer change (a clear RuntimeError)."""
     _, ens, _ = full_run
     out_file = tmp_path / "two.npz"
-    child = _run_child(textwrap.dedent(f"""
+    child = _run_child(
+        textwrap.dedent(f"""
         sharded_run(2, {str(out_file)!r})
         try:
             T.use_cpu_devices(3)
@@ -296,7 +331,10 @@ def test_two_cpu_devices_hold_two_members_each(env, datasets, full_run, tmp_path
         else:
             raise AssertionError("use_cpu_devices after a computation did not raise")
         print("OK", flush=True)
-    """), {"XLA_FLAGS": ""}, prelude="assert T.use_cpu_devices(2) == 2")
+    """),
+        {"XLA_FLAGS": ""},
+        prelude="assert T.use_cpu_devices(2) == 2",
+    )
     out, err = child.communicate(timeout=300)
     assert child.returncode == 0 and "OK" in out, err[-3000:]
     _assert_saved_params_close(out_file, ens)
@@ -307,12 +345,14 @@ def test_adagrad_first_step_and_its_initial_accumulator():
     on every weight, whatever the gradient's size; 0.1 (the paper-width configs):
     lr * g / sqrt(0.1 + g^2). (optax adds eps = 1e-10 under the square root.)"""
     import jax.numpy as jnp
+
     g = np.array([1e-3, -0.5, 2.0])
     p = {"w": jnp.zeros(3)}
     for acc in (0.0, 0.1):
         tx = T.make_optimizer(TrainConfig(adagrad_initial_accumulator=acc))
         upd, _ = tx.update({"w": jnp.asarray(g, jnp.float32)}, tx.init(p), p)
-        np.testing.assert_allclose(np.asarray(upd["w"]), -0.01 * g / np.sqrt(acc + g**2 + 1e-10),
-                                   rtol=1e-5)
+        np.testing.assert_allclose(
+            np.asarray(upd["w"]), -0.01 * g / np.sqrt(acc + g**2 + 1e-10), rtol=1e-5
+        )
         if acc == 0.0:
             np.testing.assert_allclose(np.asarray(upd["w"]), -0.01 * np.sign(g), rtol=1e-4)

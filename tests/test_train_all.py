@@ -15,17 +15,27 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from shapely.geometry import LineString, Point, box as shapely_box
+from shapely.geometry import LineString, Point
+from shapely.geometry import box as shapely_box
 from shapely.ops import unary_union
 
 from ntq_jax import make_env
 from ntq_jax.experiment.pipeline import PipelineError, load_config, prepare_run, run_pipeline
 
 ROOT = Path(__file__).resolve().parents[1]
-TINY = ["envs=[point/2]", "data.k_train=40", "data.gamma_queries=2000", "data.gamma_eval=false",
-        "train.epochs=2",
-        "model.hidden=[32,32]", "eval.k_test=16", "eval.n_plan=20", "eval.replan_rounds=2",
-        "eval.replan_steps=6", "eval.gamma_queries=2000"]
+TINY = [
+    "envs=[point/2]",
+    "data.k_train=40",
+    "data.gamma_queries=2000",
+    "data.gamma_eval=false",
+    "train.epochs=2",
+    "model.hidden=[32,32]",
+    "eval.k_test=16",
+    "eval.n_plan=20",
+    "eval.replan_rounds=2",
+    "eval.replan_steps=6",
+    "eval.gamma_queries=2000",
+]
 
 
 def _script(name):
@@ -55,8 +65,10 @@ def test_run_folder_contents(run):
     res = json.loads((run / "results.json").read_text())
     rows = res["rows"]
     assert {(r["model"], r["query_kind"]) for r in rows} == {
-        (m, k) for m in [f"PNet_{m}" for m in range(4)] + ["PNet_ens", "PNet_best-of-4", "PNet_cascade"]
-        for k in ("uniform", "nontrivial")}
+        (m, k)
+        for m in [f"PNet_{m}" for m in range(4)] + ["PNet_ens", "PNet_best-of-4", "PNet_cascade"]
+        for k in ("uniform", "nontrivial")
+    }
     for r in rows:
         assert r["k_test"] == 16 and 0 <= r["success_ratio"] <= 1
         lo, hi = r["success_ci95"]
@@ -78,7 +90,9 @@ def test_run_folder_contents(run):
     for m in range(4):
         assert f"| PNet_{m} |" in md
     assert (run / "tables.tex").read_text().count("\\begin{tabular}") == 2  # results, comparisons
-    assert len((run / "results.csv").read_text().strip().splitlines()) == 1 + 2 * 7  # header + (4 members + 3 ensemble rows) x 2 query kinds
+    assert (
+        len((run / "results.csv").read_text().strip().splitlines()) == 1 + 2 * 7
+    )  # header + (4 members + 3 ensemble rows) x 2 query kinds
     for f in ("success_ratio.png", "examples_point_2.png", "queries_point_2.png"):
         assert (run / "figures" / f).stat().st_size > 1000
     assert (run / "data" / "point_2" / "env.json").is_file()
@@ -89,8 +103,9 @@ def test_run_folder_contents(run):
 
 def test_every_success_is_collision_free(run):
     env = json.loads((run / "data" / "point_2" / "env.json").read_text())
-    obst = unary_union([shapely_box(cx - hw, cy - hh, cx + hw, cy + hh)
-                        for cx, cy, hw, hh in env["boxes"]])
+    obst = unary_union(
+        [shapely_box(cx - hw, cy - hh, cx + hw, cy + hh) for cx, cy, hw, hh in env["boxes"]]
+    )
     (x0, x1), (y0, y1) = env["bounds"]
     checked = 0
     for f in sorted((run / "paths" / "point_2").glob("PNet_*_*.npz")):
@@ -107,7 +122,9 @@ def test_every_success_is_collision_free(run):
             seg = np.linalg.norm(np.diff(p, axis=0), axis=1).sum()
             assert z["costs"][i] == pytest.approx(seg, rel=1e-4)
             checked += 1
-    assert len(list((run / "paths" / "point_2").glob("*.npz"))) == 7 * 2 + 1  # (4 members + 3 ensemble rows) x 2 kinds + validation.npz
+    assert (
+        len(list((run / "paths" / "point_2").glob("*.npz"))) == 7 * 2 + 1
+    )  # (4 members + 3 ensemble rows) x 2 kinds + validation.npz
     assert checked > 0
 
 
@@ -129,12 +146,17 @@ def test_ensemble_rows(run):
             z = np.load(run / r["paths_file"])
             assert r["paths_file"] == f"paths/point_2/{name}_{kind}.npz"
             np.testing.assert_array_equal(
-                z["queries"], np.load(run / by[("PNet_0", kind)]["paths_file"])["queries"])
+                z["queries"], np.load(run / by[("PNet_0", kind)]["paths_file"])["queries"]
+            )
             assert int(z["success"].sum()) == r["successes"]
     assert "$\\mathsf{PNet}_\\mathsf{ens}$" in tex
     assert "$\\mathsf{PNet}_\\mathsf{best\\mbox{-}of\\mbox{-}4}$" in tex
-    assert (md.index("| PNet_3 |") < md.index("| PNet_ens |") < md.index("| PNet_best-of-4 |")
-            < md.index("| PNet_cascade |"))
+    assert (
+        md.index("| PNet_3 |")
+        < md.index("| PNet_ens |")
+        < md.index("| PNet_best-of-4 |")
+        < md.index("| PNet_cascade |")
+    )
     for kind in ("uniform", "nontrivial"):  # best-of-4 from the members' saved plans
         best = np.load(run / by[("PNet_best-of-4", kind)]["paths_file"])
         members = [np.load(run / by[(f"PNet_{m}", kind)]["paths_file"]) for m in range(4)]
@@ -173,8 +195,13 @@ def test_foreign_run_folder_is_refused(run):
 
 def test_train_all_script_error_is_one_line(run):
     """The command line turns the refusal into one error line and exit code 2, no traceback."""
-    args = [sys.executable, str(ROOT / "scripts" / "train_all.py"), "--out", str(run),
-            "--no-progress"] + sum((["--set", s] for s in TINY + ["eval.k_test=17"]), [])
+    args = [
+        sys.executable,
+        str(ROOT / "scripts" / "train_all.py"),
+        "--out",
+        str(run),
+        "--no-progress",
+    ] + sum((["--set", s] for s in TINY + ["eval.k_test=17"]), [])
     proc = subprocess.run(args, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 2
     err = proc.stderr.strip().splitlines()
@@ -186,14 +213,21 @@ def test_plan_script_rejects_bad_states(run, capsys):
     plan = _script("plan")
     env = json.loads((run / "data" / "point_2" / "env.json").read_text())
     cx, cy = env["boxes"][0][:2]  # inside the first wall
-    assert plan.main(["--run", str(run), "--model", "0", "--start", str(cx), str(cy),
-                      "--goal", "1", "1"]) == 2
+    assert (
+        plan.main(
+            ["--run", str(run), "--model", "0", "--start", str(cx), str(cy), "--goal", "1", "1"]
+        )
+        == 2
+    )
     assert "--start" in capsys.readouterr().err
-    assert plan.main(["--run", str(run), "--model", "0", "--start", "1", "1",
-                      "--goal", "30", "1"]) == 2
+    assert (
+        plan.main(["--run", str(run), "--model", "0", "--start", "1", "1", "--goal", "30", "1"])
+        == 2
+    )
     assert "out of bounds" in capsys.readouterr().err
-    assert plan.main(["--run", str(run), "--model", "9", "--start", "1", "1",
-                      "--goal", "2", "2"]) == 2
+    assert (
+        plan.main(["--run", str(run), "--model", "9", "--start", "1", "1", "--goal", "2", "2"]) == 2
+    )
     assert "--model" in capsys.readouterr().err
 
 
@@ -205,18 +239,34 @@ def test_report_has_paired_comparisons(run):
     md = (run / "tables.md").read_text()
     rows = json.loads((run / "results.json").read_text())["rows"]
     comps = json.loads((run / "results.json").read_text())["comparisons"]
-    best = {k: max(range(4), key=lambda m: (next(r["successes"] for r in rows if r["model"]
-                                                 == f"PNet_{m}" and r["query_kind"] == k), -m))
-            for k in ("uniform", "nontrivial")}
+    best = {
+        k: max(
+            range(4),
+            key=lambda m: (
+                next(
+                    r["successes"]
+                    for r in rows
+                    if r["model"] == f"PNet_{m}" and r["query_kind"] == k
+                ),
+                -m,
+            ),
+        )
+        for k in ("uniform", "nontrivial")
+    }
     assert {(c["model"], c["baseline"], c["query_kind"]) for c in comps} == {
-        (f"PNet_{m}", "PNet_0", k) for m in (1, 2, 3) for k in ("uniform", "nontrivial")} | {
-        (m, f"PNet_{best[k]}", k) for m in ("PNet_ens", "PNet_best-of-4", "PNet_cascade")
-        for k in ("uniform", "nontrivial")}
+        (f"PNet_{m}", "PNet_0", k) for m in (1, 2, 3) for k in ("uniform", "nontrivial")
+    } | {
+        (m, f"PNet_{best[k]}", k)
+        for m in ("PNet_ens", "PNet_best-of-4", "PNet_cascade")
+        for k in ("uniform", "nontrivial")
+    }
     for c in comps:
         base = c["baseline"] + (" (best member)" if c["baseline_rule"] else "")
         assert f"| {c['model']} | {base} | {c['query_kind']} | {c['both']} / {c['only_a']} / " in md
-        files = [run / "paths" / "point_2" / f"{m}_{c['query_kind']}.npz"
-                 for m in (c["model"], c["baseline"])]
+        files = [
+            run / "paths" / "point_2" / f"{m}_{c['query_kind']}.npz"
+            for m in (c["model"], c["baseline"])
+        ]
         want = paired_comparison(*(dict(np.load(f)) for f in files))
         assert c["n"] == 16 and c["mcnemar_p"] == pytest.approx(want["mcnemar_p"])
         assert c["success_diff"] == pytest.approx(want["success_diff"])
@@ -224,13 +274,14 @@ def test_report_has_paired_comparisons(run):
     # the LaTeX report has them too: one comparison table, a line per comparison
     tex = (run / "tables.tex").read_text()
     assert tex.count("paired comparisons on the same test queries") == 1
-    body = tex[tex.index("paired comparisons on the same test queries"):]
+    body = tex[tex.index("paired comparisons on the same test queries") :]
     lines = [ln for ln in body.splitlines() if ln.strip().startswith("point/2 & ")]
     assert len(lines) == len(comps)
     c = next(c for c in comps if c["model"] == "PNet_3" and c["query_kind"] == "nontrivial")
     diff = f"{c['success_diff']:.3f} [{c['success_diff_ci95'][0]:.3f}, "
-    assert any("$\\mathsf{PNet}_3$ & $\\mathsf{PNet}_0$ & non-trivial & " + diff in ln
-               for ln in lines)
+    assert any(
+        "$\\mathsf{PNet}_3$ & $\\mathsf{PNet}_0$ & non-trivial & " + diff in ln for ln in lines
+    )
 
 
 def test_headline_reads_each_maps_success_and_the_gap_from_results_json(run):
@@ -244,8 +295,11 @@ def test_headline_reads_each_maps_success_and_the_gap_from_results_json(run):
     r = next(r for r in res["rows"] if r["model"] == "PNet_3" and r["query_kind"] == "nontrivial")
     row = next(line for line in lines if line.strip().startswith("PNet_3 "))
     assert row.split()[-1] == f"{r['success_ratio']:.3f}"  # the non-trivial column
-    c = next(c for c in res["comparisons"] if c["model"] == "PNet_3"
-             and c["baseline"] == "PNet_0" and c["query_kind"] == "nontrivial")
+    c = next(
+        c
+        for c in res["comparisons"]
+        if c["model"] == "PNet_3" and c["baseline"] == "PNet_0" and c["query_kind"] == "nontrivial"
+    )
     assert f"PNet_3 - PNet_0, non-trivial: {c['success_diff']:+.3f}" in text
     assert lines[-1].startswith("full tables:") or lines[-1].startswith("figures:")
     assert headline(run / "missing") == []

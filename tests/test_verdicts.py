@@ -9,11 +9,11 @@ import math
 
 import numpy as np
 import pytest
-from scipy.stats import kendalltau, t as student_t
+from scipy.stats import kendalltau
+from scipy.stats import t as student_t
 
 from ntq_jax import stats as S
 from ntq_jax.experiment import coverage as C
-
 
 # ---------------------------------------------------------------------------
 # Multiplicity
@@ -46,7 +46,7 @@ def test_seed_estimate_adds_the_between_seed_variance_to_the_shared_query_varian
     assert e.spread == pytest.approx(math.sqrt(s2))
     assert e.seed_part == pytest.approx((s2 / 3, 2))
     # Satterthwaite: the query term is known (df inf), so df = V^2 / ((s2/3)^2 / 2)
-    assert e.df == pytest.approx(e.variance ** 2 / ((s2 / 3) ** 2 / 2))
+    assert e.df == pytest.approx(e.variance**2 / ((s2 / 3) ** 2 / 2))
     lo, hi = e.ci()
     half = max(student_t.ppf(0.975, e.df) * e.se, student_t.ppf(0.975, 2) * math.sqrt(s2 / 3))
     assert (lo, hi) == pytest.approx((e.estimate - half, e.estimate + half))
@@ -80,8 +80,9 @@ def test_query_variances_keep_zero_counts_positive():
     assert S.proportion_variance(500, 500) > 0 and S.proportion_variance(0, 500) > 0
     assert S.proportion_variance(250, 500) == pytest.approx(0.25 / 500, rel=1e-2)
     # (b - c) / n with b = 60, c = 40 of 500: Var(D) = (b + c) / n - d^2
-    assert S.paired_difference_variance(60, 40, 500) == pytest.approx((0.2 - 0.04 ** 2) / 500,
-                                                                      rel=1e-2)
+    assert S.paired_difference_variance(60, 40, 500) == pytest.approx(
+        (0.2 - 0.04**2) / 500, rel=1e-2
+    )
     assert S.paired_difference_variance(0, 0, 500) > 0
     assert math.isnan(S.proportion_variance(1, 0))
 
@@ -122,19 +123,23 @@ def test_stratified_kendall_is_exact():
     tau, less, greater = S.stratified_kendall([(x, y)])
     assert tau == pytest.approx(kendalltau(x, y).statistic)
     assert less == pytest.approx(kendalltau(x, y, method="exact", alternative="less").pvalue)
-    assert greater == pytest.approx(kendalltau(x, y, method="exact",
-                                               alternative="greater").pvalue)
+    assert greater == pytest.approx(kendalltau(x, y, method="exact", alternative="greater").pvalue)
     # two strata by brute force over every pair of within-stratum permutations
     a, b = ([1, 2, 3, 4], [3, 1, 2, 4]), ([1, 2, 3], [3, 2, 1])
     tau, less, greater = S.stratified_kendall([a, b])
 
     def s_of(xs, ys):
-        return sum(np.sign(xs[i] - xs[j]) * np.sign(ys[i] - ys[j])
-                   for i, j in itertools.combinations(range(len(xs)), 2))
+        return sum(
+            np.sign(xs[i] - xs[j]) * np.sign(ys[i] - ys[j])
+            for i, j in itertools.combinations(range(len(xs)), 2)
+        )
 
     obs = s_of(*a) + s_of(*b)
-    null = [s_of(a[0], pa) + s_of(b[0], pb) for pa in itertools.permutations(a[1])
-            for pb in itertools.permutations(b[1])]
+    null = [
+        s_of(a[0], pa) + s_of(b[0], pb)
+        for pa in itertools.permutations(a[1])
+        for pb in itertools.permutations(b[1])
+    ]
     assert tau == pytest.approx(obs / 9)
     assert less == pytest.approx(np.mean([s <= obs for s in null]))
     assert greater == pytest.approx(np.mean([s >= obs for s in null]))

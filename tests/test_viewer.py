@@ -9,27 +9,38 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from script_loader import load_script
 
 import ntq_jax as nj
 from ntq_jax.scenes import viewer
-from script_loader import load_script
 
 DATA = Path(__file__).resolve().parent / "data"
 
 
 @pytest.fixture(scope="module")
 def env():
-    return nj.envs.Env.from_json({
-        "name": "tiny_scene",
-        "robot": {"kind": "serial_arm", "urdf": str(DATA / "tiny_arm.urdf"),
-                  "srdf": str(DATA / "tiny_arm.srdf")},
-        "bounds": [[-1, 1], [-1, 1], [-0.2, 1]],
-        "spheres": [[0.3, 0.3, 0.3, 0.08]],
-        "cuboids": [{"center": [0.4, -0.1, 0.4], "half_extents": [0.1, 0.05, 0.08],
-                     "quat_xyzw": [0, 0, 0.3826834, 0.9238795]}],
-        "capsules": [[-0.3, 0.2, 0.0, -0.3, 0.2, 0.5, 0.05]],
-        "padding": 0.0,
-        "query": [[0, 0, 0, 0], [1.0, 0.5, 0.1, 0.3]]})
+    return nj.envs.Env.from_json(
+        {
+            "name": "tiny_scene",
+            "robot": {
+                "kind": "serial_arm",
+                "urdf": str(DATA / "tiny_arm.urdf"),
+                "srdf": str(DATA / "tiny_arm.srdf"),
+            },
+            "bounds": [[-1, 1], [-1, 1], [-0.2, 1]],
+            "spheres": [[0.3, 0.3, 0.3, 0.08]],
+            "cuboids": [
+                {
+                    "center": [0.4, -0.1, 0.4],
+                    "half_extents": [0.1, 0.05, 0.08],
+                    "quat_xyzw": [0, 0, 0.3826834, 0.9238795],
+                }
+            ],
+            "capsules": [[-0.3, 0.2, 0.0, -0.3, 0.2, 0.5, 0.05]],
+            "padding": 0.0,
+            "query": [[0, 0, 0, 0], [1.0, 0.5, 0.1, 0.3]],
+        }
+    )
 
 
 def test_scene_figure_with_states_path_and_a_collision(env, tmp_path):
@@ -56,8 +67,9 @@ def test_scene_figure_with_states_path_and_a_collision(env, tmp_path):
             pass
 
     path = np.array([[0, 0, 0, 0], [0.5, 0.8, 0.05, 0.0], [1.0, 0.5, 0.1, 0.3]])
-    fig = viewer.draw_scene(env, path=path, path_states=5, log=notes.append,
-                            progress=lambda **kw: Bar(**kw))
+    fig = viewer.draw_scene(
+        env, path=path, path_states=5, log=notes.append, progress=lambda **kw: Bar(**kw)
+    )
     assert bars[0].n == bars[0].total == 2 + 3  # start, goal and 3 faded path states
     assert len(notes) == 1 and "faces" in notes[0]
     ax = fig.axes[0]
@@ -73,11 +85,13 @@ def test_scene_figure_with_states_path_and_a_collision(env, tmp_path):
     moved = env.to_json() | {"capsules": [[0.0, 0.0, 0.0, 0.0, 0.0, 0.3, 0.05]]}
     hit_env = nj.envs.Env.from_json(moved)
     notes.clear()
-    fig = viewer.draw_scene(hit_env, states=inside, labels=["inside"], limits="bounds",
-                            view=(30, -60), log=notes.append)
+    fig = viewer.draw_scene(
+        hit_env, states=inside, labels=["inside"], limits="bounds", view=(30, -60), log=notes.append
+    )
     assert not bool(hit_env.is_valid(inside[None])[0])
-    assert any(t.get_text() == "sphere touching an obstacle"
-               for t in fig.axes[0].get_legend().get_texts())
+    assert any(
+        t.get_text() == "sphere touching an obstacle" for t in fig.axes[0].get_legend().get_texts()
+    )
     viewer.save(fig, tmp_path / "hit.png")
 
 

@@ -20,16 +20,16 @@ Every returned path is also re-checked with ``env.steer_to`` at its padding.
 import math
 import os
 
+import jax
 import networkx as nx
 import numpy as np
 import pytest
 import shapely
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from shapely.geometry import Point, box as shapely_box
+from shapely.geometry import Point
+from shapely.geometry import box as shapely_box
 from shapely.ops import unary_union
-
-import jax
 
 from ntq_jax import Env, make_env
 from ntq_jax.envs.env import BUCKET_MIN_ROWS
@@ -38,13 +38,18 @@ from ntq_jax.types import PlanStatus
 
 TAU = 1e-4  # oracle ambiguity band (workspace units), >> float32 rounding of the kernel
 SIDE = 20.0
-HSET = settings(max_examples=int(os.environ.get("VISGRAPH_EXAMPLES", 8)), deadline=None, derandomize=True,
-                suppress_health_check=[HealthCheck.too_slow])
+HSET = settings(
+    max_examples=int(os.environ.get("VISGRAPH_EXAMPLES", 8)),
+    deadline=None,
+    derandomize=True,
+    suppress_health_check=[HealthCheck.too_slow],
+)
 
 
 # ---------------------------------------------------------------------------
 # Oracle
 # ---------------------------------------------------------------------------
+
 
 def segments(a, b):
     return shapely.linestrings(np.stack([np.asarray(a, np.float64), np.asarray(b, np.float64)], 1))
@@ -76,7 +81,9 @@ class Oracle:
             g = nx.Graph()
             g.add_nodes_from(range(v))
             g.add_weighted_edges_from(zip(ii[vis], jj[vis], w[vis]))
-            self.dist[key] = nx.floyd_warshall_numpy(g, nodelist=range(v)) if v else np.zeros((0, 0))
+            self.dist[key] = (
+                nx.floyd_warshall_numpy(g, nodelist=range(v)) if v else np.zeros((0, 0))
+            )
             wm = np.full((v, v), np.inf)
             wm[ii[vis], jj[vis]] = wm[jj[vis], ii[vis]] = w[vis]
             self.weights[key] = wm
@@ -126,10 +133,20 @@ def box_polys(boxes):
 
 
 def box_corners(boxes, bounds):
-    c = np.array([[cx + sx * hw, cy + sy * hh] for cx, cy, hw, hh in boxes
-                  for sx in (-1, 1) for sy in (-1, 1)]).reshape(-1, 2)
-    inside = ((c[:, 0] >= bounds[0][0]) & (c[:, 0] <= bounds[0][1])
-              & (c[:, 1] >= bounds[1][0]) & (c[:, 1] <= bounds[1][1]))
+    c = np.array(
+        [
+            [cx + sx * hw, cy + sy * hh]
+            for cx, cy, hw, hh in boxes
+            for sx in (-1, 1)
+            for sy in (-1, 1)
+        ]
+    ).reshape(-1, 2)
+    inside = (
+        (c[:, 0] >= bounds[0][0])
+        & (c[:, 0] <= bounds[0][1])
+        & (c[:, 1] >= bounds[1][0])
+        & (c[:, 1] <= bounds[1][1])
+    )
     return np.unique(c[inside], axis=0)
 
 
@@ -140,8 +157,12 @@ def polygon_vertices(geom, bounds):
         for ring in [p.exterior, *p.interiors]:
             pts.append(np.asarray(ring.coords)[:-1])
     pts = np.concatenate(pts) if pts else np.zeros((0, 2))
-    inside = ((pts[:, 0] >= bounds[0][0]) & (pts[:, 0] <= bounds[0][1])
-              & (pts[:, 1] >= bounds[1][0]) & (pts[:, 1] <= bounds[1][1]))
+    inside = (
+        (pts[:, 0] >= bounds[0][0])
+        & (pts[:, 0] <= bounds[0][1])
+        & (pts[:, 1] >= bounds[1][0])
+        & (pts[:, 1] <= bounds[1][1])
+    )
     return np.unique(pts[inside], axis=0)
 
 
@@ -176,16 +197,27 @@ def plan_fixed(graph, queries):
 
 
 def make_point_env(boxes, discs=(), padding=0.0):
-    return Env.from_json({"name": "test", "robot": {"kind": "point"},
-                          "bounds": [[0, SIDE], [0, SIDE]], "boxes": [list(b) for b in boxes],
-                          "discs": [list(d) for d in discs], "padding": padding})
+    return Env.from_json(
+        {
+            "name": "test",
+            "robot": {"kind": "point"},
+            "bounds": [[0, SIDE], [0, SIDE]],
+            "boxes": [list(b) for b in boxes],
+            "discs": [list(d) for d in discs],
+            "padding": padding,
+        }
+    )
 
 
 def cage(cx, cy, a=1.2, t=0.4):
     """Four overlapping walls enclosing the square of half side ``a`` (no aligned edges)."""
     # opposite walls differ in length by 0.1 so that no two walls share an edge coordinate
-    return [(cx, cy + a + t / 2, a + t / 2, t / 2), (cx, cy - a - t / 2, a + t / 2 + 0.1, t / 2),
-            (cx - a - t / 2, cy, t / 2, a + 1.5 * t), (cx + a + t / 2, cy, t / 2, a + 1.5 * t + 0.1)]
+    return [
+        (cx, cy + a + t / 2, a + t / 2, t / 2),
+        (cx, cy - a - t / 2, a + t / 2 + 0.1, t / 2),
+        (cx - a - t / 2, cy, t / 2, a + 1.5 * t),
+        (cx + a + t / 2, cy, t / 2, a + 1.5 * t + 0.1),
+    ]
 
 
 def edges_apart(b, others, margin):
@@ -194,8 +226,10 @@ def edges_apart(b, others, margin):
     ey = np.array([b[1] - b[3], b[1] + b[3]])
     ox = [0.0, SIDE] + [o[0] + s * o[2] for o in others for s in (-1, 1)]
     oy = [0.0, SIDE] + [o[1] + s * o[3] for o in others for s in (-1, 1)]
-    return (np.min(np.abs(ex[:, None] - np.array(ox)[None])) > margin
-            and np.min(np.abs(ey[:, None] - np.array(oy)[None])) > margin)
+    return (
+        np.min(np.abs(ex[:, None] - np.array(ox)[None])) > margin
+        and np.min(np.abs(ey[:, None] - np.array(oy)[None])) > margin
+    )
 
 
 def clear_of_cage(b, c, a=1.2):
@@ -213,8 +247,9 @@ def generic_map(seed, n_boxes, margin=0.05):
             break
     while len(boxes) < n_boxes + 4:
         b = (*rng.uniform(0.5, SIDE - 0.5, 2), *rng.uniform(0.3, 2.5, 2))
-        if clear_of_cage(b, c) and all(edges_apart(x, [y for y in boxes + [b] if y is not x], margin)
-                                       for x in boxes + [b]):
+        if clear_of_cage(b, c) and all(
+            edges_apart(x, [y for y in boxes + [b] if y is not x], margin) for x in boxes + [b]
+        ):
             boxes.append(tuple(float(v) for v in b))
     return boxes, c
 
@@ -227,8 +262,9 @@ def make_queries(env, seed, n, padding, cage_center=None):
     q = [np.stack([s, g], 1)]
     near = s[: n // 4] + np.asarray(jax.random.uniform(k3, (n // 4, 2), minval=-1.5, maxval=1.5))
     # padded past BUCKET_MIN_ROWS: the chunk program ``VisGraph.build`` compiled (per-row answers)
-    ok = np.asarray(env.is_valid(np.concatenate([near, np.repeat(near[:1], BUCKET_MIN_ROWS + 1, 0)]),
-                                 padding))[: len(near)]
+    ok = np.asarray(
+        env.is_valid(np.concatenate([near, np.repeat(near[:1], BUCKET_MIN_ROWS + 1, 0)]), padding)
+    )[: len(near)]
     q.append(np.stack([s[: n // 4][ok], near[ok]], 1))
     if cage_center is not None:
         inside = np.array(cage_center) + np.array([[0.3, -0.2], [-0.25, 0.1]])
@@ -242,6 +278,7 @@ def make_queries(env, seed, n, padding, cage_center=None):
 # Checks shared by the tests
 # ---------------------------------------------------------------------------
 
+
 def check_paths(env, res, queries, padding):
     """Paths start/end at the query exactly, are collision-free, and costs are their lengths."""
     a, b = [], []
@@ -252,7 +289,7 @@ def check_paths(env, res, queries, padding):
             continue
         p = res.path(i)
         assert len(p) >= 2 and not np.any(np.isnan(p))
-        assert np.all(np.isnan(res.paths[i, len(p):]))
+        assert np.all(np.isnan(res.paths[i, len(p) :]))
         np.testing.assert_array_equal(p[0], queries[i, 0])
         np.testing.assert_array_equal(p[-1], queries[i, 1])
         seg = np.linalg.norm(np.diff(p.astype(np.float64), axis=0), axis=1).sum()
@@ -274,8 +311,12 @@ def check_paths(env, res, queries, padding):
 # ---------------------------------------------------------------------------
 
 half_units = st.integers(0, 40).map(lambda k: k / 2)
-lattice_box = st.tuples(half_units, half_units, st.integers(1, 8).map(lambda k: k / 2),
-                        st.integers(1, 8).map(lambda k: k / 2))
+lattice_box = st.tuples(
+    half_units,
+    half_units,
+    st.integers(1, 8).map(lambda k: k / 2),
+    st.integers(1, 8).map(lambda k: k / 2),
+)
 
 
 @HSET
@@ -346,17 +387,23 @@ def test_padded_and_disc_maps_between_inscribed_and_circumscribed_optima(seed):
     d64 = np.asarray(env.world.discs, np.float64)
     bounds = [[0, SIDE], [0, SIDE]]
     # polygons inside the true padded obstacles (vertices on the arcs)
-    inner = ([p.buffer(pad, quad_segs=q_segs) for p in box_polys(b64)]
-             + [Point(x, y).buffer(r + pad, quad_segs=q_segs) for x, y, r in d64])
+    inner = [p.buffer(pad, quad_segs=q_segs) for p in box_polys(b64)] + [
+        Point(x, y).buffer(r + pad, quad_segs=q_segs) for x, y, r in d64
+    ]
     # polygons containing the package's circumscribed ones, grown by the node offset
     m_box = math.ceil((math.pi / 2) / graph.arc_step - 1e-9)
     m_disc = max(3, math.ceil(2 * math.pi / graph.arc_step - 1e-9))
     grow = 1 / math.cos(math.pi / (4 * q_segs))
     slack = 2 * math.sqrt(2) * graph.eps
-    outer = ([p.buffer((pad / math.cos(math.pi / 4 / m_box) + slack) * grow, quad_segs=q_segs)
-              for p in box_polys(b64)]
-             + [Point(x, y).buffer(((r + pad) / math.cos(math.pi / m_disc) + slack) * grow,
-                                   quad_segs=q_segs) for x, y, r in d64])
+    outer = [
+        p.buffer((pad / math.cos(math.pi / 4 / m_box) + slack) * grow, quad_segs=q_segs)
+        for p in box_polys(b64)
+    ] + [
+        Point(x, y).buffer(
+            ((r + pad) / math.cos(math.pi / m_disc) + slack) * grow, quad_segs=q_segs
+        )
+        for x, y, r in d64
+    ]
     lo = Oracle(inner, polygon_vertices(unary_union(inner), bounds), "closure").lengths(q)[:, 0]
     up = Oracle(outer, polygon_vertices(unary_union(outer), bounds), "closure").lengths(q)
     hi, bends = up[:, 0], up[:, 2]
@@ -402,12 +449,17 @@ def test_single_disc_matches_analytic_wrap_length():
 def test_invalid_queries_and_empty_maps():
     env = make_point_env([(10.0, 10.0, 2.0, 2.0)])
     graph = VisGraph.build(env, 0.0)
-    q = np.array([[[10, 10], [1, 1]],          # start inside the box
-                  [[1, 1], [12, 10]],          # goal on the box boundary (closed set)
-                  [[np.nan, 1], [1, 1]],       # not finite
-                  [[1, 1], [25, 1]],           # out of bounds
-                  [[1, 1], [19, 19]],          # around the box
-                  [[1, 1], [1, 1]]], np.float32)  # zero length
+    q = np.array(
+        [
+            [[10, 10], [1, 1]],  # start inside the box
+            [[1, 1], [12, 10]],  # goal on the box boundary (closed set)
+            [[np.nan, 1], [1, 1]],  # not finite
+            [[1, 1], [25, 1]],  # out of bounds
+            [[1, 1], [19, 19]],  # around the box
+            [[1, 1], [1, 1]],
+        ],
+        np.float32,
+    )  # zero length
     res = graph.plan(q)
     S, I = PlanStatus.SOLVED, PlanStatus.INVALID
     np.testing.assert_array_equal(res.status, [I, I, I, I, S, S])
@@ -430,7 +482,9 @@ def test_nodes_are_offset_corners():
     v = obstacle_vertices(env.world, 0.8, 1e-3, math.pi / 4)
     assert v.shape == (8, 2)
     corners = np.repeat(np.array([[12, 11], [8, 11], [8, 9], [12, 9]]), 2, 0)
-    np.testing.assert_allclose(np.linalg.norm(v - corners, axis=1), 0.8 / math.cos(math.pi / 8) + 1e-3)
+    np.testing.assert_allclose(
+        np.linalg.norm(v - corners, axis=1), 0.8 / math.cos(math.pi / 8) + 1e-3
+    )
 
 
 def test_preset_smoke_and_rejections():

@@ -100,7 +100,10 @@ def test_steer_to_costs_little_more_than_its_kernel(name):
         da, db, dap, dbp = jax.block_until_ready([jnp.asarray(v) for v in (a, b, ap, bp)])
         bare = lambda x, y: B.steer_to_batch(env.robot, env.world, x, y, 0.0)  # noqa: E731
         public = lambda x, y: env.steer_to(x, y, padding=0)  # noqa: E731
-        for kind, args, bare_args in (("device", (da, db), (dap, dbp)), ("numpy", (a, b), (ap, bp))):
+        for kind, args, bare_args in (
+            ("device", (da, db), (dap, dbp)),
+            ("numpy", (a, b), (ap, bp)),
+        ):
             _check(public, bare, args, bare_args, n, f"{name} steer_to {kind} n={n}")
 
 

@@ -30,8 +30,12 @@ HERE = Path(__file__).resolve().parent.parent  # benchmarks/, where bench_steer.
 def run(src: Path, args: list[str]) -> list[dict]:
     with tempfile.NamedTemporaryFile(suffix=".json") as f:
         env = dict(os.environ, PYTHONPATH=str(src))
-        subprocess.run([sys.executable, str(HERE / "bench_steer.py"), *args, "--json", f.name],
-                       check=True, env=env, stdout=subprocess.DEVNULL)
+        subprocess.run(
+            [sys.executable, str(HERE / "bench_steer.py"), *args, "--json", f.name],
+            check=True,
+            env=env,
+            stdout=subprocess.DEVNULL,
+        )
         return json.loads(Path(f.name).read_text())
 
 
@@ -40,7 +44,9 @@ def rows_of(out) -> list[dict]:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("--base", type=Path, required=True)
     ap.add_argument("--head", type=Path, default=HERE.parent)
     ap.add_argument("--rounds", type=int, default=3)

@@ -23,18 +23,26 @@ from ntq_jax.robots import batch
 
 
 def main(argv=None) -> int:
-    argparse.ArgumentParser(description=__doc__,
-                            formatter_class=argparse.RawDescriptionHelpFormatter).parse_args(argv)
+    argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    ).parse_args(argv)
     out = {}
     for name in ("point/0", "point/3", "rigid/3", "nlink/2", "nlink/6"):
         e = nj.make_env(name)
         x = jnp.zeros((4096, e.dim), jnp.float32)
         for pad in (0.0, e.padding):
-            out[f"{name} is_valid pad {pad:g}"] = batch.is_valid_batch.lower(e.robot, e.world, x, pad).as_text()
+            out[f"{name} is_valid pad {pad:g}"] = batch.is_valid_batch.lower(
+                e.robot, e.world, x, pad
+            ).as_text()
             for check in ("discretized", "certified"):
                 out[f"{name} steer {check} pad {pad:g}"] = batch._steer_to_batch.lower(
-                    e.robot, e.world, x, x, pad, check).as_text()
-    print(json.dumps({k: hashlib.sha256(v.encode()).hexdigest()[:16] for k, v in out.items()}, indent=1))
+                    e.robot, e.world, x, x, pad, check
+                ).as_text()
+    print(
+        json.dumps(
+            {k: hashlib.sha256(v.encode()).hexdigest()[:16] for k, v in out.items()}, indent=1
+        )
+    )
     return 0
 
 

@@ -45,7 +45,7 @@ def dense_collides(env, paths: np.ndarray, lengths: np.ndarray) -> np.ndarray:
     out = np.zeros(len(paths), bool)
     step = robot.resolution / DENSE
     for i, (p, n) in enumerate(zip(paths, lengths)):
-        a, b = p[:n - 1], p[1:n]
+        a, b = p[: n - 1], p[1:n]
         bad = ~steer_to_pairs(robot, env.world, a, b, 0.0, check="certified")
         for sa, sb in zip(a[bad], b[bad]):
             m = int(np.ceil(float(distances(robot, sa[None], sb[None])[0]) / step)) + 1
@@ -76,10 +76,18 @@ def recheck_run(run: Path) -> list[dict]:
             ok_d, _ = check_paths(env, paths, n, 0.0, "discretized")
             ok_c, _ = check_paths(env, paths, n, 0.0, "certified")
             rej = np.flatnonzero(ok_d & ~ok_c)
-            rows.append({"env": name, "model": "reference", "query_kind": kind, "steer": True,
-                         "k_test": int(len(solved)), "successes_discretized": int(ok_d.sum()),
-                         "rejected_by_certified": int(len(rej)),
-                         "rejected_colliding": int(dense_collides(env, paths[rej], n[rej]).sum())})
+            rows.append(
+                {
+                    "env": name,
+                    "model": "reference",
+                    "query_kind": kind,
+                    "steer": True,
+                    "k_test": int(len(solved)),
+                    "successes_discretized": int(ok_d.sum()),
+                    "rejected_by_certified": int(len(rej)),
+                    "rejected_colliding": int(dense_collides(env, paths[rej], n[rej]).sum()),
+                }
+            )
         for f in sorted((run / "paths" / slug).glob("PNet_*.npz")):
             z = artifacts.load_npz(f)
             succ = np.asarray(z["success"], bool)
@@ -89,19 +97,33 @@ def recheck_run(run: Path) -> list[dict]:
             parts = f.stem.split("_")
             rej = np.flatnonzero(succ & ok_d & ~ok_c)
             coll = dense_collides(env, z["paths"][rej], z["lengths"][rej])
-            rows.append({"env": name, "model": "_".join(parts[:2]), "query_kind": parts[2],
-                         "steer": not f.stem.endswith("_nosteer"), "k_test": int(len(succ)),
-                         "successes_discretized": int(np.sum(succ & ok_d)),
-                         "rejected_by_certified": int(len(rej)),
-                         "rejected_colliding": int(coll.sum()),
-                         "recheck_seconds": time.perf_counter() - t0})
+            rows.append(
+                {
+                    "env": name,
+                    "model": "_".join(parts[:2]),
+                    "query_kind": parts[2],
+                    "steer": not f.stem.endswith("_nosteer"),
+                    "k_test": int(len(succ)),
+                    "successes_discretized": int(np.sum(succ & ok_d)),
+                    "rejected_by_certified": int(len(rej)),
+                    "rejected_colliding": int(coll.sum()),
+                    "recheck_seconds": time.perf_counter() - t0,
+                }
+            )
     return rows
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--run", type=Path, required=True, action="append",
-                    help="a finished run folder evaluated with eval.motion_check=discretized (repeatable)")
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    ap.add_argument(
+        "--run",
+        type=Path,
+        required=True,
+        action="append",
+        help="a finished run folder evaluated with eval.motion_check=discretized (repeatable)",
+    )
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args(argv)
     rows = []
@@ -110,20 +132,28 @@ def main(argv=None) -> int:
             print(f"error: {run} is not a run folder (no config.yaml)", file=sys.stderr)
             return 2
         rows += recheck_run(run)
-    print(f"{'env':<9} {'model':<10} {'kind':<11} {'steer':<6} {'K':>5} {'succ (disc)':>12} "
-          f"{'rejected (cert)':>16} {'of which collide':>17}")
+    print(
+        f"{'env':<9} {'model':<10} {'kind':<11} {'steer':<6} {'K':>5} {'succ (disc)':>12} "
+        f"{'rejected (cert)':>16} {'of which collide':>17}"
+    )
     for r in rows:
-        print(f"{r['env']:<9} {r['model']:<10} {r['query_kind']:<11} {str(r['steer']):<6} "
-              f"{r['k_test']:>5} {r['successes_discretized']:>12} {r['rejected_by_certified']:>16} "
-              f"{r['rejected_colliding']:>17}")
-    for who, sel in (("neural planner", lambda r: r["model"] != "reference"),
-                     ("reference planner", lambda r: r["model"] == "reference")):
+        print(
+            f"{r['env']:<9} {r['model']:<10} {r['query_kind']:<11} {str(r['steer']):<6} "
+            f"{r['k_test']:>5} {r['successes_discretized']:>12} {r['rejected_by_certified']:>16} "
+            f"{r['rejected_colliding']:>17}"
+        )
+    for who, sel in (
+        ("neural planner", lambda r: r["model"] != "reference"),
+        ("reference planner", lambda r: r["model"] == "reference"),
+    ):
         tot_s = sum(r["successes_discretized"] for r in rows if sel(r))
         tot_r = sum(r["rejected_by_certified"] for r in rows if sel(r))
         tot_c = sum(r["rejected_colliding"] for r in rows if sel(r))
-        print(f"{who} successes (discretised check): {tot_s}; rejected by the certified check: "
-              f"{tot_r} ({tot_r / max(tot_s, 1):.2%}), of which a dense check at resolution/{DENSE} "
-              f"finds in collision: {tot_c}")
+        print(
+            f"{who} successes (discretised check): {tot_s}; rejected by the certified check: "
+            f"{tot_r} ({tot_r / max(tot_s, 1):.2%}), of which a dense check at resolution/{DENSE} "
+            f"finds in collision: {tot_c}"
+        )
     if args.json:
         artifacts.write_json(args.json, {"runs": [str(r) for r in args.run], "rows": rows})
     return 0

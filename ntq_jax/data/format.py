@@ -34,10 +34,24 @@ import numpy as np
 from ntq_jax import artifacts, plotting
 from ntq_jax.envs import Env
 
-__all__ = ["FORMAT", "FORMAT_VERSION", "ARRAY_SPECS", "Dataset", "DatasetError",
-           "dataset_names", "meta_bytes", "recorded_checksums", "regenerate_hint",
-           "dataset_problem", "damaged_datasets", "is_complete", "write_dataset", "load_dataset",
-           "load_datasets", "plot_environment"]
+__all__ = [
+    "FORMAT",
+    "FORMAT_VERSION",
+    "ARRAY_SPECS",
+    "Dataset",
+    "DatasetError",
+    "dataset_names",
+    "meta_bytes",
+    "recorded_checksums",
+    "regenerate_hint",
+    "dataset_problem",
+    "damaged_datasets",
+    "is_complete",
+    "write_dataset",
+    "load_dataset",
+    "load_datasets",
+    "plot_environment",
+]
 
 #: The ``format`` field of a dataset's ``meta.json``.
 FORMAT = "ntq_jax.dataset"
@@ -99,10 +113,12 @@ def dataset_names(n: int) -> list[str]:
 # Writing
 # ---------------------------------------------------------------------------
 
+
 def meta_bytes(obj) -> bytes:
     """``meta.json``'s bytes: sorted keys, indent 1, NumPy values as JSON numbers."""
-    return (json.dumps(obj, indent=1, sort_keys=True, default=artifacts.json_default)
-            + "\n").encode()
+    return (
+        json.dumps(obj, indent=1, sort_keys=True, default=artifacts.json_default) + "\n"
+    ).encode()
 
 
 def _env_name_of(env_dir: Path) -> str | None:
@@ -134,12 +150,22 @@ def regenerate_hint(env_dir, env_name: str | None = None) -> str:
         config = run_config
     env_name = env_name or _env_name_of(env_dir)
     if config.is_file() and env_name:
-        cmd = " ".join(["python scripts/generate_data.py", "--config", shlex.quote(str(config)),
-                        "--out", shlex.quote(str(env_dir.parent)), "--env",
-                        shlex.quote(env_name)])
+        cmd = " ".join(
+            [
+                "python scripts/generate_data.py",
+                "--config",
+                shlex.quote(str(config)),
+                "--out",
+                shlex.quote(str(env_dir.parent)),
+                "--env",
+                shlex.quote(env_name),
+            ]
+        )
         return f"regenerate it with: {cmd} (it rewrites only the damaged datasets)"
-    return (f"regenerate it by rerunning the scripts/generate_data.py command that wrote "
-            f"{env_dir} (same --config, --set and --out; it rewrites only the damaged datasets)")
+    return (
+        f"regenerate it by rerunning the scripts/generate_data.py command that wrote "
+        f"{env_dir} (same --config, --set and --out; it rewrites only the damaged datasets)"
+    )
 
 
 def _npy_layout(f: Path) -> tuple[np.dtype, tuple[int, ...], int]:
@@ -167,8 +193,10 @@ def _array_problem(f: Path, want, checksum: bool) -> str | None:
     except (OSError, ValueError, EOFError) as e:
         return f"{f}: unreadable .npy header ({e})"
     if dtype.str != want.get("dtype") or list(shape) != list(want.get("shape", [])):
-        return (f"{f}: dtype {dtype} shape {tuple(shape)} differs from meta.json (dtype "
-                f"{want.get('dtype')}, shape {want.get('shape')})")
+        return (
+            f"{f}: dtype {dtype} shape {tuple(shape)} differs from meta.json (dtype "
+            f"{want.get('dtype')}, shape {want.get('shape')})"
+        )
     actual = f.stat().st_size
     if actual != size:
         return f"{f}: truncated or corrupt ({actual} bytes, its header needs {size})"
@@ -203,8 +231,9 @@ def dataset_problem(folder, fingerprint: str | None = None, checksum: bool = Tru
     return None
 
 
-def damaged_datasets(env_dir, names: list[str], fingerprint: str | None = None,
-                     checksum: bool = True) -> dict[str, str]:
+def damaged_datasets(
+    env_dir, names: list[str], fingerprint: str | None = None, checksum: bool = True
+) -> dict[str, str]:
     """``{name: problem}`` for every dataset of ``names`` that :func:`dataset_problem` rejects."""
     env_dir = Path(env_dir)
     out = {}
@@ -251,24 +280,29 @@ def write_dataset(folder: Path, arrays: dict[str, np.ndarray], meta: dict) -> No
 # Loading
 # ---------------------------------------------------------------------------
 
+
 def _read_meta(folder: Path, fix: str) -> dict:
     mpath = folder / "meta.json"
     if not folder.is_dir():
         raise DatasetError(f"{folder}: no such dataset folder; {fix}")
     if not mpath.is_file():
-        raise DatasetError(f"{mpath}: missing, the dataset is incomplete (generation interrupted?); "
-                           f"{fix}")
+        raise DatasetError(
+            f"{mpath}: missing, the dataset is incomplete (generation interrupted?); {fix}"
+        )
     try:
         meta = json.loads(mpath.read_text())
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
         raise DatasetError(f"{mpath}: not valid JSON ({e}); {fix}") from None
     if not isinstance(meta, dict) or meta.get("format") != FORMAT:
         found = meta.get("format") if isinstance(meta, dict) else type(meta).__name__
-        raise DatasetError(f"{mpath}: not an ntq_jax dataset (format {found!r}, expected "
-                           f"{FORMAT!r}); {fix}")
+        raise DatasetError(
+            f"{mpath}: not an ntq_jax dataset (format {found!r}, expected {FORMAT!r}); {fix}"
+        )
     if meta.get("format_version") != FORMAT_VERSION:
-        raise DatasetError(f"{mpath}: format version {meta.get('format_version')!r}, this "
-                           f"ntq_jax reads {FORMAT_VERSION}; {fix}")
+        raise DatasetError(
+            f"{mpath}: format version {meta.get('format_version')!r}, this "
+            f"ntq_jax reads {FORMAT_VERSION}; {fix}"
+        )
     return meta
 
 
@@ -293,11 +327,13 @@ def _read_array(folder: Path, name: str, want, mmap: bool, verify: bool, fix: st
     except (OSError, ValueError, EOFError) as e:
         raise DatasetError(f"{f}: truncated or corrupt ({e}); {fix}") from None
     if a.dtype != dtype or a.ndim != ndim:
-        raise DatasetError(f"{f}: dtype {a.dtype} shape {a.shape}, expected {dtype} with "
-                           f"{ndim} dimensions; {fix}")
+        raise DatasetError(
+            f"{f}: dtype {a.dtype} shape {a.shape}, expected {dtype} with {ndim} dimensions; {fix}"
+        )
     if list(a.shape) != list(want.get("shape", [])):
-        raise DatasetError(f"{f}: shape {a.shape} differs from meta.json {want.get('shape')}; "
-                           f"{fix}")
+        raise DatasetError(
+            f"{f}: shape {a.shape} differs from meta.json {want.get('shape')}; {fix}"
+        )
     return a
 
 
@@ -318,8 +354,9 @@ def load_dataset(folder, mmap: bool = True, verify: bool = True) -> Dataset:
     fix = regenerate_hint(folder.parent)
     meta = _read_meta(folder, fix)
     info = meta.get("arrays") or {}
-    arrs = {name: _read_array(folder, name, info.get(name), mmap, verify, fix)
-            for name in ARRAY_SPECS}
+    arrs = {
+        name: _read_array(folder, name, info.get(name), mmap, verify, fix) for name in ARRAY_SPECS
+    }
     _check_consistency(folder, arrs, meta, fix)
     return Dataset(meta=meta, **arrs)
 
@@ -349,7 +386,9 @@ def _check_consistency(folder: Path, a: dict, meta: dict, fix: str):
         bad(f"{int(np.count_nonzero(a['solved']))} solved queries but {P} paths")
     if N and (int(a["path_index"].min()) < 0 or int(a["path_index"].max()) >= P):
         bad("path_index.npy points outside paths.npy")
-    if P and (int(a["path_lengths"].min()) < 2 or int(a["path_lengths"].max()) > a["paths"].shape[1]):
+    if P and (
+        int(a["path_lengths"].min()) < 2 or int(a["path_lengths"].max()) > a["paths"].shape[1]
+    ):
         bad("path_lengths.npy out of range [2, L_max]")
     kinds = np.unique(np.asarray(a["query_kind"]))
     if np.any((kinds < 0) | (kinds > 2)):
@@ -368,14 +407,20 @@ def load_datasets(env_dir, mmap: bool = True, verify: bool = True) -> list[Datas
         DatasetError: no dataset folder, a gap in the numbering, or any dataset invalid.
     """
     env_dir = Path(env_dir)
-    found = sorted((int(p.name[1:]), p) for p in env_dir.glob("D*")
-                   if p.is_dir() and re.fullmatch(r"D\d+", p.name))
+    found = sorted(
+        (int(p.name[1:]), p)
+        for p in env_dir.glob("D*")
+        if p.is_dir() and re.fullmatch(r"D\d+", p.name)
+    )
     if not found:
-        raise DatasetError(f"{env_dir}: no D0..D3 dataset folders; generate them with "
-                           "scripts/generate_data.py")
+        raise DatasetError(
+            f"{env_dir}: no D0..D3 dataset folders; generate them with scripts/generate_data.py"
+        )
     if [i for i, _ in found] != list(range(len(found))):
-        raise DatasetError(f"{env_dir}: dataset folders {[p.name for _, p in found]} are not "
-                           f"D0..D{len(found) - 1}; {regenerate_hint(env_dir)}")
+        raise DatasetError(
+            f"{env_dir}: dataset folders {[p.name for _, p in found]} are not "
+            f"D0..D{len(found) - 1}; {regenerate_hint(env_dir)}"
+        )
     return [load_dataset(p, mmap=mmap, verify=verify) for _, p in found]
 
 
@@ -384,5 +429,6 @@ def plot_environment(env_dir, out=None, n_points: int = 400, n_paths: int = 6) -
     env_dir = Path(env_dir)
     env = Env.from_json(json.loads((env_dir / "env.json").read_text()))
     out = Path(out) if out is not None else env_dir / "figure.png"
-    return plotting.dataset_figure(env, load_datasets(env_dir, verify=False), out,
-                                   n_points=n_points, n_paths=n_paths)
+    return plotting.dataset_figure(
+        env, load_datasets(env_dir, verify=False), out, n_points=n_points, n_paths=n_paths
+    )

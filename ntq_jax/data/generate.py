@@ -52,25 +52,45 @@ import yaml
 
 from ntq_jax import artifacts
 from ntq_jax import queries as Q
-from ntq_jax.data.format import (CONFIG_FILE, FORMAT, FORMAT_VERSION, damaged_datasets,
-                                 dataset_names, plot_environment, write_dataset)
-from ntq_jax.envs import env_slug
-from ntq_jax.data.include import include_data, prune_probability, prune_rng
-from ntq_jax.planners.path_modes import shape_paths
-from ntq_jax.planners.jobs import PoolPlan, plan_pool, planner_options, resolve_planner
-from ntq_jax.data.options import DataOptions
 from ntq_jax.data import records
+from ntq_jax.data.format import (
+    CONFIG_FILE,
+    FORMAT,
+    FORMAT_VERSION,
+    damaged_datasets,
+    dataset_names,
+    plot_environment,
+    write_dataset,
+)
+from ntq_jax.data.include import include_data, prune_probability, prune_rng
 from ntq_jax.data.limits import check_roadmap, check_spacing
-from ntq_jax.data.pools import (Keys, Pools, mixing_bits, pool_index, pool_sizes, run_keys,
-                                sample_pools)
+from ntq_jax.data.options import DataOptions
+from ntq_jax.data.pools import (
+    Keys,
+    Pools,
+    mixing_bits,
+    pool_index,
+    pool_sizes,
+    run_keys,
+    sample_pools,
+)
+from ntq_jax.envs import env_slug
+from ntq_jax.planners.jobs import PoolPlan, plan_pool, planner_options, resolve_planner
+from ntq_jax.planners.path_modes import shape_paths
 from ntq_jax.progress import open_bar
 from ntq_jax.robots.batch import steer_to_pairs
 from ntq_jax.stats import wilson_interval
 from ntq_jax.types import PlanResult
 from ntq_jax.version import __version__
 
-__all__ = ["RunSpec", "resolve_run", "estimate_gammas", "dataset_arrays", "dataset_stats",
-           "generate_datasets"]
+__all__ = [
+    "RunSpec",
+    "resolve_run",
+    "estimate_gammas",
+    "dataset_arrays",
+    "dataset_stats",
+    "generate_datasets",
+]
 
 _NO_GAMMA = {"padding": 0.0, "gamma": None, "ci95": None, "queries": 0}
 _QUERY_KINDS = {"0": "uniform", "1": "non-trivial", "2": "non-trivial sampler exhausted (trivial)"}
@@ -80,21 +100,22 @@ _QUERY_KINDS = {"0": "uniform", "1": "non-trivial", "2": "non-trivial sampler ex
 # The run's settings
 # ---------------------------------------------------------------------------
 
+
 class RunSpec(NamedTuple):
     """Everything one environment's generation follows from, resolved once."""
 
     env_name: str
     slug: str
     env_dir: Path
-    names: list[str]     # D0, D1, ...
-    specs: list          # options.datasets
-    k: int               # queries per dataset
-    padding: float       # the data-generation geometry
+    names: list[str]  # D0, D1, ...
+    specs: list  # options.datasets
+    k: int  # queries per dataset
+    padding: float  # the data-generation geometry
     prune_padding: float
     plan_fn: Callable
     planner_name: str
     options: dict
-    verify: bool         # plan_fn is a user's callable: verify its results here
+    verify: bool  # plan_fn is a user's callable: verify its results here
     keys: Keys
     bits: list[np.ndarray]
     fingerprint: str
@@ -120,10 +141,14 @@ def resolve_run(env, opts: DataOptions, out_dir, env_name: str | None, planner) 
     pad, prune_pad = env.resolve_padding(None), env.resolve_padding(dc.prune_padding)
     planner = opts.planner.name if planner is None else planner
     custom = callable(planner)
-    options = (dict(getattr(planner, "options", {}) or {}) if custom
-               else planner_options(opts.planner, str(planner)))
-    plan_fn, planner_name = resolve_planner(planner, options,
-                                            cache_dir=Path(out_dir) / slug / "roadmap")
+    options = (
+        dict(getattr(planner, "options", {}) or {})
+        if custom
+        else planner_options(opts.planner, str(planner))
+    )
+    plan_fn, planner_name = resolve_planner(
+        planner, options, cache_dir=Path(out_dir) / slug / "roadmap"
+    )
     keys = run_keys(opts.seed, slug)
     bits = [mixing_bits(keys.mix, k, s.p_nt) for s in specs]
     n_u, n_nt = pool_sizes(bits)
@@ -133,28 +158,61 @@ def resolve_run(env, opts: DataOptions, out_dir, env_name: str | None, planner) 
         check_roadmap(env, options, env_name)
     source = dc.paths_from
     record = None if source is None else records.provenance(source, {"U": n_u, "N": n_nt})
-    fp = artifacts.fingerprint({
-        "format": FORMAT_VERSION, "env": env.to_json(), "env_name": env_name, "seed": opts.seed,
-        "pad": pad, "prune_pad": prune_pad, "planner": planner_name, "options": options,
-        "n_max": opts.n_max, "n_u": n_u, "n_nt": n_nt, "k": k,
-        "datasets": [[s.p_nt, s.prune] for s in specs],
-        "gamma_queries": dc.gamma_queries, "gamma_eval": dc.gamma_eval,
-        # only when set: the fingerprints of runs with the planners' default paths stay
-        **({} if mode is None else {"data_paths": mode}),
-        # a spacing's paths keep a direct connection as its two ends (path_modes)
-        **({"direct": "ends"} if isinstance(mode, (int, float)) and not isinstance(mode, bool)
-           else {}),
-        # the record's chunks, by content: a changed record makes the datasets again
-        **({} if record is None else {"paths_from": str(source), "record": record["digest"]}),
-    }, default=artifacts.json_default)
-    return RunSpec(env_name, slug, Path(out_dir) / slug, dataset_names(len(specs)), specs, k,
-                   pad, prune_pad, plan_fn, planner_name, options, custom, keys, bits, fp, mode,
-                   record)
+    fp = artifacts.fingerprint(
+        {
+            "format": FORMAT_VERSION,
+            "env": env.to_json(),
+            "env_name": env_name,
+            "seed": opts.seed,
+            "pad": pad,
+            "prune_pad": prune_pad,
+            "planner": planner_name,
+            "options": options,
+            "n_max": opts.n_max,
+            "n_u": n_u,
+            "n_nt": n_nt,
+            "k": k,
+            "datasets": [[s.p_nt, s.prune] for s in specs],
+            "gamma_queries": dc.gamma_queries,
+            "gamma_eval": dc.gamma_eval,
+            # only when set: the fingerprints of runs with the planners' default paths stay
+            **({} if mode is None else {"data_paths": mode}),
+            # a spacing's paths keep a direct connection as its two ends (path_modes)
+            **(
+                {"direct": "ends"}
+                if isinstance(mode, (int, float)) and not isinstance(mode, bool)
+                else {}
+            ),
+            # the record's chunks, by content: a changed record makes the datasets again
+            **({} if record is None else {"paths_from": str(source), "record": record["digest"]}),
+        },
+        default=artifacts.json_default,
+    )
+    return RunSpec(
+        env_name,
+        slug,
+        Path(out_dir) / slug,
+        dataset_names(len(specs)),
+        specs,
+        k,
+        pad,
+        prune_pad,
+        plan_fn,
+        planner_name,
+        options,
+        custom,
+        keys,
+        bits,
+        fp,
+        mode,
+        record,
+    )
 
 
 # ---------------------------------------------------------------------------
 # Steps
 # ---------------------------------------------------------------------------
+
 
 def estimate_gamma(env, key: jax.Array, n: int, padding: float, cache: Path) -> dict:
     """gamma_nt at ``padding`` as a JSON-ready dict, cached in ``cache`` (a resumed run reads it)."""
@@ -172,8 +230,9 @@ def estimate_gamma(env, key: jax.Array, n: int, padding: float, cache: Path) -> 
     return out
 
 
-def estimate_gammas(env, key: jax.Array, opts: DataOptions, padding: float, work: Path
-                    ) -> tuple[dict, dict, float]:
+def estimate_gammas(
+    env, key: jax.Array, opts: DataOptions, padding: float, work: Path
+) -> tuple[dict, dict, float]:
     """``(gamma_nt at padding, gamma_nt at 0 or none, seconds)`` (``data.gamma_eval``).
 
     At ``padding`` 0 (e.g. the Panda's scenes) the data geometry is the evaluation
@@ -200,14 +259,22 @@ def resolve_prune(spec, g_data: dict, env_name: str, name: str) -> float:
             raise ValueError(
                 f"{env_name} {name}: prune: gamma needs the map's gamma_nt at the data padding, "
                 f"but it could not be estimated ({g_data.get('error', 'no estimate')}); give "
-                "the dataset a pruning probability instead")
+                "the dataset a pruning probability instead"
+            )
         return prune_probability(min(max(float(g), 0.0), 1.0))
     return prune_probability(spec.prune)
 
 
-def dataset_arrays(env, pools: Pools, planned: PlanResult, idx: np.ndarray, prune: bool | float,
-                   prune_padding: float, rng: np.random.Generator | None = None,
-                   keep_last: bool = False) -> dict[str, np.ndarray]:
+def dataset_arrays(
+    env,
+    pools: Pools,
+    planned: PlanResult,
+    idx: np.ndarray,
+    prune: bool | float,
+    prune_padding: float,
+    rng: np.random.Generator | None = None,
+    keep_last: bool = False,
+) -> dict[str, np.ndarray]:
     """The arrays of the dataset made of pool rows ``idx`` (:data:`ARRAY_SPECS`).
 
     ``prune``, ``rng``, ``keep_last``: :func:`ntq_jax.data.include.include_data`'s.
@@ -216,18 +283,35 @@ def dataset_arrays(env, pools: Pools, planned: PlanResult, idx: np.ndarray, prun
     sel = idx[solved]
     lens = planned.lengths[sel].astype(np.int32)
     lmax = int(lens.max()) if len(lens) else 0
-    paths = (np.ascontiguousarray(planned.paths[sel, :lmax]) if len(sel)
-             else np.zeros((0, 0, env.dim), np.float32))
-    inputs, targets, pidx = include_data(env, paths, lens, prune=prune, padding=prune_padding,
-                                         rng=rng, keep_last=keep_last)
-    return {"inputs": inputs, "targets": targets, "path_index": pidx,
-            "paths": paths.astype(np.float32), "path_lengths": lens,
-            "queries": pools.queries[idx].astype(np.float32),
-            "query_kind": pools.kind[idx].astype(np.int8), "solved": solved.astype(np.bool_)}
+    paths = (
+        np.ascontiguousarray(planned.paths[sel, :lmax])
+        if len(sel)
+        else np.zeros((0, 0, env.dim), np.float32)
+    )
+    inputs, targets, pidx = include_data(
+        env, paths, lens, prune=prune, padding=prune_padding, rng=rng, keep_last=keep_last
+    )
+    return {
+        "inputs": inputs,
+        "targets": targets,
+        "path_index": pidx,
+        "paths": paths.astype(np.float32),
+        "path_lengths": lens,
+        "queries": pools.queries[idx].astype(np.float32),
+        "query_kind": pools.kind[idx].astype(np.int8),
+        "solved": solved.astype(np.bool_),
+    }
 
 
-def dataset_stats(arrays: dict, idx: np.ndarray, planned: PoolPlan, blocked: np.ndarray,
-                  prune: bool, g_data: dict, g_eval: dict) -> dict:
+def dataset_stats(
+    arrays: dict,
+    idx: np.ndarray,
+    planned: PoolPlan,
+    blocked: np.ndarray,
+    prune: bool,
+    g_data: dict,
+    g_eval: dict,
+) -> dict:
     """The ``stats`` of a dataset's ``meta.json``."""
     k, kind, solved = len(idx), arrays["query_kind"], arrays["solved"]
     lens, samples = arrays["path_lengths"], len(arrays["inputs"])
@@ -235,12 +319,16 @@ def dataset_stats(arrays: dict, idx: np.ndarray, planned: PoolPlan, blocked: np.
     segments = int(np.maximum(lens - 1, 0).sum())
     nblk = int(blocked[idx].sum())
     return {
-        "queries": k, "uniform": int((kind == Q.UNIFORM).sum()),
+        "queries": k,
+        "uniform": int((kind == Q.UNIFORM).sum()),
         "non_trivial": int((kind == Q.NON_TRIVIAL).sum()),
         "nt_exhausted": int((kind == Q.NT_EXHAUSTED).sum()),
-        "solved": int(solved.sum()), "unsolved": int(k - solved.sum()),
+        "solved": int(solved.sum()),
+        "unsolved": int(k - solved.sum()),
         "rejected_paths": int(planned.rejected[idx].sum()),
-        "paths": int(len(sel)), "segments": segments, "samples": samples,
+        "paths": int(len(sel)),
+        "segments": segments,
+        "samples": samples,
         "pruned": segments - samples if prune else 0,
         "fraction_pruned": (segments - samples) / segments if prune and segments else 0.0,
         "mean_waypoints": float(lens.mean()) if len(lens) else 0.0,
@@ -248,7 +336,8 @@ def dataset_stats(arrays: dict, idx: np.ndarray, planned: PoolPlan, blocked: np.
         "blocked_fraction": nblk / k,
         "blocked_fraction_ci95": list(wilson_interval(nblk, k)) if k else [0.0, 1.0],
         "mean_cost": float(planned.result.costs[sel].mean()) if len(sel) else None,
-        "gamma_nt": g_data["gamma"], "gamma_nt_eval": g_eval["gamma"],
+        "gamma_nt": g_data["gamma"],
+        "gamma_nt_eval": g_eval["gamma"],
     }
 
 
@@ -256,38 +345,63 @@ def dataset_warnings(env_name: str, name: str, stats: dict, prune: bool, n_max: 
     """The ``warnings`` of a dataset's ``meta.json``; an empty dataset is also warned about."""
     out = []
     if stats["samples"] == 0:
-        why = ("(pruning removed every segment: no waypoint of any path is blocked from its goal, "
-               "e.g. a map without obstacles)" if prune and stats["segments"]
-               else "(no query was solved)" if not stats["paths"] else "(empty)")
-        out.append(f"{env_name} {name}: the dataset has no samples {why}; an empty, valid "
-                   "dataset was written")
+        why = (
+            "(pruning removed every segment: no waypoint of any path is blocked from its goal, "
+            "e.g. a map without obstacles)"
+            if prune and stats["segments"]
+            else "(no query was solved)"
+            if not stats["paths"]
+            else "(empty)"
+        )
+        out.append(
+            f"{env_name} {name}: the dataset has no samples {why}; an empty, valid "
+            "dataset was written"
+        )
         warnings.warn(out[-1], RuntimeWarning, stacklevel=3)
     if stats["nt_exhausted"]:
-        out.append(f"{env_name} {name}: {stats['nt_exhausted']} non-trivial draw(s) found no "
-                   f"blocked query in n_max={n_max} attempts and are trivial (query_kind 2)")
+        out.append(
+            f"{env_name} {name}: {stats['nt_exhausted']} non-trivial draw(s) found no "
+            f"blocked query in n_max={n_max} attempts and are trivial (query_kind 2)"
+        )
     return out
 
 
 def sharing(run: RunSpec, j: int) -> dict:
     """Dataset ``j``'s pool prefixes and the earlier datasets with the same queries."""
     b = run.bits[j]
-    return {"uniform_pool": [0, int((~b).sum())], "nontrivial_pool": [0, int(b.sum())],
-            "same_queries_as": [run.names[i] for i in range(j) if np.array_equal(run.bits[i], b)]}
+    return {
+        "uniform_pool": [0, int((~b).sum())],
+        "nontrivial_pool": [0, int(b.sum())],
+        "same_queries_as": [run.names[i] for i in range(j) if np.array_equal(run.bits[i], b)],
+    }
 
 
 def common_meta(env, opts: DataOptions, run: RunSpec, g_data: dict, g_eval: dict) -> dict:
     """The ``meta.json`` entries every dataset of the run shares."""
     return {
-        "format": FORMAT, "format_version": FORMAT_VERSION, "env": env.name,
-        "env_name": run.env_name, "env_slug": run.slug, "seed": opts.seed, "k_train": run.k,
-        "padding": run.padding, "prune_padding": run.prune_padding,
-        "planner": {"name": run.planner_name, "options": run.options,
-                    **({} if run.data_paths is None else {"data_paths": run.data_paths}),
-                    # where the recorded paths come from (the planner above plans the rest)
-                    **({} if run.record is None else {"paths_from": run.record})},
-        "sampling": {"n_max": opts.n_max}, "gamma_nt": g_data, "gamma_nt_eval": g_eval,
-        "package_version": __version__, "config_hash": opts.recorded_hash(),
-        "fingerprint": run.fingerprint, "query_kind_values": _QUERY_KINDS,
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "env": env.name,
+        "env_name": run.env_name,
+        "env_slug": run.slug,
+        "seed": opts.seed,
+        "k_train": run.k,
+        "padding": run.padding,
+        "prune_padding": run.prune_padding,
+        "planner": {
+            "name": run.planner_name,
+            "options": run.options,
+            **({} if run.data_paths is None else {"data_paths": run.data_paths}),
+            # where the recorded paths come from (the planner above plans the rest)
+            **({} if run.record is None else {"paths_from": run.record}),
+        },
+        "sampling": {"n_max": opts.n_max},
+        "gamma_nt": g_data,
+        "gamma_nt_eval": g_eval,
+        "package_version": __version__,
+        "config_hash": opts.recorded_hash(),
+        "fingerprint": run.fingerprint,
+        "query_kind_values": _QUERY_KINDS,
     }
 
 
@@ -303,9 +417,13 @@ def _warn_rejected(run: RunSpec, planned: PoolPlan, recorded: int = 0) -> None:
     n = int(planned.rejected.sum())
     if n:
         where = f" ({recorded} of them from {run.record['record']})" if recorded else ""
-        warnings.warn(f"{run.env_name}: {n} planner path(s){where} failed the independent "
-                      f"check (a segment in collision at padding {run.padding}, or not finite); "
-                      "they are recorded as unsolved", RuntimeWarning, stacklevel=3)
+        warnings.warn(
+            f"{run.env_name}: {n} planner path(s){where} failed the independent "
+            f"check (a segment in collision at padding {run.padding}, or not finite); "
+            "they are recorded as unsolved",
+            RuntimeWarning,
+            stacklevel=3,
+        )
 
 
 def _open_work(env, opts: DataOptions, run: RunSpec) -> Path:
@@ -325,7 +443,9 @@ def _unchanged(folder: Path, arrays: dict[str, np.ndarray]) -> bool:
     """``folder``'s ``meta.json`` records exactly these arrays (sha256 of their ``.npy`` bytes)."""
     try:
         recorded = json.loads((folder / "meta.json").read_text())["arrays"]
-        return all(recorded[name]["sha256"] == artifacts.npy_sha256(a) for name, a in arrays.items())
+        return all(
+            recorded[name]["sha256"] == artifacts.npy_sha256(a) for name, a in arrays.items()
+        )
     except (OSError, ValueError, KeyError, TypeError):
         return False
 
@@ -336,9 +456,16 @@ def _already_complete(run: RunSpec, figure: bool) -> dict:
     if figure and not (run.env_dir / "figure.png").is_file():
         write_figure(run)
     shutil.rmtree(run.env_dir / ".work", ignore_errors=True)
-    return {"env_dir": str(run.env_dir), "skipped": True, "fingerprint": run.fingerprint,
-            "timings": {}, "reused_queries": 0, "damaged": {}, "rewritten": [],
-            "datasets": {nm: m["stats"] for nm, m in metas.items()}}
+    return {
+        "env_dir": str(run.env_dir),
+        "skipped": True,
+        "fingerprint": run.fingerprint,
+        "timings": {},
+        "reused_queries": 0,
+        "damaged": {},
+        "rewritten": [],
+        "datasets": {nm: m["stats"] for nm, m in metas.items()},
+    }
 
 
 @contextlib.contextmanager
@@ -352,8 +479,10 @@ def _timed(timings: dict, stage: str):
 # The orchestrator
 # ---------------------------------------------------------------------------
 
-def _write_datasets(env, opts, run, pools, planned, blocked, gammas, bad: dict,
-                    timings: dict, progress) -> tuple[dict[str, dict], list[str]]:
+
+def _write_datasets(
+    env, opts, run, pools, planned, blocked, gammas, bad: dict, timings: dict, progress
+) -> tuple[dict[str, dict], list[str]]:
     """includeData (Alg. 4) for every dataset of ``run``, each written with its metadata.
 
     A dataset is rewritten only when it is damaged (``bad``) or its arrays changed.
@@ -363,36 +492,60 @@ def _write_datasets(env, opts, run, pools, planned, blocked, gammas, bad: dict,
     common = common_meta(env, opts, run, g_data, g_eval)
     summary: dict[str, dict] = {}
     rewritten: list[str] = []
-    with open_bar(progress, desc=f"{run.slug}: includeData + write", total=len(run.specs),
-                  unit="dataset") as bar:
+    with open_bar(
+        progress, desc=f"{run.slug}: includeData + write", total=len(run.specs), unit="dataset"
+    ) as bar:
         for j, (name, spec) in enumerate(zip(run.names, run.specs)):
             with _timed(timings, "include"):
                 idx = pool_index(run.bits[j], pools.n_u)
                 p_prune = resolve_prune(spec, g_data, run.env_name, name)
                 # bool prune: exactly Alg. 4's flag (the paper's datasets, as before)
                 prune = spec.prune if isinstance(spec.prune, bool) else p_prune
-                arrays = dataset_arrays(env, pools, planned.result, idx, prune,
-                                        run.prune_padding,
-                                        rng=prune_rng(opts.seed, run.slug, name),
-                                        keep_last=spec.prune == "keep_last")
+                arrays = dataset_arrays(
+                    env,
+                    pools,
+                    planned.result,
+                    idx,
+                    prune,
+                    run.prune_padding,
+                    rng=prune_rng(opts.seed, run.slug, name),
+                    keep_last=spec.prune == "keep_last",
+                )
             with _timed(timings, "write"):
                 stats = dataset_stats(arrays, idx, planned, blocked, p_prune > 0, g_data, g_eval)
-                warns = dataset_warnings(run.env_name, name, stats, p_prune > 0,
-                                         opts.n_max)
+                warns = dataset_warnings(run.env_name, name, stats, p_prune > 0, opts.n_max)
                 if name in bad or not _unchanged(run.env_dir / name, arrays):
-                    write_dataset(run.env_dir / name, arrays, dict(
-                        common, name=name, p_nt=spec.p_nt, prune=spec.prune,
-                        p_prune=p_prune, stats=stats,
-                        sharing=sharing(run, j), warnings=warns))
+                    write_dataset(
+                        run.env_dir / name,
+                        arrays,
+                        dict(
+                            common,
+                            name=name,
+                            p_nt=spec.p_nt,
+                            prune=spec.prune,
+                            p_prune=p_prune,
+                            stats=stats,
+                            sharing=sharing(run, j),
+                            warnings=warns,
+                        ),
+                    )
                     rewritten.append(name)
             summary[name] = stats
             bar.update(1)
     return summary, rewritten
 
 
-def generate_datasets(env, options: DataOptions | None, out_dir, *,
-                      env_name: str | None = None, planner=None, progress=True,
-                      figure: bool = True, executor=None) -> dict:
+def generate_datasets(
+    env,
+    options: DataOptions | None,
+    out_dir,
+    *,
+    env_name: str | None = None,
+    planner=None,
+    progress=True,
+    figure: bool = True,
+    executor=None,
+) -> dict:
     """Generates D0..D3 (``options.datasets``) for one environment (Alg. 2 + 4).
 
     Writes ``<out_dir>/<env_slug>/env.json``, ``D<i>/`` (:mod:`ntq_jax.data.format`)
@@ -434,42 +587,71 @@ def generate_datasets(env, options: DataOptions | None, out_dir, *,
 
     # 1. the query pools U and N
     with _timed(timings, "sample"):
-        pools = sample_pools(env, run.keys, run.n_u, run.n_nt, run.padding,
-                             opts.n_max, progress, f"{run.slug}: sample queries")
+        pools = sample_pools(
+            env,
+            run.keys,
+            run.n_u,
+            run.n_nt,
+            run.padding,
+            opts.n_max,
+            progress,
+            f"{run.slug}: sample queries",
+        )
 
     recorded = 0  # recorded paths the verification rejected
     if run.record is not None:  # checked and verified before plan_pool reuses them
-        recorded = records.seed_work(work, run.record["record"], pools.queries, pools.n_u, env,
-                                     env_name=run.env_name, seed=opts.seed,
-                                     padding=run.padding)[1]
+        recorded = records.seed_work(
+            work,
+            run.record["record"],
+            pools.queries,
+            pools.n_u,
+            env,
+            env_name=run.env_name,
+            seed=opts.seed,
+            padding=run.padding,
+        )[1]
 
     with ThreadPoolExecutor(1, thread_name_prefix="ntq_jax-gamma") as gamma_thread:
         # 2. gamma_nt of the map, in the background while the planner runs
-        gammas = gamma_thread.submit(estimate_gammas, env, run.keys.gamma, opts,
-                                     run.padding, work)
+        gammas = gamma_thread.submit(estimate_gammas, env, run.keys.gamma, opts, run.padding, work)
         # 3. planning (chunked, resumable, verified) and the blocked-ness of every query
         with _timed(timings, "plan"):
-            planned = plan_pool(env, pools.queries, run.plan_fn, verify=run.verify,
-                                padding=run.padding, seed=opts.seed, chunk=opts.chunk,
-                                work=work, progress=progress,
-                                desc=f"{run.slug}: plan ({run.planner_name})", executor=executor)
+            planned = plan_pool(
+                env,
+                pools.queries,
+                run.plan_fn,
+                verify=run.verify,
+                padding=run.padding,
+                seed=opts.seed,
+                chunk=opts.chunk,
+                work=work,
+                progress=progress,
+                desc=f"{run.slug}: plan ({run.planner_name})",
+                executor=executor,
+            )
         _warn_rejected(run, planned, recorded)
         with _timed(timings, "shape"):
-            shaped, shaping = shape_paths(env, planned.result, run.data_paths,
-                                          "custom" if run.verify else run.planner_name,
-                                          run.padding)
+            shaped, shaping = shape_paths(
+                env,
+                planned.result,
+                run.data_paths,
+                "custom" if run.verify else run.planner_name,
+                run.padding,
+            )
             planned = planned._replace(result=shaped)
         with _timed(timings, "check"):
-            blocked = ~steer_to_pairs(env.robot, env.world, pools.queries[:, 0],
-                                      pools.queries[:, 1], run.padding)
+            blocked = ~steer_to_pairs(
+                env.robot, env.world, pools.queries[:, 0], pools.queries[:, 1], run.padding
+            )
         with _timed(timings, "gamma_wait"):
             g_data, g_eval, timings["gamma"] = gammas.result()
         with open_bar(progress, desc=f"{run.slug}: gamma_nt", total=1, unit="estimate") as bar:
             bar.update(1)
 
     # 4. includeData per dataset, written with its metadata (meta.json last)
-    summary, rewritten = _write_datasets(env, opts, run, pools, planned, blocked,
-                                         (g_data, g_eval), bad, timings, progress)
+    summary, rewritten = _write_datasets(
+        env, opts, run, pools, planned, blocked, (g_data, g_eval), bad, timings, progress
+    )
 
     # 5. the figure; the datasets are complete: drop every work folder
     if figure:
@@ -477,7 +659,15 @@ def generate_datasets(env, options: DataOptions | None, out_dir, *,
             write_figure(run)
     shutil.rmtree(run.env_dir / ".work", ignore_errors=True)
     timings["total"] = time.perf_counter() - t_all
-    return {"env_dir": str(run.env_dir), "skipped": False, "fingerprint": run.fingerprint,
-            "timings": timings, "reused_queries": planned.reused, "datasets": summary,
-            "damaged": damaged, "rewritten": rewritten, "planned_queries": len(pools.queries),
-            "data_paths": shaping}
+    return {
+        "env_dir": str(run.env_dir),
+        "skipped": False,
+        "fingerprint": run.fingerprint,
+        "timings": timings,
+        "reused_queries": planned.reused,
+        "datasets": summary,
+        "damaged": damaged,
+        "rewritten": rewritten,
+        "planned_queries": len(pools.queries),
+        "data_paths": shaping,
+    }

@@ -53,14 +53,25 @@ def prune_rng(seed: int, env_slug: str, dataset: str) -> np.random.Generator:
     :class:`numpy.random.SeedSequence`): the same run seed, environment and
     dataset name give the same draws, whatever the chunking or the other datasets.
     """
+
     def h(t: str) -> int:
         return zlib.crc32(t.encode())
-    return np.random.default_rng(np.random.SeedSequence(
-        [int(seed), h(env_slug), h(dataset), h("prune")]))
+
+    return np.random.default_rng(
+        np.random.SeedSequence([int(seed), h(env_slug), h(dataset), h("prune")])
+    )
 
 
-def include_data(env, paths, lengths, *, prune: bool | float, padding: float | None = None,
-                 rng: np.random.Generator | None = None, keep_last: bool = False):
+def include_data(
+    env,
+    paths,
+    lengths,
+    *,
+    prune: bool | float,
+    padding: float | None = None,
+    rng: np.random.Generator | None = None,
+    keep_last: bool = False,
+):
     """Alg. 4 over every segment of every path at once.
 
     Sample ``((pi_i, pi_end), pi_{i+1})`` for ``i = 0..L_p-2`` of each path ``p``
@@ -90,8 +101,10 @@ def include_data(env, paths, lengths, *, prune: bool | float, padding: float | N
     lengths = np.asarray(lengths, np.int64).reshape(-1)
     d = env.dim
     if paths.ndim != 3 or paths.shape[2] != d or paths.shape[0] != lengths.shape[0]:
-        raise ValueError(f"paths must have shape (P, L, {d}) and lengths (P,), got "
-                         f"{paths.shape} and {lengths.shape}")
+        raise ValueError(
+            f"paths must have shape (P, L, {d}) and lengths (P,), got "
+            f"{paths.shape} and {lengths.shape}"
+        )
     L = paths.shape[1]
     if np.any(lengths < 0) or np.any(lengths > L):
         raise ValueError(f"lengths must be in [0, {L}]")

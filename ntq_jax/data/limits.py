@@ -23,8 +23,14 @@ import os
 
 from ntq_jax.errors import ConfigError
 
-__all__ = ["MAX_CROSSING_WAYPOINTS", "ROADMAP_BYTES", "crossing_length", "check_spacing",
-           "memory_bytes", "check_roadmap"]
+__all__ = [
+    "MAX_CROSSING_WAYPOINTS",
+    "ROADMAP_BYTES",
+    "crossing_length",
+    "check_spacing",
+    "memory_bytes",
+    "check_roadmap",
+]
 
 #: the most waypoints a spacing may put on one straight crossing of the map
 MAX_CROSSING_WAYPOINTS = 10_000
@@ -52,7 +58,8 @@ def check_spacing(env, mode, env_name: str) -> None:
             f"planner.data_paths {mode:g} for {env_name}: one straight crossing of the map "
             f"({length:.3g} in the robot's metric) would be {n:.3g} waypoints, each a "
             f"training sample (at most {MAX_CROSSING_WAYPOINTS:,}); use a spacing >= "
-            f"{length / MAX_CROSSING_WAYPOINTS:.3g}, or shortcut/raw")
+            f"{length / MAX_CROSSING_WAYPOINTS:.3g}, or shortcut/raw"
+        )
 
 
 #: bytes a roadmap takes per state and neighbour while it is built (its kNN candidates,
@@ -83,4 +90,5 @@ def check_roadmap(env, options: dict, env_name: str) -> None:
         raise ConfigError(
             f"planner.milestones {m:,} for {env_name}: its roadmap ({n:,} states in its last "
             f"growth round, about {need / 1e9:.3g} GB) would not fit in this machine's memory "
-            f"({mem / 1e9:.3g} GB); use at most {most:,} milestones (or fewer grow_rounds)")
+            f"({mem / 1e9:.3g} GB); use at most {most:,} milestones (or fewer grow_rounds)"
+        )

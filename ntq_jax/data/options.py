@@ -37,8 +37,12 @@ class DatasetSpec(NamedTuple):
 
 
 #: The paper's D0..D3: ``p_nt`` 0, 0.5 and 1, and D3 = D2 pruned.
-PAPER_DATASETS = (DatasetSpec(0.0, False), DatasetSpec(0.5, False), DatasetSpec(1.0, False),
-                  DatasetSpec(1.0, True))
+PAPER_DATASETS = (
+    DatasetSpec(0.0, False),
+    DatasetSpec(0.5, False),
+    DatasetSpec(1.0, False),
+    DatasetSpec(1.0, True),
+)
 
 
 @dataclasses.dataclass(frozen=True)

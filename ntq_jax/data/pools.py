@@ -16,20 +16,20 @@ from typing import NamedTuple
 import jax
 import numpy as np
 
-from ntq_jax import prng, queries as Q
+from ntq_jax import prng
+from ntq_jax import queries as Q
 from ntq_jax.progress import open_bar
 
-__all__ = ["Keys", "run_keys", "mixing_bits", "pool_sizes", "Pools", "sample_pools",
-           "pool_index"]
+__all__ = ["Keys", "run_keys", "mixing_bits", "pool_sizes", "Pools", "sample_pools", "pool_index"]
 
 
 class Keys(NamedTuple):
     """The PRNG keys of one environment's run."""
 
-    uniform: jax.Array     # the uniform pool U
+    uniform: jax.Array  # the uniform pool U
     nontrivial: jax.Array  # the non-trivial pool N
-    mix: jax.Array         # the datasets' mixing bits
-    gamma: jax.Array       # the gamma_nt estimates
+    mix: jax.Array  # the datasets' mixing bits
+    gamma: jax.Array  # the gamma_nt estimates
 
 
 def run_keys(seed: int, slug: str) -> Keys:
@@ -71,22 +71,38 @@ class Pools(NamedTuple):
     n_u: int
 
 
-def sample_pools(env, keys: Keys, n_u: int, n_nt: int, padding: float, n_max: int,
-                 progress=None, desc: str = "sample queries") -> Pools:
+def sample_pools(
+    env,
+    keys: Keys,
+    n_u: int,
+    n_nt: int,
+    padding: float,
+    n_max: int,
+    progress=None,
+    desc: str = "sample queries",
+) -> Pools:
     """``n_u`` i.i.d. uniform and ``n_nt`` i.i.d. non-trivial queries (Alg. 3, ``n_max`` attempts)."""
     d = env.dim
     with open_bar(progress, desc=desc, total=n_u + n_nt, unit="query") as bar:
-        U = (Q.sample_uniform_queries(env.robot, env.world, keys.uniform, n_u, padding) if n_u
-             else np.zeros((0, 2, d), np.float32))
+        U = (
+            Q.sample_uniform_queries(env.robot, env.world, keys.uniform, n_u, padding)
+            if n_u
+            else np.zeros((0, 2, d), np.float32)
+        )
         bar.update(n_u)
         if n_nt:
-            N, exh = Q.sample_nontrivial_queries(env.robot, env.world, keys.nontrivial, n_nt,
-                                                 padding, n_max)
+            N, exh = Q.sample_nontrivial_queries(
+                env.robot, env.world, keys.nontrivial, n_nt, padding, n_max
+            )
         else:
             N, exh = np.zeros((0, 2, d), np.float32), np.zeros(0, bool)
         bar.update(n_nt)
-    kind = np.concatenate([np.full(n_u, Q.UNIFORM, np.int8),
-                           np.where(exh, Q.NT_EXHAUSTED, Q.NON_TRIVIAL).astype(np.int8)])
+    kind = np.concatenate(
+        [
+            np.full(n_u, Q.UNIFORM, np.int8),
+            np.where(exh, Q.NT_EXHAUSTED, Q.NON_TRIVIAL).astype(np.int8),
+        ]
+    )
     return Pools(np.concatenate([U, N]).astype(np.float32), kind, n_u)
 
 

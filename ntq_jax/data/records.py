@@ -36,9 +36,23 @@ import numpy as np
 from ntq_jax import artifacts
 from ntq_jax.types import PlanStatus
 
-__all__ = ["RecordError", "RECORD_FILE", "IDENTITY", "CHUNK_KEYS", "POOLS", "read_record",
-           "differences", "record_command", "check_resume", "chunk_files", "load_chunk",
-           "check_chunks", "record_digest", "provenance", "seed_work"]
+__all__ = [
+    "RecordError",
+    "RECORD_FILE",
+    "IDENTITY",
+    "CHUNK_KEYS",
+    "POOLS",
+    "read_record",
+    "differences",
+    "record_command",
+    "check_resume",
+    "chunk_files",
+    "load_chunk",
+    "check_chunks",
+    "record_digest",
+    "provenance",
+    "seed_work",
+]
 
 RECORD_FILE = "record.json"
 POOLS = ("U", "N")
@@ -59,17 +73,23 @@ def read_record(folder: str | os.PathLike) -> dict:
     """``<folder>/record.json`` as a dict; a :class:`RecordError` if it is missing or unreadable."""
     f = Path(folder) / RECORD_FILE
     if not f.is_file():
-        raise RecordError(f"{f}: no such file; {folder} is not a record (scripts/record_paths.py "
-                          "makes one): check the path")
+        raise RecordError(
+            f"{f}: no such file; {folder} is not a record (scripts/record_paths.py "
+            "makes one): check the path"
+        )
     try:
         meta = json.loads(f.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, ValueError) as e:
-        raise RecordError(f"{f}: not a readable record ({type(e).__name__}: {e}); restore it "
-                          "(e.g. from git) or record into a new folder") from None
+        raise RecordError(
+            f"{f}: not a readable record ({type(e).__name__}: {e}); restore it "
+            "(e.g. from git) or record into a new folder"
+        ) from None
     missing = [k for k in IDENTITY if not isinstance(meta, dict) or k not in meta]
     if missing:
-        raise RecordError(f"{f}: not a record (no {', '.join(missing)}); restore it (e.g. from "
-                          "git) or record into a new folder")
+        raise RecordError(
+            f"{f}: not a record (no {', '.join(missing)}); restore it (e.g. from "
+            "git) or record into a new folder"
+        )
     return meta
 
 
@@ -108,8 +128,16 @@ def differences(saved: dict, now: dict) -> list[str]:
 
 def record_command(meta: dict, out: str | os.PathLike) -> str:
     """The ``scripts/record_paths.py`` command of the record ``meta`` (its arguments)."""
-    cmd = ["python", "scripts/record_paths.py", "--config", str(meta["config"]), "--env",
-           str(meta["env"]), "--planner", str(meta["planner"])]
+    cmd = [
+        "python",
+        "scripts/record_paths.py",
+        "--config",
+        str(meta["config"]),
+        "--env",
+        str(meta["env"]),
+        "--planner",
+        str(meta["planner"]),
+    ]
     for ov in meta.get("overrides") or []:
         k, _, v = str(ov).partition("=")
         if k.strip() == "planner.workers":
@@ -125,18 +153,24 @@ def check_resume(out: str | os.PathLike, now: dict) -> dict | None:
     out = Path(out)
     if not (out / RECORD_FILE).exists():
         if out.is_dir():
-            other = sorted(p.name for p in out.iterdir() if p.name not in (*POOLS, artifacts.LOCK_NAME))
+            other = sorted(
+                p.name for p in out.iterdir() if p.name not in (*POOLS, artifacts.LOCK_NAME)
+            )
             if other:
-                raise RecordError(f"--out {out}: not a record (it holds {', '.join(other[:3])}"
-                                  f"{', ...' if len(other) > 3 else ''} and no {RECORD_FILE}); "
-                                  "give a new or empty folder")
+                raise RecordError(
+                    f"--out {out}: not a record (it holds {', '.join(other[:3])}"
+                    f"{', ...' if len(other) > 3 else ''} and no {RECORD_FILE}); "
+                    "give a new or empty folder"
+                )
         return None
     saved = read_record(out)
     diff = differences(saved, now)
     if diff:
-        raise RecordError(f"{out} is a record made with other arguments ({'; '.join(diff)}): a "
-                          "record is never overwritten or mixed; record into another --out, or "
-                          f"resume it with its own arguments: {record_command(saved, out)}")
+        raise RecordError(
+            f"{out} is a record made with other arguments ({'; '.join(diff)}): a "
+            "record is never overwritten or mixed; record into another --out, or "
+            f"resume it with its own arguments: {record_command(saved, out)}"
+        )
     return saved
 
 
@@ -155,6 +189,7 @@ def load_chunk(path: Path, d: int, fix: str) -> dict[str, np.ndarray]:
     """The arrays of the chunk file ``path`` of ``d``-dimensional states, checked: every key
     of :data:`CHUNK_KEYS`, one row per query of its range, integer statuses and lengths
     within the paths; otherwise one :class:`RecordError` naming the file and ``fix``."""
+
     def bad(why: str) -> RecordError:
         return RecordError(f"{path}: {why}; {fix}")
 
@@ -169,11 +204,15 @@ def load_chunk(path: Path, d: int, fix: str) -> dict[str, np.ndarray]:
     if missing:
         raise bad(f"not a chunk file (no {', '.join(missing)})")
     p = got["paths"]
-    for key, want, text in (("queries", (k, 2, d), f"({k}, 2, {d})"),
-                            ("paths", (k, p.shape[1] if p.ndim == 3 else -1, d), f"({k}, L, {d})")):
+    for key, want, text in (
+        ("queries", (k, 2, d), f"({k}, 2, {d})"),
+        ("paths", (k, p.shape[1] if p.ndim == 3 else -1, d), f"({k}, L, {d})"),
+    ):
         if got[key].shape != want or got[key].dtype.kind != "f":
-            raise bad(f"{key} of shape {got[key].shape} ({got[key].dtype}), expected {text} "
-                      f"floats ({k} queries of {d}-dimensional states)")
+            raise bad(
+                f"{key} of shape {got[key].shape} ({got[key].dtype}), expected {text} "
+                f"floats ({k} queries of {d}-dimensional states)"
+            )
     for key, kinds in (("lengths", "iu"), ("costs", "fiu"), ("status", "iu"), ("rejected", "biu")):
         if got[key].shape != (k,) or got[key].dtype.kind not in kinds:
             raise bad(f"{key} of shape {got[key].shape} ({got[key].dtype}), expected ({k},)")
@@ -194,9 +233,11 @@ def check_chunks(folder: Path, pools: dict[str, np.ndarray], fix: str) -> int:
         for lo, hi, f in chunk_files(folder / name, len(queries)):
             z = load_chunk(f, queries.shape[2], fix)
             if not np.array_equal(z["queries"], queries[lo:hi]):
-                raise RecordError(f"{f}: its queries are not the pool rows {lo}..{hi} of these "
-                                  "arguments (another sampler or code version made them); "
-                                  "record into another --out (this record stays as it is)")
+                raise RecordError(
+                    f"{f}: its queries are not the pool rows {lo}..{hi} of these "
+                    "arguments (another sampler or code version made them); "
+                    "record into another --out (this record stays as it is)"
+                )
             covered += hi - lo
     return covered
 
@@ -206,8 +247,9 @@ def record_digest(folder: str | os.PathLike, sizes: dict[str, int]) -> str:
     (pool -> rows a run uses): it changes when any chunk a run reads changes."""
     folder = Path(folder)
     meta = read_record(folder)
-    h = hashlib.sha256(json.dumps({k: meta[k] for k in IDENTITY}, sort_keys=True,
-                                  default=str).encode())
+    h = hashlib.sha256(
+        json.dumps({k: meta[k] for k in IDENTITY}, sort_keys=True, default=str).encode()
+    )
     for name in POOLS:
         for lo, hi, f in chunk_files(folder / name, sizes.get(name, 0)):
             h.update(f"{name}/{f.name}:{artifacts.sha256(f)}\n".encode())
@@ -217,13 +259,27 @@ def record_digest(folder: str | os.PathLike, sizes: dict[str, int]) -> str:
 def provenance(folder: str | os.PathLike, sizes: dict[str, int]) -> dict:
     """What a dataset's ``meta.json`` records of the record its paths come from."""
     meta = read_record(folder)
-    return {"record": str(folder), "env": meta["env"], "planner": meta["planner"],
-            "options": meta["options"], "seed": meta["seed"],
-            "digest": record_digest(folder, sizes)}
+    return {
+        "record": str(folder),
+        "env": meta["env"],
+        "planner": meta["planner"],
+        "options": meta["options"],
+        "seed": meta["seed"],
+        "digest": record_digest(folder, sizes),
+    }
 
 
-def seed_work(work: Path, record: str | os.PathLike, pool: np.ndarray, n_u: int, env, *,
-              env_name: str, seed: int, padding: float) -> tuple[int, int]:
+def seed_work(
+    work: Path,
+    record: str | os.PathLike,
+    pool: np.ndarray,
+    n_u: int,
+    env,
+    *,
+    env_name: str,
+    seed: int,
+    padding: float,
+) -> tuple[int, int]:
     """Copies a record's chunks, checked and verified, into ``work`` as pooled chunk files.
 
     The record's ``U/plan_<a>_<b>.npz`` become ``plan_<a>_<b>.npz`` and its
@@ -244,31 +300,54 @@ def seed_work(work: Path, record: str | os.PathLike, pool: np.ndarray, n_u: int,
 
     record = Path(record)
     meta = read_record(record)
-    if (meta["env"] != env_name or not np.isclose(float(meta["padding"]), padding)
-            or meta["seed"] != seed):
-        raise RecordError(f"{record} records {meta['env']} at padding {meta['padding']} with seed "
-                          f"{meta['seed']}, not {env_name} at {padding} with seed {seed}: point "
-                          "data.per_env's paths_from at this map's record")
-    fix = (f"re-plan it (delete the file, then run {record_command(meta, record)}) or point "
-           "paths_from at an intact record")
+    if (
+        meta["env"] != env_name
+        or not np.isclose(float(meta["padding"]), padding)
+        or meta["seed"] != seed
+    ):
+        raise RecordError(
+            f"{record} records {meta['env']} at padding {meta['padding']} with seed "
+            f"{meta['seed']}, not {env_name} at {padding} with seed {seed}: point "
+            "data.per_env's paths_from at this map's record"
+        )
+    fix = (
+        f"re-plan it (delete the file, then run {record_command(meta, record)}) or point "
+        "paths_from at an intact record"
+    )
     spans = {"U": (0, n_u), "N": (n_u, len(pool))}
     seeded = rejected = 0
     for name, (lo0, hi0) in spans.items():
         for a, b, f in chunk_files(record / name, hi0 - lo0):
             z = load_chunk(f, pool.shape[2], fix)
-            if not np.array_equal(z["queries"], pool[lo0 + a:lo0 + b]):
-                raise RecordError(f"{f}: its queries are not this run's pool rows {lo0 + a}.."
-                                  f"{lo0 + b} (the record was made with another config, seed or "
-                                  "sampler); point paths_from at a record of this config")
+            if not np.array_equal(z["queries"], pool[lo0 + a : lo0 + b]):
+                raise RecordError(
+                    f"{f}: its queries are not this run's pool rows {lo0 + a}.."
+                    f"{lo0 + b} (the record was made with another config, seed or "
+                    "sampler); point paths_from at a record of this config"
+                )
             seeded += b - a
             dest = work / f"plan_{lo0 + a:09d}_{lo0 + b:09d}.npz"
             if dest.exists():
                 continue
             status = z["status"].astype(np.int8)
-            res = finalize(z["queries"], z["paths"].astype(np.float32),
-                           z["lengths"].astype(np.int32), status, {}, env, padding)
+            res = finalize(
+                z["queries"],
+                z["paths"].astype(np.float32),
+                z["lengths"].astype(np.int32),
+                status,
+                {},
+                env,
+                padding,
+            )
             rej = z["rejected"].astype(bool) | ((status == PlanStatus.SOLVED) & ~res.solved)
             rejected += int(((status == PlanStatus.SOLVED) & ~res.solved).sum())
-            artifacts.save_npz(dest, queries=z["queries"], paths=res.paths, lengths=res.lengths,
-                               costs=res.costs, status=res.status, rejected=rej)
+            artifacts.save_npz(
+                dest,
+                queries=z["queries"],
+                paths=res.paths,
+                lengths=res.lengths,
+                costs=res.costs,
+                status=res.status,
+                rejected=rej,
+            )
     return seeded, rejected

@@ -7,8 +7,9 @@ import numpy as np
 __all__ = ["straight_line_rows"]
 
 
-def straight_line_rows(seed: int, lo, hi, *, step: float, n_paths: int | None = None,
-                       n_rows: int | None = None):
+def straight_line_rows(
+    seed: int, lo, hi, *, step: float, n_paths: int | None = None, n_rows: int | None = None
+):
     """Synthetic MPNet rows without obstacles or a planner (smoke tests, benchmarks).
 
     Straight paths between uniform random points of the box ``[lo, hi]``, cut
@@ -34,5 +35,8 @@ def straight_line_rows(seed: int, lo, hi, *, step: float, n_paths: int | None = 
             pis.append(p)
         p += 1
     end = len(xs) if n_rows is None else n_rows
-    return (np.array(xs[:end], np.float32), np.array(ys[:end], np.float32),
-            np.array(pis[:end], np.int32))
+    return (
+        np.array(xs[:end], np.float32),
+        np.array(ys[:end], np.float32),
+        np.array(pis[:end], np.int32),
+    )

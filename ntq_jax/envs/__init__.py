@@ -7,10 +7,26 @@
   :func:`resolve_envs` (a config's ``envs`` list, each map once).
 """
 
-from ntq_jax.envs.env import (BUCKET_MIN_ROWS, MAX_STATES_PER_MOTION, Env, EnvError,
-                              check_resolution, index_reach)
+from ntq_jax.envs.env import (
+    BUCKET_MIN_ROWS,
+    MAX_STATES_PER_MOTION,
+    Env,
+    EnvError,
+    check_resolution,
+    index_reach,
+)
 from ntq_jax.envs.make import make_env, panda_env
 from ntq_jax.envs.names import env_slug, resolve_envs
 
-__all__ = ["Env", "EnvError", "make_env", "panda_env", "check_resolution", "index_reach",
-           "MAX_STATES_PER_MOTION", "BUCKET_MIN_ROWS", "env_slug", "resolve_envs"]
+__all__ = [
+    "Env",
+    "EnvError",
+    "make_env",
+    "panda_env",
+    "check_resolution",
+    "index_reach",
+    "MAX_STATES_PER_MOTION",
+    "BUCKET_MIN_ROWS",
+    "env_slug",
+    "resolve_envs",
+]

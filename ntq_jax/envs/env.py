@@ -39,7 +39,6 @@ the environment's own padding, the data-generation geometry of the paper;
 from __future__ import annotations
 
 import dataclasses
-import json
 import os
 from pathlib import Path
 from typing import Any
@@ -49,10 +48,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from ntq_jax import artifacts, broadphase, geometry, grid_maps, validation
-from ntq_jax.batching import bucket_size
 from ntq_jax import queries as Q
+from ntq_jax.batching import bucket_size
 from ntq_jax.geometry import World, World3D
-from ntq_jax.presets import PRESETS
 from ntq_jax.robots import Robot, robot_from_json
 from ntq_jax.robots import batch as _batch
 from ntq_jax.robots.batch import distance_batch, is_valid_batch, steer_to_batch
@@ -102,7 +100,8 @@ def check_resolution(robot: Robot, world: World) -> None:
         raise ValueError(
             f"{robot.kind}.resolution {robot.resolution:g}{unit} is too fine: the longest motion "
             f"({length:.4g}{unit}) would be checked at {length / robot.resolution:.3g} states; "
-            f"use resolution >= {floor:.3g}{unit} (at most {MAX_STATES_PER_MOTION} states per motion)")
+            f"use resolution >= {floor:.3g}{unit} (at most {MAX_STATES_PER_MOTION} states per motion)"
+        )
 
 
 def index_reach(robot: Robot, world: World, padding: float) -> tuple[float, float]:
@@ -147,8 +146,11 @@ class Env:
             check_resolution(self.robot, self.world)
         except ValueError as e:
             raise EnvError(f"{self.name}: {e}") from None
-        if (isinstance(self.world, World) and self.world.num_boxes > broadphase.UNROLL_MAX
-                and self.world.index is None):
+        if (
+            isinstance(self.world, World)
+            and self.world.num_boxes > broadphase.UNROLL_MAX
+            and self.world.index is None
+        ):
             reach, cell = index_reach(self.robot, self.world, self.padding)
             object.__setattr__(self, "world", broadphase.with_index(self.world, reach, cell))
 
@@ -157,8 +159,11 @@ class Env:
         parameters, the padding and the exact float32 bounds, boxes and discs. Two maps
         with the same content have the same hash whatever their names or file paths."""
         keys = ("bounds", "boxes", "discs") if isinstance(self.world, World) else WORLD3D_KEYS
-        content = {"robot": self.robot.to_json(), "padding": float(self.padding),
-                   **{k: np.asarray(getattr(self.world, k), np.float64).tolist() for k in keys}}
+        content = {
+            "robot": self.robot.to_json(),
+            "padding": float(self.padding),
+            **{k: np.asarray(getattr(self.world, k), np.float64).tolist() for k in keys},
+        }
         return artifacts.sha256_json(content)
 
     # -- geometry -----------------------------------------------------------
@@ -178,14 +183,20 @@ class Env:
             try:
                 x = np.asarray(x)
             except (TypeError, ValueError) as e:
-                raise TypeError(f"{what} must be an (N, {self.dim}) array of real numbers, "
-                                f"got {type(x).__name__} ({e})") from None
+                raise TypeError(
+                    f"{what} must be an (N, {self.dim}) array of real numbers, "
+                    f"got {type(x).__name__} ({e})"
+                ) from None
         if np.dtype(x.dtype).kind not in "fiu":  # not bool, complex, strings, objects
-            raise TypeError(f"{what} must be an (N, {self.dim}) array of real numbers, got "
-                            f"dtype {np.dtype(x.dtype)}")
+            raise TypeError(
+                f"{what} must be an (N, {self.dim}) array of real numbers, got "
+                f"dtype {np.dtype(x.dtype)}"
+            )
         if x.ndim != 2 or x.shape[1] != self.dim:
-            raise ValueError(f"{what} must have shape (N, {self.dim}) for {self.name} "
-                             f"({self.robot.kind}), got {tuple(x.shape)}")
+            raise ValueError(
+                f"{what} must have shape (N, {self.dim}) for {self.name} "
+                f"({self.robot.kind}), got {tuple(x.shape)}"
+            )
         rows = host_rows(x)
         return jnp.asarray(x, jnp.float32) if rows is None else rows
 
@@ -211,9 +222,8 @@ class Env:
         if isinstance(x, jax.Array):
             if isinstance(x, jax.core.Tracer):
                 return _batch.is_valid_cm(self.robot, self.world, x.T, p)
-            return is_valid_batch(self.robot, self.world, _direct_rows(x), p)[:x.shape[0]]
-        return _settled(states, x, _batch.valid_rows(self.robot, self.world, x, p,
-                                                     _whole(states)))
+            return is_valid_batch(self.robot, self.world, _direct_rows(x), p)[: x.shape[0]]
+        return _settled(states, x, _batch.valid_rows(self.robot, self.world, x, p, _whole(states)))
 
     def steer_to(self, a, b, padding: float | None = None, check: str = "discretized") -> Array:
         """``(N, d), (N, d) -> (N,)`` bool: True where the straight connection is collision-free.
@@ -243,8 +253,9 @@ class Env:
             ra, rb = jnp.asarray(ra), jnp.asarray(rb)
             if isinstance(ra, jax.core.Tracer) or isinstance(rb, jax.core.Tracer):
                 return _batch.steer_to_cm(self.robot, self.world, ra.T, rb.T, p, check=check)
-            return steer_to_batch(self.robot, self.world, _direct_rows(ra), _direct_rows(rb), p,
-                                  check)[:ra.shape[0]]
+            return steer_to_batch(
+                self.robot, self.world, _direct_rows(ra), _direct_rows(rb), p, check
+            )[: ra.shape[0]]
         out = _batch.steer_rows(self.robot, self.world, ra, rb, p, check, _whole(a, b))
         return _settled((a, b), (ra, rb), out)
 
@@ -258,7 +269,7 @@ class Env:
             ra, rb = jnp.asarray(ra), jnp.asarray(rb)
             if isinstance(ra, jax.core.Tracer) or isinstance(rb, jax.core.Tracer):
                 return jax.vmap(self.robot.distance)(ra, rb)
-            return distance_batch(self.robot, _direct_rows(ra), _direct_rows(rb))[:ra.shape[0]]
+            return distance_batch(self.robot, _direct_rows(ra), _direct_rows(rb))[: ra.shape[0]]
         return _settled((a, b), (ra, rb), _batch.distance_rows(self.robot, ra, rb, _whole(a, b)))
 
     def rasterize(self, resolution: float, padding: float | None = None) -> np.ndarray:
@@ -273,22 +284,42 @@ class Env:
         """``n`` uniform valid states ``(n, d)``."""
         return Q.sample_states(self.robot, self.world, key, n, self.resolve_padding(padding))
 
-    def sample_queries(self, key: Array, n: int, p_nt: float = 0.0,
-                       padding: float | None = None, n_max: int = Q.DEFAULT_N_MAX):
+    def sample_queries(
+        self,
+        key: Array,
+        n: int,
+        p_nt: float = 0.0,
+        padding: float | None = None,
+        n_max: int = Q.DEFAULT_N_MAX,
+    ):
         """``n`` queries of Alg. 2 ``((n, 2, d), kind (n,) int8)``; see :mod:`ntq_jax.queries`."""
-        return Q.sample_queries(self.robot, self.world, key, n, p_nt, self.resolve_padding(padding), n_max)
+        return Q.sample_queries(
+            self.robot, self.world, key, n, p_nt, self.resolve_padding(padding), n_max
+        )
 
-    def gamma_nt(self, key: Array, n: int, padding: float | None = None,
-                 chunk: int | None = None, progress=None) -> Q.GammaEstimate:
+    def gamma_nt(
+        self,
+        key: Array,
+        n: int,
+        padding: float | None = None,
+        chunk: int | None = None,
+        progress=None,
+    ) -> Q.GammaEstimate:
         """gamma_nt over ``n`` uniform queries, with its Wilson 95% interval."""
-        return Q.gamma_nt(self.robot, self.world, key, n, self.resolve_padding(padding), chunk, progress)
+        return Q.gamma_nt(
+            self.robot, self.world, key, n, self.resolve_padding(padding), chunk, progress
+        )
 
     # -- JSON ------------------------------------------------------------------
     def to_json(self) -> dict[str, Any]:
         """The environment in the JSON format of this module's docstring (a dict)."""
         if isinstance(self.world, World3D):
-            out = {"name": self.name, "robot": self.robot.to_json(), **self.world.to_json(),
-                   "padding": self.padding}
+            out = {
+                "name": self.name,
+                "robot": self.robot.to_json(),
+                **self.world.to_json(),
+                "padding": self.padding,
+            }
             if self.query is not None:
                 out["query"] = np.asarray(self.query, np.float64).tolist()
             return out
@@ -306,9 +337,15 @@ class Env:
         return artifacts.write_json(path, self.to_json())
 
     @staticmethod
-    def from_grid(path: str | os.PathLike, robot: dict | Robot | None = None,
-                  padding: float = 0.0, name: str | None = None, unknown: str = "occupied",
-                  scale: float | None = None, where: str | None = None) -> "Env":
+    def from_grid(
+        path: str | os.PathLike,
+        robot: dict | Robot | None = None,
+        padding: float = 0.0,
+        name: str | None = None,
+        unknown: str = "occupied",
+        scale: float | None = None,
+        where: str | None = None,
+    ) -> "Env":
         """An environment from a grid map file (ROS ``.yaml`` or MovingAI ``.map``).
 
         ``robot``: a robot JSON dict or a Robot (default the point robot);
@@ -341,8 +378,9 @@ class Env:
         return Env(name or Path(path).stem, robot, world, padding, grid)
 
     @staticmethod
-    def from_json(spec: dict[str, Any], where: str = "environment",
-                  base_dir: str | os.PathLike | None = None) -> "Env":
+    def from_json(
+        spec: dict[str, Any], where: str = "environment", base_dir: str | os.PathLike | None = None
+    ) -> "Env":
         """Builds an Env from a JSON dict; every problem is one :class:`EnvError` naming the key.
 
         Strict (see the module docstring): exact row widths, finite numbers only
@@ -370,16 +408,17 @@ class Env:
         """The 3-D form (see the module docstring)."""
         name, robot = _name_and_robot(spec, where, _JSON3D_KEYS, "a 3-D environment allows")
         if robot.kind != "serial_arm":
-            raise EnvError(f"{where}: a 3-D world (spheres, cuboids, capsules, 3 bounds rows) "
-                           f"needs a 3-D robot (kind 'serial_arm'), got {robot.kind!r}")
+            raise EnvError(
+                f"{where}: a 3-D world (spheres, cuboids, capsules, 3 bounds rows) "
+                f"needs a 3-D robot (kind 'serial_arm'), got {robot.kind!r}"
+            )
         try:
             validation.check_float32({k: spec[k] for k in WORLD3D_KEYS if k in spec})
             world = World3D.from_json({k: spec[k] for k in WORLD3D_KEYS if k in spec})
             padding = validation.number(spec.get("padding", 0.0), "padding", minimum=0)
             query = None
             if spec.get("query") is not None:
-                query = validation.number_rows(spec["query"], "query", robot.dim,
-                                               "[q_1, ..., q_d]")
+                query = validation.number_rows(spec["query"], "query", robot.dim, "[q_1, ..., q_d]")
                 if query.shape[0] != 2:
                     raise ValueError(f"query must be two rows [start, goal], got {query.shape[0]}")
                 query = np.asarray(query, np.float32)
@@ -392,28 +431,45 @@ class Env:
         """The ``{"grid": ...}`` form (see the module docstring)."""
         unknown = sorted(set(spec) - _GRID_JSON_KEYS)
         if unknown:
-            raise EnvError(f"{where}: unknown key(s) {unknown}; a grid map JSON allows "
-                           f"{sorted(_GRID_JSON_KEYS)}")
+            raise EnvError(
+                f"{where}: unknown key(s) {unknown}; a grid map JSON allows "
+                f"{sorted(_GRID_JSON_KEYS)}"
+            )
         grid = spec["grid"]
         if not isinstance(grid, str) or not grid:
-            raise EnvError(f"{where}: grid must be the path of a ROS .yaml or MovingAI .map file, "
-                           f"got {validation.short_repr(grid)}")
+            raise EnvError(
+                f"{where}: grid must be the path of a ROS .yaml or MovingAI .map file, "
+                f"got {validation.short_repr(grid)}"
+            )
         path = Path(grid)
         if not path.is_absolute() and base_dir is not None:
             path = Path(base_dir) / path
         name = spec.get("name", path.stem)
         if not isinstance(name, str) or not name:
-            raise EnvError(f"{where}: name must be a non-empty string, got {validation.short_repr(name)}")
+            raise EnvError(
+                f"{where}: name must be a non-empty string, got {validation.short_repr(name)}"
+            )
         policy = spec.get("unknown", "occupied")
         if policy not in grid_maps.UNKNOWN_POLICIES:
-            raise EnvError(f"{where}: unknown must be one of {list(grid_maps.UNKNOWN_POLICIES)}, "
-                           f"got {validation.short_repr(policy)}")
+            raise EnvError(
+                f"{where}: unknown must be one of {list(grid_maps.UNKNOWN_POLICIES)}, "
+                f"got {validation.short_repr(policy)}"
+            )
         if "unknown" in spec and path.suffix.lower() == ".map":
-            raise EnvError(f"{where}: 'unknown' is for ROS maps; a MovingAI map has no unknown cells")
+            raise EnvError(
+                f"{where}: 'unknown' is for ROS maps; a MovingAI map has no unknown cells"
+            )
         if "robot" not in spec:
             raise EnvError(f"{where}: missing required key 'robot'")
-        return Env.from_grid(path, spec["robot"], spec.get("padding", 0.0), name, policy,
-                             spec.get("scale"), where=where)
+        return Env.from_grid(
+            path,
+            spec["robot"],
+            spec.get("padding", 0.0),
+            name,
+            policy,
+            spec.get("scale"),
+            where=where,
+        )
 
 
 #: The smallest compiled batch size: smaller batches are padded to it
@@ -432,7 +488,9 @@ def _name_and_robot(spec: dict, where: str, keys: set, allowed: str) -> tuple[st
             raise EnvError(f"{where}: missing required key {key!r}")
     name = spec.get("name", "custom")
     if not isinstance(name, str) or not name:
-        raise EnvError(f"{where}: name must be a non-empty string, got {validation.short_repr(name)}")
+        raise EnvError(
+            f"{where}: name must be a non-empty string, got {validation.short_repr(name)}"
+        )
     try:
         return name, robot_from_json(spec["robot"], where=f"{where}: robot")
     except (TypeError, ValueError) as e:

@@ -29,11 +29,14 @@ def panda_env(name: str) -> Env:
     the problem's start and goal as :attr:`Env.query`."""
     from ntq_jax.robots import SerialArm
     from ntq_jax.scenes import mbm
-    parts = name[len(PANDA_PREFIX):].split("/")
+
+    parts = name[len(PANDA_PREFIX) :].split("/")
     if len(parts) != 2 or not parts[1].isdigit():
-        raise EnvError(f"unknown environment {name!r}: a Panda problem is "
-                       f"'panda/<scene>/<number>', e.g. 'panda/cage/1' (scenes: "
-                       f"{', '.join(mbm.SCENES)}; numbers {mbm.NUMBERS[0]}..{mbm.NUMBERS[-1]})")
+        raise EnvError(
+            f"unknown environment {name!r}: a Panda problem is "
+            f"'panda/<scene>/<number>', e.g. 'panda/cage/1' (scenes: "
+            f"{', '.join(mbm.SCENES)}; numbers {mbm.NUMBERS[0]}..{mbm.NUMBERS[-1]})"
+        )
     try:
         problem = mbm.load_problem(parts[0], int(parts[1]))
     except ValueError as e:
@@ -42,10 +45,14 @@ def panda_env(name: str) -> Env:
     return Env(name, SerialArm.panda(), problem.world, 0.0, query=query)
 
 
-
-def make_env(name_or_path: str | os.PathLike, *, robot: str | dict | Robot | None = None,
-             padding: float | None = None, unknown: str = "occupied",
-             scale: float | None = None) -> Env:
+def make_env(
+    name_or_path: str | os.PathLike,
+    *,
+    robot: str | dict | Robot | None = None,
+    padding: float | None = None,
+    unknown: str = "occupied",
+    scale: float | None = None,
+) -> Env:
     """A preset by name (``point/0..3``, ``rigid/0..3``, ``nlink/2|4|6``), a JSON map file,
     or a grid map file (a ROS map ``.yaml``/``.yml`` or a MovingAI ``.map``).
 
@@ -61,10 +68,13 @@ def make_env(name_or_path: str | os.PathLike, *, robot: str | dict | Robot | Non
     name = str(name_or_path)
     path = Path(name)
     grid_file = path.suffix.lower() in (".yaml", ".yml", ".map")
-    if not grid_file and (robot is not None or padding is not None or scale is not None
-                          or unknown != "occupied"):
-        raise EnvError(f"{name!r}: robot, padding, unknown and scale are for grid map files "
-                       "(.yaml, .map); a preset or a JSON map carries its own")
+    if not grid_file and (
+        robot is not None or padding is not None or scale is not None or unknown != "occupied"
+    ):
+        raise EnvError(
+            f"{name!r}: robot, padding, unknown and scale are for grid map files "
+            "(.yaml, .map); a preset or a JSON map carries its own"
+        )
     if name in PRESETS:
         return Env.from_json(PRESETS[name], where=f"preset {name}")
     if name.startswith(PANDA_PREFIX) and not path.exists():
@@ -75,13 +85,18 @@ def make_env(name_or_path: str | os.PathLike, *, robot: str | dict | Robot | Non
         if isinstance(robot, str):  # a robot kind, as the command line takes it
             robot = {"kind": robot}
         if robot is not None and not isinstance(robot, dict) and not hasattr(robot, "is_valid"):
-            raise EnvError(f"{name!r}: robot must be a kind (point, rigid_body, nlink), a robot "
-                           f"JSON dict or a Robot, got {type(robot).__name__}")
+            raise EnvError(
+                f"{name!r}: robot must be a kind (point, rigid_body, nlink), a robot "
+                f"JSON dict or a Robot, got {type(robot).__name__}"
+            )
         if path.suffix.lower() == ".map" and unknown != "occupied":
-            raise EnvError(f"{name!r}: unknown={unknown!r} is for ROS maps; a MovingAI map has "
-                           "no unknown cells (its passable and blocked characters are fixed)")
-        return Env.from_grid(path, robot, 0.0 if padding is None else padding, unknown=unknown,
-                             scale=scale)
+            raise EnvError(
+                f"{name!r}: unknown={unknown!r} is for ROS maps; a MovingAI map has "
+                "no unknown cells (its passable and blocked characters are fixed)"
+            )
+        return Env.from_grid(
+            path, robot, 0.0 if padding is None else padding, unknown=unknown, scale=scale
+        )
     if path.suffix.lower() == ".json" or path.exists():
         if path.is_dir():
             raise EnvError(f"environment file {name!r} is a directory, not a JSON map file")
@@ -92,6 +107,8 @@ def make_env(name_or_path: str | os.PathLike, *, robot: str | dict | Robot | Non
         except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
             raise EnvError(f"environment file {name!r} is not valid JSON: {e}") from None
         return Env.from_json(spec, where=f"environment file {name!r}", base_dir=path.parent)
-    raise EnvError(f"unknown environment {name!r}: use a preset ({', '.join(PRESETS)}), "
-                   "a Panda problem ('panda/<scene>/<number>', e.g. 'panda/cage/1'), "
-                   "the path of a JSON map file, or a grid map (.yaml, .map)")
+    raise EnvError(
+        f"unknown environment {name!r}: use a preset ({', '.join(PRESETS)}), "
+        "a Panda problem ('panda/<scene>/<number>', e.g. 'panda/cage/1'), "
+        "the path of a JSON map file, or a grid map (.yaml, .map)"
+    )

@@ -61,10 +61,14 @@ def resolve_envs(names) -> dict[str, Env]:
         by_slug.setdefault(env_slug(name, envs[name]), []).append(name)
         by_content.setdefault(envs[name].content_hash(), []).append(name)
     same = [(f"would share the folder {slug!r}", ns) for slug, ns in by_slug.items() if len(ns) > 1]
-    same += [(f"the same map, content hash {h[:8]}", ns) for h, ns in by_content.items()
-             if len({env_slug(n, envs[n]) for n in ns}) > 1]
+    same += [
+        (f"the same map, content hash {h[:8]}", ns)
+        for h, ns in by_content.items()
+        if len({env_slug(n, envs[n]) for n in ns}) > 1
+    ]
     if same:
         listed = "; ".join(f"{', '.join(map(repr, ns))} ({what})" for what, ns in same)
-        raise EnvError(f"envs lists the same environment more than once: {listed}; "
-                       "list each map once")
+        raise EnvError(
+            f"envs lists the same environment more than once: {listed}; list each map once"
+        )
     return envs

@@ -25,8 +25,9 @@ def damaged(folder: Path) -> str | None:
             obj = json.loads(f.read_text(encoding="utf-8"))
             if isinstance(obj, dict) and all(k in obj for k in keys):
                 continue
-            return (f"{f}: not a cell's {f.name} (expected a JSON object"
-                    + (f" with {' and '.join(keys)})" if keys else ")"))
+            return f"{f}: not a cell's {f.name} (expected a JSON object" + (
+                f" with {' and '.join(keys)})" if keys else ")"
+            )
         except FileNotFoundError:
             continue
         except (OSError, UnicodeDecodeError, ValueError) as e:
@@ -46,8 +47,10 @@ def check_cells(results: Path) -> None:
         why = damaged(f.parent)
         if why:
             key = f.parent.relative_to(results).as_posix()
-            raise UsageError(f"{why}; redo the cell: python scripts/factor_study.py --cell {key} "
-                             "(--next redoes it first), or restore the file from git")
+            raise UsageError(
+                f"{why}; redo the cell: python scripts/factor_study.py --cell {key} "
+                "(--next redoes it first), or restore the file from git"
+            )
 
 
 def paired(run: Path, cell, env) -> list[dict]:
@@ -70,16 +73,25 @@ def paired(run: Path, cell, env) -> list[dict]:
             a = np.load(run / r["paths_file"])["success"]
             b = np.load(run / base["paths_file"])["success"]
             band = in_band(env, qs[kind])
-            for part, mask in (("all", np.ones_like(band)), ("in_band", band),
-                               ("out_band", ~band)):
-                row = {"model": model, "baseline": baseline, "query_kind": kind,
-                       "steer": steer, "band": part, "n": int(mask.sum())}
+            for part, mask in (("all", np.ones_like(band)), ("in_band", band), ("out_band", ~band)):
+                row = {
+                    "model": model,
+                    "baseline": baseline,
+                    "query_kind": kind,
+                    "steer": steer,
+                    "band": part,
+                    "n": int(mask.sum()),
+                }
                 if mask.any():
                     d = paired_success_difference(a[mask], b[mask])
-                    row.update(success=float(a[mask].mean()),
-                               baseline_success=float(b[mask].mean()),
-                               only_a=d["only_a"], only_b=d["only_b"], success_diff=d["diff"],
-                               success_diff_ci95=d["ci"],
-                               mcnemar_p=mcnemar_exact(d["only_a"], d["only_b"]))
+                    row.update(
+                        success=float(a[mask].mean()),
+                        baseline_success=float(b[mask].mean()),
+                        only_a=d["only_a"],
+                        only_b=d["only_b"],
+                        success_diff=d["diff"],
+                        success_diff_ci95=d["ci"],
+                        mcnemar_p=mcnemar_exact(d["only_a"], d["only_b"]),
+                    )
                 out.append(row)
     return out

@@ -27,16 +27,35 @@ def effect_text(e: SeedEstimate | None, null: float = 0.0) -> str:
         return "-"
     lo, hi = e.ci()
     seeds = f"{e.seeds} seed{'s' if e.seeds != 1 else ''}"
-    sd = ("sd borrowed" if e.borrowed and not num(e.spread)
-          else "no sd (one seed)" if not num(e.spread)
-          else f"sd {fixed(e.spread)}" + (" (one-seed maps borrow)" if e.borrowed else "")
-          + ("" if e.seed_aware else " (a one-seed map without)"))
+    sd = (
+        "sd borrowed"
+        if e.borrowed and not num(e.spread)
+        else "no sd (one seed)"
+        if not num(e.spread)
+        else f"sd {fixed(e.spread)}"
+        + (" (one-seed maps borrow)" if e.borrowed else "")
+        + ("" if e.seed_aware else " (a one-seed map without)")
+    )
     return f"{signed(e.estimate)} [{signed(lo)}, {signed(hi)}], {seeds}, {sd}"
 
 
-def claim_line(table, claim, scope, *, est=None, null=0.0, sign=1, p=None, direction=None,
-               paper_effect=None, magnitude_claim=False, evidence="", paper="",
-               effect=None, aware=None) -> dict:
+def claim_line(
+    table,
+    claim,
+    scope,
+    *,
+    est=None,
+    null=0.0,
+    sign=1,
+    p=None,
+    direction=None,
+    paper_effect=None,
+    magnitude_claim=False,
+    evidence="",
+    paper="",
+    effect=None,
+    aware=None,
+) -> dict:
     """One claim line. ``est``: the effect's estimate (its p and direction derived unless
     given); ``paper_effect``: the paper's value of the same effect (its test joins the
     family); ``effect``: the line's effect text (default: ``est``'s); ``aware``: whether
@@ -49,16 +68,28 @@ def claim_line(table, claim, scope, *, est=None, null=0.0, sign=1, p=None, direc
         p = est.p(null) if p is None else p
     if not aware:  # one seed and no spread to borrow: no seed-aware test, no verdict
         p = None
-        evidence = ("one training seed and no map of this robot with more: the between-seed "
-                    "variance is unknown; " + evidence)
+        evidence = (
+            "one training seed and no map of this robot with more: the between-seed "
+            "variance is unknown; " + evidence
+        )
     p_paper = est.p(paper_effect) if est is not None and aware and num(paper_effect) else None
-    return {"table": table, "claim": claim, "scope": scope, "estimate": est,
-            "effect": effect if effect is not None else effect_text(est, null),
-            "p": p if num(p) else None, "direction": direction or 0,
-            "paper_effect": paper_effect, "p_paper": p_paper,
-            "magnitude_claim": magnitude_claim, "evidence": evidence, "paper": paper,
-            "seed_aware": aware, "seeds": None if est is None else est.seeds,
-            "spread": None if est is None else est.spread}
+    return {
+        "table": table,
+        "claim": claim,
+        "scope": scope,
+        "estimate": est,
+        "effect": effect if effect is not None else effect_text(est, null),
+        "p": p if num(p) else None,
+        "direction": direction or 0,
+        "paper_effect": paper_effect,
+        "p_paper": p_paper,
+        "magnitude_claim": magnitude_claim,
+        "evidence": evidence,
+        "paper": paper,
+        "seed_aware": aware,
+        "seeds": None if est is None else est.seeds,
+        "spread": None if est is None else est.spread,
+    }
 
 
 def not_run(table, claim, scope, evidence, paper) -> dict:
@@ -72,31 +103,53 @@ def parts_line(table, claim, scope, parts, sign, paper, need="all") -> dict:
         return not_run(table, claim, scope, "not run", paper)
     direction, p, i = several_parts(parts, sign, need)
     label, e, null = parts[i]
-    ev = "; ".join(f"{lab} {fixed(x.estimate) if nl else signed(x.estimate)} "
-                   f"(p {p_value(x.p(nl))})" for lab, x, nl in parts)
+    ev = "; ".join(
+        f"{lab} {fixed(x.estimate) if nl else signed(x.estimate)} (p {p_value(x.p(nl))})"
+        for lab, x, nl in parts
+    )
     text = effect_text(e)
     if null:  # a level against a threshold: the level itself, not its distance
         text = text.split(" [", 1)
         lo, hi = e.ci()
-        text = f"{fixed(e.estimate)} [{fixed(lo)}, {fixed(hi)}]" + text[1].split("]", 1)[1] \
+        text = (
+            f"{fixed(e.estimate)} [{fixed(lo)}, {fixed(hi)}]"
+            + text[1].split("]", 1)[1]
             + f"; vs {null}"
-    return claim_line(table, claim, scope, est=e, null=null, sign=sign, p=p,
-                      direction=direction, evidence=f"parts: {ev}", paper=paper,
-                      effect=f"{label}: {text}", aware=all(x.seed_aware for _, x, _ in parts))
+        )
+    return claim_line(
+        table,
+        claim,
+        scope,
+        est=e,
+        null=null,
+        sign=sign,
+        p=p,
+        direction=direction,
+        evidence=f"parts: {ev}",
+        paper=paper,
+        effect=f"{label}: {text}",
+        aware=all(x.seed_aware for _, x, _ in parts),
+    )
 
 
 def pooled_line(table, claim, scope, ests, paper_diffs, model) -> dict:
     """The line of a mean over maps of their estimates ``ests`` (not run if a map is
     missing); ``paper_diffs``: the paper's effect on each map (``model`` ahead or not)."""
-    paper = (f"mean diff {signed(sum(paper_diffs) / len(paper_diffs))}; {model} ahead in "
-             f"{sum(d > 0 for d in paper_diffs)} of {len(paper_diffs)}")
+    paper = (
+        f"mean diff {signed(sum(paper_diffs) / len(paper_diffs))}; {model} ahead in "
+        f"{sum(d > 0 for d in paper_diffs)} of {len(paper_diffs)}"
+    )
     if any(e is None for e in ests):
         n_run = sum(e is not None for e in ests)
-        return not_run(table, claim, scope, f"not run ({n_run} of {len(ests)} maps present)",
-                       paper)
+        return not_run(table, claim, scope, f"not run ({n_run} of {len(ests)} maps present)", paper)
     e = combine(ests)
-    return claim_line(table, claim, scope, est=e,
-                      paper_effect=sum(paper_diffs) / len(paper_diffs), paper=paper,
-                      evidence="mean of the maps' estimates"
-                      + (" (one-seed maps borrow their robot's between-seed variance)"
-                         if e.borrowed else ""))
+    return claim_line(
+        table,
+        claim,
+        scope,
+        est=e,
+        paper_effect=sum(paper_diffs) / len(paper_diffs),
+        paper=paper,
+        evidence="mean of the maps' estimates"
+        + (" (one-seed maps borrow their robot's between-seed variance)" if e.borrowed else ""),
+    )

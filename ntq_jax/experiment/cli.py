@@ -7,7 +7,8 @@ Every script's entry point goes through :func:`run_cli`::
 
 The package's expected exceptions (:class:`UsageError` for a bad argument,
 :data:`EXPECTED_ERRORS`: a bad environment, config, dataset, checkpoint or run
-folder, a path that is missing, not writable or of the wrong kind) are printed as one ``error: <message>`` line on stderr
+folder, a path that is missing, not writable or of the wrong kind) are printed as one ``error:
+<message>`` line on stderr
 (their messages name the problem and the fix) and give exit code 2; Ctrl-C
 gives one ``interrupted`` line and exit code 130. Anything else is a bug and
 keeps its traceback.
@@ -24,9 +25,22 @@ from typing import Callable, Iterable
 
 from ntq_jax.errors import UsageError  # re-exported: the scripts import it from here
 
-__all__ = ["UsageError", "EXPECTED_ERRORS", "PATH_ERRORS", "expected_error_types", "error_line",
-           "positive_int", "seed_arg", "check_writable", "check_writable_folder", "add_run_options", "add_executor_options",
-           "executor_of", "start_run", "run_cli"]
+__all__ = [
+    "UsageError",
+    "EXPECTED_ERRORS",
+    "PATH_ERRORS",
+    "expected_error_types",
+    "error_line",
+    "positive_int",
+    "seed_arg",
+    "check_writable",
+    "check_writable_folder",
+    "add_run_options",
+    "add_executor_options",
+    "executor_of",
+    "start_run",
+    "run_cli",
+]
 
 
 #: ``(module, class name)`` of the package's expected exceptions. They are looked
@@ -49,16 +63,19 @@ PATH_ERRORS: dict[type[OSError], str] = {
     FileNotFoundError: "check the path",
     IsADirectoryError: "a file was expected there, not a folder",
     NotADirectoryError: "a folder was expected there, but the path (or one of its parents) "
-                        "is a file",
+    "is a file",
     FileExistsError: "a folder is needed there but a file of that name exists; choose another "
-                     "path or remove the file",
+    "path or remove the file",
 }
 
 
 #: ``errno`` of a full or read-only disk: expected wherever they arise (also wrapped by a
 #: library, e.g. Orbax), printed as one line advising to free space and resume.
-DISK_ERRNOS = {errno.ENOSPC: "free some space", errno.EDQUOT: "free some space (disk quota)",
-               errno.EROFS: "choose a writable location"}
+DISK_ERRNOS = {
+    errno.ENOSPC: "free some space",
+    errno.EDQUOT: "free some space (disk quota)",
+    errno.EROFS: "choose a writable location",
+}
 
 
 def disk_error(err: BaseException) -> OSError | None:
@@ -72,8 +89,9 @@ def disk_error(err: BaseException) -> OSError | None:
     return None
 
 
-def expected_error_types(extra: Iterable[type[BaseException]] = ()
-                         ) -> tuple[type[BaseException], ...]:
+def expected_error_types(
+    extra: Iterable[type[BaseException]] = (),
+) -> tuple[type[BaseException], ...]:
     """The expected exception classes of the modules imported so far, path errors and ``extra``."""
     found = []
     for module, name in EXPECTED_ERRORS:
@@ -96,6 +114,7 @@ SEED_MAX = 2**32 - 1  # jax.random.key takes a 32-bit seed (larger values wrap o
 def seed_arg(text: str) -> int:
     """An argparse ``type`` for a PRNG seed: an integer in ``[0, 2**32 - 1]``."""
     import argparse
+
     try:
         value = int(text)
     except ValueError:
@@ -109,6 +128,7 @@ def check_writable(path: str | os.PathLike, flag: str) -> None:
     """A :class:`UsageError` unless a file can be written at ``path`` (its folder is created on
     write), so a script can refuse an output path before doing its work."""
     from ntq_jax.artifacts import unwritable_reason
+
     path = Path(path)
     if path.is_dir():
         raise UsageError(f"{flag} {path} is a folder; give a file name")
@@ -121,26 +141,46 @@ def check_writable_folder(path: str | os.PathLike, flag: str) -> None:
     """A :class:`UsageError` unless ``path`` is (or can be created as) a folder files can be
     written in, so a script can refuse an output folder before doing its work."""
     from ntq_jax.artifacts import unwritable_reason
+
     path = Path(path)
-    why = (f"{path} is a file, not a folder" if path.exists() and not path.is_dir()
-           else unwritable_reason(path))
+    why = (
+        f"{path} is a file, not a folder"
+        if path.exists() and not path.is_dir()
+        else unwritable_reason(path)
+    )
     if why:
         raise UsageError(f"{flag} {path} cannot be written: {why}; give a writable folder")
 
 
-def add_run_options(ap, *, set_example: str, figures_help: str | None, cpu_devices_help: str,
-                    executor: bool = False, config_help: str | None = None) -> None:
+def add_run_options(
+    ap,
+    *,
+    set_example: str,
+    figures_help: str | None,
+    cpu_devices_help: str,
+    executor: bool = False,
+    config_help: str | None = None,
+) -> None:
     """The options of every script that runs pipeline stages: ``--config``, ``--set``,
     ``--no-progress``, ``--no-compile-cache``, ``--cpu-devices`` (applied by
     :func:`start_run`), ``--no-figures`` unless ``figures_help`` is None and, with
     ``executor``, ``--executor`` and ``--ray-address`` (:func:`executor_of`)."""
-    ap.add_argument("--config", default=None,
-                    help=config_help or "YAML config (default: the embedded default)")
-    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                    help=f"config override, e.g. --set {set_example} (repeatable)")
+    ap.add_argument(
+        "--config", default=None, help=config_help or "YAML config (default: the embedded default)"
+    )
+    ap.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help=f"config override, e.g. --set {set_example} (repeatable)",
+    )
     ap.add_argument("--no-progress", action="store_true", help="no progress bars")
-    ap.add_argument("--no-compile-cache", action="store_true",
-                    help="do not use JAX's persistent compilation cache")
+    ap.add_argument(
+        "--no-compile-cache",
+        action="store_true",
+        help="do not use JAX's persistent compilation cache",
+    )
     if figures_help is not None:
         ap.add_argument("--no-figures", action="store_true", help=figures_help)
     ap.add_argument("--cpu-devices", type=int, default=1, help=cpu_devices_help)
@@ -150,17 +190,26 @@ def add_run_options(ap, *, set_example: str, figures_help: str | None, cpu_devic
 
 def add_executor_options(ap) -> None:
     """``--executor local|ray`` and ``--ray-address`` (read by :func:`executor_of`)."""
-    ap.add_argument("--executor", choices=("local", "ray"), default=None,
-                    help="where the planning chunks run: local (this process, the default) or "
-                         "ray (Ray tasks; overrides the config's executor)")
-    ap.add_argument("--ray-address", default=None, metavar="ADDRESS",
-                    help="with --executor ray: auto joins the cluster `ray start` made, "
-                         "<host>:<port> another one; default: start a local Ray instance")
+    ap.add_argument(
+        "--executor",
+        choices=("local", "ray"),
+        default=None,
+        help="where the planning chunks run: local (this process, the default) or "
+        "ray (Ray tasks; overrides the config's executor)",
+    )
+    ap.add_argument(
+        "--ray-address",
+        default=None,
+        metavar="ADDRESS",
+        help="with --executor ray: auto joins the cluster `ray start` made, "
+        "<host>:<port> another one; default: start a local Ray instance",
+    )
 
 
 def executor_of(args, cfg):
     """The executor of ``cfg`` with :func:`add_executor_options`' options overriding it."""
     from ntq_jax.executors import make_executor
+
     name = getattr(args, "executor", None) or cfg.executor or "local"
     address = getattr(args, "ray_address", None)
     if address and name != "ray":
@@ -173,6 +222,7 @@ def start_run(args) -> None:
     ``--no-compile-cache``."""
     from ntq_jax import artifacts
     from ntq_jax.training import use_cpu_devices
+
     use_cpu_devices(positive_int("--cpu-devices", args.cpu_devices))
     if not args.no_compile_cache:
         artifacts.enable_compile_cache()
@@ -188,8 +238,10 @@ def error_line(err: BaseException) -> str:
     if disk is not None:
         where = f"{disk.filename}: " if disk.filename is not None else ""
         reason = (disk.strerror or os.strerror(disk.errno)).lower()
-        return (f"error: {where}{reason}; {DISK_ERRNOS[disk.errno]} and run the same command "
-                "again (a run resumes from its last finished step)")
+        return (
+            f"error: {where}{reason}; {DISK_ERRNOS[disk.errno]} and run the same command "
+            "again (a run resumes from its last finished step)"
+        )
     fix = next((f for cls, f in PATH_ERRORS.items() if type(err) is cls), None)
     if fix is not None and isinstance(err, OSError) and err.strerror:
         where = f"{err.filename}: " if err.filename is not None else ""

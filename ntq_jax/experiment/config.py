@@ -31,24 +31,54 @@ from typing import Optional
 import yaml
 
 from ntq_jax import artifacts
-from ntq_jax.errors import ConfigError, check_config as _check
-from ntq_jax.data.options import DataOptions, DatasetSpec as CoreDatasetSpec
+from ntq_jax.data.options import DataOptions
+from ntq_jax.data.options import DatasetSpec as CoreDatasetSpec
+from ntq_jax.errors import ConfigError
+from ntq_jax.errors import check_config as _check
+from ntq_jax.experiment.sections import (
+    DATA_PATH_MODES,
+    ENSEMBLE_ROWS,
+    PLANNERS,
+    PRUNE_GAMMA,
+    DataConfig,
+    DataEnvOverride,
+    DatasetSpec,
+    EvalConfig,
+    PlannerConfig,
+    PlannerEnvOverride,
+    SamplingConfig,
+    validate_mode,
+)
 from ntq_jax.models import ModelConfig
 from ntq_jax.neural_options import PlannerOptions
 from ntq_jax.planners.jobs import PlannerSettings
 from ntq_jax.training.config import TrainConfig
-from ntq_jax.experiment.sections import (DATA_PATH_MODES, ENSEMBLE_ROWS, PLANNERS, PRUNE_GAMMA,
-                                         DataConfig, DataEnvOverride, DatasetSpec, EvalConfig,
-                                         PlannerConfig, PlannerEnvOverride, SamplingConfig,
-                                         validate_mode)
 
-
-
-__all__ = ["Config", "ConfigError", "load", "from_dict", "apply_overrides", "ModelConfig",
-           "TrainConfig", "SamplingConfig", "DatasetSpec", "DataEnvOverride", "DataConfig",
-           "PlannerEnvOverride", "PlannerConfig", "EvalConfig", "PLANNERS", "DATA_PATH_MODES",
-           "PRUNE_GAMMA", "ENSEMBLE_ROWS", "validate_mode", "planner_settings", "data_options",
-           "train_args", "neural_options"]
+__all__ = [
+    "Config",
+    "ConfigError",
+    "load",
+    "from_dict",
+    "apply_overrides",
+    "ModelConfig",
+    "TrainConfig",
+    "SamplingConfig",
+    "DatasetSpec",
+    "DataEnvOverride",
+    "DataConfig",
+    "PlannerEnvOverride",
+    "PlannerConfig",
+    "EvalConfig",
+    "PLANNERS",
+    "DATA_PATH_MODES",
+    "PRUNE_GAMMA",
+    "ENSEMBLE_ROWS",
+    "validate_mode",
+    "planner_settings",
+    "data_options",
+    "train_args",
+    "neural_options",
+]
 
 
 #: the values of ``task`` (the run folder's name; ``panda``: the 7-DoF arm in 3-D scenes)
@@ -59,11 +89,14 @@ class _Loader(yaml.SafeLoader):
     """PyYAML's safe loader reading ``5e-2`` and ``1e9`` as numbers (see the module docstring)."""
 
 
-_Loader.yaml_implicit_resolvers = {k: list(v) for k, v in
-                                   yaml.SafeLoader.yaml_implicit_resolvers.items()}
+_Loader.yaml_implicit_resolvers = {
+    k: list(v) for k, v in yaml.SafeLoader.yaml_implicit_resolvers.items()
+}
 _Loader.add_implicit_resolver(
     "tag:yaml.org,2002:float",
-    re.compile(r"^[-+]?(?:[0-9][0-9_]*)(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"), list("-+0123456789"))
+    re.compile(r"^[-+]?(?:[0-9][0-9_]*)(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"),
+    list("-+0123456789"),
+)
 
 
 def yaml_load(text: str):
@@ -113,12 +146,21 @@ class Config:
 
     def validate(self, p: str = ""):
         pre = f"{p}." if p else ""
-        _check(self.executor in (None, "local", "ray"), f"{pre}executor",
-               f"must be local or ray (or null: local), got {self.executor!r}")
-        _check(self.ray_address is None or bool(self.ray_address.strip()), f"{pre}ray_address",
-               "must be auto, <host>:<port> or null (start a local Ray instance)")
-        _check(self.task in TASKS, f"{pre}task",
-               f"must be point, rigid, nlink or panda; got {self.task!r}")
+        _check(
+            self.executor in (None, "local", "ray"),
+            f"{pre}executor",
+            f"must be local or ray (or null: local), got {self.executor!r}",
+        )
+        _check(
+            self.ray_address is None or bool(self.ray_address.strip()),
+            f"{pre}ray_address",
+            "must be auto, <host>:<port> or null (start a local Ray instance)",
+        )
+        _check(
+            self.task in TASKS,
+            f"{pre}task",
+            f"must be point, rigid, nlink or panda; got {self.task!r}",
+        )
         _check(len(self.envs) >= 1, f"{pre}envs", "must list at least one environment")
         _check(self.seed >= 0, f"{pre}seed", f"must be >= 0, got {self.seed}")
         for f in dataclasses.fields(self):
@@ -139,11 +181,15 @@ class Config:
 # Generic typed loading
 # ---------------------------------------------------------------------------
 
+
 def _to_plain(obj):
     if dataclasses.is_dataclass(obj):
         omit = getattr(obj, "_OMIT_NONE", ())
-        return {f.name: _to_plain(getattr(obj, f.name)) for f in dataclasses.fields(obj)
-                if not (f.name in omit and getattr(obj, f.name) is None)}
+        return {
+            f.name: _to_plain(getattr(obj, f.name))
+            for f in dataclasses.fields(obj)
+            if not (f.name in omit and getattr(obj, f.name) is None)
+        }
     if isinstance(obj, tuple):
         return [_to_plain(v) for v in obj]
     return obj
@@ -171,10 +217,15 @@ def _coerce(value, tp, key: str):
             raise ConfigError(f"{key}: expected {_type_name(tp)}, got null")
         if len(args) > 1:  # e.g. prune: bool, a number or a string, chosen by the value's type
             for a in args:
-                if ((a is bool and isinstance(value, bool))
-                        or (a is float and isinstance(value, (int, float))
-                            and not isinstance(value, bool))
-                        or (a is str and isinstance(value, str))):
+                if (
+                    (a is bool and isinstance(value, bool))
+                    or (
+                        a is float
+                        and isinstance(value, (int, float))
+                        and not isinstance(value, bool)
+                    )
+                    or (a is str and isinstance(value, str))
+                ):
                     return _coerce(value, a, key)
             raise ConfigError(f"{key}: expected {_type_name(tp)}, got {value!r}")
         return _coerce(value, args[0], key)
@@ -190,13 +241,17 @@ def _coerce(value, tp, key: str):
             raise ConfigError(f"{key}: expected true or false, got {value!r}")
         return value
     if tp is int:
-        if isinstance(value, float) and value.is_integer() and abs(value) < 2 ** 63:
+        if isinstance(value, float) and value.is_integer() and abs(value) < 2**63:
             value = int(value)  # 1e9
         if isinstance(value, bool) or not isinstance(value, int):
             raise ConfigError(f"{key}: expected an integer, got {value!r}")
         return value
     if tp is float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        if (
+            isinstance(value, bool)
+            or not isinstance(value, (int, float))
+            or not math.isfinite(value)
+        ):
             raise ConfigError(f"{key}: expected a finite number, got {value!r}")
         return float(value)
     if tp is str:
@@ -216,7 +271,9 @@ def _from_dict(cls, data, prefix: str):
         key = f"{prefix}.{k}" if prefix else str(k)
         if k not in names:
             close = difflib.get_close_matches(str(k), names, n=1)
-            hint = f"; did you mean {close[0]!r}?" if close else f"; allowed keys: {', '.join(names)}"
+            hint = (
+                f"; did you mean {close[0]!r}?" if close else f"; allowed keys: {', '.join(names)}"
+            )
             raise ConfigError(f"{key}: unknown key{hint}")
         kwargs[k] = _coerce(v, hints[k], key)
     return cls(**kwargs)
@@ -256,8 +313,10 @@ def apply_overrides(data: dict, overrides: list[str] | None) -> dict:
             value = yaml_load(v)
         except yaml.YAMLError as e:
             why = getattr(e, "problem", None) or type(e).__name__
-            raise ConfigError(f"override {ov!r}: the value is not valid YAML ({why}); quote "
-                              "it in the shell, e.g. --set 'envs=[point/0, point/1]'") from None
+            raise ConfigError(
+                f"override {ov!r}: the value is not valid YAML ({why}); quote "
+                "it in the shell, e.g. --set 'envs=[point/0, point/1]'"
+            ) from None
         _set_dotted(data, k.strip(), value)
     return data
 
@@ -278,8 +337,9 @@ def load(path: str | Path | None = None, overrides: list[str] | None = None) -> 
         try:
             data = yaml_load(p.read_text(encoding="utf-8")) or {}
         except UnicodeDecodeError:
-            raise ConfigError(f"{where}: not a text (UTF-8) file; a config is YAML, e.g. "
-                              "configs/point.yaml") from None
+            raise ConfigError(
+                f"{where}: not a text (UTF-8) file; a config is YAML, e.g. configs/point.yaml"
+            ) from None
         except yaml.YAMLError as e:
             raise ConfigError(f"{where}: not valid YAML: {e}") from None
     if overrides:
@@ -291,16 +351,24 @@ def load(path: str | Path | None = None, overrides: list[str] | None = None) -> 
 # The core's options of a Config
 # ---------------------------------------------------------------------------
 
+
 def planner_settings(cfg: Config, env_name: str) -> PlannerSettings:
     """``cfg``'s planner settings for environment ``env_name`` (its ``per_env`` overrides
     applied; the roadmap's seed is the run's, the motion check the evaluation's)."""
     pc = cfg.planner
     return PlannerSettings(
-        name=pc.name_for(env_name), resolution=pc.resolution, milestones=pc.milestones,
-        neighbors=pc.neighbors, grow_rounds=pc.grow_rounds, roadmap_seed=cfg.seed,
+        name=pc.name_for(env_name),
+        resolution=pc.resolution,
+        milestones=pc.milestones,
+        neighbors=pc.neighbors,
+        grow_rounds=pc.grow_rounds,
+        roadmap_seed=cfg.seed,
         time_budget=pc.time_budget_for(env_name),
-        eval_time_budget=pc.eval_time_budget_for(env_name), workers=pc.workers,
-        data_paths=pc.data_paths_for(env_name), motion_check=cfg.eval.motion_check)
+        eval_time_budget=pc.eval_time_budget_for(env_name),
+        workers=pc.workers,
+        data_paths=pc.data_paths_for(env_name),
+        motion_check=cfg.eval.motion_check,
+    )
 
 
 def data_options(cfg: Config, env_name: str) -> DataOptions:
@@ -309,12 +377,19 @@ def data_options(cfg: Config, env_name: str) -> DataOptions:
     the datasets record the whole resolved config and its :meth:`Config.hash`."""
     dc = cfg.data
     return DataOptions(
-        seed=cfg.seed, k_train=dc.k_train_for(env_name),
+        seed=cfg.seed,
+        k_train=dc.k_train_for(env_name),
         datasets=tuple(CoreDatasetSpec(s.p_nt, s.prune) for s in dc.datasets),
-        n_max=cfg.sampling.n_max, prune_padding=dc.prune_padding, chunk=dc.chunk,
-        gamma_queries=dc.gamma_queries, gamma_eval=dc.gamma_eval,
-        paths_from=dc.paths_from_for(env_name), planner=planner_settings(cfg, env_name),
-        record=cfg.to_dict(), record_hash=cfg.hash())
+        n_max=cfg.sampling.n_max,
+        prune_padding=dc.prune_padding,
+        chunk=dc.chunk,
+        gamma_queries=dc.gamma_queries,
+        gamma_eval=dc.gamma_eval,
+        paths_from=dc.paths_from_for(env_name),
+        planner=planner_settings(cfg, env_name),
+        record=cfg.to_dict(),
+        record_hash=cfg.hash(),
+    )
 
 
 def train_args(cfg: Config) -> dict:
@@ -327,8 +402,13 @@ def neural_options(ev: EvalConfig, steer: bool | None = None) -> PlannerOptions:
     """The neural planner's :class:`~ntq_jax.neural_options.PlannerOptions` of ``ev``
     (``steer`` overrides its first entry)."""
     return PlannerOptions(
-        n_plan=ev.n_plan, steer=ev.steer[0] if steer is None else bool(steer),
-        delta=ev.delta, delta_norm=ev.delta_norm or "robot",
+        n_plan=ev.n_plan,
+        steer=ev.steer[0] if steer is None else bool(steer),
+        delta=ev.delta,
+        delta_norm=ev.delta_norm or "robot",
         nosteer_check=True if ev.nosteer_check is None else ev.nosteer_check,
-        replan_rounds=ev.replan_rounds, replan_steps=ev.replan_steps,
-        bidirectional=ev.bidirectional, eval_check=ev.motion_check)
+        replan_rounds=ev.replan_rounds,
+        replan_steps=ev.replan_steps,
+        bidirectional=ev.bidirectional,
+        eval_check=ev.motion_check,
+    )

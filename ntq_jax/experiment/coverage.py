@@ -80,9 +80,10 @@ def _mean_expit(mu: float, sd: float) -> float:
 
 def true_effect(sc: Scenario) -> float:
     """The expected success of PNet_3 minus PNet_0 over new seeds and new queries."""
-    base = sc.query_sd ** 2 + sc.seed_sd ** 2 + sc.cell_sd ** 2
-    return (_mean_expit(sc.mu3, math.sqrt(base + sc.model_query_sd ** 2))
-            - _mean_expit(sc.mu0, math.sqrt(base)))
+    base = sc.query_sd**2 + sc.seed_sd**2 + sc.cell_sd**2
+    return _mean_expit(sc.mu3, math.sqrt(base + sc.model_query_sd**2)) - _mean_expit(
+        sc.mu0, math.sqrt(base)
+    )
 
 
 def simulate(sc: Scenario, reps: int, rng: np.random.Generator, seeds: int | None = None):
@@ -118,8 +119,9 @@ def _estimate(d: np.ndarray, borrow=None) -> S.SeedEstimate:
     return S.seed_estimate(x, v, key="map", borrow=borrow)
 
 
-def _interval(method: str, y3: np.ndarray, y0: np.ndarray, rng: np.random.Generator,
-              boot: int) -> tuple:
+def _interval(
+    method: str, y3: np.ndarray, y0: np.ndarray, rng: np.random.Generator, boot: int
+) -> tuple:
     """The 95 % interval of ``method`` for one experiment's successes (S, n)."""
     d = y3.astype(np.int8) - y0.astype(np.int8)
     s, n = d.shape
@@ -127,6 +129,7 @@ def _interval(method: str, y3: np.ndarray, y0: np.ndarray, rng: np.random.Genera
         return tuple(_estimate(d).ci())
     if method == "satterthwaite":
         from scipy.stats import t
+
         e = _estimate(d)
         h = t.ppf(0.975, e.df) * e.se
         return e.estimate - h, e.estimate + h
@@ -138,6 +141,7 @@ def _interval(method: str, y3: np.ndarray, y0: np.ndarray, rng: np.random.Genera
         return tuple(S.paired_success_difference(y3[0], y0[0])["ci"])
     if method == "t_over_seeds":
         from scipy.stats import t
+
         x = d.mean(-1)
         h = t.ppf(0.975, s - 1) * x.std(ddof=1) / math.sqrt(s)
         return x.mean() - h, x.mean() + h
@@ -150,8 +154,14 @@ def _interval(method: str, y3: np.ndarray, y0: np.ndarray, rng: np.random.Genera
     raise ValueError(f"unknown method {method!r}")
 
 
-def coverage(sc: Scenario, reps: int, seed: int = 0, methods=METHODS, boot: int = 400,
-             boot_reps: int | None = None) -> dict:
+def coverage(
+    sc: Scenario,
+    reps: int,
+    seed: int = 0,
+    methods=METHODS,
+    boot: int = 400,
+    boot_reps: int | None = None,
+) -> dict:
     """Coverage of the true effect by each method's 95 % interval over ``reps`` simulated
     experiments (the bootstrap over the first ``boot_reps`` only: it is the slow one).
 
@@ -200,11 +210,17 @@ def coverage(sc: Scenario, reps: int, seed: int = 0, methods=METHODS, boot: int 
         if d.shape[1] > 1:
             sds.append(float(np.mean(d.mean(-1).std(axis=1, ddof=1))))
         done += k
-    out = {"effect": eff, "discordant": float(np.mean(disc)),
-           "sd_per_seed": float(np.mean(sds)) if sds else float("nan")}
+    out = {
+        "effect": eff,
+        "discordant": float(np.mean(disc)),
+        "sd_per_seed": float(np.mean(sds)) if sds else float("nan"),
+    }
     for m in methods:
-        out[m] = {"coverage": float(np.mean(hits[m])), "width": float(np.mean(widths[m])),
-                  "reps": len(hits[m])}
+        out[m] = {
+            "coverage": float(np.mean(hits[m])),
+            "width": float(np.mean(widths[m])),
+            "reps": len(hits[m]),
+        }
     return out
 
 
@@ -213,15 +229,35 @@ def coverage(sc: Scenario, reps: int, seed: int = 0, methods=METHODS, boot: int 
 #: moves by about 0.03 / 0.07 / 0.1 between seeds; ours moves by up to 0.10) x a shared
 #: query effect on PNet_3 or none; then a one-seed map borrowing the spread of two
 #: three-seed maps, and the mean over four three-seed maps.
-GRID = tuple(
-    Scenario(f"S={s}, seed_sd={sd}, model_query_sd={mq}", seeds=s, seed_sd=sd, model_query_sd=mq)
-    for s in (2, 3, 5) for sd in (0.0, 0.15, 0.35, 0.5) for mq in (0.0, 1.0)
-) + tuple(
-    Scenario(f"one seed, spread borrowed from 2 maps x 3 seeds, seed_sd={sd}, "
-             f"model_query_sd={mq}", seeds=3, seed_sd=sd, model_query_sd=mq, borrow_from=2)
-    for sd in (0.15, 0.35) for mq in (0.0, 1.0)
-) + tuple(
-    Scenario(f"mean over 4 maps x 3 seeds, seed_sd={sd}, model_query_sd={mq}", seeds=3,
-             seed_sd=sd, model_query_sd=mq, maps=4)
-    for sd in (0.15, 0.35) for mq in (0.0, 1.0)
+GRID = (
+    tuple(
+        Scenario(
+            f"S={s}, seed_sd={sd}, model_query_sd={mq}", seeds=s, seed_sd=sd, model_query_sd=mq
+        )
+        for s in (2, 3, 5)
+        for sd in (0.0, 0.15, 0.35, 0.5)
+        for mq in (0.0, 1.0)
+    )
+    + tuple(
+        Scenario(
+            f"one seed, spread borrowed from 2 maps x 3 seeds, seed_sd={sd}, model_query_sd={mq}",
+            seeds=3,
+            seed_sd=sd,
+            model_query_sd=mq,
+            borrow_from=2,
+        )
+        for sd in (0.15, 0.35)
+        for mq in (0.0, 1.0)
+    )
+    + tuple(
+        Scenario(
+            f"mean over 4 maps x 3 seeds, seed_sd={sd}, model_query_sd={mq}",
+            seeds=3,
+            seed_sd=sd,
+            model_query_sd=mq,
+            maps=4,
+        )
+        for sd in (0.15, 0.35)
+        for mq in (0.0, 1.0)
+    )
 )

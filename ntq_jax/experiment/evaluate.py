@@ -72,12 +72,12 @@ import numpy as np
 from ntq_jax import artifacts
 from ntq_jax import neural_planner as NP
 from ntq_jax.envs import env_slug
-from ntq_jax.planners.jobs import plan_pool, planner_options, resolve_planner
-from ntq_jax.planners import plan, visgraph
-from ntq_jax.models import member_pnets
 from ntq_jax.experiment import config as C
 from ntq_jax.experiment.metrics import band_metrics, best_of, in_band, metrics
-from ntq_jax.types import (QUERY_KINDS, TASK_OF_ROBOT)
+from ntq_jax.models import member_pnets
+from ntq_jax.planners import plan, visgraph
+from ntq_jax.planners.jobs import plan_pool, planner_options, resolve_planner
+from ntq_jax.types import QUERY_KINDS, TASK_OF_ROBOT
 
 EVAL_TAG = 0x7E57  # key tag of the test queries (training uses other streams)
 
@@ -108,7 +108,12 @@ def model_name(member: int | str) -> str:
 def paths_file(run_dir, slug: str, member: int | str, kind: str, steer: bool) -> Path:
     """``<run>/paths/<slug>/PNet_<m>_<kind>[_nosteer].npz`` (``m``: a member index,
     :data:`ENSEMBLE` or :func:`best_id`)."""
-    return Path(run_dir) / "paths" / slug / f"{model_name(member)}_{kind}{'' if steer else '_nosteer'}.npz"
+    return (
+        Path(run_dir)
+        / "paths"
+        / slug
+        / f"{model_name(member)}_{kind}{'' if steer else '_nosteer'}.npz"
+    )
 
 
 # ---------------------------------------------------------------------------
@@ -118,6 +123,7 @@ def paths_file(run_dir, slug: str, member: int | str, kind: str, steer: bool) ->
 # ---------------------------------------------------------------------------
 # Test queries and references
 # ---------------------------------------------------------------------------
+
 
 def _tag(slug: str) -> int:
     return zlib.crc32(slug.encode()) & 0x7FFFFFFF
@@ -130,12 +136,16 @@ def test_queries(env, cfg, slug: str, out_dir: Path) -> dict[str, np.ndarray]:
     fp = artifacts.fingerprint(slug, ev.k_test, qpad, cfg.seed, cfg.sampling.n_max, env.to_json())
 
     def compute():
-        key = jax.random.fold_in(jax.random.fold_in(jax.random.key(cfg.seed), EVAL_TAG),
-                                 _tag(slug))
+        key = jax.random.fold_in(jax.random.fold_in(jax.random.key(cfg.seed), EVAL_TAG), _tag(slug))
         out = {"query_padding": qpad}
         for i, kind in enumerate(QUERY_KINDS):
-            q, _ = env.sample_queries(jax.random.fold_in(key, i), ev.k_test, float(i),
-                                      padding=qpad, n_max=cfg.sampling.n_max)
+            q, _ = env.sample_queries(
+                jax.random.fold_in(key, i),
+                ev.k_test,
+                float(i),
+                padding=qpad,
+                n_max=cfg.sampling.n_max,
+            )
             out[kind] = np.asarray(q, np.float32)
         return out
 
@@ -164,8 +174,16 @@ def reuse_roadmaps(source, out_dir: Path) -> int:
     return copied
 
 
-def reference_plans(env, cfg, env_name: str, slug: str, queries: dict, out_dir: Path,
-                    planner: Callable | None = None, executor=None) -> dict:
+def reference_plans(
+    env,
+    cfg,
+    env_name: str,
+    slug: str,
+    queries: dict,
+    out_dir: Path,
+    planner: Callable | None = None,
+    executor=None,
+) -> dict:
     """Reference (and, for point robots, optimum) costs and paths on padding 0, cached.
 
     ``planner`` (optional) replaces ``cfg.planner``: a callable ``(env, q, *,
@@ -182,26 +200,43 @@ def reference_plans(env, cfg, env_name: str, slug: str, queries: dict, out_dir: 
     A* (grid, visgraph, roadmap) give the same references either way; BIT*'s
     queries then get their chunks' seeds (it is not reproducible anyway).
     """
-    name = (cfg.planner.name_for(env_name) if planner is None
-            else getattr(planner, "__name__", "custom"))
-    fp = artifacts.fingerprint(slug, name, cfg.planner, cfg.eval.motion_check,
-                               {k: artifacts.array_digest(v) for k, v in queries.items()},
-                               {k: len(v) for k, v in queries.items()})
+    name = (
+        cfg.planner.name_for(env_name)
+        if planner is None
+        else getattr(planner, "__name__", "custom")
+    )
+    fp = artifacts.fingerprint(
+        slug,
+        name,
+        cfg.planner,
+        cfg.eval.motion_check,
+        {k: artifacts.array_digest(v) for k, v in queries.items()},
+        {k: len(v) for k, v in queries.items()},
+    )
 
     def compute():
         out: dict = {"planner": name}
         for kind in QUERY_KINDS:
             q = queries[kind]
             t0 = time.perf_counter()
-            res = _run_reference(env, q, cfg, env_name, planner, out_dir, executor,
-                                 Path(out_dir) / ".work" / f"reference_{fp[:16]}_{kind}")
+            res = _run_reference(
+                env,
+                q,
+                cfg,
+                env_name,
+                planner,
+                out_dir,
+                executor,
+                Path(out_dir) / ".work" / f"reference_{fp[:16]}_{kind}",
+            )
             out[f"{kind}_seconds"] = time.perf_counter() - t0
             out[f"{kind}_costs"] = np.asarray(res.costs, np.float64)
             out[f"{kind}_status"] = np.asarray(res.status, np.int8)
             out[f"{kind}_paths"] = np.asarray(res.paths, np.float32)
             out[f"{kind}_lengths"] = np.asarray(res.lengths, np.int32)
-            if env.robot.kind == "point" and (env.world.num_boxes + env.world.num_discs
-                                              <= visgraph.MAX_OBSTACLES):
+            if env.robot.kind == "point" and (
+                env.world.num_boxes + env.world.num_discs <= visgraph.MAX_OBSTACLES
+            ):
                 opt = plan(env, q, "visgraph", padding=0.0)
                 out[f"{kind}_opt_costs"] = np.asarray(opt.costs, np.float64)
         return out
@@ -211,20 +246,31 @@ def reference_plans(env, cfg, env_name: str, slug: str, queries: dict, out_dir: 
     return got
 
 
-def _run_reference(env, q, cfg, env_name, planner, out_dir: Path, executor=None,
-                   work: Path | None = None):
+def _run_reference(
+    env, q, cfg, env_name, planner, out_dir: Path, executor=None, work: Path | None = None
+):
     if planner is not None:
         return planner(env, q, padding=0.0, seed=cfg.seed)
     name = cfg.planner.name_for(env_name)
     settings = C.planner_settings(cfg, env_name)
-    run, _ = resolve_planner(name, planner_options(settings, name, evaluation=True),
-                             cache_dir=Path(out_dir) / "roadmap")
+    run, _ = resolve_planner(
+        name, planner_options(settings, name, evaluation=True), cache_dir=Path(out_dir) / "roadmap"
+    )
     if executor is None or executor.name == "local":
         return run(env, q, padding=0.0, seed=cfg.seed)
     work.mkdir(parents=True, exist_ok=True)
-    return plan_pool(env, q, run, verify=False, padding=0.0, seed=cfg.seed,
-                     chunk=cfg.data.chunk, work=work, progress=False,
-                     executor=executor).result
+    return plan_pool(
+        env,
+        q,
+        run,
+        verify=False,
+        padding=0.0,
+        seed=cfg.seed,
+        chunk=cfg.data.chunk,
+        work=work,
+        progress=False,
+        executor=executor,
+    ).result
 
 
 def _data_planner(cfg, env_name: str, data_env_dir) -> str:
@@ -246,8 +292,12 @@ def _gamma(env, cfg, data_env_dir, slug: str, out_dir: Path) -> dict:
             except (OSError, json.JSONDecodeError):
                 continue
             if g.get("gamma") is not None:
-                return {"gamma": g["gamma"], "ci95": g.get("ci95"), "queries": g.get("queries"),
-                        "source": str(meta)}
+                return {
+                    "gamma": g["gamma"],
+                    "ci95": g.get("ci95"),
+                    "queries": g.get("queries"),
+                    "source": str(meta),
+                }
     f = Path(out_dir) / "gamma.json"
     if f.is_file():
         try:
@@ -256,8 +306,12 @@ def _gamma(env, cfg, data_env_dir, slug: str, out_dir: Path) -> dict:
             pass
     key = jax.random.fold_in(jax.random.fold_in(jax.random.key(cfg.seed), EVAL_TAG + 1), _tag(slug))
     e = env.gamma_nt(key, cfg.eval.gamma_queries, padding=0.0)
-    g = {"gamma": float(e.gamma), "ci95": [float(x) for x in e.ci95], "queries": int(e.queries),
-         "source": "eval"}
+    g = {
+        "gamma": float(e.gamma),
+        "ci95": [float(x) for x in e.ci95],
+        "queries": int(e.queries),
+        "source": "eval",
+    }
     artifacts.write_json(f, g, indent=None)
     return g
 
@@ -265,6 +319,7 @@ def _gamma(env, cfg, data_env_dir, slug: str, out_dir: Path) -> dict:
 # ---------------------------------------------------------------------------
 # One environment
 # ---------------------------------------------------------------------------
+
 
 @dataclasses.dataclass(frozen=True)
 class _EnvEval:
@@ -286,29 +341,44 @@ class _EnvEval:
 def _plan_cell(ctx: _EnvEval, pnet, m: int | str, kind: str, steer, order=None) -> dict:
     """Neural plans of one cell, as saved in its paths file (``order``: the cascade's)."""
     cfg, q = ctx.cfg, ctx.queries[kind]
-    key = jax.random.fold_in(jax.random.fold_in(jax.random.key(cfg.seed), EVAL_TAG + 2),
-                             _tag(f"{ctx.slug}/{m}/{kind}/{steer}"))
+    key = jax.random.fold_in(
+        jax.random.fold_in(jax.random.key(cfg.seed), EVAL_TAG + 2),
+        _tag(f"{ctx.slug}/{m}/{kind}/{steer}"),
+    )
     opts = C.neural_options(cfg.eval, steer=steer)
     if m == CASCADE:
         res = NP.plan_cascade(ctx.env, pnet, q, key, opts, order=order, chunk=cfg.eval.chunk)
     else:
         res = NP.plan_batch(ctx.env, pnet, q, key, opts, chunk=cfg.eval.chunk)
-    out = dict(queries=q, paths=res.paths, lengths=res.lengths, success=res.success,
-               costs=res.costs, cause=res.cause, pnet_calls=res.pnet_calls, replans=res.replans,
-               ref_costs=ctx.ref[f"{kind}_costs"], ref_status=ctx.ref[f"{kind}_status"],
-               seconds=res.seconds, compile_seconds=res.compile_seconds)
+    out = dict(
+        queries=q,
+        paths=res.paths,
+        lengths=res.lengths,
+        success=res.success,
+        costs=res.costs,
+        cause=res.cause,
+        pnet_calls=res.pnet_calls,
+        replans=res.replans,
+        ref_costs=ctx.ref[f"{kind}_costs"],
+        ref_status=ctx.ref[f"{kind}_status"],
+        seconds=res.seconds,
+        compile_seconds=res.compile_seconds,
+    )
     if f"{kind}_opt_costs" in ctx.ref:
         out["opt_costs"] = ctx.ref[f"{kind}_opt_costs"]
     if res.member is not None:
         out.update(member=res.member, order=np.asarray(order, np.int8))
-    ctx.log(f"  {ctx.slug} {model_name(m)} {kind:10s} steer={steer!s:5s}: success "
-            f"{res.success.mean():.3f}, {res.seconds / max(len(q), 1) * 1e3:.2f} "
-            f"ms/query (+{res.compile_seconds:.1f} s compile)")
+    ctx.log(
+        f"  {ctx.slug} {model_name(m)} {kind:10s} steer={steer!s:5s}: success "
+        f"{res.success.mean():.3f}, {res.seconds / max(len(q), 1) * 1e3:.2f} "
+        f"ms/query (+{res.compile_seconds:.1f} s compile)"
+    )
     return out
 
 
-def _cell(ctx: _EnvEval, pnet, m: int | str, kind: str, steer, *extra,
-          order=None) -> tuple[dict, dict]:
+def _cell(
+    ctx: _EnvEval, pnet, m: int | str, kind: str, steer, *extra, order=None
+) -> tuple[dict, dict]:
     """The result row of one (model, query kind, steerTo) cell, planned or loaded, and
     its paths file's arrays.
 
@@ -318,9 +388,17 @@ def _cell(ctx: _EnvEval, pnet, m: int | str, kind: str, steer, *extra,
     """
     cfg = ctx.cfg
     f = paths_file(ctx.run_dir, ctx.slug, m, kind, steer)
-    fp = artifacts.fingerprint(cfg.hash(), ctx.slug, m, kind, steer, str(ctx.ref["fingerprint"]),
-                               NP.ALGORITHM_VERSION, *extra,
-                               *([] if order is None else [list(map(int, order))]))
+    fp = artifacts.fingerprint(
+        cfg.hash(),
+        ctx.slug,
+        m,
+        kind,
+        steer,
+        str(ctx.ref["fingerprint"]),
+        NP.ALGORITHM_VERSION,
+        *extra,
+        *([] if order is None else [list(map(int, order))]),
+    )
     got = artifacts.compute_or_load(f, fp, lambda: _plan_cell(ctx, pnet, m, kind, steer, order))
     return _row(ctx, m, kind, steer, f, got), got
 
@@ -329,14 +407,23 @@ def _best_cell(ctx: _EnvEval, members: list[dict], kind: str, steer) -> dict:
     """The best-of-N row from the members' paths files' arrays (saved like a planned cell)."""
     m = best_id(len(members))
     f = paths_file(ctx.run_dir, ctx.slug, m, kind, steer)
-    fp = artifacts.fingerprint(ctx.cfg.hash(), ctx.slug, m, kind, steer,
-                               str(ctx.ref["fingerprint"]), NP.ALGORITHM_VERSION,
-                               [str(z["fingerprint"]) for z in members])
+    fp = artifacts.fingerprint(
+        ctx.cfg.hash(),
+        ctx.slug,
+        m,
+        kind,
+        steer,
+        str(ctx.ref["fingerprint"]),
+        NP.ALGORITHM_VERSION,
+        [str(z["fingerprint"]) for z in members],
+    )
 
     def compute():
         out = best_of(members)
-        ctx.log(f"  {ctx.slug} {model_name(m)} {kind:10s} steer={steer!s:5s}: success "
-                f"{out['success'].mean():.3f} (from the members' saved plans)")
+        ctx.log(
+            f"  {ctx.slug} {model_name(m)} {kind:10s} steer={steer!s:5s}: success "
+            f"{out['success'].mean():.3f} (from the members' saved plans)"
+        )
         return out
 
     return _row(ctx, m, kind, steer, f, artifacts.compute_or_load(f, fp, compute))
@@ -353,23 +440,36 @@ def validation_order(ctx: _EnvEval, pnets: list, steer) -> list[int]:
     """
     cfg = ctx.cfg
     f = Path(ctx.run_dir) / "paths" / ctx.slug / f"validation{'' if steer else '_nosteer'}.npz"
-    fp = artifacts.fingerprint(cfg.hash(), ctx.slug, "validation", steer, len(pnets),
-                               NP.ALGORITHM_VERSION)
+    fp = artifacts.fingerprint(
+        cfg.hash(), ctx.slug, "validation", steer, len(pnets), NP.ALGORITHM_VERSION
+    )
 
     def compute():
-        key = jax.random.fold_in(jax.random.fold_in(jax.random.key(cfg.seed), VALIDATION_TAG),
-                                 _tag(ctx.slug))
+        key = jax.random.fold_in(
+            jax.random.fold_in(jax.random.key(cfg.seed), VALIDATION_TAG), _tag(ctx.slug)
+        )
         qpad = ctx.env.resolve_padding(cfg.eval.query_padding)
-        q, _ = ctx.env.sample_queries(jax.random.fold_in(key, 0), cfg.eval.k_test, 1.0,
-                                      padding=qpad, n_max=cfg.sampling.n_max)
+        q, _ = ctx.env.sample_queries(
+            jax.random.fold_in(key, 0), cfg.eval.k_test, 1.0, padding=qpad, n_max=cfg.sampling.n_max
+        )
         opts = C.neural_options(cfg.eval, steer=steer)
-        res = [NP.plan_batch(ctx.env, p, np.asarray(q, np.float32),
-                             jax.random.fold_in(key, 1 + m), opts, chunk=cfg.eval.chunk)
-               for m, p in enumerate(pnets)]
+        res = [
+            NP.plan_batch(
+                ctx.env,
+                p,
+                np.asarray(q, np.float32),
+                jax.random.fold_in(key, 1 + m),
+                opts,
+                chunk=cfg.eval.chunk,
+            )
+            for m, p in enumerate(pnets)
+        ]
         success = np.array([r.success.mean() for r in res])
         order = np.argsort(-success, kind="stable").astype(np.int8)
-        ctx.log(f"  {ctx.slug} cascade order {order.tolist()} (validation success "
-                f"{np.round(success, 3).tolist()})")
+        ctx.log(
+            f"  {ctx.slug} cascade order {order.tolist()} (validation success "
+            f"{np.round(success, 3).tolist()})"
+        )
         return dict(success=success, order=order, seconds=sum(r.seconds for r in res))
 
     return [int(m) for m in artifacts.compute_or_load(f, fp, compute)["order"]]
@@ -381,28 +481,52 @@ def _row(ctx: _EnvEval, m: int | str, kind: str, steer, f: Path, got: dict) -> d
     specs = [dict(p_nt=d.p_nt, prune=d.prune) for d in cfg.data.datasets]
     member = m if isinstance(m, int) else None
     row = {
-        "task": task_of(ctx.env), "env": ctx.env_name, "env_slug": ctx.slug, "model": model_name(m),
-        "member": member, "dataset": specs[member] if member is not None and member < len(specs)
-        else None,
-        "query_kind": kind, "steer": bool(steer),
-        "gamma_nt": ctx.gamma.get("gamma"), "gamma_nt_ci95": ctx.gamma.get("ci95"),
-        "reference_planner": str(ctx.ref["planner"]), "data_planner": ctx.data_planner,
+        "task": task_of(ctx.env),
+        "env": ctx.env_name,
+        "env_slug": ctx.slug,
+        "model": model_name(m),
+        "member": member,
+        "dataset": specs[member] if member is not None and member < len(specs) else None,
+        "query_kind": kind,
+        "steer": bool(steer),
+        "gamma_nt": ctx.gamma.get("gamma"),
+        "gamma_nt_ci95": ctx.gamma.get("ci95"),
+        "reference_planner": str(ctx.ref["planner"]),
+        "data_planner": ctx.data_planner,
         "seconds_per_query": float(got["seconds"]) / k,
         "compile_seconds": float(got["compile_seconds"]),
         "reference_seconds_per_query": float(ctx.ref[f"{kind}_seconds"]) / k,
         "paths_file": str(f.relative_to(ctx.run_dir)),
     }
-    row.update(metrics(got["success"], got["costs"], got["cause"], got["ref_costs"],
-                       got["ref_status"], got.get("opt_costs")))
+    row.update(
+        metrics(
+            got["success"],
+            got["costs"],
+            got["cause"],
+            got["ref_costs"],
+            got["ref_status"],
+            got.get("opt_costs"),
+        )
+    )
     row["band_padding"] = float(ctx.env.padding)
     row.update(band_metrics(got["success"], ctx.in_band[kind]))
     return row
 
 
-def evaluate_env(env, ensemble, cfg, run_dir, *, env_name: str, data_env_dir=None,
-                 planner: Callable | None = None, members: Sequence[int] | None = None,
-                 eval_dir=None, log: Callable[[str], None] = print, executor=None
-                 ) -> list[dict]:
+def evaluate_env(
+    env,
+    ensemble,
+    cfg,
+    run_dir,
+    *,
+    env_name: str,
+    data_env_dir=None,
+    planner: Callable | None = None,
+    members: Sequence[int] | None = None,
+    eval_dir=None,
+    log: Callable[[str], None] = print,
+    executor=None,
+) -> list[dict]:
     """Evaluates every member of ``ensemble`` on one environment (see the module docstring).
 
     Args:
@@ -438,14 +562,22 @@ def evaluate_env(env, ensemble, cfg, run_dir, *, env_name: str, data_env_dir=Non
     pnets = list(ensemble) if isinstance(ensemble, (list, tuple)) else member_pnets(ensemble)
     members = list(range(len(pnets)) if members is None else members)
     queries = test_queries(env, cfg, slug, out_dir)
-    ctx = _EnvEval(env, cfg, run_dir, env_name, slug, queries,
-                   reference_plans(env, cfg, env_name, slug, queries, out_dir, planner,
-                                   executor),
-                   _gamma(env, cfg, data_env_dir, slug, out_dir),
-                   _data_planner(cfg, env_name, data_env_dir),
-                   {kind: in_band(env, q) for kind, q in queries.items()}, log)
-    together = (len(pnets) >= 2 and sorted(members) == list(range(len(pnets)))
-                and cfg.eval.ensemble_rows)
+    ctx = _EnvEval(
+        env,
+        cfg,
+        run_dir,
+        env_name,
+        slug,
+        queries,
+        reference_plans(env, cfg, env_name, slug, queries, out_dir, planner, executor),
+        _gamma(env, cfg, data_env_dir, slug, out_dir),
+        _data_planner(cfg, env_name, data_env_dir),
+        {kind: in_band(env, q) for kind, q in queries.items()},
+        log,
+    )
+    together = (
+        len(pnets) >= 2 and sorted(members) == list(range(len(pnets))) and cfg.eval.ensemble_rows
+    )
     rows = []
     for steer in cfg.eval.steer:
         saved = {}
@@ -454,14 +586,18 @@ def evaluate_env(env, ensemble, cfg, run_dir, *, env_name: str, data_env_dir=Non
                 row, saved[m, kind] = _cell(ctx, pnets[m], m, kind, steer)
                 rows.append(row)
         if together and "ens" in cfg.eval.ensemble_rows:
-            rows += [_cell(ctx, pnets, ENSEMBLE, kind, steer, len(pnets))[0]
-                     for kind in QUERY_KINDS]
+            rows += [
+                _cell(ctx, pnets, ENSEMBLE, kind, steer, len(pnets))[0] for kind in QUERY_KINDS
+            ]
         if together and "best" in cfg.eval.ensemble_rows:
-            rows += [_best_cell(ctx, [saved[m, kind] for m in members], kind, steer)
-                     for kind in QUERY_KINDS]
+            rows += [
+                _best_cell(ctx, [saved[m, kind] for m in members], kind, steer)
+                for kind in QUERY_KINDS
+            ]
         if together and CASCADE in cfg.eval.ensemble_rows:
             order = validation_order(ctx, pnets, steer)
-            rows += [_cell(ctx, pnets, CASCADE, kind, steer, len(pnets), CASCADE_VERSION,
-                           order=order)[0]
-                     for kind in QUERY_KINDS]
+            rows += [
+                _cell(ctx, pnets, CASCADE, kind, steer, len(pnets), CASCADE_VERSION, order=order)[0]
+                for kind in QUERY_KINDS
+            ]
     return rows

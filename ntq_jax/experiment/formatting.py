@@ -9,7 +9,17 @@ from __future__ import annotations
 import math
 import numbers
 
-__all__ = ["num", "fixed", "interval", "estimate", "signed", "p_value", "ms", "model_key", "kind_name"]
+__all__ = [
+    "num",
+    "fixed",
+    "interval",
+    "estimate",
+    "signed",
+    "p_value",
+    "ms",
+    "model_key",
+    "kind_name",
+]
 
 
 def num(x) -> bool:

@@ -20,19 +20,30 @@ KINDS = ("uniform", "nontrivial")
 
 def _success(rows: list[dict], env: str, model: str, kind: str) -> str:
     for r in rows:
-        if (r["env"] == env and r["model"] == model and r["query_kind"] == kind
-                and r.get("steer", True)):
+        if (
+            r["env"] == env
+            and r["model"] == model
+            and r["query_kind"] == kind
+            and r.get("steer", True)
+        ):
             return f"{r['success_ratio']:.3f}"
     return "-"
 
 
 def _gap(comparisons: list[dict], env: str) -> str:
     for c in comparisons:
-        if (c["env"] == env and c["model"] == "PNet_3" and c.get("baseline") == "PNet_0"
-                and c["query_kind"] == "nontrivial" and c.get("steer", True)):
+        if (
+            c["env"] == env
+            and c["model"] == "PNet_3"
+            and c.get("baseline") == "PNet_0"
+            and c["query_kind"] == "nontrivial"
+            and c.get("steer", True)
+        ):
             lo, hi = c["success_diff_ci95"]
-            return (f"PNet_3 - PNet_0, non-trivial: {c['success_diff']:+.3f} "
-                    f"[{lo:+.3f}, {hi:+.3f}], McNemar p={c['mcnemar_p']:.2g} (n={c['n']})")
+            return (
+                f"PNet_3 - PNet_0, non-trivial: {c['success_diff']:+.3f} "
+                f"[{lo:+.3f}, {hi:+.3f}], McNemar p={c['mcnemar_p']:.2g} (n={c['n']})"
+            )
     return "PNet_3 - PNet_0, non-trivial: not evaluated"
 
 
@@ -48,10 +59,15 @@ def headline(run: str | Path) -> list[str]:
     width = max([len(m) for m in models] + [5])
     lines = []
     for env in dict.fromkeys(r["env"] for r in rows):
-        lines += [f"{env}: success ratio with steerTo",
-                  f"  {'model':<{width}}  {'uniform':>8}  {'non-trivial':>11}"]
-        lines += [f"  {m:<{width}}  {_success(rows, env, m, 'uniform'):>8}  "
-                  f"{_success(rows, env, m, 'nontrivial'):>11}" for m in models]
+        lines += [
+            f"{env}: success ratio with steerTo",
+            f"  {'model':<{width}}  {'uniform':>8}  {'non-trivial':>11}",
+        ]
+        lines += [
+            f"  {m:<{width}}  {_success(rows, env, m, 'uniform'):>8}  "
+            f"{_success(rows, env, m, 'nontrivial'):>11}"
+            for m in models
+        ]
         lines += [f"  {_gap(comparisons, env)}", ""]
     figures = sorted(p.name for p in (run / "figures").glob("*.png"))
     lines.append(f"full tables: {run / 'tables.md'} (LaTeX: tables.tex; rows: results.csv)")

@@ -28,8 +28,14 @@ from ntq_jax.types import CAUSE_NAMES, CAUSE_RANK, PlanCause, PlanStatus
 __all__ = ["metrics", "best_of", "in_band", "band_metrics", "recheck_paths"]
 
 
-def metrics(success: np.ndarray, costs: np.ndarray, cause: np.ndarray, ref_costs: np.ndarray,
-            ref_status: np.ndarray, opt_costs: np.ndarray | None = None) -> dict:
+def metrics(
+    success: np.ndarray,
+    costs: np.ndarray,
+    cause: np.ndarray,
+    ref_costs: np.ndarray,
+    ref_status: np.ndarray,
+    opt_costs: np.ndarray | None = None,
+) -> dict:
     """Success ratio with its Wilson interval, cost ratios and failure counts."""
     k = int(len(success))
     s = int(np.sum(success))
@@ -38,12 +44,15 @@ def metrics(success: np.ndarray, costs: np.ndarray, cause: np.ndarray, ref_costs
     ref_ok = ref_solved & np.isfinite(ref_costs) & (ref_costs > 0)
     both = success & ref_ok
     out = {
-        "k_test": k, "successes": s, "success_ratio": s / k if k else float("nan"),
+        "k_test": k,
+        "successes": s,
+        "success_ratio": s / k if k else float("nan"),
         "success_ci95": [lo, hi],
         "cost_ratio": float(np.mean(costs[both] / ref_costs[both])) if both.any() else None,
         "cost_ratio_n": int(both.sum()),
-        "failures": {CAUSE_NAMES[c]: int(np.sum(cause == c)) for c in PlanCause
-                     if c != PlanCause.SUCCESS},
+        "failures": {
+            CAUSE_NAMES[c]: int(np.sum(cause == c)) for c in PlanCause if c != PlanCause.SUCCESS
+        },
         "reference_failed": int(np.sum(~ref_solved)),
         "reference_success_ratio": float(np.mean(ref_solved)) if k else float("nan"),
     }
@@ -51,10 +60,10 @@ def metrics(success: np.ndarray, costs: np.ndarray, cause: np.ndarray, ref_costs
         ok = success & np.isfinite(opt_costs) & (opt_costs > 0)
         out["cost_ratio_opt"] = float(np.mean(costs[ok] / opt_costs[ok])) if ok.any() else None
         rk = ref_ok & np.isfinite(opt_costs) & (opt_costs > 0)
-        out["reference_cost_ratio_opt"] = (float(np.mean(ref_costs[rk] / opt_costs[rk]))
-                                           if rk.any() else None)
+        out["reference_cost_ratio_opt"] = (
+            float(np.mean(ref_costs[rk] / opt_costs[rk])) if rk.any() else None
+        )
     return out
-
 
 
 def best_of(results: Sequence[dict]) -> dict:
@@ -83,9 +92,10 @@ def best_of(results: Sequence[dict]) -> dict:
     """
     if not results:
         raise ValueError("best_of needs at least one result")
-    success = np.stack([np.asarray(r["success"], bool) for r in results])       # (N, K)
-    costs = np.where(success, np.stack([np.asarray(r["costs"], np.float64) for r in results]),
-                     np.inf)
+    success = np.stack([np.asarray(r["success"], bool) for r in results])  # (N, K)
+    costs = np.where(
+        success, np.stack([np.asarray(r["costs"], np.float64) for r in results]), np.inf
+    )
     cause = np.stack([np.asarray(r["cause"]) for r in results])
     rank = np.vectorize(lambda c: CAUSE_RANK[PlanCause(int(c))], otypes=[np.int64])(cause)
     any_ok = success.any(axis=0)
@@ -99,16 +109,25 @@ def best_of(results: Sequence[dict]) -> dict:
         sel = pick == j
         paths[sel, : r["paths"].shape[1]] = r["paths"][sel]
     lengths = np.stack([np.asarray(r["lengths"]) for r in results])[pick, rows]
-    out = dict(queries=results[0]["queries"], paths=paths, lengths=lengths.astype(np.int32),
-               success=any_ok, costs=costs[pick, rows], cause=cause[pick, rows].astype(np.int8),
-               pnet_calls=np.sum([np.asarray(r["pnet_calls"], np.int64) for r in results],
-                                 axis=0).astype(np.int32),
-               replans=np.sum([np.asarray(r["replans"], np.int64) for r in results],
-                              axis=0).astype(np.int32),
-               member=pick.astype(np.int8),
-               ref_costs=results[0]["ref_costs"], ref_status=results[0]["ref_status"],
-               seconds=float(sum(float(r["seconds"]) for r in results)),
-               compile_seconds=float(sum(float(r["compile_seconds"]) for r in results)))
+    out = dict(
+        queries=results[0]["queries"],
+        paths=paths,
+        lengths=lengths.astype(np.int32),
+        success=any_ok,
+        costs=costs[pick, rows],
+        cause=cause[pick, rows].astype(np.int8),
+        pnet_calls=np.sum([np.asarray(r["pnet_calls"], np.int64) for r in results], axis=0).astype(
+            np.int32
+        ),
+        replans=np.sum([np.asarray(r["replans"], np.int64) for r in results], axis=0).astype(
+            np.int32
+        ),
+        member=pick.astype(np.int8),
+        ref_costs=results[0]["ref_costs"],
+        ref_status=results[0]["ref_status"],
+        seconds=float(sum(float(r["seconds"]) for r in results)),
+        compile_seconds=float(sum(float(r["compile_seconds"]) for r in results)),
+    )
     if "opt_costs" in results[0]:
         out["opt_costs"] = results[0]["opt_costs"]
     return out
@@ -144,14 +163,20 @@ def band_metrics(success: np.ndarray, band: np.ndarray) -> dict:
     for name, part in (("in_band", band), ("out_band", ~band)):
         n, s = int(part.sum()), int((success & part).sum())
         lo, hi = wilson_interval(s, n)
-        out.update({f"n_{name}": n, f"successes_{name}": s,
-                    f"success_{name}": s / n if n else float("nan"),
-                    f"success_{name}_ci95": [lo, hi]})
+        out.update(
+            {
+                f"n_{name}": n,
+                f"successes_{name}": s,
+                f"success_{name}": s / n if n else float("nan"),
+                f"success_{name}_ci95": [lo, hi],
+            }
+        )
     return out
 
 
-def recheck_paths(env, npz_path, *, delta: float | None = None, atol: float = 1e-5,
-                  check: str = "certified") -> np.ndarray:
+def recheck_paths(
+    env, npz_path, *, delta: float | None = None, atol: float = 1e-5, check: str = "certified"
+) -> np.ndarray:
     """Independent re-check of the successes of a saved paths file, on the evaluation geometry.
 
     A success passes when its path has at least 2 states, all finite, every
@@ -187,8 +212,9 @@ def recheck_paths(env, npz_path, *, delta: float | None = None, atol: float = 1e
     at_start = np.all(np.abs(start - q[:, 0]) <= atol, axis=1)
     if nosteer:
         single = np.flatnonzero(n == 1)  # one state: no segment, the state itself is checked
-        free[single] = (np.isfinite(start[single]).all(axis=1)
-                        & valid_states(env.robot, env.world, start[single], 0.0))
+        free[single] = np.isfinite(start[single]).all(axis=1) & valid_states(
+            env.robot, env.world, start[single], 0.0
+        )
         at_goal = distances(env.robot, end, q[:, 1]) <= delta + atol
     else:
         at_goal = np.all(np.abs(end - q[:, 1]) <= atol, axis=1)

@@ -68,8 +68,11 @@ def pack(run, env_name: str, env=None, train_seed=None) -> dict[str, np.ndarray]
     if not rows:
         raise KeyError(f"{run}: no result rows of {env_name}")
     slug = rows[0]["env_slug"]
-    out: dict[str, np.ndarray] = {"format": np.array(FORMAT), "env": np.array(env_name),
-                                  "train_seed": np.array(-1 if train_seed is None else train_seed)}
+    out: dict[str, np.ndarray] = {
+        "format": np.array(FORMAT),
+        "env": np.array(env_name),
+        "train_seed": np.array(-1 if train_seed is None else train_seed),
+    }
     qs = np.load(run / "eval" / slug / "queries.npz")
     kinds = [k for k in KINDS if any(r["query_kind"] == k for r in rows)]
     out["kinds"] = np.array(kinds)
@@ -84,7 +87,8 @@ def pack(run, env_name: str, env=None, train_seed=None) -> dict[str, np.ndarray]
             tag = f"{kind}__{_steer(steer)}"
             out[f"models__{tag}"] = np.array([r["model"] for r in rs])
             out[f"success__{tag}"] = np.packbits(
-                np.stack([np.asarray(a["success"], bool) for a in arrays]), axis=1)
+                np.stack([np.asarray(a["success"], bool) for a in arrays]), axis=1
+            )
             out[f"cost__{tag}"] = np.stack([np.asarray(a["costs"], np.float32) for a in arrays])
             out[f"cause__{tag}"] = np.stack([np.asarray(a["cause"], np.uint8) for a in arrays])
             ref = ref or arrays[0]
@@ -95,6 +99,7 @@ def pack(run, env_name: str, env=None, train_seed=None) -> dict[str, np.ndarray]
         out[f"queries_sha256__{kind}"] = np.array(artifacts.npy_sha256(q))
         if env is not None:
             from ntq_jax.experiment.metrics import in_band
+
             out[f"in_band__{kind}"] = np.packbits(np.asarray(in_band(env, q), bool))
     return out
 
@@ -114,13 +119,17 @@ def load(path) -> dict:
     z = np.load(Path(path))
     if str(z["format"]) != FORMAT:
         raise ValueError(f"{path}: format {z['format']!s}, expected {FORMAT}")
-    out: dict = {"meta": {"env": str(z["env"]), "train_seed": int(z["train_seed"]),
-                          "queries_sha256": {}}}
+    out: dict = {
+        "meta": {"env": str(z["env"]), "train_seed": int(z["train_seed"]), "queries_sha256": {}}
+    }
     for kind in (str(k) for k in z["kinds"]):
         k = int(z[f"k__{kind}"])
         out["meta"]["queries_sha256"][kind] = str(z[f"queries_sha256__{kind}"])
-        band = (np.unpackbits(z[f"in_band__{kind}"])[:k].astype(bool)
-                if f"in_band__{kind}" in z.files else None)
+        band = (
+            np.unpackbits(z[f"in_band__{kind}"])[:k].astype(bool)
+            if f"in_band__{kind}" in z.files
+            else None
+        )
         for steer in (True, False):
             tag = f"{kind}__{_steer(steer)}"
             if f"models__{tag}" not in z.files:
@@ -128,28 +137,46 @@ def load(path) -> dict:
             success = np.unpackbits(z[f"success__{tag}"], axis=1)[:, :k].astype(bool)
             for i, m in enumerate(str(x) for x in z[f"models__{tag}"]):
                 out[(m, kind, steer)] = {
-                    "success": success[i], "cost": z[f"cost__{tag}"][i],
-                    "cause": z[f"cause__{tag}"][i], "ref_cost": z[f"ref_cost__{kind}"],
-                    "ref_status": z[f"ref_status__{kind}"], "in_band": band}
+                    "success": success[i],
+                    "cost": z[f"cost__{tag}"][i],
+                    "cause": z[f"cause__{tag}"][i],
+                    "ref_cost": z[f"ref_cost__{kind}"],
+                    "ref_status": z[f"ref_status__{kind}"],
+                    "in_band": band,
+                }
     return out
 
 
 def _row_counts(o: dict) -> dict:
     """A summary row's counts from one model's outcomes (as ``metrics.metrics`` makes them)."""
     from ntq_jax.types import CAUSE_NAMES, PlanCause
+
     s, k = o["success"], len(o["success"])
     ref = o["ref_cost"].astype(np.float64)
     ok = (o["ref_status"] == 0) & np.isfinite(ref) & (ref > 0)
     both = s & ok
-    got = {"k_test": k, "successes": int(s.sum()), "success_ratio": s.sum() / k,
-           "cost_ratio": float(np.mean(o["cost"][both].astype(np.float64) / ref[both]))
-           if both.any() else None, "cost_ratio_n": int(both.sum()),
-           "failures": {CAUSE_NAMES[c]: int(np.sum(o["cause"] == c)) for c in PlanCause
-                        if c != PlanCause.SUCCESS}}
+    got = {
+        "k_test": k,
+        "successes": int(s.sum()),
+        "success_ratio": s.sum() / k,
+        "cost_ratio": float(np.mean(o["cost"][both].astype(np.float64) / ref[both]))
+        if both.any()
+        else None,
+        "cost_ratio_n": int(both.sum()),
+        "failures": {
+            CAUSE_NAMES[c]: int(np.sum(o["cause"] == c))
+            for c in PlanCause
+            if c != PlanCause.SUCCESS
+        },
+    }
     if o["in_band"] is not None:
         b = o["in_band"]
-        got.update(n_in_band=int(b.sum()), n_out_band=int((~b).sum()),
-                   successes_in_band=int((s & b).sum()), successes_out_band=int((s & ~b).sum()))
+        got.update(
+            n_in_band=int(b.sum()),
+            n_out_band=int((~b).sum()),
+            successes_in_band=int((s & b).sum()),
+            successes_out_band=int((s & ~b).sum()),
+        )
     return got
 
 
@@ -157,6 +184,7 @@ def recount(summary_dir) -> tuple[int, list[str]]:
     """Every count of ``<summary_dir>/summary.json`` recomputed from its ``outcomes.npz``:
     ``(numbers checked, mismatches)`` (one line each)."""
     from ntq_jax.stats import mcnemar_exact
+
     d = Path(summary_dir)
     summary = json.loads((d / "summary.json").read_text())
     got = load(d / FILE)
@@ -181,8 +209,15 @@ def recount(summary_dir) -> tuple[int, list[str]]:
             bad.append(f"{d}: {where}: no outcomes")
             continue
         c = _row_counts(got[key])
-        for name in ("k_test", "successes", "cost_ratio_n", "n_in_band", "n_out_band",
-                     "successes_in_band", "successes_out_band"):
+        for name in (
+            "k_test",
+            "successes",
+            "cost_ratio_n",
+            "n_in_band",
+            "n_out_band",
+            "successes_in_band",
+            "successes_out_band",
+        ):
             if name in c and name in r:
                 same(where, name, r[name], c[name])
         same(where, "success_ratio", r["success_ratio"], c["success_ratio"], 1e-12)
@@ -193,19 +228,35 @@ def recount(summary_dir) -> tuple[int, list[str]]:
         steer = bool(cmp_.get("steer", True))
         a, b = (got.get((m, cmp_["query_kind"], steer)) for m in (cmp_["model"], cmp_["baseline"]))
         where = f"{cmp_['model']} vs {cmp_['baseline']} {cmp_['query_kind']}" + (
-            "" if steer else " without steerTo")
+            "" if steer else " without steerTo"
+        )
         if a is None or b is None:
             bad.append(f"{d}: {where}: no outcomes")
             continue
         sa, sb = a["success"], b["success"]
-        counts = {"n": len(sa), "both": int((sa & sb).sum()), "only_a": int((sa & ~sb).sum()),
-                  "only_b": int((~sa & sb).sum()), "neither": int((~sa & ~sb).sum())}
+        counts = {
+            "n": len(sa),
+            "both": int((sa & sb).sum()),
+            "only_a": int((sa & ~sb).sum()),
+            "only_b": int((~sa & sb).sum()),
+            "neither": int((~sa & ~sb).sum()),
+        }
         for name, v in counts.items():
             same(where, name, cmp_[name], v)
-        same(where, "success_diff", cmp_["success_diff"],
-             (counts["only_a"] - counts["only_b"]) / counts["n"], 1e-12)
-        same(where, "mcnemar_p", cmp_["mcnemar_p"],
-             mcnemar_exact(counts["only_a"], counts["only_b"]), 1e-12)
+        same(
+            where,
+            "success_diff",
+            cmp_["success_diff"],
+            (counts["only_a"] - counts["only_b"]) / counts["n"],
+            1e-12,
+        )
+        same(
+            where,
+            "mcnemar_p",
+            cmp_["mcnemar_p"],
+            mcnemar_exact(counts["only_a"], counts["only_b"]),
+            1e-12,
+        )
     return checked, bad
 
 
@@ -214,9 +265,11 @@ def _summaries(roots) -> list[Path]:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m ntq_jax.experiment.outcomes",
-                                 description="Recompute every count of the committed summaries "
-                                             "from their per-query outcomes.")
+    ap = argparse.ArgumentParser(
+        prog="python -m ntq_jax.experiment.outcomes",
+        description="Recompute every count of the committed summaries "
+        "from their per-query outcomes.",
+    )
     ap.add_argument("roots", nargs="*", default=["results/paper", "results/factors"])
     ap.add_argument("--pack", metavar="RUN", help="write outcomes.npz from this run folder")
     ap.add_argument("--env", help="with --pack: the map (e.g. rigid/1)")
@@ -228,6 +281,7 @@ def main(argv=None) -> int:
             print("error: --pack needs --env and --out", file=sys.stderr)
             return 2
         from ntq_jax import make_env
+
         print(write(args.pack, args.env, args.out, make_env(args.env), args.train_seed))
         return 0
     dirs = _summaries(args.roots)
@@ -240,9 +294,11 @@ def main(argv=None) -> int:
         bad += b
     for line in bad:
         print(line)
-    print(f"{len(have)} summaries with outcomes: {total} counts recomputed, "
-          f"{len(bad)} mismatches; {len(lack)} summaries without outcomes (made before they "
-          "were stored):")
+    print(
+        f"{len(have)} summaries with outcomes: {total} counts recomputed, "
+        f"{len(bad)} mismatches; {len(lack)} summaries without outcomes (made before they "
+        "were stored):"
+    )
     for d in lack:
         print(f"  {d}")
     return 1 if bad else 0

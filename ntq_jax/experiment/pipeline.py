@@ -39,19 +39,16 @@ from typing import Callable
 
 import yaml
 
-from ntq_jax import artifacts
-from ntq_jax.experiment import config as C
+from ntq_jax import artifacts, training
 from ntq_jax import data as data_mod
-from ntq_jax import training
-from ntq_jax.envs import env_slug, resolve_envs
 from ntq_jax.data.format import ARRAY_SPECS, recorded_checksums
 from ntq_jax.data.limits import check_roadmap, check_spacing
-from ntq_jax.planners.jobs import planner_options
-from ntq_jax.envs import EnvError
-from ntq_jax.planners.options import unsupported_robot
-from ntq_jax.experiment.evaluate import (evaluate_env, reference_plans, reuse_roadmaps,
-                                         test_queries)
+from ntq_jax.envs import EnvError, env_slug, resolve_envs
+from ntq_jax.experiment import config as C
+from ntq_jax.experiment.evaluate import evaluate_env, reference_plans, reuse_roadmaps, test_queries
 from ntq_jax.experiment.report import write_report
+from ntq_jax.planners.jobs import planner_options
+from ntq_jax.planners.options import unsupported_robot
 from ntq_jax.version import __version__
 
 __all__ = ["DEFAULT", "PipelineError", "load_config", "prepare_run", "run_pipeline"]
@@ -61,28 +58,48 @@ __all__ = ["DEFAULT", "PipelineError", "load_config", "prepare_run", "run_pipeli
 #: data and reference come from the roadmap planner; its table shows PNet_3 against PNet_0
 #: on non-trivial queries, where the paper's gains are clearest, with the paired p-value.
 DEFAULT = yaml.safe_load(
-    (importlib.resources.files("ntq_jax.experiment") / "default.yaml").read_text("utf-8"))
+    (importlib.resources.files("ntq_jax.experiment") / "default.yaml").read_text("utf-8")
+)
 
 
 #: What a run folder may hold (``--overwrite`` deletes only folders made of these).
-RUN_ENTRIES = frozenset({".lock", "config.yaml", "run.json", "data", "models", "eval", "paths",
-                         "results.json", "results.csv", "tables.md", "tables.tex", "timings.csv",
-                         "figures"})
+RUN_ENTRIES = frozenset(
+    {
+        ".lock",
+        "config.yaml",
+        "run.json",
+        "data",
+        "models",
+        "eval",
+        "paths",
+        "results.json",
+        "results.csv",
+        "tables.md",
+        "tables.tex",
+        "timings.csv",
+        "figures",
+    }
+)
 #: Every file a run writes, as a pattern of its path in the run folder (``<env>``: one
 #: folder name): what ``--overwrite`` may delete. Anything else stops it.
-RUN_FILES = re.compile("|".join(f"(?:{p})" for p in (
-    r"(config\.yaml|run\.json|results\.json|results\.csv|tables\.md|tables\.tex|timings\.csv|\.lock)",
-    r"figures/[^/]+\.png",
-    r"data/[^/]+/(env\.json|config\.yaml|figure\.png)",
-    rf"data/[^/]+/D\d+/(({'|'.join(ARRAY_SPECS)})\.npy|meta\.json)",
-    r"(data|eval)/[^/]+/roadmap/roadmap_[0-9a-f]+\.npz",
-    r"data/[^/]+/\.work/.+",
-    r"eval/[^/]+/[a-z_]+\.(npz|json)",
-    r"models/[^/]+/(config\.json|curves\.png|history\.csv|history\.jsonl)",
-    r"models/[^/]+/(checkpoints|ensemble)/.+",
-    r"paths/[^/]+/[A-Za-z0-9_.+-]+\.npz",
-    r"(.+/)?\.[^/]+\.tmp-[^/]+(/.+)?",  # an interrupted atomic write (file or folder)
-)))
+RUN_FILES = re.compile(
+    "|".join(
+        f"(?:{p})"
+        for p in (
+            r"(config\.yaml|run\.json|results\.json|results\.csv|tables\.md|tables\.tex|timings\.csv|\.lock)",
+            r"figures/[^/]+\.png",
+            r"data/[^/]+/(env\.json|config\.yaml|figure\.png)",
+            rf"data/[^/]+/D\d+/(({'|'.join(ARRAY_SPECS)})\.npy|meta\.json)",
+            r"(data|eval)/[^/]+/roadmap/roadmap_[0-9a-f]+\.npz",
+            r"data/[^/]+/\.work/.+",
+            r"eval/[^/]+/[a-z_]+\.(npz|json)",
+            r"models/[^/]+/(config\.json|curves\.png|history\.csv|history\.jsonl)",
+            r"models/[^/]+/(checkpoints|ensemble)/.+",
+            r"paths/[^/]+/[A-Za-z0-9_.+-]+\.npz",
+            r"(.+/)?\.[^/]+\.tmp-[^/]+(/.+)?",  # an interrupted atomic write (file or folder)
+        )
+    )
+)
 _NEW_OUT = "pass a new --out"
 
 
@@ -93,8 +110,9 @@ class PipelineError(RuntimeError):
 def load_config(path: str | Path | None, overrides: list[str]) -> C.Config:
     """The resolved config: the YAML file (or the embedded :data:`DEFAULT`) plus overrides."""
     if path is None:
-        where = "embedded default" + (f" (with overrides {', '.join(overrides)})"
-                                      if overrides else "")
+        where = "embedded default" + (
+            f" (with overrides {', '.join(overrides)})" if overrides else ""
+        )
         return C.from_dict(C.apply_overrides(DEFAULT, overrides), where)
     return C.load(path, overrides)
 
@@ -113,8 +131,11 @@ def read_run_info(run: Path) -> tuple[dict | None, str]:
         info = json.loads(f.read_text())
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
         return None, f"{f} is unreadable ({type(e).__name__}: {e})"
-    if (not isinstance(info, dict) or not isinstance(info.get("config_hash"), str)
-            or not isinstance(info.get("stages"), dict)):
+    if (
+        not isinstance(info, dict)
+        or not isinstance(info.get("config_hash"), str)
+        or not isinstance(info.get("stages"), dict)
+    ):
         return None, f"{f} is not a run record (config_hash and stages expected)"
     return info, ""
 
@@ -122,13 +143,16 @@ def read_run_info(run: Path) -> tuple[dict | None, str]:
 def _refuse_or_clear(run: Path, why: str, overwrite: bool) -> None:
     """Deletes ``run`` for ``overwrite`` (a run's files only), else raises the error ``why``."""
     if not overwrite:
-        raise PipelineError(f"{run}: {why}; {_NEW_OUT}, or add --overwrite to delete this "
-                            "folder and start over")
+        raise PipelineError(
+            f"{run}: {why}; {_NEW_OUT}, or add --overwrite to delete this folder and start over"
+        )
     foreign = foreign_files(run)
     if foreign:
         more = f" and {len(foreign) - 5} more" if len(foreign) > 5 else ""
-        raise PipelineError(f"{run}: {why}, and it holds {', '.join(foreign[:5])}{more}, which "
-                            f"are not a run's files; --overwrite refuses to delete it: {_NEW_OUT}")
+        raise PipelineError(
+            f"{run}: {why}, and it holds {', '.join(foreign[:5])}{more}, which "
+            f"are not a run's files; --overwrite refuses to delete it: {_NEW_OUT}"
+        )
     shutil.rmtree(run)
 
 
@@ -198,8 +222,12 @@ def prepare_run(cfg: C.Config, out: str | Path | None, *, overwrite: bool = Fals
             if info is None:
                 _refuse_or_clear(run, f"not empty and not a run folder: {why}", overwrite)
             elif info["config_hash"] != cfg.hash():
-                _refuse_or_clear(run, f"holds a run with another config (hash "
-                                      f"{info['config_hash']}, this one {cfg.hash()})", overwrite)
+                _refuse_or_clear(
+                    run,
+                    f"holds a run with another config (hash "
+                    f"{info['config_hash']}, this one {cfg.hash()})",
+                    overwrite,
+                )
     except PipelineError:
         if took_lock:  # a refused folder is left as it was: unlocked, and without a new file
             artifacts.unlock_folder(run)
@@ -232,8 +260,10 @@ def check_planners(cfg: C.Config, envs: dict) -> None:
             try:
                 resolve_envs([o.env])
             except EnvError as e:
-                raise PipelineError(f"{section}.per_env[{i}].env {o.env!r} is not an "
-                                    f"environment ({e}); the run's are {', '.join(envs)}") from None
+                raise PipelineError(
+                    f"{section}.per_env[{i}].env {o.env!r} is not an "
+                    f"environment ({e}); the run's are {', '.join(envs)}"
+                ) from None
     for name, env in envs.items():
         check_spacing(env, cfg.planner.data_paths_for(name), name)
         planner = cfg.planner.name_for(name)
@@ -241,8 +271,11 @@ def check_planners(cfg: C.Config, envs: dict) -> None:
             check_roadmap(env, planner_options(C.planner_settings(cfg, name), planner), name)
         why = unsupported_robot(planner, env)
         if why:
-            key = ("planner.per_env" if any(o.env == name and o.name for o in cfg.planner.per_env)
-                   else "planner.name")
+            key = (
+                "planner.per_env"
+                if any(o.env == name and o.name for o in cfg.planner.per_env)
+                else "planner.name"
+            )
             raise PipelineError(f"{key} {planner} for {name}: {why}")
 
 
@@ -268,29 +301,56 @@ def _mark(run: Path, stage: str, **fields) -> None:
     artifacts.write_json(f, info)
 
 
-def _host_stage(cfg: C.Config, run: Path, name: str, env, *, progress, figures: bool,
-                log: Callable[[str], None], executor=None) -> tuple[dict, float]:
+def _host_stage(
+    cfg: C.Config,
+    run: Path,
+    name: str,
+    env,
+    *,
+    progress,
+    figures: bool,
+    log: Callable[[str], None],
+    executor=None,
+) -> tuple[dict, float]:
     """The host-side work of one environment, ``(data summary, seconds)``: its datasets and,
     with a non-local executor, the evaluation's test queries and reference (which need no
     model), so that they are planned while other environments train."""
     t0 = time.perf_counter()
-    log(f"[{name}] data: {cfg.data.k_train_for(name)} queries x {len(cfg.data.datasets)} "
-        f"datasets ({cfg.planner.name_for(name)})")
-    summary = data_mod.generate_datasets(env, C.data_options(cfg, name), run / "data",
-                                         env_name=name, progress=progress, figure=figures,
-                                         executor=executor)
+    log(
+        f"[{name}] data: {cfg.data.k_train_for(name)} queries x {len(cfg.data.datasets)} "
+        f"datasets ({cfg.planner.name_for(name)})"
+    )
+    summary = data_mod.generate_datasets(
+        env,
+        C.data_options(cfg, name),
+        run / "data",
+        env_name=name,
+        progress=progress,
+        figure=figures,
+        executor=executor,
+    )
     if executor is not None and executor.name != "local":
         slug = env_slug(name, env)
         out_dir = run / "eval" / slug
         reuse_roadmaps(Path(summary["env_dir"]) / "roadmap", out_dir)
-        reference_plans(env, cfg, name, slug, test_queries(env, cfg, slug, out_dir), out_dir,
-                        None, executor)
+        reference_plans(
+            env, cfg, name, slug, test_queries(env, cfg, slug, out_dir), out_dir, None, executor
+        )
     return summary, time.perf_counter() - t0
 
 
-def _run_env(cfg: C.Config, run: Path, name: str, env, *, progress, figures: bool,
-             log: Callable[[str], None], executor=None, host: Future | None = None
-             ) -> tuple[list[dict], dict]:
+def _run_env(
+    cfg: C.Config,
+    run: Path,
+    name: str,
+    env,
+    *,
+    progress,
+    figures: bool,
+    log: Callable[[str], None],
+    executor=None,
+    host: Future | None = None,
+) -> tuple[list[dict], dict]:
     """Data -> training -> evaluation for one environment; returns its rows and timings.
 
     ``host``: the environment's :func:`_host_stage` already running in a thread (Ray).
@@ -299,15 +359,18 @@ def _run_env(cfg: C.Config, run: Path, name: str, env, *, progress, figures: boo
     # -- data ----------------------------------------------------------------
     t0 = time.perf_counter()
     if host is None:
-        summary, _ = _host_stage(cfg, run, name, env, progress=progress, figures=figures,
-                                 log=log, executor=executor)
+        summary, _ = _host_stage(
+            cfg, run, name, env, progress=progress, figures=figures, log=log, executor=executor
+        )
     else:
         summary, seconds = host.result()
         t0 = time.perf_counter() - seconds  # the stage's own time, not the wait for it
     data_dir = Path(summary["env_dir"])
     for ds, why in summary.get("damaged", {}).items():
-        log(f"[{name}] data: {ds} failed verification ({why}); "
-            + ("rewritten" if ds in summary.get("rewritten", []) else "regenerated"))
+        log(
+            f"[{name}] data: {ds} failed verification ({why}); "
+            + ("rewritten" if ds in summary.get("rewritten", []) else "regenerated")
+        )
     t1 = time.perf_counter()
     _mark(run, f"data/{slug}", seconds=round(t1 - t0, 1), skipped=bool(summary.get("skipped")))
     # -- training --------------------------------------------------------------
@@ -319,7 +382,8 @@ def _run_env(cfg: C.Config, run: Path, name: str, env, *, progress, figures: boo
             raise PipelineError(
                 f"{model_dir} was trained on other data than {data_dir} now holds (a dataset "
                 f"was regenerated and differs); delete {model_dir} and {run / 'paths' / slug} "
-                "and rerun the same command to retrain and re-evaluate")
+                "and rerun the same command to retrain and re-evaluate"
+            )
         log(f"[{name}] train: complete, loading {model_dir / 'ensemble'}")
     else:
         log(f"[{name}] train: {len(cfg.data.datasets)} PNets, {cfg.train.epochs} epochs")
@@ -328,17 +392,27 @@ def _run_env(cfg: C.Config, run: Path, name: str, env, *, progress, figures: boo
     t2 = time.perf_counter()
     _mark(run, f"train/{slug}", seconds=round(t2 - t1, 1), data=digest)
     # -- evaluation ------------------------------------------------------------
-    log(f"[{name}] evaluate: K_test = {cfg.eval.k_test} uniform + {cfg.eval.k_test} "
-        f"non-trivial queries, {ens.num_members} models, steerTo {list(cfg.eval.steer)}")
-    rows = evaluate_env(env, ens, cfg, run, env_name=name, data_env_dir=data_dir, log=log,
-                        executor=executor)
+    log(
+        f"[{name}] evaluate: K_test = {cfg.eval.k_test} uniform + {cfg.eval.k_test} "
+        f"non-trivial queries, {ens.num_members} models, steerTo {list(cfg.eval.steer)}"
+    )
+    rows = evaluate_env(
+        env, ens, cfg, run, env_name=name, data_env_dir=data_dir, log=log, executor=executor
+    )
     t3 = time.perf_counter()
     _mark(run, f"eval/{slug}", seconds=round(t3 - t2, 1))
     return rows, {"data": t1 - t0, "train": t2 - t1, "eval": t3 - t2}
 
 
-def run_pipeline(cfg: C.Config, run: Path, *, progress=True, figures: bool = True,
-                 log: Callable[[str], None] = print, executor=None) -> dict:
+def run_pipeline(
+    cfg: C.Config,
+    run: Path,
+    *,
+    progress=True,
+    figures: bool = True,
+    log: Callable[[str], None] = print,
+    executor=None,
+) -> dict:
     """Runs every stage for every environment of ``cfg``; returns the report's file paths.
 
     Args:
@@ -360,8 +434,7 @@ def run_pipeline(cfg: C.Config, run: Path, *, progress=True, figures: bool = Tru
     """
     _lock(run)
     try:
-        return _run_stages(cfg, run, progress=progress, figures=figures, log=log,
-                           executor=executor)
+        return _run_stages(cfg, run, progress=progress, figures=figures, log=log, executor=executor)
     finally:
         artifacts.unlock_folder(run)
 
@@ -373,22 +446,50 @@ def _run_stages(cfg: C.Config, run: Path, *, progress, figures: bool, log, execu
     concurrent = executor is not None and executor.name != "local" and len(cfg.envs) > 1
     if concurrent:
         executor.start()  # in the main thread, before the environments' threads
-    pool = ThreadPoolExecutor(len(cfg.envs), thread_name_prefix="ntq_jax-env") if concurrent \
-        else None
+    pool = (
+        ThreadPoolExecutor(len(cfg.envs), thread_name_prefix="ntq_jax-env") if concurrent else None
+    )
     try:
-        hosts = {name: pool.submit(_host_stage, cfg, run, name, envs[name], progress=progress,
-                                   figures=figures, log=log, executor=executor)
-                 for name in cfg.envs} if pool else {}
+        hosts = (
+            {
+                name: pool.submit(
+                    _host_stage,
+                    cfg,
+                    run,
+                    name,
+                    envs[name],
+                    progress=progress,
+                    figures=figures,
+                    log=log,
+                    executor=executor,
+                )
+                for name in cfg.envs
+            }
+            if pool
+            else {}
+        )
         for name in cfg.envs:
-            env_rows, timings[name] = _run_env(cfg, run, name, envs[name], progress=progress,
-                                               figures=figures, log=log, executor=executor,
-                                               host=hosts.get(name))
+            env_rows, timings[name] = _run_env(
+                cfg,
+                run,
+                name,
+                envs[name],
+                progress=progress,
+                figures=figures,
+                log=log,
+                executor=executor,
+                host=hosts.get(name),
+            )
             rows += env_rows
     finally:
         if pool is not None:
             pool.shutdown(wait=True, cancel_futures=True)
-    meta = {"config": cfg.to_dict(), "config_hash": cfg.hash(), "timings": timings,
-            "package_version": __version__}
+    meta = {
+        "config": cfg.to_dict(),
+        "config_hash": cfg.hash(),
+        "timings": timings,
+        "package_version": __version__,
+    }
     out = write_report(run, rows, envs, meta=meta, figures=figures)
     _mark(run, "report")
     return out

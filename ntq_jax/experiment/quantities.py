@@ -34,11 +34,24 @@ from typing import Callable, NamedTuple
 from ntq_jax.experiment.formatting import num
 from ntq_jax.experiment.paper import KINDS, MAPS, MEMBERS
 from ntq_jax.experiment.summaries import main_runs, run_cells
-from ntq_jax.seed_effects import (SeedEstimate, paired_difference_variance, pooled_spread,
-                                  proportion_variance, seed_estimate)
+from ntq_jax.seed_effects import (
+    SeedEstimate,
+    paired_difference_variance,
+    pooled_spread,
+    proportion_variance,
+    seed_estimate,
+)
 
-__all__ = ["Quantity", "Seeds", "q_diff", "q_diff_kinds", "q_level", "q_members", "q_kind_gap",
-           "q_steer_gap"]
+__all__ = [
+    "Quantity",
+    "Seeds",
+    "q_diff",
+    "q_diff_kinds",
+    "q_level",
+    "q_members",
+    "q_kind_gap",
+    "q_steer_gap",
+]
 
 Value = "tuple[float, float] | None"  # (value, its variance over the test queries)
 
@@ -86,11 +99,13 @@ def _members(s, kind: str, steer: bool = True):
 
 def _both_kinds(f: Callable):
     """The mean over the two query kinds of ``f(s, kind)`` (independent query sets)."""
+
     def g(s):
         got = [f(s, k) for k in KINDS]
         if any(x is None for x in got):
             return None
         return sum(x for x, _ in got) / len(got), sum(v for _, v in got) / len(got) ** 2
+
     return g
 
 
@@ -124,14 +139,17 @@ def q_members(kind: str, steer: bool = True) -> Quantity:
 
 
 def q_kind_gap(model: str, steer: bool = True) -> Quantity:
-    return Quantity(f"{model}|uniform-nontrivial|{steer}",
-                    lambda s: _gap(_level(s, model, "uniform", steer),
-                                   _level(s, model, "nontrivial", steer)))
+    return Quantity(
+        f"{model}|uniform-nontrivial|{steer}",
+        lambda s: _gap(_level(s, model, "uniform", steer), _level(s, model, "nontrivial", steer)),
+    )
 
 
 def q_steer_gap(model: str) -> Quantity:
-    return Quantity(f"{model}|steer-nosteer|both", _both_kinds(
-        lambda s, k: _gap(_level(s, model, k, True), _level(s, model, k, False))))
+    return Quantity(
+        f"{model}|steer-nosteer|both",
+        _both_kinds(lambda s, k: _gap(_level(s, model, k, True), _level(s, model, k, False))),
+    )
 
 
 class Seeds:
@@ -161,8 +179,9 @@ class Seeds:
         """The between-seed variance of ``q`` pooled over the task's maps with two or more
         seeds (None when there is none)."""
         envs = [e for e in MAPS if e.startswith(task + "/")]
-        return pooled_spread([[x for _, x, _ in self.values(e, q)] for e in envs],
-                             f"{task}|{q.key}")
+        return pooled_spread(
+            [[x for _, x, _ in self.values(e, q)] for e in envs], f"{task}|{q.key}"
+        )
 
     def estimate(self, env: str, q: Quantity) -> SeedEstimate | None:
         """``q`` on ``env`` over its seeds (None if no seed has it)."""
@@ -170,9 +189,16 @@ class Seeds:
         if key not in self._cache:
             vals = self.values(env, q)
             borrow = self.borrow(env.split("/")[0], q) if len(vals) == 1 else None
-            self._cache[key] = None if not vals else seed_estimate(
-                [x for _, x, _ in vals], [v for _, _, v in vals], key=f"{env}|{q.key}",
-                borrow=borrow)
+            self._cache[key] = (
+                None
+                if not vals
+                else seed_estimate(
+                    [x for _, x, _ in vals],
+                    [v for _, _, v in vals],
+                    key=f"{env}|{q.key}",
+                    borrow=borrow,
+                )
+            )
         return self._cache[key]
 
     def seed_values(self, env: str, q: Quantity) -> list[float]:

@@ -50,24 +50,63 @@ from ntq_jax.experiment.formatting import estimate, fixed, p_value
 from ntq_jax.presets import PAPER_GAMMA
 from ntq_jax.types import QUERY_KINDS
 
-TITLES = {"point": "Point robot planning", "rigid": "Rigid body planning",
-          "nlink": "n-link manipulator planning", "serial_arm": "Serial arm (3-D) planning"}
-CSV_FIELDS = ["task", "env", "model", "query_kind", "steer", "k_test", "successes",
-              "success_ratio", "success_ci95_lo", "success_ci95_hi", "cost_ratio", "cost_ratio_n",
-              "cost_ratio_opt", "failures_no_path", "failures_infeasible",
-              "failures_invalid_query", "reference_failed", "reference_planner", "data_planner",
-              "gamma_nt", "band_padding", "n_in_band", "n_out_band", "success_in_band",
-              "success_in_band_ci95_lo", "success_in_band_ci95_hi", "success_out_band",
-              "success_out_band_ci95_lo", "success_out_band_ci95_hi", "paths_file"]
+TITLES = {
+    "point": "Point robot planning",
+    "rigid": "Rigid body planning",
+    "nlink": "n-link manipulator planning",
+    "serial_arm": "Serial arm (3-D) planning",
+}
+CSV_FIELDS = [
+    "task",
+    "env",
+    "model",
+    "query_kind",
+    "steer",
+    "k_test",
+    "successes",
+    "success_ratio",
+    "success_ci95_lo",
+    "success_ci95_hi",
+    "cost_ratio",
+    "cost_ratio_n",
+    "cost_ratio_opt",
+    "failures_no_path",
+    "failures_infeasible",
+    "failures_invalid_query",
+    "reference_failed",
+    "reference_planner",
+    "data_planner",
+    "gamma_nt",
+    "band_padding",
+    "n_in_band",
+    "n_out_band",
+    "success_in_band",
+    "success_in_band_ci95_lo",
+    "success_in_band_ci95_hi",
+    "success_out_band",
+    "success_out_band_ci95_lo",
+    "success_out_band_ci95_hi",
+    "paths_file",
+]
 #: the wall-clock fields of a row: in timings.csv, not in results.csv or tables.md
 TIMING_FIELDS = ["seconds_per_query", "compile_seconds", "reference_seconds_per_query"]
 #: the columns of timings.csv: a row's key, then its times
 TIMING_CSV_FIELDS = ["task", "env", "model", "query_kind", "steer"] + TIMING_FIELDS
 # a row's first paired comparison (as the model; see comparisons()), after CSV_FIELDS
-COMPARISON_CSV_FIELDS = ["vs_model", "vs_only_model", "vs_only_baseline", "vs_success_diff",
-                         "vs_success_diff_ci95_lo", "vs_success_diff_ci95_hi", "vs_mcnemar_p",
-                         "vs_cost_n", "vs_cost_ratio_diff", "vs_cost_ratio_diff_ci95_lo",
-                         "vs_cost_ratio_diff_ci95_hi", "vs_wilcoxon_p"]
+COMPARISON_CSV_FIELDS = [
+    "vs_model",
+    "vs_only_model",
+    "vs_only_baseline",
+    "vs_success_diff",
+    "vs_success_diff_ci95_lo",
+    "vs_success_diff_ci95_hi",
+    "vs_mcnemar_p",
+    "vs_cost_n",
+    "vs_cost_ratio_diff",
+    "vs_cost_ratio_diff_ci95_lo",
+    "vs_cost_ratio_diff_ci95_hi",
+    "vs_wilcoxon_p",
+]
 
 #: Baseline placeholder of a pair: the single member (``PNet_<m>``) with the most
 #: successes in the (environment, query kind, steerTo) cell (ties: the lower index).
@@ -75,11 +114,15 @@ BEST_MEMBER = "best member"
 #: The paired comparisons of the report, ``(model, baseline)``: PNet_1..3 vs PNet_0, and
 #: the ensemble rows (``eval.ensemble``; best-of-4, or of 5 with a D4 member; the cascade)
 #: vs their best member. Pairs whose model has no row are left out.
-DEFAULT_PAIRS: tuple[tuple[str, str], ...] = (("PNet_1", "PNet_0"), ("PNet_2", "PNet_0"),
-                                              ("PNet_3", "PNet_0"), ("PNet_ens", BEST_MEMBER),
-                                              ("PNet_best-of-4", BEST_MEMBER),
-                                              ("PNet_best-of-5", BEST_MEMBER),
-                                              ("PNet_cascade", BEST_MEMBER))
+DEFAULT_PAIRS: tuple[tuple[str, str], ...] = (
+    ("PNet_1", "PNet_0"),
+    ("PNet_2", "PNet_0"),
+    ("PNet_3", "PNet_0"),
+    ("PNet_ens", BEST_MEMBER),
+    ("PNet_best-of-4", BEST_MEMBER),
+    ("PNet_best-of-5", BEST_MEMBER),
+    ("PNet_cascade", BEST_MEMBER),
+)
 _MEMBER = re.compile(r"PNet_(\d+)")
 
 
@@ -143,8 +186,7 @@ def _band_cells(r) -> list[str]:
     out = [f"{r['n_in_band']} / {r['n_in_band'] + r['n_out_band']}"]
     for part in ("in_band", "out_band"):
         lo, hi = r[f"success_{part}_ci95"]
-        out.append(f"{fixed(r[f'success_{part}'])} [{lo:.3f}, {hi:.3f}]"
-                   if r[f"n_{part}"] else "-")
+        out.append(f"{fixed(r[f'success_{part}'])} [{lo:.3f}, {hi:.3f}]" if r[f"n_{part}"] else "-")
     return out
 
 
@@ -152,13 +194,17 @@ def _band_cells(r) -> list[str]:
 # Paired comparisons
 # ---------------------------------------------------------------------------
 
+
 def best_member(cell: dict) -> str | None:
     """The single member (``PNet_<m>``) of ``cell`` (``{model: row}``) with the most successes.
 
     Ties go to the lower member index; None if the cell has no single member.
     """
-    members = [(-r["successes"], int(mt.group(1)), m) for m, r in cell.items()
-               if (mt := _MEMBER.fullmatch(m))]
+    members = [
+        (-r["successes"], int(mt.group(1)), m)
+        for m, r in cell.items()
+        if (mt := _MEMBER.fullmatch(m))
+    ]
     return min(members)[2] if members else None
 
 
@@ -170,8 +216,15 @@ def _nan_to_none(v):
     return v
 
 
-def comparisons(run_dir, rows, pairs=DEFAULT_PAIRS, *, n_boot: int = stats.N_BOOT,
-                seed: int = stats.SEED, load=artifacts.load_npz) -> list[dict]:
+def comparisons(
+    run_dir,
+    rows,
+    pairs=DEFAULT_PAIRS,
+    *,
+    n_boot: int = stats.N_BOOT,
+    seed: int = stats.SEED,
+    load=artifacts.load_npz,
+) -> list[dict]:
     """Paired comparisons of models tested on the same queries (:func:`ntq_jax.stats.paired_comparison`).
 
     For every (task, environment, steerTo, query kind) cell of ``rows`` and every
@@ -201,8 +254,9 @@ def comparisons(run_dir, rows, pairs=DEFAULT_PAIRS, *, n_boot: int = stats.N_BOO
     run_dir = Path(run_dir)
     cells: dict = {}
     for r in rows:
-        cells.setdefault((r["task"], r["steer"], r["env"]), {}).setdefault(
-            r["query_kind"], {})[r["model"]] = r
+        cells.setdefault((r["task"], r["steer"], r["env"]), {}).setdefault(r["query_kind"], {})[
+            r["model"]
+        ] = r
     cache: dict = {}
     missing: list[str] = []
 
@@ -217,7 +271,9 @@ def comparisons(run_dir, rows, pairs=DEFAULT_PAIRS, *, n_boot: int = stats.N_BOO
     out = []
     for (task, steer, env), kinds in cells.items():
         for model, base in pairs:
-            for kind in [k for k in QUERY_KINDS if k in kinds] + sorted(set(kinds) - set(QUERY_KINDS)):
+            for kind in [k for k in QUERY_KINDS if k in kinds] + sorted(
+                set(kinds) - set(QUERY_KINDS)
+            ):
                 cell = kinds[kind]
                 base_name = best_member(cell) if base == BEST_MEMBER else base
                 if model not in cell or base_name not in cell or base_name == model:
@@ -228,18 +284,32 @@ def comparisons(run_dir, rows, pairs=DEFAULT_PAIRS, *, n_boot: int = stats.N_BOO
                 try:
                     cmp = stats.paired_comparison(a, b, n_boot=n_boot, seed=seed)
                 except ValueError as e:
-                    warnings.warn(f"paired comparison {model} vs {base_name} ({env}, {kind}, "
-                                  f"steer={steer}) left out: {e}", stacklevel=2)
+                    warnings.warn(
+                        f"paired comparison {model} vs {base_name} ({env}, {kind}, "
+                        f"steer={steer}) left out: {e}",
+                        stacklevel=2,
+                    )
                     continue
-                out.append({"task": task, "env": env, "steer": bool(steer), "query_kind": kind,
-                            "model": model, "baseline": base_name,
-                            "baseline_rule": base if base == BEST_MEMBER else None,
-                            "n_boot": n_boot, "seed": seed,
-                            **{k: _nan_to_none(v) for k, v in cmp.items()}})
+                out.append(
+                    {
+                        "task": task,
+                        "env": env,
+                        "steer": bool(steer),
+                        "query_kind": kind,
+                        "model": model,
+                        "baseline": base_name,
+                        "baseline_rule": base if base == BEST_MEMBER else None,
+                        "n_boot": n_boot,
+                        "seed": seed,
+                        **{k: _nan_to_none(v) for k, v in cmp.items()},
+                    }
+                )
     if missing:
-        warnings.warn(f"paired comparisons: {len(missing)} paths file(s) missing or unreadable "
-                      f"under {run_dir} (e.g. {missing[0]}); their pairs are left out",
-                      stacklevel=2)
+        warnings.warn(
+            f"paired comparisons: {len(missing)} paths file(s) missing or unreadable "
+            f"under {run_dir} (e.g. {missing[0]}); their pairs are left out",
+            stacklevel=2,
+        )
     return out
 
 
@@ -247,21 +317,26 @@ def _comparison_md(comps) -> list[str]:
     """The paired-comparison table of one environment block (empty if no comparison)."""
     if not comps:
         return []
-    out = ["Detail, paired comparisons on the same test queries (model minus baseline): "
-           "queries solved by both / only the model / only the baseline / neither; success "
-           "ratio difference with Newcombe's paired 95% interval and McNemar's exact p; over "
-           "the queries both solve, the mean difference of cost ratio with a paired bootstrap "
-           "95% interval and the Wilcoxon signed-rank p.", "",
-           "| Model | vs | kind | both / only model / only vs / neither | success diff [95%] | "
-           "McNemar p | both solved | cost ratio diff [95%] | Wilcoxon p |",
-           "|---|---|---|---|---|---|---|---|---|"]
+    out = [
+        "Detail, paired comparisons on the same test queries (model minus baseline): "
+        "queries solved by both / only the model / only the baseline / neither; success "
+        "ratio difference with Newcombe's paired 95% interval and McNemar's exact p; over "
+        "the queries both solve, the mean difference of cost ratio with a paired bootstrap "
+        "95% interval and the Wilcoxon signed-rank p.",
+        "",
+        "| Model | vs | kind | both / only model / only vs / neither | success diff [95%] | "
+        "McNemar p | both solved | cost ratio diff [95%] | Wilcoxon p |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
     for c in comps:
         vs = c["baseline"] + (f" ({c['baseline_rule']})" if c.get("baseline_rule") else "")
-        out.append(f"| {c['model']} | {vs} | {c['query_kind']} | "
-                   f"{c['both']} / {c['only_a']} / {c['only_b']} / {c['neither']} | "
-                   f"{estimate(c['success_diff'], c['success_diff_ci95'])} | {p_value(c['mcnemar_p'])} | "
-                   f"{c['cost_n']} | {estimate(c['cost_ratio_diff'], c['cost_ratio_diff_ci95'])} | "
-                   f"{p_value(c['wilcoxon_p'])} |")
+        out.append(
+            f"| {c['model']} | {vs} | {c['query_kind']} | "
+            f"{c['both']} / {c['only_a']} / {c['only_b']} / {c['neither']} | "
+            f"{estimate(c['success_diff'], c['success_diff_ci95'])} | {p_value(c['mcnemar_p'])} | "
+            f"{c['cost_n']} | {estimate(c['cost_ratio_diff'], c['cost_ratio_diff_ci95'])} | "
+            f"{p_value(c['wilcoxon_p'])} |"
+        )
     return out + [""]
 
 
@@ -273,36 +348,54 @@ def tables_md(rows, comparisons: list[dict] | None = None) -> str:
         for env, block in envs.items():
             md, _ = _gamma_heading(env, block)
             any_row = next(iter(block.values()))
-            out += [f"### {md}", "",
-                    f"K_test = {any_row['k_test']} per query kind; data planner: "
-                    f"{any_row.get('data_planner', '-')}; reference planner: "
-                    f"{any_row['reference_planner']}; success ratio with its 95% Wilson interval.", "",
-                    "| Model | Uniform success ratio | Uniform cost ratio | Non-trivial success ratio "
-                    "| Non-trivial cost ratio |",
-                    "|---|---|---|---|---|"]
+            out += [
+                f"### {md}",
+                "",
+                f"K_test = {any_row['k_test']} per query kind; data planner: "
+                f"{any_row.get('data_planner', '-')}; reference planner: "
+                f"{any_row['reference_planner']}; success ratio with its 95% Wilson interval.",
+                "",
+                "| Model | Uniform success ratio | Uniform cost ratio | Non-trivial success ratio "
+                "| Non-trivial cost ratio |",
+                "|---|---|---|---|---|",
+            ]
             for m in _models(block):
                 out.append(f"| {m} | " + " | ".join(_cells(block, m, _md_cells)) + " |")
             out.append("")
             # extras: optimum ratio, timings, failures, in-band / out-of-band success
             band = any_row.get("band_padding")
-            out += [(f"Detail. In band: test queries with both endpoints valid at the "
-                     f"environment's data padding ({fixed(band, 2)}); out of band: the others."), "",
-                    "| Model | kind | cost ratio to optimum | no path | "
-                    "infeasible | invalid | reference failed | in band | success in band | "
-                    "success out of band |", "|---|---|---|---|---|---|---|---|---|---|"]
+            out += [
+                (
+                    f"Detail. In band: test queries with both endpoints valid at the "
+                    f"environment's data padding ({fixed(band, 2)}); out of band: the others."
+                ),
+                "",
+                "| Model | kind | cost ratio to optimum | no path | "
+                "infeasible | invalid | reference failed | in band | success in band | "
+                "success out of band |",
+                "|---|---|---|---|---|---|---|---|---|---|",
+            ]
             for m in _models(block):
                 for kind in QUERY_KINDS:
                     r = block.get((m, kind))
                     if r is None:
                         continue
                     fl = r["failures"]
-                    out.append(f"| {m} | {kind} | {fixed(r.get('cost_ratio_opt'))} | "
-                               f"{fl.get('no_path', 0)} | {fl.get('infeasible', 0)} | "
-                               f"{fl.get('invalid_query', 0)} | {r['reference_failed']} | "
-                               + " | ".join(_band_cells(r)) + " |")
+                    out.append(
+                        f"| {m} | {kind} | {fixed(r.get('cost_ratio_opt'))} | "
+                        f"{fl.get('no_path', 0)} | {fl.get('infeasible', 0)} | "
+                        f"{fl.get('invalid_query', 0)} | {r['reference_failed']} | "
+                        + " | ".join(_band_cells(r))
+                        + " |"
+                    )
             out.append("")
-            out += _comparison_md([c for c in comparisons or ()
-                                   if (c["task"], c["steer"], c["env"]) == (task, steer, env)])
+            out += _comparison_md(
+                [
+                    c
+                    for c in comparisons or ()
+                    if (c["task"], c["steer"], c["env"]) == (task, steer, env)
+                ]
+            )
     return "\n".join(out)
 
 
@@ -323,22 +416,29 @@ def _comparison_tex(title: str, comps) -> list[str]:
     """The paired comparisons of one task and steerTo variant as one LaTeX table."""
     if not comps:
         return []
-    out = ["\\begin{table}",
-           "\t\\caption{" + title + ": paired comparisons on the same test queries (model "
-           "minus baseline). Success difference with Newcombe's paired 95\\% interval and "
-           "McNemar's exact $p$; cost ratio difference over the queries both solve, with a "
-           "paired bootstrap 95\\% interval and the Wilcoxon signed-rank $p$.}",
-           "\t\\centering", "\t\\begin{tabular}{llllcccc}", "\t\t\\toprule",
-           "\t\tEnv. & Model & vs & Query & success diff. & McNemar $p$ & cost ratio diff. & "
-           "Wilcoxon $p$ \\\\", "\t\t\\midrule"]
+    out = [
+        "\\begin{table}",
+        "\t\\caption{" + title + ": paired comparisons on the same test queries (model "
+        "minus baseline). Success difference with Newcombe's paired 95\\% interval and "
+        "McNemar's exact $p$; cost ratio difference over the queries both solve, with a "
+        "paired bootstrap 95\\% interval and the Wilcoxon signed-rank $p$.}",
+        "\t\\centering",
+        "\t\\begin{tabular}{llllcccc}",
+        "\t\t\\toprule",
+        "\t\tEnv. & Model & vs & Query & success diff. & McNemar $p$ & cost ratio diff. & "
+        "Wilcoxon $p$ \\\\",
+        "\t\t\\midrule",
+    ]
     for c in comps:
         vs = _tex_model(c["baseline"]) + (" (best)" if c.get("baseline_rule") else "")
         kind = "non-trivial" if c["query_kind"] == "nontrivial" else c["query_kind"]
-        out.append(f"\t\t{c['env']} & {_tex_model(c['model'])} & {vs} & {kind} & "
-                   f"{estimate(c['success_diff'], c['success_diff_ci95'])} & "
-                   f"{_tex_p(c['mcnemar_p'])} & "
-                   f"{estimate(c['cost_ratio_diff'], c['cost_ratio_diff_ci95'])} & "
-                   f"{_tex_p(c['wilcoxon_p'])} \\\\")
+        out.append(
+            f"\t\t{c['env']} & {_tex_model(c['model'])} & {vs} & {kind} & "
+            f"{estimate(c['success_diff'], c['success_diff_ci95'])} & "
+            f"{_tex_p(c['mcnemar_p'])} & "
+            f"{estimate(c['cost_ratio_diff'], c['cost_ratio_diff_ci95'])} & "
+            f"{_tex_p(c['wilcoxon_p'])} \\\\"
+        )
     return out + ["\t\t\\bottomrule", "\t\\end{tabular}", "\\end{table}", ""]
 
 
@@ -355,26 +455,39 @@ def tables_tex(rows, comparisons: list[dict] | None = None) -> str:
                 out += ["\t\\vspace{0.5em}", f"\t\\\\{tex} \\\\"]
             else:
                 out += [f"\t{tex} \\\\"]
-            out += ["\t\\vspace{0.2em}", "\t\\begin{tabular}{lcccc}", "\t\t\\toprule",
-                    "\t\t\\multirow{2}{*}{Model} & \\multicolumn{2}{c}{Uniform Query} & "
-                    "\\multicolumn{2}{c}{Non-trivial Query} \\\\",
-                    "\t\t& {success ratio} & {cost ratio} & {success ratio} & {cost ratio} \\\\",
-                    "\t\t\\midrule"]
+            out += [
+                "\t\\vspace{0.2em}",
+                "\t\\begin{tabular}{lcccc}",
+                "\t\t\\toprule",
+                "\t\t\\multirow{2}{*}{Model} & \\multicolumn{2}{c}{Uniform Query} & "
+                "\\multicolumn{2}{c}{Non-trivial Query} \\\\",
+                "\t\t& {success ratio} & {cost ratio} & {success ratio} & {cost ratio} \\\\",
+                "\t\t\\midrule",
+            ]
             for m in _models(block):
-                cells = _cells(block, m, lambda r: [fixed(r["success_ratio"]), fixed(r["cost_ratio"])])
+                cells = _cells(
+                    block, m, lambda r: [fixed(r["success_ratio"]), fixed(r["cost_ratio"])]
+                )
                 out.append(f"\t\t{_tex_model(m)} & " + " & ".join(cells) + " \\\\")
             out += ["\t\t\\bottomrule", "\t\\end{tabular}"]
         out += ["\\end{table}", ""]
-        out += _comparison_tex(cap, [c for c in comparisons or ()
-                                     if (c["task"], c["steer"]) == (task, steer)])
+        out += _comparison_tex(
+            cap, [c for c in comparisons or () if (c["task"], c["steer"]) == (task, steer)]
+        )
     return "\n".join(out)
 
 
 def _comparison_csv(c: dict) -> dict:
-    out = {"vs_model": c["baseline"], "vs_only_model": c["only_a"],
-           "vs_only_baseline": c["only_b"], "vs_success_diff": c["success_diff"],
-           "vs_mcnemar_p": c["mcnemar_p"], "vs_cost_n": c["cost_n"],
-           "vs_cost_ratio_diff": c["cost_ratio_diff"], "vs_wilcoxon_p": c["wilcoxon_p"]}
+    out = {
+        "vs_model": c["baseline"],
+        "vs_only_model": c["only_a"],
+        "vs_only_baseline": c["only_b"],
+        "vs_success_diff": c["success_diff"],
+        "vs_mcnemar_p": c["mcnemar_p"],
+        "vs_cost_n": c["cost_n"],
+        "vs_cost_ratio_diff": c["cost_ratio_diff"],
+        "vs_wilcoxon_p": c["wilcoxon_p"],
+    }
     out["vs_success_diff_ci95_lo"], out["vs_success_diff_ci95_hi"] = c["success_diff_ci95"]
     out["vs_cost_ratio_diff_ci95_lo"], out["vs_cost_ratio_diff_ci95_hi"] = c["cost_ratio_diff_ci95"]
     return out
@@ -418,8 +531,15 @@ def timings_csv(rows) -> str:
 # Everything
 # ---------------------------------------------------------------------------
 
-def write_report(run_dir, rows: list[dict], envs: dict | None = None, meta: dict | None = None,
-                 figures: bool = True, pairs=DEFAULT_PAIRS) -> dict:
+
+def write_report(
+    run_dir,
+    rows: list[dict],
+    envs: dict | None = None,
+    meta: dict | None = None,
+    figures: bool = True,
+    pairs=DEFAULT_PAIRS,
+) -> dict:
     """Writes results.json/csv, tables.md/tex, timings.csv and the figures; returns their paths.
 
     Args:
@@ -431,12 +551,17 @@ def write_report(run_dir, rows: list[dict], envs: dict | None = None, meta: dict
         pairs: the paired comparisons, ``[(model, baseline), ...]`` (see :func:`comparisons`).
     """
     run_dir = Path(run_dir)
-    out = {name: run_dir / name
-           for name in ("results.json", "results.csv", "tables.md", "tables.tex", "timings.csv")}
+    out = {
+        name: run_dir / name
+        for name in ("results.json", "results.csv", "tables.md", "tables.tex", "timings.csv")
+    }
     comps = comparisons(run_dir, rows, pairs)
-    artifacts.write_json(out["results.json"],
-                         {"meta": meta or {}, "rows": rows, "comparisons": comps}, indent=1,
-                         default=str)
+    artifacts.write_json(
+        out["results.json"],
+        {"meta": meta or {}, "rows": rows, "comparisons": comps},
+        indent=1,
+        default=str,
+    )
     artifacts.write_text(out["results.csv"], results_csv(rows, comps))
     artifacts.write_text(out["tables.md"], tables_md(rows, comps))
     artifacts.write_text(out["tables.tex"], tables_tex(rows, comps))
@@ -451,18 +576,35 @@ def _figures(run_dir: Path, rows: list[dict], envs: dict) -> dict:
     figs = run_dir / "figures"
     written = []
     for steer in sorted({r["steer"] for r in rows}, reverse=True):
-        written.append(plotting.success_figure(
-            rows, figs / f"success_ratio{'' if steer else '_nosteer'}.png", steer))
+        written.append(
+            plotting.success_figure(
+                rows, figs / f"success_ratio{'' if steer else '_nosteer'}.png", steer
+            )
+        )
     for name, env in envs.items():
         slug = env_slug(name, env)
         steer = any(r["steer"] for r in rows if r["env"] == name)
-        mine = [r for r in rows if r["env"] == name and r["steer"] == steer
-                and r["query_kind"] == "nontrivial"]
-        saved = {r["model"]: artifacts.load_npz(run_dir / r["paths_file"])
-                 for r in sorted(mine, key=lambda r: _model_key(r["model"]))}
+        mine = [
+            r
+            for r in rows
+            if r["env"] == name and r["steer"] == steer and r["query_kind"] == "nontrivial"
+        ]
+        saved = {
+            r["model"]: artifacts.load_npz(run_dir / r["paths_file"])
+            for r in sorted(mine, key=lambda r: _model_key(r["model"]))
+        }
         eval_dir = run_dir / "eval" / slug
-        written.append(plotting.examples_figure(env, artifacts.load_npz(eval_dir / "reference.npz"),
-                                                saved, figs / f"examples_{slug}.png"))
-        written.append(plotting.queries_figure(env, artifacts.load_npz(eval_dir / "queries.npz"),
-                                               figs / f"queries_{slug}.png"))
+        written.append(
+            plotting.examples_figure(
+                env,
+                artifacts.load_npz(eval_dir / "reference.npz"),
+                saved,
+                figs / f"examples_{slug}.png",
+            )
+        )
+        written.append(
+            plotting.queries_figure(
+                env, artifacts.load_npz(eval_dir / "queries.npz"), figs / f"queries_{slug}.png"
+            )
+        )
     return {p.name: p for p in written if p}

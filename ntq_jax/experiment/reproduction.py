@@ -98,17 +98,38 @@ from pathlib import Path
 from ntq_jax import artifacts
 from ntq_jax.experiment import factor_table, seed_tables
 from ntq_jax.experiment.claims import claims
-from ntq_jax.experiment.formatting import (fixed, interval, kind_name, model_key, ms, num,
-                                           p_value, signed)
+from ntq_jax.experiment.formatting import (
+    fixed,
+    interval,
+    kind_name,
+    model_key,
+    ms,
+    num,
+    p_value,
+    signed,
+)
 from ntq_jax.experiment.paper import KINDS, MAPS, MEMBERS, PAPER, PAPER_TABLES
 from ntq_jax.experiment.seed_tables import seed_variance, seed_variance_diffs
-from ntq_jax.experiment.summaries import (check_seed_runs, check_summary,
-                                          is_seed_run, k_train_of, load_summaries, main_runs,
-                                          run_cells)
+from ntq_jax.experiment.summaries import (
+    check_seed_runs,
+    check_summary,
+    is_seed_run,
+    k_train_of,
+    load_summaries,
+    main_runs,
+    run_cells,
+)
 from ntq_jax.experiment.verdict_tables import claims_section, summary_page
 
-__all__ = ["DOC_NAME", "seed_variance", "seed_variance_diffs", "summary_page", "render", "write",
-           "check"]
+__all__ = [
+    "DOC_NAME",
+    "seed_variance",
+    "seed_variance_diffs",
+    "summary_page",
+    "render",
+    "write",
+    "check",
+]
 
 DOC_NAME = "REPRODUCTION.md"
 
@@ -117,43 +138,56 @@ def _root_label(root) -> str:
     """``root`` as the repository spells it (from its ``results`` folder on), whatever the
     working directory."""
     parts = Path(root).resolve().parts
-    return "/".join(parts[parts.index("results"):]) if "results" in parts else Path(root).name
+    return "/".join(parts[parts.index("results") :]) if "results" in parts else Path(root).name
 
 
 def _header(summaries, label: str = "results/paper") -> list[str]:
     cmds = sorted({s.get("command") for s in summaries if s.get("command")})
-    out = ["# Reproduction of the paper's Tables I-IV", "",
-           'Paper: Sagar Suhas Joshi and Panagiotis Tsiotras, "Non-Trivial Query Sampling For '
-           'Efficient Learning To Plan". Its numbers and sizes are transcribed in '
-           "`ntq_jax/experiment/paper.py` (`PAPER`, `PAPER_K_TRAIN`, `PAPER_K_TEST`, `PAPER_PADDING`).",
-           "",
-           "Generated from the committed summaries (`<task>/<map>/summary.json`, seed runs in "
-           "`<task>/<map>/seeds/train_seed_<k>/summary.json`) by "
-           f"`python scripts/reproduce.py --report-only --results {label}` (do not edit by hand; "
-           "add `--check` to tell whether it is current). "
-           "The summaries were made with:", ""]
+    out = [
+        "# Reproduction of the paper's Tables I-IV",
+        "",
+        'Paper: Sagar Suhas Joshi and Panagiotis Tsiotras, "Non-Trivial Query Sampling For '
+        'Efficient Learning To Plan". Its numbers and sizes are transcribed in '
+        "`ntq_jax/experiment/paper.py` (`PAPER`, `PAPER_K_TRAIN`, `PAPER_K_TEST`, `PAPER_PADDING`).",
+        "",
+        "Generated from the committed summaries (`<task>/<map>/summary.json`, seed runs in "
+        "`<task>/<map>/seeds/train_seed_<k>/summary.json`) by "
+        f"`python scripts/reproduce.py --report-only --results {label}` (do not edit by hand; "
+        "add `--check` to tell whether it is current). "
+        "The summaries were made with:",
+        "",
+    ]
     out += [f"    {c}" for c in cmds] or ["    (no summary yet: `python scripts/reproduce.py ...`)"]
-    out += ["", "Success ratio: successes / K_test, with its 95% Wilson interval. Cost ratio: "
-            "neural cost / reference planner cost, mean over the queries both solve. Paired "
-            "differences in Tables I-IV are those of the main run (training seed 0) on the same "
-            "test queries: model minus baseline, Newcombe's 95% interval and McNemar's exact p, "
-            "which account for the test queries only, not for training; the verdicts (the "
-            "summary above and the claims at the end) use the seed-aware test instead.", "",
-            "Test queries: every query sampled at padding 0 (the evaluation geometry), the "
-            "population the headline tables use, since the paper's padding \"was propagated "
-            "during the data generation step, and was relaxed during the final performance "
-            "evaluation step\" (Section V). Some of them have an endpoint inside the data "
-            "padding's band, where no training state lies: the queries in band (both ends "
-            "valid at the data padding) and out of band are reported apart in the factor "
-            "study's section below, where the results have one.", ""]
+    out += [
+        "",
+        "Success ratio: successes / K_test, with its 95% Wilson interval. Cost ratio: "
+        "neural cost / reference planner cost, mean over the queries both solve. Paired "
+        "differences in Tables I-IV are those of the main run (training seed 0) on the same "
+        "test queries: model minus baseline, Newcombe's 95% interval and McNemar's exact p, "
+        "which account for the test queries only, not for training; the verdicts (the "
+        "summary above and the claims at the end) use the seed-aware test instead.",
+        "",
+        "Test queries: every query sampled at padding 0 (the evaluation geometry), the "
+        "population the headline tables use, since the paper's padding \"was propagated "
+        "during the data generation step, and was relaxed during the final performance "
+        'evaluation step" (Section V). Some of them have an endpoint inside the data '
+        "padding's band, where no training state lies: the queries in band (both ends "
+        "valid at the data padding) and out of band are reported apart in the factor "
+        "study's section below, where the results have one.",
+        "",
+    ]
     return out
 
 
 def _coverage(summaries) -> list[str]:
     main = main_runs(summaries)
-    out = ["## Coverage", "",
-           "| Table | Map | status | K_train | K_test | padding | train seed | package | "
-           "config hash | finished | check |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+    out = [
+        "## Coverage",
+        "",
+        "| Table | Map | status | K_train | K_test | padding | train seed | package | "
+        "config hash | finished | check |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
     missing = []
     for tid, spec in PAPER_TABLES.items():
         for env in spec["envs"]:
@@ -165,15 +199,20 @@ def _coverage(summaries) -> list[str]:
                 continue
             probs = check_summary(s)
             cfg = s.get("config") or {}
-            out.append(f"| {tid} | {env} | present | {k_train_of(cfg, env)} | "
-                       f"{cfg.get('eval', {}).get('k_test')} | {s.get('padding')} | "
-                       f"{s.get('train_seed')} | {s.get('package_version', '-')} | "
-                       f"{s.get('config_hash', '-')} | {s.get('finished', '-')} | "
-                       f"{'ok' if not probs else '; '.join(probs)} |")
+            out.append(
+                f"| {tid} | {env} | present | {k_train_of(cfg, env)} | "
+                f"{cfg.get('eval', {}).get('k_test')} | {s.get('padding')} | "
+                f"{s.get('train_seed')} | {s.get('package_version', '-')} | "
+                f"{s.get('config_hash', '-')} | {s.get('finished', '-')} | "
+                f"{'ok' if not probs else '; '.join(probs)} |"
+            )
     n_maps = sum(1 for e in MAPS if e in main and run_cells(main[e], True))
     n3 = sum(1 for e in PAPER_TABLES["III"]["envs"] if e in main and run_cells(main[e], False))
-    out += ["", f"Maps with steerTo: {n_maps} of {len(MAPS)}; Table III (rigid without "
-            f"steerTo): {n3} of {len(PAPER_TABLES['III']['envs'])}."]
+    out += [
+        "",
+        f"Maps with steerTo: {n_maps} of {len(MAPS)}; Table III (rigid without "
+        f"steerTo): {n3} of {len(PAPER_TABLES['III']['envs'])}.",
+    ]
     out.append("Missing: " + (", ".join(missing) if missing else "none") + ".")
     extra = sorted({s.get("env") for s in summaries if s.get("env") not in MAPS}, key=str)
     if extra:
@@ -183,9 +222,11 @@ def _coverage(summaries) -> list[str]:
         ks = sorted({s.get("train_seed") for s in summaries if s.get("env") == env}, key=str)
         if ks:
             seeds.append(f"{env} {len(ks)} ({', '.join(map(str, ks))})")
-    bad = [f"`{s['_path']}`: {'; '.join(p)}." for s in summaries
-           if is_seed_run(s) and (p := check_summary(s))] + [
-        f"{p}." for p in check_seed_runs(summaries)]
+    bad = [
+        f"`{s['_path']}`: {'; '.join(p)}."
+        for s in summaries
+        if is_seed_run(s) and (p := check_summary(s))
+    ] + [f"{p}." for p in check_seed_runs(summaries)]
     out += [f"Training seeds per map (the same data; `seeds/train_seed_<k>`): {'; '.join(seeds)}."]
     if bad:
         out += ["Seed-run problems: " + " ".join(bad)]
@@ -198,45 +239,69 @@ def _table_block(tid: str, env: str, s) -> list[str]:
     cell = run_cells(s, spec["steer"])
     r0 = cell.get(("PNet_0", "uniform")) or next(iter(cell.values()), None)
     g = None if r0 is None else r0.get("gamma_nt")
-    out = [f"### {env}: gamma_nt {fixed(g)}{interval(None if r0 is None else r0.get('gamma_nt_ci95'))} "
-           f"(paper {paper['gamma_nt']:.3f})", ""]
+    out = [
+        f"### {env}: gamma_nt {fixed(g)}{interval(None if r0 is None else r0.get('gamma_nt_ci95'))} "
+        f"(paper {paper['gamma_nt']:.3f})",
+        "",
+    ]
     if not cell:
         return out + ["Not run yet.", ""]
-    out += ["| Model | uniform success [95%] | paper | uniform cost ratio | paper | "
-            "non-trivial success [95%] | paper | non-trivial cost ratio | paper |",
-            "|---|---|---|---|---|---|---|---|---|"]
+    out += [
+        "| Model | uniform success [95%] | paper | uniform cost ratio | paper | "
+        "non-trivial success [95%] | paper | non-trivial cost ratio | paper |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
     models = sorted({m for m, _ in cell} | set(MEMBERS), key=model_key)
     for m in models:
         cells = []
         for kind in KINDS:
             r = cell.get((m, kind))
             pm = paper["models"].get(m, {}).get(kind)
-            cells += [("-" if r is None else fixed(r["success_ratio"]) + interval(r.get("success_ci95"))),
-                      "-" if pm is None else fixed(pm["success"]),
-                      "-" if r is None else fixed(r.get("cost_ratio")),
-                      "-" if pm is None else fixed(pm["cost"])]
+            cells += [
+                ("-" if r is None else fixed(r["success_ratio"]) + interval(r.get("success_ci95"))),
+                "-" if pm is None else fixed(pm["success"]),
+                "-" if r is None else fixed(r.get("cost_ratio")),
+                "-" if pm is None else fixed(pm["cost"]),
+            ]
         out.append(f"| {m} | " + " | ".join(cells) + " |")
-    refs = sorted({(r.get("reference_planner"), r.get("data_planner")) for r in cell.values()},
-                  key=str)
-    out += ["", "Reference planner (cost ratio denominator): " +
-            ", ".join(f"{a} (data: {b})" for a, b in refs) + "."]
-    comps = sorted((c for c in s.get("comparisons", [])
-                    if bool(c.get("steer", True)) == spec["steer"]),
-                   key=lambda c: (model_key(c["model"]), KINDS.index(c["query_kind"])
-                                  if c["query_kind"] in KINDS else 9))
+    refs = sorted(
+        {(r.get("reference_planner"), r.get("data_planner")) for r in cell.values()}, key=str
+    )
+    out += [
+        "",
+        "Reference planner (cost ratio denominator): "
+        + ", ".join(f"{a} (data: {b})" for a, b in refs)
+        + ".",
+    ]
+    comps = sorted(
+        (c for c in s.get("comparisons", []) if bool(c.get("steer", True)) == spec["steer"]),
+        key=lambda c: (
+            model_key(c["model"]),
+            KINDS.index(c["query_kind"]) if c["query_kind"] in KINDS else 9,
+        ),
+    )
     if comps:
-        out += ["", "| Model | vs | kind | success diff [95%] | McNemar p | paper diff | "
-                "cost ratio diff [95%] | Wilcoxon p |", "|---|---|---|---|---|---|---|---|"]
+        out += [
+            "",
+            "| Model | vs | kind | success diff [95%] | McNemar p | paper diff | "
+            "cost ratio diff [95%] | Wilcoxon p |",
+            "|---|---|---|---|---|---|---|---|",
+        ]
         for c in comps:
             pm, pb = paper["models"].get(c["model"]), paper["models"].get(c["baseline"])
-            pdiff = ("-" if pm is None or pb is None or c.get("baseline_rule")
-                     else signed(pm[c["query_kind"]]["success"] - pb[c["query_kind"]]["success"]))
+            pdiff = (
+                "-"
+                if pm is None or pb is None or c.get("baseline_rule")
+                else signed(pm[c["query_kind"]]["success"] - pb[c["query_kind"]]["success"])
+            )
             vs = c["baseline"] + (f" ({c['baseline_rule']})" if c.get("baseline_rule") else "")
-            out.append(f"| {c['model']} | {vs} | {kind_name(c['query_kind'])} | "
-                       f"{signed(c['success_diff'])}{interval(c.get('success_diff_ci95'))} | "
-                       f"{p_value(c.get('mcnemar_p'))} | {pdiff} | "
-                       f"{signed(c.get('cost_ratio_diff'))}{interval(c.get('cost_ratio_diff_ci95'))} | "
-                       f"{p_value(c.get('wilcoxon_p'))} |")
+            out.append(
+                f"| {c['model']} | {vs} | {kind_name(c['query_kind'])} | "
+                f"{signed(c['success_diff'])}{interval(c.get('success_diff_ci95'))} | "
+                f"{p_value(c.get('mcnemar_p'))} | {pdiff} | "
+                f"{signed(c.get('cost_ratio_diff'))}{interval(c.get('cost_ratio_diff_ci95'))} | "
+                f"{p_value(c.get('wilcoxon_p'))} |"
+            )
     return out + [""]
 
 
@@ -254,33 +319,51 @@ def _datasets(summaries) -> list[str]:
     """Per map, each dataset's planned paths, samples and mean states per data path (the
     summaries that record them)."""
     main = main_runs(summaries)
-    rows = [(env, main[env]["datasets"]) for env in MAPS
-            if env in main and isinstance(main[env].get("datasets"), dict)]
+    rows = [
+        (env, main[env]["datasets"])
+        for env in MAPS
+        if env in main and isinstance(main[env].get("datasets"), dict)
+    ]
     if not rows:
         return []
     names = sorted({n for _, d in rows for n in d}, key=lambda n: (len(n), n))
-    out = ["## Datasets", "",
-           "Per dataset: planned paths used / samples written (includeData, Alg. 4) / mean "
-           "states per data path; D3's samples are D2's paths after pruning.", "",
-           "| Map | data paths | " + " | ".join(names) + " |",
-           "|---|---|" + "---|" * len(names)]
+    out = [
+        "## Datasets",
+        "",
+        "Per dataset: planned paths used / samples written (includeData, Alg. 4) / mean "
+        "states per data path; D3's samples are D2's paths after pruning.",
+        "",
+        "| Map | data paths | " + " | ".join(names) + " |",
+        "|---|---|" + "---|" * len(names),
+    ]
     for env, d in rows:
         cfg = (main[env].get("config") or {}).get("planner") or {}
-        mode = next((o.get("data_paths") for o in cfg.get("per_env") or ()
-                     if o.get("env") == env and o.get("data_paths") is not None),
-                    cfg.get("data_paths"))
-        cells = [f"{v['paths']} / {v['samples']} / {v['states_per_path']:.1f}" if v else "-"
-                 for v in (d.get(n) for n in names)]
+        mode = next(
+            (
+                o.get("data_paths")
+                for o in cfg.get("per_env") or ()
+                if o.get("env") == env and o.get("data_paths") is not None
+            ),
+            cfg.get("data_paths"),
+        )
+        cells = [
+            f"{v['paths']} / {v['samples']} / {v['states_per_path']:.1f}" if v else "-"
+            for v in (d.get(n) for n in names)
+        ]
         out.append(f"| {env} | {'default' if mode is None else mode} | " + " | ".join(cells) + " |")
     return out + [""]
 
 
 def _times(summaries) -> list[str]:
     main = main_runs(summaries)
-    out = ["## Time per query (ms)", "",
-           "Neural planner per model, and the reference planner, per test query (mean).", "",
-           "| Map | steerTo | kind | " + " | ".join(MEMBERS) + " | ensemble rows | reference |",
-           "|---|---|---|" + "---|" * len(MEMBERS) + "---|---|"]
+    out = [
+        "## Time per query (ms)",
+        "",
+        "Neural planner per model, and the reference planner, per test query (mean).",
+        "",
+        "| Map | steerTo | kind | " + " | ".join(MEMBERS) + " | ensemble rows | reference |",
+        "|---|---|---|" + "---|" * len(MEMBERS) + "---|---|",
+    ]
     for env in MAPS:
         s = main.get(env)
         for steer in (True, False):
@@ -289,14 +372,29 @@ def _times(summaries) -> list[str]:
                 rows = {m: r for (m, k), r in cell.items() if k == kind}
                 if not rows:
                     continue
-                ens = ", ".join(f"{m} {ms(rows[m].get('seconds_per_query'))}"
-                                for m in sorted(rows, key=model_key) if m not in MEMBERS) or "-"
+                ens = (
+                    ", ".join(
+                        f"{m} {ms(rows[m].get('seconds_per_query'))}"
+                        for m in sorted(rows, key=model_key)
+                        if m not in MEMBERS
+                    )
+                    or "-"
+                )
                 ref = next((r.get("reference_seconds_per_query") for r in rows.values()), None)
-                out.append(f"| {env} | {'yes' if steer else 'no'} | {kind_name(kind)} | " +
-                           " | ".join(ms(rows[m].get("seconds_per_query")) if m in rows else "-"
-                                      for m in MEMBERS) + f" | {ens} | {ms(ref)} |")
-    out += ["", "## Time per stage (s)", "", "| Run | data | train | eval | total |",
-            "|---|---|---|---|---|"]
+                out.append(
+                    f"| {env} | {'yes' if steer else 'no'} | {kind_name(kind)} | "
+                    + " | ".join(
+                        ms(rows[m].get("seconds_per_query")) if m in rows else "-" for m in MEMBERS
+                    )
+                    + f" | {ens} | {ms(ref)} |"
+                )
+    out += [
+        "",
+        "## Time per stage (s)",
+        "",
+        "| Run | data | train | eval | total |",
+        "|---|---|---|---|---|",
+    ]
     tot = {"data": 0.0, "train": 0.0, "eval": 0.0}
     for s in summaries:
         tm = s.get("timings") or {}
@@ -304,10 +402,16 @@ def _times(summaries) -> list[str]:
         for k, v in zip(tot, vals):
             tot[k] += v if num(v) else 0.0
         run = s.get("env", "?") + (f" (train seed {s.get('train_seed')})" if is_seed_run(s) else "")
-        out.append(f"| {run} | " + " | ".join(fixed(v, 1) for v in vals) +
-                   f" | {fixed(sum(v for v in vals if num(v)), 1)} |")
-    out.append("| total | " + " | ".join(fixed(v, 1) for v in tot.values()) +
-               f" | {fixed(sum(tot.values()), 1)} |")
+        out.append(
+            f"| {run} | "
+            + " | ".join(fixed(v, 1) for v in vals)
+            + f" | {fixed(sum(v for v in vals if num(v)), 1)} |"
+        )
+    out.append(
+        "| total | "
+        + " | ".join(fixed(v, 1) for v in tot.values())
+        + f" | {fixed(sum(tot.values()), 1)} |"
+    )
     return out + [""]
 
 
@@ -322,10 +426,18 @@ def render(root, factors=None) -> str:
     factors = Path(root).parent / "factors" if factors is None else Path(factors)
     cs = claims(summaries)
     head = _header(summaries, _root_label(root))
-    lines = (head[:2] + summary_page(cs) + head[2:] + _coverage(summaries) + _tables(summaries)
-             + factor_table.section(factors, _root_label(factors))
-             + _datasets(summaries) + _times(summaries)
-             + seed_tables.section(summaries) + claims_section(cs))
+    lines = (
+        head[:2]
+        + summary_page(cs)
+        + head[2:]
+        + _coverage(summaries)
+        + _tables(summaries)
+        + factor_table.section(factors, _root_label(factors))
+        + _datasets(summaries)
+        + _times(summaries)
+        + seed_tables.section(summaries)
+        + claims_section(cs)
+    )
     return "\n".join(lines).rstrip("\n") + "\n"
 
 

@@ -10,16 +10,28 @@ naming the key. ``model`` and ``train`` are the core's own
 from __future__ import annotations
 
 import dataclasses
-import typing
 import math
+import typing
 from typing import Optional
 
 from ntq_jax.errors import check_config as _check
 from ntq_jax.neural_options import NOSTEER_CHECKS
 
-__all__ = ["SamplingConfig", "PRUNE_GAMMA", "PRUNE_KEEP_LAST", "DatasetSpec",
-           "DataEnvOverride", "DataConfig", "PlannerEnvOverride", "PLANNERS",
-           "DATA_PATH_MODES", "validate_mode", "PlannerConfig", "ENSEMBLE_ROWS", "EvalConfig"]
+__all__ = [
+    "SamplingConfig",
+    "PRUNE_GAMMA",
+    "PRUNE_KEEP_LAST",
+    "DatasetSpec",
+    "DataEnvOverride",
+    "DataConfig",
+    "PlannerEnvOverride",
+    "PLANNERS",
+    "DATA_PATH_MODES",
+    "validate_mode",
+    "PlannerConfig",
+    "ENSEMBLE_ROWS",
+    "EvalConfig",
+]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -75,23 +87,34 @@ class DatasetSpec:
         _check(0.0 <= self.p_nt <= 1.0, f"{p}.p_nt", f"must be in [0, 1], got {self.p_nt}")
         pr = self.prune
         if isinstance(pr, str):
-            _check(pr in (PRUNE_GAMMA, PRUNE_KEEP_LAST), f"{p}.prune",
-                   f"must be true, false, a probability in [0, 1], {PRUNE_GAMMA!r} or "
-                   f"{PRUNE_KEEP_LAST!r}; got {pr!r}")
+            _check(
+                pr in (PRUNE_GAMMA, PRUNE_KEEP_LAST),
+                f"{p}.prune",
+                f"must be true, false, a probability in [0, 1], {PRUNE_GAMMA!r} or "
+                f"{PRUNE_KEEP_LAST!r}; got {pr!r}",
+            )
         elif not isinstance(pr, bool):
-            _check(0.0 <= pr <= 1.0, f"{p}.prune",
-                   f"a pruning probability must be in [0, 1], got {pr}")
+            _check(
+                0.0 <= pr <= 1.0, f"{p}.prune", f"a pruning probability must be in [0, 1], got {pr}"
+            )
 
     @property
     def prunes(self) -> bool:
         """Whether any sample may be pruned (``false`` and ``0`` never prune)."""
-        return self.prune is True or isinstance(self.prune, str) or (
-            not isinstance(self.prune, bool) and self.prune > 0.0)
+        return (
+            self.prune is True
+            or isinstance(self.prune, str)
+            or (not isinstance(self.prune, bool) and self.prune > 0.0)
+        )
 
 
 def _paper_datasets() -> tuple[DatasetSpec, ...]:
-    return (DatasetSpec(0.0, False), DatasetSpec(0.5, False), DatasetSpec(1.0, False),
-            DatasetSpec(1.0, True))
+    return (
+        DatasetSpec(0.0, False),
+        DatasetSpec(0.5, False),
+        DatasetSpec(1.0, False),
+        DatasetSpec(1.0, True),
+    )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -115,8 +138,11 @@ class DataEnvOverride:
 
     def validate(self, p: str):
         _check(bool(self.env), f"{p}.env", "must name an environment")
-        _check(self.k_train is None or self.k_train >= 1, f"{p}.k_train",
-               f"must be >= 1 or null, got {self.k_train}")
+        _check(
+            self.k_train is None or self.k_train >= 1,
+            f"{p}.k_train",
+            f"must be >= 1 or null, got {self.k_train}",
+        )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -153,17 +179,26 @@ class DataConfig:
         _check(len(self.datasets) >= 1, f"{p}.datasets", "must list at least one dataset")
         for i, d in enumerate(self.datasets):
             d.validate(f"{p}.datasets[{i}]")
-            _check(d.name is None or d.name == f"D{i}", f"{p}.datasets[{i}].name",
-                   f"datasets are named by position: entry {i} is D{i}, got {d.name!r}")
-        _check(self.prune_padding is None or self.prune_padding >= 0, f"{p}.prune_padding",
-               f"must be >= 0 or null, got {self.prune_padding}")
+            _check(
+                d.name is None or d.name == f"D{i}",
+                f"{p}.datasets[{i}].name",
+                f"datasets are named by position: entry {i} is D{i}, got {d.name!r}",
+            )
+        _check(
+            self.prune_padding is None or self.prune_padding >= 0,
+            f"{p}.prune_padding",
+            f"must be >= 0 or null, got {self.prune_padding}",
+        )
         _check(self.chunk >= 1, f"{p}.chunk", f"must be >= 1, got {self.chunk}")
-        _check(self.gamma_queries >= 1, f"{p}.gamma_queries",
-               f"must be >= 1, got {self.gamma_queries}")
+        _check(
+            self.gamma_queries >= 1, f"{p}.gamma_queries", f"must be >= 1, got {self.gamma_queries}"
+        )
         for i, o in enumerate(self.per_env):
             o.validate(f"{p}.per_env[{i}]")
         names = [o.env for o in self.per_env]
-        _check(len(set(names)) == len(names), f"{p}.per_env", f"lists an environment twice: {names}")
+        _check(
+            len(set(names)) == len(names), f"{p}.per_env", f"lists an environment twice: {names}"
+        )
 
     def paths_from_for(self, env: str) -> str | None:
         """The recorded data paths of ``env`` (its override's ``paths_from``), or None."""
@@ -202,8 +237,11 @@ class PlannerEnvOverride:
 
     def validate(self, p: str):
         _check(bool(self.env), f"{p}.env", "must name an environment")
-        _check(self.name is None or self.name in PLANNERS, f"{p}.name",
-               f"must be one of {', '.join(PLANNERS)} or null; got {self.name!r}")
+        _check(
+            self.name is None or self.name in PLANNERS,
+            f"{p}.name",
+            f"must be one of {', '.join(PLANNERS)} or null; got {self.name!r}",
+        )
         for k in ("time_budget", "eval_time_budget"):
             v = getattr(self, k)
             _check(v is None or v > 0, f"{p}.{k}", f"must be > 0 or null, got {v}")
@@ -268,27 +306,44 @@ class PlannerConfig:
     _OMIT_NONE = ("data_paths", "smooth_data")
 
     def validate(self, p: str):
-        _check(self.name in PLANNERS, f"{p}.name",
-               f"must be one of {', '.join(PLANNERS)}; got {self.name!r}")
+        _check(
+            self.name in PLANNERS,
+            f"{p}.name",
+            f"must be one of {', '.join(PLANNERS)}; got {self.name!r}",
+        )
         _check(self.milestones >= 2, f"{p}.milestones", f"must be >= 2, got {self.milestones}")
-        _check(self.neighbors is None or self.neighbors >= 1, f"{p}.neighbors",
-               f"must be >= 1 or null, got {self.neighbors}")
-        _check(0 <= self.grow_rounds <= 8, f"{p}.grow_rounds",
-               f"must be in [0, 8], got {self.grow_rounds}")
+        _check(
+            self.neighbors is None or self.neighbors >= 1,
+            f"{p}.neighbors",
+            f"must be >= 1 or null, got {self.neighbors}",
+        )
+        _check(
+            0 <= self.grow_rounds <= 8,
+            f"{p}.grow_rounds",
+            f"must be in [0, 8], got {self.grow_rounds}",
+        )
         _check(self.resolution > 0, f"{p}.resolution", f"must be > 0, got {self.resolution}")
         _check(self.time_budget > 0, f"{p}.time_budget", f"must be > 0, got {self.time_budget}")
-        _check(self.eval_time_budget > 0, f"{p}.eval_time_budget",
-               f"must be > 0, got {self.eval_time_budget}")
+        _check(
+            self.eval_time_budget > 0,
+            f"{p}.eval_time_budget",
+            f"must be > 0, got {self.eval_time_budget}",
+        )
         _check(self.workers >= 0, f"{p}.workers", f"must be >= 0, got {self.workers}")
         why = validate_mode(self.data_paths)
         _check(why is None, f"{p}.data_paths", why or "")
-        _check(self.data_paths is None or self.smooth_data is None, f"{p}.smooth_data",
-               "is the earlier spelling of data_paths; set only data_paths "
-               "(raw for false, shortcut for true)")
+        _check(
+            self.data_paths is None or self.smooth_data is None,
+            f"{p}.smooth_data",
+            "is the earlier spelling of data_paths; set only data_paths "
+            "(raw for false, shortcut for true)",
+        )
         for i, o in enumerate(self.per_env):
             o.validate(f"{p}.per_env[{i}]")
         names = [o.env for o in self.per_env]
-        _check(len(set(names)) == len(names), f"{p}.per_env", f"lists an environment twice: {names}")
+        _check(
+            len(set(names)) == len(names), f"{p}.per_env", f"lists an environment twice: {names}"
+        )
 
     def _for(self, env: str, key: str) -> float:
         for o in self.per_env:
@@ -406,28 +461,52 @@ class EvalConfig:
 
     def validate(self, p: str):
         for i, e in enumerate(self.ensemble_rows):
-            _check(e in ENSEMBLE_ROWS, f"{p}.ensemble[{i}]",
-                   f"must be one of {', '.join(ENSEMBLE_ROWS)}, got {e!r}")
-        _check(len(set(self.ensemble_rows)) == len(self.ensemble_rows), f"{p}.ensemble",
-               f"lists a row twice: {list(self.ensemble_rows)}")
-        _check(self.motion_check in ("discretized", "certified"), f"{p}.motion_check",
-               f"must be certified or discretized, got {self.motion_check!r}")
+            _check(
+                e in ENSEMBLE_ROWS,
+                f"{p}.ensemble[{i}]",
+                f"must be one of {', '.join(ENSEMBLE_ROWS)}, got {e!r}",
+            )
+        _check(
+            len(set(self.ensemble_rows)) == len(self.ensemble_rows),
+            f"{p}.ensemble",
+            f"lists a row twice: {list(self.ensemble_rows)}",
+        )
+        _check(
+            self.motion_check in ("discretized", "certified"),
+            f"{p}.motion_check",
+            f"must be certified or discretized, got {self.motion_check!r}",
+        )
         _check(self.k_test >= 1, f"{p}.k_test", f"must be >= 1, got {self.k_test}")
         _check(self.n_plan >= 1, f"{p}.n_plan", f"must be >= 1, got {self.n_plan}")
         _check(len(self.steer) >= 1, f"{p}.steer", "must list at least one of true, false")
         _check(self.delta > 0, f"{p}.delta", f"must be > 0, got {self.delta}")
-        _check(self.delta_norm in (None, "robot", "l2"), f"{p}.delta_norm",
-               f"must be robot, l2 or null, got {self.delta_norm!r}")
-        _check(self.nosteer_check in (None, *NOSTEER_CHECKS), f"{p}.nosteer_check",
-               f"must be true, false, states, replan or null, got {self.nosteer_check!r}")
-        _check(self.replan_rounds >= 0, f"{p}.replan_rounds",
-               f"must be >= 0, got {self.replan_rounds}")
-        _check(self.replan_steps >= 1, f"{p}.replan_steps",
-               f"must be >= 1, got {self.replan_steps}")
-        _check(not (self.bidirectional and False in self.steer), f"{p}.bidirectional",
-               "the bidirectional planner needs steerTo; remove false from eval.steer")
-        _check(self.query_padding is None or self.query_padding >= 0, f"{p}.query_padding",
-               f"must be >= 0 or null, got {self.query_padding}")
-        _check(self.gamma_queries >= 1, f"{p}.gamma_queries",
-               f"must be >= 1, got {self.gamma_queries}")
+        _check(
+            self.delta_norm in (None, "robot", "l2"),
+            f"{p}.delta_norm",
+            f"must be robot, l2 or null, got {self.delta_norm!r}",
+        )
+        _check(
+            self.nosteer_check in (None, *NOSTEER_CHECKS),
+            f"{p}.nosteer_check",
+            f"must be true, false, states, replan or null, got {self.nosteer_check!r}",
+        )
+        _check(
+            self.replan_rounds >= 0, f"{p}.replan_rounds", f"must be >= 0, got {self.replan_rounds}"
+        )
+        _check(
+            self.replan_steps >= 1, f"{p}.replan_steps", f"must be >= 1, got {self.replan_steps}"
+        )
+        _check(
+            not (self.bidirectional and False in self.steer),
+            f"{p}.bidirectional",
+            "the bidirectional planner needs steerTo; remove false from eval.steer",
+        )
+        _check(
+            self.query_padding is None or self.query_padding >= 0,
+            f"{p}.query_padding",
+            f"must be >= 0 or null, got {self.query_padding}",
+        )
+        _check(
+            self.gamma_queries >= 1, f"{p}.gamma_queries", f"must be >= 1, got {self.gamma_queries}"
+        )
         _check(self.chunk >= 1, f"{p}.chunk", f"must be >= 1, got {self.chunk}")

@@ -36,17 +36,30 @@ import time
 from pathlib import Path
 
 from ntq_jax import artifacts
-from ntq_jax.data.format import recorded_checksums
 from ntq_jax.data import dataset_names
+from ntq_jax.data.format import recorded_checksums
 from ntq_jax.envs import env_slug
-from ntq_jax.experiment.paper import (KINDS, MAPS, MEMBERS, PAPER_DATASETS, PAPER_K_TEST,
-                                      PAPER_K_TRAIN, PAPER_PADDING)
+from ntq_jax.experiment.paper import (
+    KINDS,
+    MAPS,
+    MEMBERS,
+    PAPER_DATASETS,
+    PAPER_K_TEST,
+    PAPER_K_TRAIN,
+    PAPER_PADDING,
+)
 from ntq_jax.version import __version__
 
 SCHEMA = 1
 
-__all__ = ["SCHEMA", "dataset_fingerprints", "dataset_sizes", "models_fingerprint",
-           "write_summary", "read_summary"]
+__all__ = [
+    "SCHEMA",
+    "dataset_fingerprints",
+    "dataset_sizes",
+    "models_fingerprint",
+    "write_summary",
+    "read_summary",
+]
 
 
 def dataset_fingerprints(data_env_dir: Path, names: list[str]) -> dict[str, str | None]:
@@ -62,8 +75,11 @@ def dataset_sizes(data_env_dir: Path, names: list[str]) -> dict[str, dict | None
     for nm in names:
         try:
             st = json.loads((Path(data_env_dir) / nm / "meta.json").read_text())["stats"]
-            out[nm] = {"paths": int(st["paths"]), "samples": int(st["samples"]),
-                       "states_per_path": float(st["mean_waypoints"])}
+            out[nm] = {
+                "paths": int(st["paths"]),
+                "samples": int(st["samples"]),
+                "states_per_path": float(st["mean_waypoints"]),
+            }
         except (OSError, ValueError, KeyError, TypeError):
             out[nm] = None
     return out
@@ -75,6 +91,7 @@ def models_fingerprint(model_dir: Path) -> str | None:
     Orbax's files hold timestamps, so equal weights saved twice would differ."""
 
     from ntq_jax.training import CheckpointError, load_ensemble
+
     if not (Path(model_dir) / "ensemble").is_dir():
         return None
     try:
@@ -92,8 +109,9 @@ def _stage_seconds(run: Path, slug: str) -> dict[str, float | None]:
     return {s: stages.get(f"{s}/{slug}", {}).get("seconds") for s in ("data", "train", "eval")}
 
 
-def write_summary(run: Path, env_name: str, env, out_dir: Path, *, command: str = "",
-                  timings: dict | None = None) -> Path:
+def write_summary(
+    run: Path, env_name: str, env, out_dir: Path, *, command: str = "", timings: dict | None = None
+) -> Path:
     """Writes the summary of environment ``env_name`` of the finished run ``run`` to ``out_dir``.
 
     Args:
@@ -121,31 +139,45 @@ def write_summary(run: Path, env_name: str, env, out_dir: Path, *, command: str 
     names = dataset_names(len(cfg["data"]["datasets"]))
     train_seed = cfg["train"].get("seed")
     summary = {
-        "schema": SCHEMA, "task": cfg["task"], "env": env_name, "env_slug": slug,
-        "seed": cfg["seed"], "train_seed": cfg["seed"] if train_seed is None else train_seed,
-        "package_version": __version__, "config": cfg, "config_hash": res["meta"]["config_hash"],
-        "padding": float(env.padding), "rows": rows, "comparisons": comps,
-        "fingerprints": {"datasets": dataset_fingerprints(run / "data" / slug, names),
-                         "models": models_fingerprint(run / "models" / slug)},
+        "schema": SCHEMA,
+        "task": cfg["task"],
+        "env": env_name,
+        "env_slug": slug,
+        "seed": cfg["seed"],
+        "train_seed": cfg["seed"] if train_seed is None else train_seed,
+        "package_version": __version__,
+        "config": cfg,
+        "config_hash": res["meta"]["config_hash"],
+        "padding": float(env.padding),
+        "rows": rows,
+        "comparisons": comps,
+        "fingerprints": {
+            "datasets": dataset_fingerprints(run / "data" / slug, names),
+            "models": models_fingerprint(run / "models" / slug),
+        },
         "datasets": dataset_sizes(run / "data" / slug, names),
         "timings": timings or _stage_seconds(run, slug),
-        "finished": time.strftime("%Y-%m-%dT%H:%M:%S"), "command": command,
+        "finished": time.strftime("%Y-%m-%dT%H:%M:%S"),
+        "command": command,
     }
     out_dir.mkdir(parents=True, exist_ok=True)
     from ntq_jax.experiment import outcomes
+
     try:  # the per-query outcomes: a failure here must not lose the summary itself
         outcomes.write(run, env_name, out_dir, env, summary["train_seed"])
         summary["outcomes"] = outcomes.FILE
     except (OSError, KeyError, ValueError, TypeError) as e:
-        print(f"warning: {env_name}: per-query outcomes not written ({type(e).__name__}: {e}); "
-              f"python -m ntq_jax.experiment.outcomes --pack {run} --env {env_name} "
-              f"--out {out_dir} writes them later", file=sys.stderr)
+        print(
+            f"warning: {env_name}: per-query outcomes not written ({type(e).__name__}: {e}); "
+            f"python -m ntq_jax.experiment.outcomes --pack {run} --env {env_name} "
+            f"--out {out_dir} writes them later",
+            file=sys.stderr,
+        )
         summary["outcomes"] = None
     for name in ("tables.md", "tables.tex", "config.yaml"):
         if (run / name).is_file():
             artifacts.write_text(out_dir / name, (run / name).read_text())
-    figs = [run / "figures" / "success_ratio.png"] + sorted(
-        (run / "figures").glob(f"*_{slug}.png"))
+    figs = [run / "figures" / "success_ratio.png"] + sorted((run / "figures").glob(f"*_{slug}.png"))
     for f in figs:
         if f.is_file():
             artifacts.write_bytes(out_dir / "figures" / f.name, f.read_bytes())
@@ -163,6 +195,7 @@ def read_summary(out_dir: Path) -> dict | None:
 
 
 # Reading and checking summaries (REPRODUCTION.md's input)
+
 
 def task_of(env: str) -> str:
     return env.split("/", 1)[0]
@@ -198,16 +231,27 @@ def load_summaries(root) -> list[dict]:
         try:
             s = json.loads(f.read_text(encoding="utf-8"))
         except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
-            raise SummaryError(f"{f}: not a readable summary ({type(e).__name__}: {e}); restore "
-                               "it from git, or delete it and rerun the map with "
-                               "scripts/reproduce.py") from None
+            raise SummaryError(
+                f"{f}: not a readable summary ({type(e).__name__}: {e}); restore "
+                "it from git, or delete it and rerun the map with "
+                "scripts/reproduce.py"
+            ) from None
         if not isinstance(s, dict):
-            raise SummaryError(f"{f}: not a summary (a JSON object is expected); restore it "
-                               "from git, or delete it and rerun the map")
+            raise SummaryError(
+                f"{f}: not a summary (a JSON object is expected); restore it "
+                "from git, or delete it and rerun the map"
+            )
         s["_path"] = f.relative_to(root).as_posix()
         out.append(s)
-    return sorted(out, key=lambda s: (map_key(s.get("env", "")), is_seed_run(s),
-                                      s.get("train_seed", 0), s["_path"]))
+    return sorted(
+        out,
+        key=lambda s: (
+            map_key(s.get("env", "")),
+            is_seed_run(s),
+            s.get("train_seed", 0),
+            s["_path"],
+        ),
+    )
 
 
 def k_train_of(config: dict, env: str):
@@ -247,8 +291,10 @@ def check_summary(summary: dict) -> list[str]:
     pad = summary.get("padding")
     if not isinstance(pad, (int, float)) or abs(pad - PAPER_PADDING[task]) > 1e-9:
         out.append(f"padding is {pad}, the paper's is {PAPER_PADDING[task]}")
-    ds = [{"p_nt": float(d.get("p_nt", -1)), "prune": bool(d.get("prune"))}
-          for d in config.get("data", {}).get("datasets") or ()]
+    ds = [
+        {"p_nt": float(d.get("p_nt", -1)), "prune": bool(d.get("prune"))}
+        for d in config.get("data", {}).get("datasets") or ()
+    ]
     if ds != list(PAPER_DATASETS):
         out.append(f"datasets are {ds}, the paper's are D0..D3 {list(PAPER_DATASETS)}")
     fp = summary.get("fingerprints") or {}
@@ -269,7 +315,9 @@ def check_summary(summary: dict) -> list[str]:
     need = [(m, k, True) for m in MEMBERS for k in KINDS]
     if task == "rigid" and not is_seed_run(summary):
         need += [(m, k, False) for m in MEMBERS for k in KINDS]
-    lack = [f"{m} {k}{'' if s else ' without steerTo'}" for m, k, s in need if (m, k, s) not in have]
+    lack = [
+        f"{m} {k}{'' if s else ' without steerTo'}" for m, k, s in need if (m, k, s) not in have
+    ]
     if lack:
         out.append(f"rows missing: {', '.join(lack)}")
     return out
@@ -314,5 +362,8 @@ def run_cells(summary, steer: bool) -> dict:
     """``{(model, kind): row}`` of ``summary`` with steerTo ``steer``."""
     if summary is None:
         return {}
-    return {(r["model"], r["query_kind"]): r for r in summary.get("rows", [])
-            if bool(r.get("steer", True)) == steer}
+    return {
+        (r["model"], r["query_kind"]): r
+        for r in summary.get("rows", [])
+        if bool(r.get("steer", True)) == steer
+    }

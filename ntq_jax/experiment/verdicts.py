@@ -36,18 +36,36 @@ from __future__ import annotations
 from ntq_jax.experiment.formatting import num
 from ntq_jax.multiplicity import holm
 
-__all__ = ["ALPHA", "HOLDS", "CONTRADICTED", "FAILS", "MAGNITUDE", "UNRESOLVED", "NOT_RUN",
-           "VERDICTS", "verdict", "several_parts", "decide", "family_size"]
+__all__ = [
+    "ALPHA",
+    "HOLDS",
+    "CONTRADICTED",
+    "FAILS",
+    "MAGNITUDE",
+    "UNRESOLVED",
+    "NOT_RUN",
+    "VERDICTS",
+    "verdict",
+    "several_parts",
+    "decide",
+    "family_size",
+]
 
 ALPHA = 0.05  #: significance level of every verdict (on Holm-adjusted p-values)
 HOLDS, CONTRADICTED, MAGNITUDE, UNRESOLVED, NOT_RUN = (
-    "holds", "contradicted", "paper's magnitude excluded", "unresolved", "not run")
+    "holds",
+    "contradicted",
+    "paper's magnitude excluded",
+    "unresolved",
+    "not run",
+)
 FAILS = CONTRADICTED  #: the former name of a claim our data contradict
 VERDICTS = (HOLDS, CONTRADICTED, MAGNITUDE, UNRESOLVED, NOT_RUN)
 
 
-def verdict(direction: int, p, p_paper=None, *, magnitude_claim: bool = False,
-            alpha: float = ALPHA) -> str:
+def verdict(
+    direction: int, p, p_paper=None, *, magnitude_claim: bool = False, alpha: float = ALPHA
+) -> str:
     """The verdict rule (the module docstring's, in its order).
 
     Args:
@@ -104,9 +122,13 @@ def decide(lines: list[dict]) -> list[dict]:
     for i, c in enumerate(lines):
         c["p_holm"] = None if c["p"] is None else float(adj[i])
         c["p_paper_holm"] = None if c["p_paper"] is None else float(adj[n + i])
-        c["verdict"] = (UNRESOLVED if not c["seed_aware"] else
-                        verdict(c["direction"], c["p_holm"], c["p_paper_holm"],
-                                magnitude_claim=c["magnitude_claim"]))
+        c["verdict"] = (
+            UNRESOLVED
+            if not c["seed_aware"]
+            else verdict(
+                c["direction"], c["p_holm"], c["p_paper_holm"], magnitude_claim=c["magnitude_claim"]
+            )
+        )
     return lines
 
 

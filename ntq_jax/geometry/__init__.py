@@ -44,16 +44,92 @@ Every jitted batch entry point compiles with :data:`KERNEL_COMPILER_OPTIONS`
 elementwise compares, which wider vectors speed up (BENCHMARKS.md).
 """
 
-
-from ntq_jax.geometry.world import (KERNEL_COMPILER_OPTIONS, World, as_sequence_of_floats)
-from ntq_jax.geometry.shapes import (sincos, in_bounds, point_hits_box, point_hits_disc, point_free, segment_hits_box, segment_hits_disc, segment_free, segment_cover_steps, segment_hits_near, segment_free_indexed, RectPose, rect_pose, rect_corners, rect_hits_box, rect_hits_disc, pose_hits_box, pose_hits_disc, rect_free)
-from ntq_jax.geometry.clearance import (segment_box_dist2, segment_disc_dist, rect_box_dist2, rect_disc_dist, pose_box_dist2, pose_disc_dist, wall_clearance, segment_clearance, rect_clearance)
-from ntq_jax.geometry.raster import (rasterize, cell_centers, point_to_cell)
+from ntq_jax.geometry.clearance import (
+    pose_box_dist2,
+    pose_disc_dist,
+    rect_box_dist2,
+    rect_clearance,
+    rect_disc_dist,
+    segment_box_dist2,
+    segment_clearance,
+    segment_disc_dist,
+    wall_clearance,
+)
+from ntq_jax.geometry.raster import cell_centers, point_to_cell, rasterize
+from ntq_jax.geometry.shapes import (
+    RectPose,
+    in_bounds,
+    point_free,
+    point_hits_box,
+    point_hits_disc,
+    pose_hits_box,
+    pose_hits_disc,
+    rect_corners,
+    rect_free,
+    rect_hits_box,
+    rect_hits_disc,
+    rect_pose,
+    segment_cover_steps,
+    segment_free,
+    segment_free_indexed,
+    segment_hits_box,
+    segment_hits_disc,
+    segment_hits_near,
+    sincos,
+)
+from ntq_jax.geometry.shapes3d import (
+    NO_OBSTACLE_CLEARANCE,
+    point_capsule_dist,
+    point_cuboid_dist,
+    point_sphere_dist,
+    sphere_clearance,
+    spheres_clearance,
+    spheres_collide,
+)
+from ntq_jax.geometry.world import KERNEL_COMPILER_OPTIONS, World, as_sequence_of_floats
 from ntq_jax.geometry.world3d import World3D
-from ntq_jax.geometry.shapes3d import (NO_OBSTACLE_CLEARANCE, point_sphere_dist,
-                                       point_cuboid_dist, point_capsule_dist, sphere_clearance,
-                                       spheres_clearance, spheres_collide)
 
-__all__ = ["KERNEL_COMPILER_OPTIONS", "World", "as_sequence_of_floats", "sincos", "in_bounds", "point_hits_box", "point_hits_disc", "point_free", "segment_hits_box", "segment_hits_disc", "segment_free", "segment_cover_steps", "segment_hits_near", "segment_free_indexed", "RectPose", "rect_pose", "rect_corners", "rect_hits_box", "rect_hits_disc", "pose_hits_box", "pose_hits_disc", "rect_free", "segment_box_dist2", "segment_disc_dist", "rect_box_dist2", "rect_disc_dist", "pose_box_dist2", "pose_disc_dist", "wall_clearance", "segment_clearance", "rect_clearance", "rasterize", "cell_centers", "point_to_cell",
-           "World3D", "NO_OBSTACLE_CLEARANCE", "point_sphere_dist", "point_cuboid_dist",
-           "point_capsule_dist", "sphere_clearance", "spheres_clearance", "spheres_collide"]
+__all__ = [
+    "KERNEL_COMPILER_OPTIONS",
+    "World",
+    "as_sequence_of_floats",
+    "sincos",
+    "in_bounds",
+    "point_hits_box",
+    "point_hits_disc",
+    "point_free",
+    "segment_hits_box",
+    "segment_hits_disc",
+    "segment_free",
+    "segment_cover_steps",
+    "segment_hits_near",
+    "segment_free_indexed",
+    "RectPose",
+    "rect_pose",
+    "rect_corners",
+    "rect_hits_box",
+    "rect_hits_disc",
+    "pose_hits_box",
+    "pose_hits_disc",
+    "rect_free",
+    "segment_box_dist2",
+    "segment_disc_dist",
+    "rect_box_dist2",
+    "rect_disc_dist",
+    "pose_box_dist2",
+    "pose_disc_dist",
+    "wall_clearance",
+    "segment_clearance",
+    "rect_clearance",
+    "rasterize",
+    "cell_centers",
+    "point_to_cell",
+    "World3D",
+    "NO_OBSTACLE_CLEARANCE",
+    "point_sphere_dist",
+    "point_cuboid_dist",
+    "point_capsule_dist",
+    "sphere_clearance",
+    "spheres_clearance",
+    "spheres_collide",
+]

@@ -8,10 +8,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-
-from ntq_jax.validation import check_positive
-from ntq_jax.geometry.world import KERNEL_COMPILER_OPTIONS, World
 from ntq_jax.geometry.shapes import point_free
+from ntq_jax.geometry.world import KERNEL_COMPILER_OPTIONS, World
+from ntq_jax.validation import check_positive
 
 Array = jax.Array
 
@@ -19,6 +18,7 @@ Array = jax.Array
 # ---------------------------------------------------------------------------
 # Rasterisation
 # ---------------------------------------------------------------------------
+
 
 def rasterize(world: World, resolution: float, padding: float = 0.0) -> np.ndarray:
     """Occupancy grid of the workspace: cell ``[i, j]`` covers ``y`` row ``i``, ``x`` column ``j``.

@@ -13,7 +13,6 @@ import jax.numpy as jnp
 
 from ntq_jax import broadphase
 from ntq_jax.broadphase import fold
-
 from ntq_jax.geometry.world import World
 
 Array = jax.Array
@@ -59,6 +58,7 @@ def sincos(x: Array) -> tuple[Array, Array]:
 # Point kernels
 # ---------------------------------------------------------------------------
 
+
 def in_bounds(x: Array, y: Array, bounds: Array) -> Array:
     """True when ``(x, y)`` lies in the closed workspace rectangle (False for NaN)."""
     return (x >= bounds[0, 0]) & (x <= bounds[0, 1]) & (y >= bounds[1, 0]) & (y <= bounds[1, 1])
@@ -95,10 +95,16 @@ def point_free(p: Array, world: World, padding: float) -> Array:
     """True when point ``p`` ``(2,)`` is in bounds and farther than ``padding`` from every obstacle."""
     x, y = p[0], p[1]
     free = in_bounds(x, y, world.bounds)
-    free = _fold_boxes(world, x, y, padding, 0.0, lambda box: point_hits_box(x, y, box, padding),
-                       free)
-    return fold(world.discs, lambda disc: point_hits_disc(x, y, disc, padding), free, _and_not,
-                _SENTINEL_DISC)
+    free = _fold_boxes(
+        world, x, y, padding, 0.0, lambda box: point_hits_box(x, y, box, padding), free
+    )
+    return fold(
+        world.discs,
+        lambda disc: point_hits_disc(x, y, disc, padding),
+        free,
+        _and_not,
+        _SENTINEL_DISC,
+    )
 
 
 def _and_not(free, hit):
@@ -120,6 +126,7 @@ def _fold_boxes(world: World, x, y, padding: float, rho: float, hit, free):
 # ---------------------------------------------------------------------------
 # Segment kernels
 # ---------------------------------------------------------------------------
+
 
 def _seg_point_interior_close(x0, y0, dx, dy, dd, px, py, r2):
     """Distance from point to the segment's interior (projection in [0, 1]) <= sqrt(r2).
@@ -187,8 +194,9 @@ def segment_hits_disc(x0, y0, x1, y1, disc: Array, padding: float) -> Array:
     return e0 | e1 | _seg_point_interior_close(x0, y0, dx, dy, dd, disc[0], disc[1], r2)
 
 
-def segment_free(p0: Array, p1: Array, world: World, padding: float,
-                 check_bounds: bool = True) -> Array:
+def segment_free(
+    p0: Array, p1: Array, world: World, padding: float, check_bounds: bool = True
+) -> Array:
     """True when the whole closed segment ``p0 -> p1`` is collision-free (exact, continuous).
 
     The workspace rectangle is convex, so the segment is inside it iff both
@@ -201,10 +209,20 @@ def segment_free(p0: Array, p1: Array, world: World, padding: float,
     if broadphase.index_covers(world, padding, strict=True):
         free = segment_free_indexed(x0, y0, x1, y1, world, padding, free)
     else:
-        free = fold(world.boxes, lambda box: segment_hits_box(x0, y0, x1, y1, box, padding),
-                    free, _and_not, broadphase.SENTINEL_BOX)
-    return fold(world.discs, lambda disc: segment_hits_disc(x0, y0, x1, y1, disc, padding),
-                free, _and_not, _SENTINEL_DISC)
+        free = fold(
+            world.boxes,
+            lambda box: segment_hits_box(x0, y0, x1, y1, box, padding),
+            free,
+            _and_not,
+            broadphase.SENTINEL_BOX,
+        )
+    return fold(
+        world.discs,
+        lambda disc: segment_hits_disc(x0, y0, x1, y1, disc, padding),
+        free,
+        _and_not,
+        _SENTINEL_DISC,
+    )
 
 
 def segment_cover_steps(x0, y0, x1, y1, reach: float, padding: float) -> Array:
@@ -215,16 +233,19 @@ def segment_cover_steps(x0, y0, x1, y1, reach: float, padding: float) -> Array:
     dx, dy = x1 - x0, y1 - y0
     length = jnp.sqrt(dx * dx + dy * dy)
     n = jnp.maximum(jnp.ceil(length * jnp.float32(1.0 / h)), 1.0)
-    return jnp.where(jnp.isfinite(n), jnp.minimum(n, 2.0 ** 30), 0.0).astype(jnp.int32)
+    return jnp.where(jnp.isfinite(n), jnp.minimum(n, 2.0**30), 0.0).astype(jnp.int32)
 
 
 def segment_hits_near(x0, y0, x1, y1, t, world: World, padding: float) -> Array:
     """True when the segment is within ``padding`` of a box listed in the index cell of
     its point at fraction ``t`` (the exact test, on the whole segment)."""
     px, py = x0 + t * (x1 - x0), y0 + t * (y1 - y0)
-    return ~broadphase.fold_candidates(world.index.candidates(px, py),
-                                       lambda box: segment_hits_box(x0, y0, x1, y1, box, padding),
-                                       jnp.bool_(True), _and_not)
+    return ~broadphase.fold_candidates(
+        world.index.candidates(px, py),
+        lambda box: segment_hits_box(x0, y0, x1, y1, box, padding),
+        jnp.bool_(True),
+        _and_not,
+    )
 
 
 def segment_free_indexed(x0, y0, x1, y1, world: World, padding: float, free: Array) -> Array:
@@ -247,6 +268,7 @@ def segment_free_indexed(x0, y0, x1, y1, world: World, padding: float, free: Arr
 # ---------------------------------------------------------------------------
 # Oriented rectangle kernels (rigid body footprint)
 # ---------------------------------------------------------------------------
+
 
 class RectPose(NamedTuple):
     """An oriented rectangle placed at a pose: what every rectangle kernel needs of it,
@@ -312,10 +334,12 @@ def pose_hits_box(pose: RectPose, box: Array, padding: float) -> Array:
     ac, as_ = jnp.abs(c), jnp.abs(s)
     tx, ty = cx - x, cy - y
     # Projections of the rectangle's half extents on the world axes and vice versa.
-    sat = ((jnp.abs(tx) <= hw + half_l * ac + half_w * as_)
-           & (jnp.abs(ty) <= hh + half_l * as_ + half_w * ac)
-           & (jnp.abs(tx * c + ty * s) <= half_l + hw * ac + hh * as_)
-           & (jnp.abs(-tx * s + ty * c) <= half_w + hw * as_ + hh * ac))
+    sat = (
+        (jnp.abs(tx) <= hw + half_l * ac + half_w * as_)
+        & (jnp.abs(ty) <= hh + half_l * as_ + half_w * ac)
+        & (jnp.abs(tx * c + ty * s) <= half_l + hw * ac + hh * as_)
+        & (jnp.abs(-tx * s + ty * c) <= half_w + hw * as_ + hh * ac)
+    )
     if padding == 0.0:
         return sat
     p2 = padding * padding
@@ -324,7 +348,9 @@ def pose_hits_box(pose: RectPose, box: Array, padding: float) -> Array:
         hit = hit | (_point_box_dist2(px, py, box) <= p2)
     for sx in (-1.0, 1.0):
         for sy in (-1.0, 1.0):
-            hit = hit | (_point_obb_dist2(cx + sx * hw, cy + sy * hh, x, y, c, s, half_l, half_w) <= p2)
+            hit = hit | (
+                _point_obb_dist2(cx + sx * hw, cy + sy * hh, x, y, c, s, half_l, half_w) <= p2
+            )
     return hit
 
 
@@ -336,8 +362,10 @@ def rect_hits_disc(x, y, theta, half_l: float, half_w: float, disc: Array, paddi
 def pose_hits_disc(pose: RectPose, disc: Array, padding: float) -> Array:
     """:func:`rect_hits_disc` for a rectangle given by :func:`rect_pose`."""
     r = disc[2] + padding
-    return _point_obb_dist2(disc[0], disc[1], pose.x, pose.y, pose.c, pose.s,
-                            pose.half_l, pose.half_w) <= r * r
+    return (
+        _point_obb_dist2(disc[0], disc[1], pose.x, pose.y, pose.c, pose.s, pose.half_l, pose.half_w)
+        <= r * r
+    )
 
 
 def rect_free(pose: Array, half_l: float, half_w: float, world: World, padding: float) -> Array:
@@ -347,7 +375,19 @@ def rect_free(pose: Array, half_l: float, half_w: float, world: World, padding: 
     rect = rect_pose(x, y, th, half_l, half_w)
     for px, py in zip(rect.xs, rect.ys):
         free = free & in_bounds(px, py, world.bounds)
-    free = _fold_boxes(world, x, y, padding, math.hypot(half_l, half_w),
-                       lambda box: pose_hits_box(rect, box, padding), free)
-    return fold(world.discs, lambda disc: pose_hits_disc(rect, disc, padding),
-                free, _and_not, _SENTINEL_DISC)
+    free = _fold_boxes(
+        world,
+        x,
+        y,
+        padding,
+        math.hypot(half_l, half_w),
+        lambda box: pose_hits_box(rect, box, padding),
+        free,
+    )
+    return fold(
+        world.discs,
+        lambda disc: pose_hits_disc(rect, disc, padding),
+        free,
+        _and_not,
+        _SENTINEL_DISC,
+    )

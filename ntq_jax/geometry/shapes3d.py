@@ -58,6 +58,7 @@ _MIN_SEGMENT2 = 1e-12
 # one point against one row and K balls against N rows ((K, 1) against (N,)).
 # ---------------------------------------------------------------------------
 
+
 def _sphere_sdf(x, y, z, s):
     dx, dy, dz = x - s[0], y - s[1], z - s[2]
     return jnp.sqrt(dx * dx + dy * dy + dz * dz) - s[3]
@@ -106,9 +107,11 @@ def point_capsule_dist(p: Array, k: Array) -> Array:
 #: Rows padding the last block of a looped obstacle fold: far from any workspace (their
 #: distances, ~1.7e7, never undercut a real obstacle's and stay finite in float32).
 _FAR = 1.0e7
-_SENTINELS = {"spheres": (_FAR,) * 3 + (0.0,),
-              "cuboids": (_FAR,) * 3 + (0.0,) * 3 + (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0),
-              "capsules": (_FAR,) * 6 + (0.0,)}
+_SENTINELS = {
+    "spheres": (_FAR,) * 3 + (0.0,),
+    "cuboids": (_FAR,) * 3 + (0.0,) * 3 + (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0),
+    "capsules": (_FAR,) * 6 + (0.0,),
+}
 _SDFS = (("spheres", _sphere_sdf), ("cuboids", _cuboid_sdf), ("capsules", _capsule_sdf))
 
 
@@ -122,13 +125,13 @@ def _min_dist(x, y, z, world: World3D) -> Array | None:
     for key, sdf in _SDFS:
         rows = getattr(world, key)
         if rows.shape[0]:
-            d = broadphase.fold(rows, lambda row, sdf=sdf: sdf(x, y, z, row), d, jnp.minimum,
-                                _SENTINELS[key])
+            d = broadphase.fold(
+                rows, lambda row, sdf=sdf: sdf(x, y, z, row), d, jnp.minimum, _SENTINELS[key]
+            )
     return d
 
 
-def spheres_clearance(centers: Array, radii: Array, world: World3D,
-                      padding: float = 0.0) -> Array:
+def spheres_clearance(centers: Array, radii: Array, world: World3D, padding: float = 0.0) -> Array:
     """``(K,)`` clearances of the balls ``centers`` ``(K, 3)``, ``radii`` ``(K,)``.
 
     ``clearance_k = min over obstacles of dist(centers[k], obstacle) - radii[k] - padding``
@@ -146,15 +149,13 @@ def spheres_clearance(centers: Array, radii: Array, world: World3D,
     return jnp.where(finite, c, -jnp.inf)
 
 
-def sphere_clearance(center: Array, radius: Array, world: World3D,
-                     padding: float = 0.0) -> Array:
+def sphere_clearance(center: Array, radius: Array, world: World3D, padding: float = 0.0) -> Array:
     """The clearance of one ball (see :func:`spheres_clearance`): a scalar."""
     center = jnp.asarray(center, jnp.float32)
     return spheres_clearance(center[None, :], jnp.reshape(radius, (1,)), world, padding)[0]
 
 
-def spheres_collide(centers: Array, radii: Array, world: World3D,
-                    padding: float = 0.0) -> Array:
+def spheres_collide(centers: Array, radii: Array, world: World3D, padding: float = 0.0) -> Array:
     """True when some ball has clearance ``<= 0`` (within ``padding`` of an obstacle).
 
     The same as ``jnp.any(spheres_clearance(...) <= 0)``, NaN/infinite input included

@@ -55,22 +55,30 @@ class World:
         """
         b = validation.number_rows(bounds, "bounds", 2, "[min, max]")
         if b.shape != (2, 2):
-            raise ValueError(f"bounds must be [[xmin, xmax], [ymin, ymax]] (two rows), got "
-                             f"{validation.short_repr(bounds)}")
+            raise ValueError(
+                f"bounds must be [[xmin, xmax], [ymin, ymax]] (two rows), got "
+                f"{validation.short_repr(bounds)}"
+            )
         for i, axis in enumerate("xy"):
             if not b[i, 1] > b[i, 0]:
-                raise ValueError(f"bounds[{i}] is {b[i].tolist()}: expected [{axis}min, {axis}max] "
-                                 f"with {axis}min < {axis}max")
+                raise ValueError(
+                    f"bounds[{i}] is {b[i].tolist()}: expected [{axis}min, {axis}max] "
+                    f"with {axis}min < {axis}max"
+                )
         bx = validation.number_rows(boxes, "boxes", 4, "[cx, cy, half_w, half_h]")
         dc = validation.number_rows(discs, "discs", 3, "[cx, cy, r]")
         for i in np.flatnonzero(np.any(bx[:, 2:] <= 0, axis=1))[:1]:
-            raise ValueError(f"boxes[{i}] is {bx[i].tolist()}: half sizes must be > 0 "
-                             "(rows are [cx, cy, half_w, half_h])")
+            raise ValueError(
+                f"boxes[{i}] is {bx[i].tolist()}: half sizes must be > 0 "
+                "(rows are [cx, cy, half_w, half_h])"
+            )
         for i in np.flatnonzero(dc[:, 2] <= 0)[:1]:
-            raise ValueError(f"discs[{i}] is {dc[i].tolist()}: radius must be > 0 "
-                             "(rows are [cx, cy, r])")
-        return World(jnp.asarray(b, jnp.float32), jnp.asarray(bx, jnp.float32),
-                     jnp.asarray(dc, jnp.float32))
+            raise ValueError(
+                f"discs[{i}] is {dc[i].tolist()}: radius must be > 0 (rows are [cx, cy, r])"
+            )
+        return World(
+            jnp.asarray(b, jnp.float32), jnp.asarray(bx, jnp.float32), jnp.asarray(dc, jnp.float32)
+        )
 
     @property
     def num_boxes(self) -> int:

@@ -55,12 +55,18 @@ def quat_to_matrix(quat_xyzw) -> np.ndarray:
     q = np.asarray(quat_xyzw, np.float64)
     norm = np.linalg.norm(q)
     if not (q.shape == (4,) and np.isfinite(norm) and norm > 0):
-        raise ValueError(f"a quaternion [x, y, z, w] must be 4 finite numbers, not all 0, got "
-                         f"{validation.short_repr(quat_xyzw)}")
+        raise ValueError(
+            f"a quaternion [x, y, z, w] must be 4 finite numbers, not all 0, got "
+            f"{validation.short_repr(quat_xyzw)}"
+        )
     x, y, z, w = q / norm
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def _nearest_rotation(r: np.ndarray) -> np.ndarray:
@@ -102,31 +108,41 @@ class World3D:
         """
         b = validation.number_rows(bounds, "bounds", 2, "[min, max]")
         if b.shape != (3, 2):
-            raise ValueError("bounds must be [[xmin, xmax], [ymin, ymax], [zmin, zmax]] "
-                             f"(three rows), got {validation.short_repr(bounds)}")
+            raise ValueError(
+                "bounds must be [[xmin, xmax], [ymin, ymax], [zmin, zmax]] "
+                f"(three rows), got {validation.short_repr(bounds)}"
+            )
         for i, axis in enumerate("xyz"):
             if not b[i, 1] > b[i, 0]:
-                raise ValueError(f"bounds[{i}] is {b[i].tolist()}: expected [{axis}min, {axis}max] "
-                                 f"with {axis}min < {axis}max")
+                raise ValueError(
+                    f"bounds[{i}] is {b[i].tolist()}: expected [{axis}min, {axis}max] "
+                    f"with {axis}min < {axis}max"
+                )
         sp = validation.number_rows(spheres, "spheres", 4, _SPHERE_FORM)
         cu = validation.number_rows(cuboids, "cuboids", 15, _CUBOID_FORM)
         ca = validation.number_rows(capsules, "capsules", 7, _CAPSULE_FORM)
         for i in np.flatnonzero(sp[:, 3] < 0)[:1]:
-            raise ValueError(f"spheres[{i}] is {sp[i].tolist()}: radius must be >= 0 "
-                             f"(rows are {_SPHERE_FORM})")
+            raise ValueError(
+                f"spheres[{i}] is {sp[i].tolist()}: radius must be >= 0 (rows are {_SPHERE_FORM})"
+            )
         for i in np.flatnonzero(ca[:, 6] < 0)[:1]:
-            raise ValueError(f"capsules[{i}] is {ca[i].tolist()}: radius must be >= 0 "
-                             f"(rows are {_CAPSULE_FORM})")
+            raise ValueError(
+                f"capsules[{i}] is {ca[i].tolist()}: radius must be >= 0 (rows are {_CAPSULE_FORM})"
+            )
         for i in np.flatnonzero(np.any(cu[:, 3:6] < 0, axis=1))[:1]:
-            raise ValueError(f"cuboids[{i}] has half extents {cu[i, 3:6].tolist()}: they must "
-                             f"be >= 0 (rows are {_CUBOID_FORM})")
+            raise ValueError(
+                f"cuboids[{i}] has half extents {cu[i, 3:6].tolist()}: they must "
+                f"be >= 0 (rows are {_CUBOID_FORM})"
+            )
         for i in range(cu.shape[0]):
             r = cu[i, 6:].reshape(3, 3)
             err = float(np.max(np.abs(r.T @ r - np.eye(3))))
             if err > ROTATION_TOL or np.linalg.det(r) <= 0:
-                raise ValueError(f"cuboids[{i}] has rotation {r.tolist()}: expected an orthonormal "
-                                 f"matrix (within {ROTATION_TOL:g}, max |R^T R - I| = {err:.3g}) "
-                                 f"with det +1 (det = {np.linalg.det(r):.4g})")
+                raise ValueError(
+                    f"cuboids[{i}] has rotation {r.tolist()}: expected an orthonormal "
+                    f"matrix (within {ROTATION_TOL:g}, max |R^T R - I| = {err:.3g}) "
+                    f"with det +1 (det = {np.linalg.det(r):.4g})"
+                )
             cu[i, 6:] = _nearest_rotation(r).ravel()
         return World3D(*(jnp.asarray(np.asarray(a, np.float32)) for a in (b, sp, cu, ca)))
 
@@ -158,33 +174,42 @@ class World3D:
             ValueError: one line naming the key (and row) at fault; unknown keys are refused.
         """
         if not isinstance(data, dict):
-            raise ValueError(f"a World3D JSON must be a dict with keys {list(_KEYS)}, got "
-                             f"{type(data).__name__}")
+            raise ValueError(
+                f"a World3D JSON must be a dict with keys {list(_KEYS)}, got {type(data).__name__}"
+            )
         unknown = sorted(set(map(str, data)) - set(_KEYS))
         if unknown:
             raise ValueError(f"unknown World3D key(s) {unknown}: expected {list(_KEYS)}")
         if "bounds" not in data:
-            raise ValueError("a World3D JSON needs 'bounds' [[xmin, xmax], [ymin, ymax], "
-                             "[zmin, zmax]]")
+            raise ValueError(
+                "a World3D JSON needs 'bounds' [[xmin, xmax], [ymin, ymax], [zmin, zmax]]"
+            )
         cuboids = data.get("cuboids", [])
         if isinstance(cuboids, (list, tuple)):
-            cuboids = [_cuboid_row(c, f"cuboids[{i}]") if isinstance(c, dict) else c
-                       for i, c in enumerate(cuboids)]
-        return World3D.create(data["bounds"], data.get("spheres", []), cuboids,
-                              data.get("capsules", []))
+            cuboids = [
+                _cuboid_row(c, f"cuboids[{i}]") if isinstance(c, dict) else c
+                for i, c in enumerate(cuboids)
+            ]
+        return World3D.create(
+            data["bounds"], data.get("spheres", []), cuboids, data.get("capsules", [])
+        )
 
 
 def _cuboid_row(item: dict, key: str) -> list[float]:
     """A cuboid given as ``{"center", "half_extents", "quat_xyzw"}`` as its row of 15 numbers."""
     fields = ("center", "half_extents", "quat_xyzw")
     if sorted(item) != sorted(fields):
-        raise ValueError(f"{key} has keys {sorted(map(str, item))}: expected exactly "
-                         f"{list(fields)} (or a row {_CUBOID_FORM})")
+        raise ValueError(
+            f"{key} has keys {sorted(map(str, item))}: expected exactly "
+            f"{list(fields)} (or a row {_CUBOID_FORM})"
+        )
     c = validation.number_list(item["center"], f"{key}.center", "[x, y, z]", 3)
     h = validation.number_list(item["half_extents"], f"{key}.half_extents", "[hx, hy, hz]", 3)
     q = validation.number_list(item["quat_xyzw"], f"{key}.quat_xyzw", "[x, y, z, w]", 4)
     norm = float(np.linalg.norm(q))
     if abs(norm - 1.0) > QUAT_TOL:
-        raise ValueError(f"{key}.quat_xyzw is {list(q)}: expected a unit quaternion (norm "
-                         f"within {QUAT_TOL:g} of 1, got {norm:.6g})")
+        raise ValueError(
+            f"{key}.quat_xyzw is {list(q)}: expected a unit quaternion (norm "
+            f"within {QUAT_TOL:g} of 1, got {norm:.6g})"
+        )
     return [*c, *h, *quat_to_matrix(q).ravel().tolist()]

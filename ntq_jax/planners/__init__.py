@@ -100,16 +100,30 @@ if TYPE_CHECKING:  # the names below, for type checkers and the API docs
 #: Where each public name lives. They load on first use (PEP 562): a BIT* worker process
 #: imports :mod:`ntq_jax.planners.ompl_worker` (NumPy and OMPL only) without loading JAX.
 _EXPORTS = {
-    "plan": "ntq_jax.planners.registry", "register_planner": "ntq_jax.planners.registry",
+    "plan": "ntq_jax.planners.registry",
+    "register_planner": "ntq_jax.planners.registry",
     "available_planners": "ntq_jax.planners.registry",
-    "PlanResult": "ntq_jax.types", "PlanStatus": "ntq_jax.types",
+    "PlanResult": "ntq_jax.types",
+    "PlanStatus": "ntq_jax.types",
     "STATUS_NAMES": "ntq_jax.types",
-    "check_paths": "ntq_jax.planners.verify", "valid_queries": "ntq_jax.planners.verify",
-    "finalize": "ntq_jax.planners.verify", "config_grid": "ntq_jax.planners.astar",
+    "check_paths": "ntq_jax.planners.verify",
+    "valid_queries": "ntq_jax.planners.verify",
+    "finalize": "ntq_jax.planners.verify",
+    "config_grid": "ntq_jax.planners.astar",
 }
 
-__all__ = ["plan", "register_planner", "available_planners", "PlanResult", "PlanStatus",
-           "STATUS_NAMES", "check_paths", "valid_queries", "finalize", "config_grid"]
+__all__ = [
+    "plan",
+    "register_planner",
+    "available_planners",
+    "PlanResult",
+    "PlanStatus",
+    "STATUS_NAMES",
+    "check_paths",
+    "valid_queries",
+    "finalize",
+    "config_grid",
+]
 
 
 __getattr__, __dir__ = lazy_exports(__name__, globals(), _EXPORTS)

@@ -30,10 +30,20 @@ from ntq_jax.batching import pad_rows, padded_chunks
 from ntq_jax.geometry import rasterize
 from ntq_jax.planners.env_cache import EnvCache
 from ntq_jax.planners.grid_graph import MAX_GRID_SIDE, GridGraph, prepare_grid
-from ntq_jax.planners.jps import (MAX_OPEN_CAPACITY, MAX_QUERIES_PER_CALL, cells_from_jump_points,
-                                  search)
-from ntq_jax.planners.options import (bool_option, check_option_names, float_option, int_option,
-                                      motion_check_option, unsupported_robot)
+from ntq_jax.planners.jps import (
+    MAX_OPEN_CAPACITY,
+    MAX_QUERIES_PER_CALL,
+    cells_from_jump_points,
+    search,
+)
+from ntq_jax.planners.options import (
+    bool_option,
+    check_option_names,
+    float_option,
+    int_option,
+    motion_check_option,
+    unsupported_robot,
+)
 from ntq_jax.planners.smoothing import SHORTCUT_GROUP, shortcut_paths
 from ntq_jax.planners.verify import finalize, valid_queries
 from ntq_jax.robots.batch import steer_to_pairs, valid_states
@@ -41,13 +51,23 @@ from ntq_jax.types import PlanResult, PlanStatus
 
 Array = jax.Array
 
-__all__ = ["AStarResult", "astar", "astar_chunked", "default_lanes", "default_max_path_len",
-           "ConfigGrid", "config_grid", "grid_shape", "plan_astar"]
+__all__ = [
+    "AStarResult",
+    "astar",
+    "astar_chunked",
+    "default_lanes",
+    "default_max_path_len",
+    "ConfigGrid",
+    "config_grid",
+    "grid_shape",
+    "plan_astar",
+]
 
 
 # ---------------------------------------------------------------------------
 # Grid A* (cells)
 # ---------------------------------------------------------------------------
+
 
 class AStarResult(NamedTuple):
     """Per-query results of :func:`astar` (N queries).
@@ -91,11 +111,14 @@ def default_lanes(shape, n: int) -> int:
 def _check_sizes(shape, n: int, max_path_len, max_waypoints, open_capacity) -> tuple[int, int]:
     """Validates the batch and buffer sizes; returns ``(max_path_len, max_waypoints)``."""
     if n > MAX_QUERIES_PER_CALL:
-        raise ValueError(f"at most {MAX_QUERIES_PER_CALL} queries per astar call, got {n}: "
-                         "use astar_chunked")
+        raise ValueError(
+            f"at most {MAX_QUERIES_PER_CALL} queries per astar call, got {n}: use astar_chunked"
+        )
     if min(shape) < 1:
-        raise ValueError(f"astar: the grid of shape {tuple(shape)} has no cell; pass a grid "
-                         "with at least 1 row and 1 column")
+        raise ValueError(
+            f"astar: the grid of shape {tuple(shape)} has no cell; pass a grid "
+            "with at least 1 row and 1 column"
+        )
     if max(shape) > MAX_GRID_SIDE:
         raise ValueError(f"grid sides must be <= {MAX_GRID_SIDE}, got {shape}")
     max_len = int(max_path_len) if max_path_len is not None else default_max_path_len(shape)
@@ -107,8 +130,17 @@ def _check_sizes(shape, n: int, max_path_len, max_waypoints, open_capacity) -> t
     return max_len, jmax
 
 
-def astar(occ, starts, goals, *, max_path_len: int | None = None, max_waypoints: int = 128,
-         lanes: int | None = None, open_capacity: int = 256, trace_steps: int = 4) -> AStarResult:
+def astar(
+    occ,
+    starts,
+    goals,
+    *,
+    max_path_len: int | None = None,
+    max_waypoints: int = 128,
+    lanes: int | None = None,
+    open_capacity: int = 256,
+    trace_steps: int = 4,
+) -> AStarResult:
     """Solves a batch of grid shortest-path queries exactly (8-connected, no corner cutting).
 
     Args:
@@ -139,29 +171,52 @@ def astar(occ, starts, goals, *, max_path_len: int | None = None, max_waypoints:
         TypeError: if ``occ`` is a traced grid (see :func:`prepare_grid`).
     """
     graph = occ if isinstance(occ, GridGraph) else prepare_grid(occ)  # host tables, no program
-    return _search_batch(graph, starts, goals, max_path_len=max_path_len,
-                         max_waypoints=max_waypoints, lanes=lanes, open_capacity=open_capacity,
-                         trace_steps=trace_steps)
+    return _search_batch(
+        graph,
+        starts,
+        goals,
+        max_path_len=max_path_len,
+        max_waypoints=max_waypoints,
+        lanes=lanes,
+        open_capacity=open_capacity,
+        trace_steps=trace_steps,
+    )
 
 
-def _astar(graph: GridGraph, starts, goals, *, max_path_len: int | None, max_waypoints: int,
-           lanes: int | None, open_capacity: int, trace_steps: int) -> AStarResult:
+def _astar(
+    graph: GridGraph,
+    starts,
+    goals,
+    *,
+    max_path_len: int | None,
+    max_waypoints: int,
+    lanes: int | None,
+    open_capacity: int,
+    trace_steps: int,
+) -> AStarResult:
     """:func:`astar` on a prepared grid (traced; one program per grid shape, batch size, options)."""
     h, w = graph.occ.shape
     starts = jnp.asarray(starts)
     goals = jnp.asarray(goals)
     if starts.ndim != 2 or starts.shape[-1] != 2 or goals.shape != starts.shape:
-        raise ValueError(f"starts and goals must both be (N, 2) (row, col) cells, got {starts.shape} "
-                         f"and {goals.shape}")
+        raise ValueError(
+            f"starts and goals must both be (N, 2) (row, col) cells, got {starts.shape} "
+            f"and {goals.shape}"
+        )
     starts = starts.astype(jnp.int32)
     goals = goals.astype(jnp.int32)
     n = starts.shape[0]
     max_len, jmax = _check_sizes((h, w), n, max_path_len, max_waypoints, open_capacity)
     nl = int(lanes) if lanes is not None else default_lanes((h, w), n)
     if n == 0:
-        return AStarResult(jnp.zeros(0, jnp.int8), jnp.zeros(0, jnp.float32),
-                           jnp.zeros((0, max_len, 2), jnp.int32), jnp.zeros(0, jnp.int32),
-                           jnp.zeros((0, jmax, 2), jnp.int32), jnp.zeros(0, jnp.int32))
+        return AStarResult(
+            jnp.zeros(0, jnp.int8),
+            jnp.zeros(0, jnp.float32),
+            jnp.zeros((0, max_len, 2), jnp.int32),
+            jnp.zeros(0, jnp.int32),
+            jnp.zeros((0, jmax, 2), jnp.int32),
+            jnp.zeros(0, jnp.int32),
+        )
 
     def flat(c):
         inside = (c[:, 0] >= 0) & (c[:, 0] < h) & (c[:, 1] >= 0) & (c[:, 1] < w)
@@ -176,20 +231,32 @@ def _astar(graph: GridGraph, starts, goals, *, max_path_len: int | None, max_way
     order = jnp.argsort(~queued, stable=True)  # the queries to search first
     nq = jnp.sum(queued).astype(jnp.int32)
 
-    status, cost, jp, njp = search(graph, sf[order], gf[order], nq, lanes=nl,
-                                   cap=int(open_capacity), max_jp=jmax,
-                                   trace_steps=int(trace_steps))
+    status, cost, jp, njp = search(
+        graph,
+        sf[order],
+        gf[order],
+        nq,
+        lanes=nl,
+        cap=int(open_capacity),
+        max_jp=jmax,
+        trace_steps=int(trace_steps),
+    )
     inv = jnp.argsort(order)
     status, cost, jp, njp = status[inv], cost[inv], jp[inv], njp[inv]
-    status = jnp.where(queued, status, jnp.where(~valid, PlanStatus.INVALID,
-                                                 jnp.where(trivial, PlanStatus.SOLVED,
-                                                           PlanStatus.NO_PATH)))
+    status = jnp.where(
+        queued,
+        status,
+        jnp.where(
+            ~valid, PlanStatus.INVALID, jnp.where(trivial, PlanStatus.SOLVED, PlanStatus.NO_PATH)
+        ),
+    )
     cost = jnp.where(trivial, 0.0, cost)
     jp = jnp.where(trivial[:, None] & (jnp.arange(jmax) == 0)[None, :], sf[:, None], jp)
     njp = jnp.where(trivial, 1, njp)
     wps, path, plen = cells_from_jump_points(jp, njp, w, max_len)
-    status = jnp.where((status == PlanStatus.SOLVED) & (plen > max_len), PlanStatus.TIMEOUT,
-                       status).astype(jnp.int8)
+    status = jnp.where(
+        (status == PlanStatus.SOLVED) & (plen > max_len), PlanStatus.TIMEOUT, status
+    ).astype(jnp.int8)
     ok = status == PlanStatus.SOLVED
     return AStarResult(
         status=status,
@@ -197,7 +264,8 @@ def _astar(graph: GridGraph, starts, goals, *, max_path_len: int | None, max_way
         path=jnp.where(ok[:, None, None], path, -1),
         path_len=jnp.where(ok, plen, 0).astype(jnp.int32),
         waypoints=jnp.where(ok[:, None, None], wps, -1),
-        num_waypoints=jnp.where(ok, njp, 0).astype(jnp.int32))
+        num_waypoints=jnp.where(ok, njp, 0).astype(jnp.int32),
+    )
 
 
 _STATIC_ARGS = ("max_path_len", "max_waypoints", "lanes", "open_capacity", "trace_steps")
@@ -229,22 +297,28 @@ def astar_chunked(occ, starts, goals, *, chunk_size: int = 1024, **options) -> A
     starts = np.asarray(starts, np.int64).reshape(-1, 2)
     goals = np.asarray(goals, np.int64).reshape(-1, 2)
     if starts.shape != goals.shape:
-        raise ValueError(f"starts and goals must have the same shape, got {starts.shape} and {goals.shape}")
+        raise ValueError(
+            f"starts and goals must have the same shape, got {starts.shape} and {goals.shape}"
+        )
     n = starts.shape[0]
     # the clipping keeps far-away cells invalid (outside the grid) and inside int32;
     # an empty batch runs one chunk of invalid queries, for the result's shapes
-    cells = [pad_rows(np.clip(c, -1, np.iinfo(np.int32).max).astype(np.int32), max(n, 1), -1)
-             for c in (starts, goals)]
-    pending = [(m, astar(graph, s, g, **options))
-               for _, m, (s, g), _ in padded_chunks(cells, chunk, fill=-1)]
+    cells = [
+        pad_rows(np.clip(c, -1, np.iinfo(np.int32).max).astype(np.int32), max(n, 1), -1)
+        for c in (starts, goals)
+    ]
+    pending = [
+        (m, astar(graph, s, g, **options))
+        for _, m, (s, g), _ in padded_chunks(cells, chunk, fill=-1)
+    ]
     parts = [jax.tree.map(lambda x, m=m: np.asarray(x)[:m], r) for m, r in pending]
     return AStarResult(*(np.concatenate(xs)[:n] for xs in zip(*parts)))
-
 
 
 # ---------------------------------------------------------------------------
 # The "astar" planner (configuration space)
 # ---------------------------------------------------------------------------
+
 
 class ConfigGrid(NamedTuple):
     """A gridded 2-D configuration box: ``occ (H, W)`` bool, ``lo (2,)`` float64, ``resolution``,
@@ -277,8 +351,11 @@ def config_grid(env, resolution: float, padding: float) -> ConfigGrid:
     own = map_grid(env)
     if own is not None and (float(resolution) != own.resolution or float(padding) != 0.0):
         own = None
-    return _GRIDS.get(env, (float(resolution), float(padding)),
-                      lambda: _build_config_grid(robot, world, float(resolution), float(padding), own))
+    return _GRIDS.get(
+        env,
+        (float(resolution), float(padding)),
+        lambda: _build_config_grid(robot, world, float(resolution), float(padding), own),
+    )
 
 
 def map_grid(env):
@@ -304,13 +381,17 @@ def grid_shape(env, resolution: float) -> tuple[int, int]:
     w, h = (int(round(e / resolution)) for e in ext)
     box = f"the {ext[0]:g} x {ext[1]:g} configuration box of {env.name}"
     if min(h, w) < 2:
-        raise ValueError(f"astar: resolution {resolution:g} is too coarse: it grids {box} into "
-                         f"{w} x {h} cells and the grid needs at least 2 x 2; use a resolution "
-                         f"<= {float(ext.min()) / 2:g}")
+        raise ValueError(
+            f"astar: resolution {resolution:g} is too coarse: it grids {box} into "
+            f"{w} x {h} cells and the grid needs at least 2 x 2; use a resolution "
+            f"<= {float(ext.min()) / 2:g}"
+        )
     if max(h, w) > MAX_GRID_SIDE:
-        raise ValueError(f"astar: resolution {resolution:g} is too fine: it grids {box} into "
-                         f"{w} x {h} cells and a side may have at most {MAX_GRID_SIDE}; use a "
-                         f"resolution >= {float(ext.max()) / MAX_GRID_SIDE:.3g}")
+        raise ValueError(
+            f"astar: resolution {resolution:g} is too fine: it grids {box} into "
+            f"{w} x {h} cells and a side may have at most {MAX_GRID_SIDE}; use a "
+            f"resolution >= {float(ext.max()) / MAX_GRID_SIDE:.3g}"
+        )
     return h, w
 
 
@@ -332,12 +413,20 @@ def _build_config_grid(robot, world, resolution: float, padding: float, own=None
     return ConfigGrid(occ, lo, resolution, prepare_grid(occ))
 
 
-_NEIGH = np.array([(0, 0), (0, 1), (1, 0), (0, -1), (-1, 0), (1, 1), (1, -1), (-1, 1), (-1, -1)],
-                  np.int64)
+_NEIGH = np.array(
+    [(0, 0), (0, 1), (1, 0), (0, -1), (-1, 0), (1, 1), (1, -1), (-1, 1), (-1, -1)], np.int64
+)
 
 
-def _snap(robot, world, grid: ConfigGrid, pts: np.ndarray, padding: float, to_cell: bool,
-          check: str = "discretized"):
+def _snap(
+    robot,
+    world,
+    grid: ConfigGrid,
+    pts: np.ndarray,
+    padding: float,
+    to_cell: bool,
+    check: str = "discretized",
+):
     """Per point, the nearest free cell of its 3x3 neighbourhood joined to it by steer_to
     (point -> centre, or centre -> point with ``to_cell``).
 
@@ -352,8 +441,9 @@ def _snap(robot, world, grid: ConfigGrid, pts: np.ndarray, padding: float, to_ce
     inside = (cand[..., 0] >= 0) & (cand[..., 0] < h) & (cand[..., 1] >= 0) & (cand[..., 1] < w)
     cc = np.clip(cand, 0, [h - 1, w - 1])
     free = inside & ~grid.occ[cc[..., 0], cc[..., 1]]
-    centre = np.stack([grid.lo[0] + (cc[..., 1] + 0.5) * r,
-                       grid.lo[1] + (cc[..., 0] + 0.5) * r], -1).astype(np.float32)  # (N, 9, 2)
+    centre = np.stack(
+        [grid.lo[0] + (cc[..., 1] + 0.5) * r, grid.lo[1] + (cc[..., 0] + 0.5) * r], -1
+    ).astype(np.float32)  # (N, 9, 2)
     dist = np.linalg.norm(centre.astype(np.float64) - pts[:, None].astype(np.float64), axis=-1)
     dist = np.where(free, dist, np.inf)
     order = np.argsort(dist, axis=1, kind="stable")
@@ -369,8 +459,9 @@ def _snap(robot, world, grid: ConfigGrid, pts: np.ndarray, padding: float, to_ce
         if not len(idx):
             continue
         p, cen = pts[idx], centre[idx, c]
-        vis = steer_to_pairs(robot, world, *((cen, p) if to_cell else (p, cen)), padding,
-                             check=check)
+        vis = steer_to_pairs(
+            robot, world, *((cen, p) if to_cell else (p, cen)), padding, check=check
+        )
         best[idx[vis]] = c[vis]
     cells = np.where(best[:, None] >= 0, cand[np.arange(n), np.maximum(best, 0)], -1)
     return cells
@@ -383,10 +474,15 @@ def _cell_paths(grid: ConfigGrid, q: np.ndarray, cells: np.ndarray, plen: np.nda
     paths = np.full((m, width, d), np.nan, np.float32)
     if m:
         r = grid.resolution
-        cen = np.stack([grid.lo[0] + (cells[:, :width - 2, 1] + 0.5) * r,
-                        grid.lo[1] + (cells[:, :width - 2, 0] + 0.5) * r], -1).astype(np.float32)
+        cen = np.stack(
+            [
+                grid.lo[0] + (cells[:, : width - 2, 1] + 0.5) * r,
+                grid.lo[1] + (cells[:, : width - 2, 0] + 0.5) * r,
+            ],
+            -1,
+        ).astype(np.float32)
         inner = np.arange(width - 2)[None, :] < plen[:, None]
-        paths[:, 1:width - 1] = np.where(inner[:, :, None], cen, np.nan)
+        paths[:, 1 : width - 1] = np.where(inner[:, :, None], cen, np.nan)
         paths[:, 0] = q[:, 0]
         paths[np.arange(m), plen + 1] = q[:, 1]
     return paths, plen + 2
@@ -394,17 +490,30 @@ def _cell_paths(grid: ConfigGrid, q: np.ndarray, cells: np.ndarray, plen: np.nda
 
 def _check_astar_options(options: dict) -> None:
     """Types and ranges of the :func:`astar` options ``plan_astar`` forwards."""
-    for name, lo, hi, none_ok in (("max_path_len", 1, None, True), ("max_waypoints", 2, None, False),
-                                  ("lanes", 1, None, True),
-                                  ("open_capacity", 1, MAX_OPEN_CAPACITY, False),
-                                  ("trace_steps", 1, None, False)):
+    for name, lo, hi, none_ok in (
+        ("max_path_len", 1, None, True),
+        ("max_waypoints", 2, None, False),
+        ("lanes", 1, None, True),
+        ("open_capacity", 1, MAX_OPEN_CAPACITY, False),
+        ("trace_steps", 1, None, False),
+    ):
         if name in options:
             int_option("astar", name, options[name], lo, hi, none_ok=none_ok)
 
 
-def plan_astar(env, queries, *, padding: float, seed: int = 0, resolution: float = 0.1,
-               smooth: bool = True, chunk_size: int = 1024, smooth_chunk: int = SHORTCUT_GROUP,
-               check: str = "discretized", **astar_options) -> PlanResult:
+def plan_astar(
+    env,
+    queries,
+    *,
+    padding: float,
+    seed: int = 0,
+    resolution: float = 0.1,
+    smooth: bool = True,
+    chunk_size: int = 1024,
+    smooth_chunk: int = SHORTCUT_GROUP,
+    check: str = "discretized",
+    **astar_options,
+) -> PlanResult:
     """Grid A* + shortcutting for a 2-D configuration space (the registry's ``"astar"``).
 
     Args:
@@ -444,10 +553,12 @@ def plan_astar(env, queries, *, padding: float, seed: int = 0, resolution: float
     if own is not None:
         h, w = own.occupied.shape
         if min(h, w) < 2:
-            raise ValueError(f"astar: {env.name} was imported from a {w} x {h}-cell grid; grid A* "
-                             "plans on a grid map's own cells (the resolution option does not "
-                             "apply) and needs at least 2 x 2: import the map at a finer "
-                             "resolution, or use the roadmap or visgraph planner")
+            raise ValueError(
+                f"astar: {env.name} was imported from a {w} x {h}-cell grid; grid A* "
+                "plans on a grid map's own cells (the resolution option does not "
+                "apply) and needs at least 2 x 2: import the map at a finer "
+                "resolution, or use the roadmap or visgraph planner"
+            )
         resolution = own.resolution
     q = np.asarray(queries, np.float32)
     t0 = time.perf_counter()
@@ -461,7 +572,7 @@ def plan_astar(env, queries, *, padding: float, seed: int = 0, resolution: float
     status[~valid] = PlanStatus.INVALID
     idx = np.flatnonzero(valid)
     s_cell = _snap(env.robot, env.world, grid, q[idx, 0], padding, False, check)  # start -> centre
-    g_cell = _snap(env.robot, env.world, grid, q[idx, 1], padding, True, check)   # centre -> goal
+    g_cell = _snap(env.robot, env.world, grid, q[idx, 1], padding, True, check)  # centre -> goal
     snapped = (s_cell[:, 0] >= 0) & (g_cell[:, 0] >= 0)
     info["unsnapped"] = int((~snapped).sum())
     idx, s_cell, g_cell = idx[snapped], s_cell[snapped], g_cell[snapped]
@@ -474,10 +585,13 @@ def plan_astar(env, queries, *, padding: float, seed: int = 0, resolution: float
     status[idx] = np.where(a_status == PlanStatus.INVALID, PlanStatus.NO_PATH, a_status)
     ok = a_status == PlanStatus.SOLVED
     idx = idx[ok]
-    paths, lengths = _cell_paths(grid, q[idx], np.asarray(res.path)[ok], np.asarray(res.path_len)[ok])
+    paths, lengths = _cell_paths(
+        grid, q[idx], np.asarray(res.path)[ok], np.asarray(res.path_len)[ok]
+    )
     if smooth and len(idx):
-        paths, lengths, _ = shortcut_paths(env.robot, env.world, paths, lengths, padding,
-                                           chunk_size=int(smooth_chunk), check=check)
+        paths, lengths, _ = shortcut_paths(
+            env.robot, env.world, paths, lengths, padding, chunk_size=int(smooth_chunk), check=check
+        )
     t3 = time.perf_counter()
     info["smooth_time"] = t3 - t2
     full_paths = np.full((k, paths.shape[1], d), np.nan, np.float32)

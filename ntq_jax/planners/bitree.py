@@ -71,8 +71,15 @@ CONNECT_PIECES = 1
 #: parts per segment before each of the two shortcut passes. ``attempts`` 12: on
 #: MotionBenchMaker's 699 valid problems (certified), 4 attempts solved 684 and 12 solved
 #: 693; 601 of the 693 needed one attempt, so the extra ones cost only the hard problems.
-BITREE_DEFAULTS = {"batch": 16, "step": 1.0, "capacity": 1024, "iterations": 128,
-                   "attempts": 12, "path_cap": 64, "split": 4}
+BITREE_DEFAULTS = {
+    "batch": 16,
+    "step": 1.0,
+    "capacity": 1024,
+    "iterations": 128,
+    "attempts": 12,
+    "path_cap": 64,
+    "split": 4,
+}
 
 
 def _nearest(tree: jax.Array, count: jax.Array, x: jax.Array) -> jax.Array:
@@ -98,24 +105,52 @@ def _free(robot, world, padding, a, b, lanes: int, mask=None, queue=None):
 
     def steps(i):
         dist = jax.vmap(robot.distance)(a[i], b[i])
-        return jnp.where(jnp.isfinite(dist), jnp.maximum(jnp.ceil(dist / resolution), 1.0),
-                         0.0).astype(jnp.int32)
+        return jnp.where(
+            jnp.isfinite(dist), jnp.maximum(jnp.ceil(dist / resolution), 1.0), 0.0
+        ).astype(jnp.int32)
 
     n = steps if queue is not None else steps(jnp.arange(a.shape[0]))
-    interpolate = jax.vmap(jax.vmap(robot.interpolate, in_axes=(None, None, 0), out_axes=1),
-                           in_axes=(1, 1, 1), out_axes=2)
-    is_valid = jax.vmap(jax.vmap(jax.jit(robot.is_valid, static_argnums=2),
-                                 in_axes=(1, None, None)), in_axes=(1, None, None))
+    interpolate = jax.vmap(
+        jax.vmap(robot.interpolate, in_axes=(None, None, 0), out_axes=1),
+        in_axes=(1, 1, 1),
+        out_axes=2,
+    )
+    is_valid = jax.vmap(
+        jax.vmap(jax.jit(robot.is_valid, static_argnums=2), in_axes=(1, None, None)),
+        in_axes=(1, None, None),
+    )
 
     def valid_at(ap, bp, t):
         return is_valid(interpolate(ap, bp, t), world, padding)
 
-    return check_queue(a.T, b.T, n, valid_at, None if queue is not None else mask, lanes,
-                       STEP_STATES, queue=queue, tail_lanes=1)
+    return check_queue(
+        a.T,
+        b.T,
+        n,
+        valid_at,
+        None if queue is not None else mask,
+        lanes,
+        STEP_STATES,
+        queue=queue,
+        tail_lanes=1,
+    )
 
 
-def grow_bitree(robot, world, start, goal, key, padding: float, *, batch: int, step: float,
-                capacity: int, iterations: int, path_cap: int, split: int):
+def grow_bitree(
+    robot,
+    world,
+    start,
+    goal,
+    key,
+    padding: float,
+    *,
+    batch: int,
+    step: float,
+    capacity: int,
+    iterations: int,
+    path_cap: int,
+    split: int,
+):
     """Searches one query with two trees and returns the shortened path (traceable).
 
     Args:
@@ -195,8 +230,7 @@ def grow_bitree(robot, world, start, goal, key, padding: float, *, batch: int, s
         hit = jnp.any(hit_b)
         last = jnp.maximum(need[first] - 1, 0)
         meet = jnp.where(last == 0, far[first], gpos2[first, jnp.maximum(last - 1, 0)])
-        pair = jnp.where(start_side, jnp.stack([pos[first], meet]),
-                         jnp.stack([meet, pos[first]]))
+        pair = jnp.where(start_side, jnp.stack([pos[first], meet]), jnp.stack([meet, pos[first]]))
         link = jnp.where(hit, pair, link)
         return nodes, parent, count, found | hit, link, it + 1, key
 
@@ -252,6 +286,7 @@ def _read_path(nodes, parent, link, cap: int):
             v, k = carry
             nxt = jnp.where(v >= 0, parent[tree, jnp.maximum(v, 0)], -1)
             return (nxt, k + (v >= 0)), v
+
         (_, k), vs = jax.lax.scan(step, (i, jnp.int32(0)), None, length=cap + 1)
         return vs, k  # vs: node indices from i back to the root, then -1
 
@@ -294,8 +329,15 @@ def _greedy(robot, world, path, n, padding):
 
     def check(a, b, cur):
         # the queue: the later waypoints cur + 1 .. n - 1, farthest first
-        return _free(robot, world, padding, a, b, SHORTCUT_LANES,
-                     queue=(lambda pos: jnp.clip(n - 1 - pos, 0, size - 1), n - 1 - cur))
+        return _free(
+            robot,
+            world,
+            padding,
+            a,
+            b,
+            SHORTCUT_LANES,
+            queue=(lambda pos: jnp.clip(n - 1 - pos, 0, size - 1), n - 1 - cur),
+        )
 
     def cond(c):
         return ~c[3]
@@ -310,28 +352,61 @@ def _greedy(robot, world, path, n, padding):
         return nxt, index, count + 1, nxt >= n - 1
 
     index = jnp.full((size,), -1, jnp.int32).at[0].set(0)
-    _, index, count, _ = jax.lax.while_loop(cond, body, (jnp.int32(0), index, jnp.int32(1),
-                                                         n <= 1))
+    _, index, count, _ = jax.lax.while_loop(cond, body, (jnp.int32(0), index, jnp.int32(1), n <= 1))
     count = jnp.where(n <= 1, n, count)
     keep = j < count
     out = jnp.where(keep[:, None], path[jnp.clip(index, 0, size - 1)], jnp.nan)
     return out, count, jnp.where(keep, index, -1)
 
 
-@functools.partial(jax.jit, static_argnames=("robot", "padding", "batch", "step", "capacity",
-                                             "iterations", "path_cap", "split"),
-                   compiler_options=KERNEL_COMPILER_OPTIONS)
-def _grow(robot, world, start, goal, key, padding, batch, step, capacity, iterations, path_cap,
-          split):
-    return grow_bitree(robot, world, start, goal, key, padding, batch=batch, step=step,
-                       capacity=capacity, iterations=iterations, path_cap=path_cap, split=split)
+@functools.partial(
+    jax.jit,
+    static_argnames=(
+        "robot",
+        "padding",
+        "batch",
+        "step",
+        "capacity",
+        "iterations",
+        "path_cap",
+        "split",
+    ),
+    compiler_options=KERNEL_COMPILER_OPTIONS,
+)
+def _grow(
+    robot, world, start, goal, key, padding, batch, step, capacity, iterations, path_cap, split
+):
+    return grow_bitree(
+        robot,
+        world,
+        start,
+        goal,
+        key,
+        padding,
+        batch=batch,
+        step=step,
+        capacity=capacity,
+        iterations=iterations,
+        path_cap=path_cap,
+        split=split,
+    )
 
 
-def plan_bitree(env, queries, *, padding: float | None = None, seed: int = 0,
-                check: str = "discretized", batch: int | None = None, step: float | None = None,
-                capacity: int | None = None, iterations: int | None = None,
-                attempts: int | None = None, path_cap: int | None = None,
-                split: int | None = None) -> PlanResult:
+def plan_bitree(
+    env,
+    queries,
+    *,
+    padding: float | None = None,
+    seed: int = 0,
+    check: str = "discretized",
+    batch: int | None = None,
+    step: float | None = None,
+    capacity: int | None = None,
+    iterations: int | None = None,
+    attempts: int | None = None,
+    path_cap: int | None = None,
+    split: int | None = None,
+) -> PlanResult:
     """Plans each query with :func:`grow_bitree` (the registry's ``"bitree"``).
 
     Args:
@@ -353,9 +428,14 @@ def plan_bitree(env, queries, *, padding: float | None = None, seed: int = 0,
         ``rejected`` (paths that failed ``check``) and ``check_time``.
     """
     opts = dict(BITREE_DEFAULTS)
-    for name, value, low in (("batch", batch, 1), ("capacity", capacity, 2),
-                             ("iterations", iterations, 1), ("attempts", attempts, 1),
-                             ("path_cap", path_cap, 2), ("split", split, 1)):
+    for name, value, low in (
+        ("batch", batch, 1),
+        ("capacity", capacity, 2),
+        ("iterations", iterations, 1),
+        ("attempts", attempts, 1),
+        ("path_cap", path_cap, 2),
+        ("split", split, 1),
+    ):
         v = int_option("bitree", name, value, low, none_ok=True)
         if v is not None:
             opts[name] = v
@@ -366,8 +446,9 @@ def plan_bitree(env, queries, *, padding: float | None = None, seed: int = 0,
     q = np.asarray(queries, np.float32)
     nq, d = q.shape[0], q.shape[2]
     if opts["capacity"] <= opts["batch"]:
-        raise ValueError(f"bitree: capacity must exceed batch ({opts['batch']}), "
-                         f"got {opts['capacity']}")
+        raise ValueError(
+            f"bitree: capacity must exceed batch ({opts['batch']}), got {opts['capacity']}"
+        )
     t0 = time.perf_counter()
     status = np.full(nq, PlanStatus.NO_PATH, np.int8)
     status[~valid_queries(env, q, pad)] = PlanStatus.INVALID
@@ -376,22 +457,31 @@ def plan_bitree(env, queries, *, padding: float | None = None, seed: int = 0,
     nodes, times = np.zeros((nq, 2), np.int32), np.zeros(nq)
     counts = {"rejected": 0, "check_time": 0.0}
     base = jax.random.key(int(seed))
-    static = {k: opts[k] for k in ("batch", "step", "capacity", "iterations", "path_cap",
-                                   "split")}
+    static = {k: opts[k] for k in ("batch", "step", "capacity", "iterations", "path_cap", "split")}
     solved = np.array([PlanStatus.SOLVED], np.int8)
     for i in np.flatnonzero(status == PlanStatus.NO_PATH):
         ti = time.perf_counter()
         for attempt in range(opts["attempts"]):
             key = jax.random.fold_in(jax.random.fold_in(base, int(i)), attempt)
             path, n, fine, m, index, found, it, cnt = jax.device_get(
-                _grow(env.robot, env.world, q[i, 0], q[i, 1], key, pad, **static))
+                _grow(env.robot, env.world, q[i, 0], q[i, 1], key, pad, **static)
+            )
             tries[i], iters[i], nodes[i] = attempt + 1, it, cnt
             if not found:
                 continue
             ts = time.perf_counter()
             fallback = (fine[None], np.array([m]), index[None])
-            one = finalize(q[i:i + 1], path[None, :max(2, int(n))], np.array([n]), solved, {}, env,
-                           pad, check, fallback=None if check == "discretized" else fallback)
+            one = finalize(
+                q[i : i + 1],
+                path[None, : max(2, int(n))],
+                np.array([n]),
+                solved,
+                {},
+                env,
+                pad,
+                check,
+                fallback=None if check == "discretized" else fallback,
+            )
             counts["check_time"] += time.perf_counter() - ts
             if one.solved[0]:  # a path failing ``check``: the next attempt's path instead
                 rows[int(i)] = one
@@ -402,9 +492,17 @@ def plan_bitree(env, queries, *, padding: float | None = None, seed: int = 0,
     paths = np.full((nq, width, d), np.nan, np.float32)
     lengths, costs = np.zeros(nq, np.int32), np.full(nq, np.inf)
     for i, r in rows.items():
-        paths[i, :r.lengths[0]] = r.paths[0, :r.lengths[0]]
+        paths[i, : r.lengths[0]] = r.paths[0, : r.lengths[0]]
         lengths[i], costs[i], status[i] = r.lengths[0], r.costs[0], PlanStatus.SOLVED
-    info = {"planner": "bitree", **opts, "check": check, "iterations": iters, "attempts": tries,
-            "tree_nodes": nodes, "plan_times": times, **counts,
-            "time": time.perf_counter() - t0}
+    info = {
+        "planner": "bitree",
+        **opts,
+        "check": check,
+        "iterations": iters,
+        "attempts": tries,
+        "tree_nodes": nodes,
+        "plan_times": times,
+        **counts,
+        "time": time.perf_counter() - t0,
+    }
     return PlanResult(paths, lengths, costs, status, info)

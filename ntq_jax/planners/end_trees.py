@@ -55,9 +55,22 @@ def _end_rng(end: np.ndarray, seed: int) -> np.random.Generator:
     return np.random.default_rng([int(seed) & 0xFFFFFFFF, *map(int, bits)])
 
 
-def grow_end_trees(robot, world, index, ends: np.ndarray, outgoing: bool, padding: float,
-                   check: str, *, rounds: int, samples: int, step: float, attach: int,
-                   seed: int = 0, targets: np.ndarray | None = None) -> list[EndLink | None]:
+def grow_end_trees(
+    robot,
+    world,
+    index,
+    ends: np.ndarray,
+    outgoing: bool,
+    padding: float,
+    check: str,
+    *,
+    rounds: int,
+    samples: int,
+    step: float,
+    attach: int,
+    seed: int = 0,
+    targets: np.ndarray | None = None,
+) -> list[EndLink | None]:
     """Grows a tree from each end until a node reaches the roadmap (see the module docstring).
 
     Args:
@@ -124,13 +137,17 @@ def grow_end_trees(robot, world, index, ends: np.ndarray, outgoing: bool, paddin
                 chain.append(nodes[e][v])
                 v = parent[e][v]
             hit = reach[r]
-            out[e] = EndLink(np.asarray(chain[::-1], np.float32), idx[r][hit].astype(np.int64),
-                             cost[e][new_id[j]] + link_cost[r][hit])
+            out[e] = EndLink(
+                np.asarray(chain[::-1], np.float32),
+                idx[r][hit].astype(np.int64),
+                cost[e][new_id[j]] + link_cost[r][hit],
+            )
     return out
 
 
-def _extend(nodes: list, live: list, rngs: list, lo: np.ndarray, hi: np.ndarray, samples: int,
-            step: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _extend(
+    nodes: list, live: list, rngs: list, lo: np.ndarray, hi: np.ndarray, samples: int, step: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """One round's RRT extensions of the trees ``live``: ``(owner, parent, state)`` per
     draw, ``samples`` per tree, in draw order (a uniform target, the tree's nearest node
     moved towards it by at most ``step``, clipped to the box)."""

@@ -26,9 +26,17 @@ import numba
 import numpy as np
 from numba import njit, prange
 
-__all__ = ["HeuristicMetric", "heuristic_metric", "QueryEdges", "SearchGraph", "search_graph",
-           "roadmap_csr", "shortest_paths",
-           "HEURISTIC_SLACK", "MIN_EDGE_COST"]
+__all__ = [
+    "HeuristicMetric",
+    "heuristic_metric",
+    "QueryEdges",
+    "SearchGraph",
+    "search_graph",
+    "roadmap_csr",
+    "shortest_paths",
+    "HEURISTIC_SLACK",
+    "MIN_EDGE_COST",
+]
 
 HEURISTIC_SLACK = 1e-5  # relative: covers the float32 rounding of the edge costs
 MIN_EDGE_COST = 1e-12  # edge costs are raised to this (coincident states keep an edge)
@@ -68,8 +76,11 @@ def heuristic_metric(robot) -> HeuristicMetric:
     if isinstance(robot, (PointRobot, NLinkArm, SerialArm)):
         return HeuristicMetric(np.ones(d), np.zeros(d, bool), np.zeros(d, np.int64))
     if isinstance(robot, RigidBody):
-        return HeuristicMetric(np.array([1.0, 1.0, float(robot.angle_weight)]),
-                               np.array([False, False, True]), np.array([0, 0, 1], np.int64))
+        return HeuristicMetric(
+            np.array([1.0, 1.0, float(robot.angle_weight)]),
+            np.array([False, False, True]),
+            np.array([0, 0, 1], np.int64),
+        )
     return HeuristicMetric(np.zeros(d), np.zeros(d, bool), np.zeros(d, np.int64))
 
 
@@ -92,24 +103,34 @@ class QueryEdges(NamedTuple):
     direct: np.ndarray
 
     @classmethod
-    def from_rows(cls, nq: int, s_row, s_node, s_cost, g_row, g_node, g_cost, d_row, d_cost
-                  ) -> "QueryEdges":
+    def from_rows(
+        cls, nq: int, s_row, s_node, s_cost, g_row, g_node, g_cost, d_row, d_cost
+    ) -> "QueryEdges":
         """From per-edge query rows (any order); ``d_row``: the queries with a direct edge."""
+
         def group(rows, node, cost):
             order = np.argsort(rows, kind="stable")
             ptr = np.zeros(nq + 1, np.int64)
             np.cumsum(np.bincount(rows, minlength=nq), out=ptr[1:])
-            return (ptr, np.asarray(node)[order].astype(np.int32),
-                    np.asarray(cost, np.float64)[order])
+            return (
+                ptr,
+                np.asarray(node)[order].astype(np.int32),
+                np.asarray(cost, np.float64)[order],
+            )
+
         direct = np.full(nq, np.inf)
         direct[np.asarray(d_row, np.int64)] = d_cost
-        return cls(*group(np.asarray(s_row, np.int64), s_node, s_cost),
-                   *group(np.asarray(g_row, np.int64), g_node, g_cost), direct)
+        return cls(
+            *group(np.asarray(s_row, np.int64), s_node, s_cost),
+            *group(np.asarray(g_row, np.int64), g_node, g_cost),
+            direct,
+        )
 
 
 # ---------------------------------------------------------------------------
 # compiled kernels
 # ---------------------------------------------------------------------------
+
 
 @njit(cache=True, inline="always")
 def _h(states, v, goal, w, per, grp):
@@ -185,9 +206,33 @@ def _push(keys, nodes, pos, size, v, key):
 
 
 @njit(cache=True)
-def _one_query(qi, indptr, indices, costs, states, goal_state, w, per, grp, s_ptr, s_node,
-               s_cost, g_ptr, g_node, g_cost, direct, g, h, pred, pos, stamp, keys, nodes,
-               goal_w, out_row):
+def _one_query(
+    qi,
+    indptr,
+    indices,
+    costs,
+    states,
+    goal_state,
+    w,
+    per,
+    grp,
+    s_ptr,
+    s_node,
+    s_cost,
+    g_ptr,
+    g_node,
+    g_cost,
+    direct,
+    g,
+    h,
+    pred,
+    pos,
+    stamp,
+    keys,
+    nodes,
+    goal_w,
+    out_row,
+):
     """A* for query ``qi`` on milestones ``0..n-1`` (start: ``n``, goal: scalars).
 
     ``stamp[v] == qi`` marks the nodes this query has seen (their ``g``, ``h``,
@@ -269,9 +314,32 @@ def _search_all(indptr, indices, costs, states, goals, w, per, grp, qe, rows, ca
         for r in range(c * QUERY_CHUNK, min(nr, (c + 1) * QUERY_CHUNK)):
             qi = rows[r]
             best[r], hops[r] = _one_query(
-                qi, indptr, indices, costs, states, goals[qi], w, per, grp, s_ptr, s_node,
-                s_cost, g_ptr, g_node, g_cost, direct, g, h, pred, pos, stamp, keys, nodes,
-                goal_w, paths[r])
+                qi,
+                indptr,
+                indices,
+                costs,
+                states,
+                goals[qi],
+                w,
+                per,
+                grp,
+                s_ptr,
+                s_node,
+                s_cost,
+                g_ptr,
+                g_node,
+                g_cost,
+                direct,
+                g,
+                h,
+                pred,
+                pos,
+                stamp,
+                keys,
+                nodes,
+                goal_w,
+                paths[r],
+            )
     return best, hops, paths
 
 
@@ -279,8 +347,10 @@ def _search_all(indptr, indices, costs, states, goals, w, per, grp, qe, rows, ca
 # API
 # ---------------------------------------------------------------------------
 
-def roadmap_csr(n: int, edges: np.ndarray, costs: np.ndarray
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+
+def roadmap_csr(
+    n: int, edges: np.ndarray, costs: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The undirected roadmap as CSR ``(indptr (n+1,) int64, indices int32, costs float64)``:
     each edge ``(i, j)`` in both directions, costs raised to ``MIN_EDGE_COST``."""
     from scipy.sparse import coo_matrix
@@ -307,16 +377,16 @@ class SearchGraph(NamedTuple):
     order: np.ndarray
 
 
-def search_graph(n: int, edges: np.ndarray, costs: np.ndarray, states: np.ndarray
-                 ) -> SearchGraph:
+def search_graph(n: int, edges: np.ndarray, costs: np.ndarray, states: np.ndarray) -> SearchGraph:
     """The :class:`SearchGraph` of ``n`` milestones at ``states (n, d)`` joined by
     ``edges (E, 2)`` (unique unordered pairs) of ``costs (E,)``."""
     from scipy.sparse import csr_matrix
     from scipy.sparse.csgraph import reverse_cuthill_mckee
 
     indptr, indices, c = roadmap_csr(n, edges, costs)
-    order = reverse_cuthill_mckee(csr_matrix((c, indices, indptr), shape=(n, n)),
-                                  symmetric_mode=True).astype(np.int64)
+    order = reverse_cuthill_mckee(
+        csr_matrix((c, indices, indptr), shape=(n, n)), symmetric_mode=True
+    ).astype(np.int64)
     rank = np.empty(n, np.int64)
     rank[order] = np.arange(n)
     e = rank[np.asarray(edges, np.int64).reshape(-1, 2)]
@@ -324,9 +394,13 @@ def search_graph(n: int, edges: np.ndarray, costs: np.ndarray, states: np.ndarra
     return SearchGraph(*roadmap_csr(n, e, costs), st, order)
 
 
-def shortest_paths(graph: SearchGraph, goals: np.ndarray, edges: QueryEdges,
-                   metric: HeuristicMetric, threads: int = 1
-                   ) -> tuple[np.ndarray, list[np.ndarray | None]]:
+def shortest_paths(
+    graph: SearchGraph,
+    goals: np.ndarray,
+    edges: QueryEdges,
+    metric: HeuristicMetric,
+    threads: int = 1,
+) -> tuple[np.ndarray, list[np.ndarray | None]]:
     """Shortest start -> goal path of every query.
 
     Args:
@@ -354,11 +428,23 @@ def shortest_paths(graph: SearchGraph, goals: np.ndarray, edges: QueryEdges,
     gs = np.ascontiguousarray(goals, np.float64)
     if np.any(np.diff(np.asarray(metric.groups)) < 0):
         raise ValueError(f"metric groups must be non-decreasing, got {metric.groups}")
-    qe = tuple(np.ascontiguousarray(np.maximum(a, MIN_EDGE_COST), np.float64)
-               if f.endswith("cost") or f == "direct" else np.ascontiguousarray(a)
-               for f, a in zip(QueryEdges._fields, edges))
-    args = (indptr, indices, costs, st, gs, np.asarray(metric.weights, np.float64),
-            np.asarray(metric.periodic, np.bool_), np.asarray(metric.groups, np.int64), qe)
+    qe = tuple(
+        np.ascontiguousarray(np.maximum(a, MIN_EDGE_COST), np.float64)
+        if f.endswith("cost") or f == "direct"
+        else np.ascontiguousarray(a)
+        for f, a in zip(QueryEdges._fields, edges)
+    )
+    args = (
+        indptr,
+        indices,
+        costs,
+        st,
+        gs,
+        np.asarray(metric.weights, np.float64),
+        np.asarray(metric.periodic, np.bool_),
+        np.asarray(metric.groups, np.int64),
+        qe,
+    )
     old = numba.get_num_threads()
     numba.set_num_threads(max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS)))
     try:
@@ -369,8 +455,9 @@ def shortest_paths(graph: SearchGraph, goals: np.ndarray, edges: QueryEdges,
             b2, h2, p2 = _search_all(*args, long, int(hops[long].max()))
     finally:
         numba.set_num_threads(old)
-    out: list[np.ndarray | None] = [None if not np.isfinite(b) else order[p[:k]]
-                                    for b, k, p in zip(best, hops, paths)]
+    out: list[np.ndarray | None] = [
+        None if not np.isfinite(b) else order[p[:k]] for b, k, p in zip(best, hops, paths)
+    ]
     for j, i in enumerate(long):
-        out[i] = order[p2[j, :h2[j]]]
+        out[i] = order[p2[j, : h2[j]]]
     return best, out

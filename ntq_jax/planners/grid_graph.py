@@ -66,11 +66,12 @@ MAX_GRID_SIDE = (1 << JUMP_BITS) - 1
 # Per-grid preprocessing (host NumPy: integer tables, computed once per grid)
 # ---------------------------------------------------------------------------
 
+
 def _shift(a: np.ndarray, dr: int, dc: int, fill) -> np.ndarray:
     """``out[i, j] = a[i + dr, j + dc]``, ``fill`` outside the grid."""
     h, w = a.shape
     p = np.pad(a, 1, constant_values=fill)
-    return p[1 + dr:1 + dr + h, 1 + dc:1 + dc + w]
+    return p[1 + dr : 1 + dr + h, 1 + dc : 1 + dc + w]
 
 
 def _scan_lines(can_move: np.ndarray, event: np.ndarray, dr: int, dc: int) -> np.ndarray:
@@ -86,7 +87,7 @@ def _scan_lines(can_move: np.ndarray, event: np.ndarray, dr: int, dc: int) -> np
     h, w = can_move.shape
     out = np.zeros((h, w), np.int32)
     nxt = np.zeros(w, np.int32)  # T of the line before, shifted by dc (0 outside the grid)
-    for i in (range(h) if dr < 0 else range(h - 1, -1, -1)):  # row i depends on row i + dr
+    for i in range(h) if dr < 0 else range(h - 1, -1, -1):  # row i depends on row i + dr
         row = np.where(event[i], 1, nxt + np.where(nxt > 0, 1, -1)).astype(np.int32)
         row[~can_move[i]] = 0
         out[i] = row
@@ -111,12 +112,15 @@ def _jump_tables(free: np.ndarray, bar=None) -> np.ndarray:
         can = _shift(free, dr, dc, False)
         # Moving (dr, dc) into y = x + d: y is a jump point when a side cell of y
         # is free while the same side cell of x (behind it) is blocked.
-        forced = ((_shift(free, dr + pr, dc + pc, False) & ~_shift(free, pr, pc, False))
-                  | (_shift(free, dr - pr, dc - pc, False) & ~_shift(free, -pr, -pc, False)))
+        forced = (_shift(free, dr + pr, dc + pc, False) & ~_shift(free, pr, pc, False)) | (
+            _shift(free, dr - pr, dc - pc, False) & ~_shift(free, -pr, -pc, False)
+        )
         tables[k] = _scan_lines(can, forced, dr, dc)
         if bar is not None:
             bar.update(1)
-    for k in range(4, 8):  # diagonal moves: y is a jump point when a straight scan from it finds one
+    for k in range(
+        4, 8
+    ):  # diagonal moves: y is a jump point when a straight scan from it finds one
         dr, dc = (int(x) for x in DIRS[k])
         kv, kh = direction_index(dr, 0), direction_index(0, dc)
         can = _shift(free, dr, dc, False) & _shift(free, dr, 0, False) & _shift(free, 0, dc, False)
@@ -148,7 +152,8 @@ def _as_occupancy(occ) -> np.ndarray:
             "probabilities or NaN would all read as occupied); convert it explicitly, e.g. "
             "occ = image < 128 for a lightness image, occ = p > 0.65 for occupancy "
             "probabilities, or load the map with ntq_jax.grid_maps (ROS map.yaml, MovingAI "
-            ".map), which applies the documented conventions")
+            ".map), which applies the documented conventions"
+        )
     return arr
 
 
@@ -189,19 +194,24 @@ def prepare_grid(occ, *, progress=None) -> GridGraph:
             side exceeds :data:`MAX_GRID_SIDE`.
     """
     if isinstance(occ, jax.core.Tracer):
-        raise TypeError("prepare_grid builds the grid tables on the host and cannot take a traced "
-                        "grid: call prepare_grid(occ) outside jax.jit and pass the GridGraph to astar")
+        raise TypeError(
+            "prepare_grid builds the grid tables on the host and cannot take a traced "
+            "grid: call prepare_grid(occ) outside jax.jit and pass the GridGraph to astar"
+        )
     occ = _as_occupancy(occ)
     if occ.ndim != 2:
         raise ValueError(f"occ must be a 2D (H, W) bool array, got shape {occ.shape}")
     if min(occ.shape) < 1:
-        raise ValueError(f"occ has no cell: an empty grid of shape {occ.shape} has nothing to "
-                         "plan on; pass a grid with at least 1 row and 1 column")
+        raise ValueError(
+            f"occ has no cell: an empty grid of shape {occ.shape} has nothing to "
+            "plan on; pass a grid with at least 1 row and 1 column"
+        )
     if max(occ.shape) > MAX_GRID_SIDE:
         raise ValueError(f"grid sides must be <= {MAX_GRID_SIDE}, got {occ.shape}")
     free = ~occ
-    with open_bar(progress, desc=f"grid tables {occ.shape[0]}x{occ.shape[1]}", total=9,
-                  unit="table") as bar:
+    with open_bar(
+        progress, desc=f"grid tables {occ.shape[0]}x{occ.shape[1]}", total=9, unit="table"
+    ) as bar:
         # (cell, direction) layout in int16: the 8 entries of a cell share one cache line
         jump = np.ascontiguousarray(_jump_tables(free, bar).reshape(8, -1).T.astype(np.int16))
         label = _components(free)

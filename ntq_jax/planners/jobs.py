@@ -24,14 +24,23 @@ from typing import Callable, NamedTuple, Optional, Union
 import numpy as np
 
 from ntq_jax import artifacts
-from ntq_jax.planners.path_modes import planner_smooth
 from ntq_jax.planners import plan
+from ntq_jax.planners.path_modes import planner_smooth
 from ntq_jax.planners.verify import finalize
 from ntq_jax.progress import open_bar
 from ntq_jax.types import PlanResult, PlanStatus
 
-__all__ = ["PlannerSettings", "planner_options", "resolve_planner", "NamedPlanner", "PoolPlan",
-           "chunk_ranges", "plan_chunk", "plan_pool", "seed_from_record"]
+__all__ = [
+    "PlannerSettings",
+    "planner_options",
+    "resolve_planner",
+    "NamedPlanner",
+    "PoolPlan",
+    "chunk_ranges",
+    "plan_chunk",
+    "plan_pool",
+    "seed_from_record",
+]
 
 _CHUNK_FILE = re.compile(r"plan_(\d+)_(\d+)\.npz")
 _CHUNK_KEYS = ("queries", "paths", "lengths", "costs", "status", "rejected")
@@ -70,8 +79,9 @@ class PlannerSettings:
     motion_check: str = "certified"
 
 
-def planner_options(settings: PlannerSettings, name: str | None = None, *,
-                    evaluation: bool = False) -> dict:
+def planner_options(
+    settings: PlannerSettings, name: str | None = None, *, evaluation: bool = False
+) -> dict:
     """The keyword options passed to ``ntq_jax.planners.plan`` for planner ``name``.
 
     ``name`` defaults to ``settings.name``; ``evaluation`` picks BIT*'s
@@ -94,13 +104,17 @@ def planner_options(settings: PlannerSettings, name: str | None = None, *,
         budget = ps.eval_time_budget if evaluation else ps.time_budget
         return {"time_budget": budget, "workers": ps.workers, **extra}
     if name == "roadmap":
-        return {"milestones": ps.milestones, "k": ps.neighbors, "grow_rounds": ps.grow_rounds,
-                "roadmap_seed": ps.roadmap_seed, **extra}
+        return {
+            "milestones": ps.milestones,
+            "k": ps.neighbors,
+            "grow_rounds": ps.grow_rounds,
+            "roadmap_seed": ps.roadmap_seed,
+            **extra,
+        }
     return extra
 
 
-def resolve_planner(planner, options: dict, cache_dir: Path | None = None
-                    ) -> tuple[Callable, str]:
+def resolve_planner(planner, options: dict, cache_dir: Path | None = None) -> tuple[Callable, str]:
     """A callable ``(env, queries, *, padding, seed) -> PlanResult`` and its name.
 
     Args:
@@ -130,8 +144,15 @@ class NamedPlanner:
         self.name, self.options, self.extra = name, dict(options), dict(extra or {})
 
     def __call__(self, env, queries, *, padding, seed=0):
-        return plan(env, queries, planner=self.name, padding=padding, seed=seed, **self.options,
-                    **self.extra)
+        return plan(
+            env,
+            queries,
+            planner=self.name,
+            padding=padding,
+            seed=seed,
+            **self.options,
+            **self.extra,
+        )
 
     def with_options(self, **options) -> "NamedPlanner":
         """The same planner with ``options`` replaced (e.g. BIT*'s ``workers`` in a task)."""
@@ -158,7 +179,7 @@ class PoolPlan(NamedTuple):
 
 def chunk_seed(seed: int, start: int) -> int:
     """The seed of the chunk starting at pool row ``start`` (distinct per chunk for BIT*)."""
-    return (int(seed) * 1_000_003 + start) % (2 ** 31 - 1)
+    return (int(seed) * 1_000_003 + start) % (2**31 - 1)
 
 
 def _completed_chunks(work: Path, n: int) -> dict[int, tuple[int, Path]]:
@@ -173,8 +194,9 @@ def _completed_chunks(work: Path, n: int) -> dict[int, tuple[int, Path]]:
     return done
 
 
-def chunk_ranges(n: int, chunk: int, done: dict[int, tuple[int, Path]]
-                 ) -> list[tuple[int, int, Optional[Path]]]:
+def chunk_ranges(
+    n: int, chunk: int, done: dict[int, tuple[int, Path]]
+) -> list[tuple[int, int, Optional[Path]]]:
     """``(start, stop, file or None)`` covering ``0..n``: the completed chunks of
     ``done`` where they start, new ranges of at most ``chunk`` rows between them."""
     parts: list[tuple[int, int, Optional[Path]]] = []
@@ -193,14 +215,18 @@ def chunk_ranges(n: int, chunk: int, done: dict[int, tuple[int, Path]]
 
 def _load_chunk(path: Path, queries: np.ndarray) -> tuple[PlanResult, np.ndarray] | None:
     z = artifacts.load_npz(path)
-    if z is None or any(k not in z for k in _CHUNK_KEYS) or not np.array_equal(z["queries"],
-                                                                               queries):
+    if (
+        z is None
+        or any(k not in z for k in _CHUNK_KEYS)
+        or not np.array_equal(z["queries"], queries)
+    ):
         return None
     return PlanResult(z["paths"], z["lengths"], z["costs"], z["status"], {}), z["rejected"]
 
 
-def _plan_chunk(env, queries: np.ndarray, plan_fn: Callable, verify: bool, padding: float,
-                seed: int) -> tuple[PlanResult, np.ndarray]:
+def _plan_chunk(
+    env, queries: np.ndarray, plan_fn: Callable, verify: bool, padding: float, seed: int
+) -> tuple[PlanResult, np.ndarray]:
     raw = plan_fn(env, queries, padding=padding, seed=seed)
     k, d = queries.shape[0], queries.shape[2]
     if not verify:
@@ -209,8 +235,9 @@ def _plan_chunk(env, queries: np.ndarray, plan_fn: Callable, verify: bool, paddi
     if paths.ndim != 3 or paths.shape[0] != k or paths.shape[2] != d:
         raise ValueError(f"planner returned paths of shape {paths.shape}, expected ({k}, L, {d})")
     status = np.asarray(raw.status, np.int8)
-    res = finalize(queries, paths, np.asarray(raw.lengths, np.int32), status, dict(raw.info),
-                   env, padding)
+    res = finalize(
+        queries, paths, np.asarray(raw.lengths, np.int32), status, dict(raw.info), env, padding
+    )
     return res, (status == PlanStatus.SOLVED) & ~res.solved
 
 
@@ -223,8 +250,12 @@ def _merge(parts, results, n: int, d: int) -> tuple[PlanResult, np.ndarray]:
     rejected = np.zeros(n, bool)
     for (lo, hi, _), (r, rej) in zip(parts, results):
         paths[lo:hi, : r.paths.shape[1]] = r.paths
-        lengths[lo:hi], costs[lo:hi], status[lo:hi], rejected[lo:hi] = (r.lengths, r.costs,
-                                                                        r.status, rej)
+        lengths[lo:hi], costs[lo:hi], status[lo:hi], rejected[lo:hi] = (
+            r.lengths,
+            r.costs,
+            r.status,
+            rej,
+        )
     return PlanResult(paths, lengths, costs, status, {}), rejected
 
 
@@ -234,8 +265,15 @@ chunk_written: Callable[[Path], None] | None = None
 _TASK_ENVS: dict[str, object] = {}  # a task process's environments by fingerprint (see plan_chunk)
 
 
-def plan_chunk(env_key: str | None, env, queries: np.ndarray, plan_fn: Callable, verify: bool,
-               padding: float, seed: int) -> tuple[PlanResult, np.ndarray]:
+def plan_chunk(
+    env_key: str | None,
+    env,
+    queries: np.ndarray,
+    plan_fn: Callable,
+    verify: bool,
+    padding: float,
+    seed: int,
+) -> tuple[PlanResult, np.ndarray]:
     """One chunk, a pure function of its arguments: ``(verified result without info, rejected)``.
 
     Runs in the driver (local executor) or in a task (Ray). ``env_key`` (the
@@ -251,9 +289,20 @@ def plan_chunk(env_key: str | None, env, queries: np.ndarray, plan_fn: Callable,
     return PlanResult(res.paths, res.lengths, res.costs, res.status, {}), rej
 
 
-def plan_pool(env, pool: np.ndarray, plan_fn: Callable, *, verify: bool, padding: float,
-              seed: int, chunk: int, work: Path, progress=None, desc: str = "plan",
-              executor=None) -> PoolPlan:
+def plan_pool(
+    env,
+    pool: np.ndarray,
+    plan_fn: Callable,
+    *,
+    verify: bool,
+    padding: float,
+    seed: int,
+    chunk: int,
+    work: Path,
+    progress=None,
+    desc: str = "plan",
+    executor=None,
+) -> PoolPlan:
     """Plans ``pool`` ``(n, 2, d)`` in chunks, reusing the completed chunk files in ``work``.
 
     Args:
@@ -292,20 +341,42 @@ def plan_pool(env, pool: np.ndarray, plan_fn: Callable, *, verify: bool, padding
         if todo:
             env_key = None if executor.name == "local" else artifacts.fingerprint(env.to_json())
             task_fn = executor.adapt_planner(plan_fn)
-            items = [(env_key, env, pool[parts[j][0]:parts[j][1]], task_fn, verify, padding,
-                      chunk_seed(seed, parts[j][0])) for j in todo]
-            first = 1 if (executor.slots > 1 and len(todo) > 1
-                          and getattr(plan_fn, "name", None) == "roadmap") else 0
+            items = [
+                (
+                    env_key,
+                    env,
+                    pool[parts[j][0] : parts[j][1]],
+                    task_fn,
+                    verify,
+                    padding,
+                    chunk_seed(seed, parts[j][0]),
+                )
+                for j in todo
+            ]
+            first = (
+                1
+                if (
+                    executor.slots > 1
+                    and len(todo) > 1
+                    and getattr(plan_fn, "name", None) == "roadmap"
+                )
+                else 0
+            )
             for batch in ([(0, items[:first])] if first else []) + [(first, items[first:])]:
                 off, its = batch
                 for i, got in executor.imap_unordered(plan_chunk, its):
                     j = todo[off + i]
                     lo, hi, _ = parts[j]
                     res, rej = got
-                    out = artifacts.save_npz(work / f"plan_{lo:09d}_{hi:09d}.npz",
-                                             queries=pool[lo:hi], paths=res.paths,
-                                             lengths=res.lengths, costs=res.costs,
-                                             status=res.status, rejected=rej)
+                    out = artifacts.save_npz(
+                        work / f"plan_{lo:09d}_{hi:09d}.npz",
+                        queries=pool[lo:hi],
+                        paths=res.paths,
+                        lengths=res.lengths,
+                        costs=res.costs,
+                        status=res.status,
+                        rejected=rej,
+                    )
                     if chunk_written is not None:
                         chunk_written(out)
                     results[j] = got
@@ -314,8 +385,9 @@ def plan_pool(env, pool: np.ndarray, plan_fn: Callable, *, verify: bool, padding
     return PoolPlan(result, rejected, reused)
 
 
-def seed_from_record(work: Path, record: Path, pool: np.ndarray, n_u: int, *, env_name: str,
-                     padding: float) -> int:
+def seed_from_record(
+    work: Path, record: Path, pool: np.ndarray, n_u: int, *, env_name: str, padding: float
+) -> int:
     """Copies a record's chunk files (``scripts/record_paths.py``) into ``work``.
 
     The record's ``U/plan_<a>_<b>.npz`` become ``plan_<a>_<b>.npz`` and its
@@ -336,9 +408,11 @@ def seed_from_record(work: Path, record: Path, pool: np.ndarray, n_u: int, *, en
     record = Path(record)
     meta = json.loads((record / "record.json").read_text())
     if meta.get("env") != env_name or not np.isclose(float(meta.get("padding", -1)), padding):
-        raise ValueError(f"{record} records {meta.get('env')} at padding {meta.get('padding')}, "
-                         f"not {env_name} at {padding}: point data.per_env's paths_from at "
-                         "this map's record")
+        raise ValueError(
+            f"{record} records {meta.get('env')} at padding {meta.get('padding')}, "
+            f"not {env_name} at {padding}: point data.per_env's paths_from at "
+            "this map's record"
+        )
     spans = {"U": (0, n_u), "N": (n_u, len(pool))}
     seeded = 0
     for name, (lo0, hi0) in spans.items():
@@ -352,8 +426,10 @@ def seed_from_record(work: Path, record: Path, pool: np.ndarray, n_u: int, *, en
             with np.load(f) as z:
                 same = np.array_equal(z["queries"], pool[a:b])
             if not same:
-                raise ValueError(f"{f}: its queries are not this run's pool rows {a}..{b} (the "
-                                 "record was made with another config, seed or sampler)")
+                raise ValueError(
+                    f"{f}: its queries are not this run's pool rows {a}..{b} (the "
+                    "record was made with another config, seed or sampler)"
+                )
             dest = work / f"plan_{a:09d}_{b:09d}.npz"
             if not dest.exists():
                 artifacts.write_bytes(dest, f.read_bytes())

@@ -33,8 +33,14 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-from ntq_jax.planners.grid_graph import (DIRS, JUMP_BITS, SQRT2, STEP_COST, GridGraph,
-                                         direction_index)
+from ntq_jax.planners.grid_graph import (
+    DIRS,
+    JUMP_BITS,
+    SQRT2,
+    STEP_COST,
+    GridGraph,
+    direction_index,
+)
 from ntq_jax.types import PlanStatus
 
 Array = jax.Array
@@ -56,8 +62,11 @@ def _successor_masks() -> np.ndarray:
             succ = [direction_index(0, dc), direction_index(dr, 0), k]
         else:
             sides = [(dc, dr), (-dc, -dr)]
-            succ = ([k] + [direction_index(*s) for s in sides]
-                    + [direction_index(dr + s[0], dc + s[1]) for s in sides])
+            succ = (
+                [k]
+                + [direction_index(*s) for s in sides]
+                + [direction_index(dr + s[0], dc + s[1]) for s in sides]
+            )
         masks[k] = sum(1 << s for s in succ)
     masks[_START_CODE] = 255
     return masks
@@ -69,6 +78,7 @@ _SUCC_MASK = _successor_masks()
 # ---------------------------------------------------------------------------
 # One search step
 # ---------------------------------------------------------------------------
+
 
 def _octile(dr: Array, dc: Array) -> Array:
     a = jnp.abs(dr).astype(jnp.float32)
@@ -176,8 +186,9 @@ def _jumps(jump, u, gu, how, goal, expand, width: int):
     return lax.optimization_barrier((s, gs, fs, steps, has))
 
 
-def _relax(word, of, orow, stack, top, used, tok, i, popped, act, u, closed_word,
-           s, gs, fs, steps, has):
+def _relax(
+    word, of, orow, stack, top, used, tok, i, popped, act, u, closed_word, s, gs, fs, steps, has
+):
     """Closes ``u`` and relaxes its successors: new cells take free slots (the popped one
     first), better ones are updated in place.
 
@@ -209,9 +220,11 @@ def _relax(word, of, orow, stack, top, used, tok, i, popped, act, u, closed_word
     top = jnp.maximum(top - n_stack, 0) + spare
     slot = jnp.where((new | better) & ~overflow, slot, cap)
     slot, new, overflow, spare, top, used = lax.optimization_barrier(
-        (slot, new, overflow, spare, top, used))
+        (slot, new, overflow, spare, top, used)
+    )
     of = of.at[jnp.concatenate([jnp.where(spare, i, cap)[None], slot])].set(
-        jnp.concatenate([inf[None], fs]), mode="drop")
+        jnp.concatenate([inf[None], fs]), mode="drop"
+    )
     rows = jnp.stack([s, lax.bitcast_convert_type(gs, jnp.int32), (ks << _DIR_SHIFT) | steps], -1)
     orow = orow.at[slot].set(rows, mode="drop")
     cells = jnp.concatenate([jnp.where(act, u, hw)[None], jnp.where(new & ~overflow, s, hw)])
@@ -247,10 +260,12 @@ def _lane_step(jump, word, of, orow, stack, top, used, fresh, tok, start, goal, 
     no heap, and the small tables are packed constants (elementwise lookups).
     """
     u, gu, how, act, reached, expand, popped, i, closed_word = _pop(
-        of, orow, used, fresh, tok, start, goal, active)
+        of, orow, used, fresh, tok, start, goal, active
+    )
     s, gs, fs, steps, has = _jumps(jump, u, gu, how, goal, expand, width)
-    lane, overflow = _relax(word, of, orow, stack, top, used, tok, i, popped, act, u,
-                            closed_word, s, gs, fs, steps, has)
+    lane, overflow = _relax(
+        word, of, orow, stack, top, used, tok, i, popped, act, u, closed_word, s, gs, fs, steps, has
+    )
     exhausted = active & ~act
     return lane, (reached, gu, exhausted, overflow)
 
@@ -272,11 +287,12 @@ def _split_jump_table(jump: Array) -> tuple[Array, ...]:
     while parts < 8 and jump.size * jump.dtype.itemsize // parts > _NO_SPLIT_BYTES:
         parts *= 2
     per = 8 // parts
-    return tuple(jump[:, p * per:(p + 1) * per].reshape(-1) for p in range(parts))
+    return tuple(jump[:, p * per : (p + 1) * per].reshape(-1) for p in range(parts))
 
 
-def _trace_back(word, jp, cur, j, s0, q, tracing, *, width: int, n: int, max_jp: int,
-                trace_steps: int):
+def _trace_back(
+    word, jp, cur, j, s0, q, tracing, *, width: int, n: int, max_jp: int, trace_steps: int
+):
     """Follows up to ``trace_steps`` parent links in every tracing lane, writing the jump
     points goal-first into ``jp`` (``(n * max_jp,)``, row ``q`` of each lane).
 
@@ -301,13 +317,21 @@ def _trace_back(word, jp, cur, j, s0, q, tracing, *, width: int, n: int, max_jp:
         step = act & ~fin
         cur = jnp.where(step, cur - back, cur)
         j = j + step
-    jp = jp.at[jnp.stack(where_to, -1).reshape(-1)].set(jnp.stack(pts, -1).reshape(-1),
-                                                        mode="drop")
+    jp = jp.at[jnp.stack(where_to, -1).reshape(-1)].set(jnp.stack(pts, -1).reshape(-1), mode="drop")
     return jp, cur, j, done, too_long
 
 
-def search(graph: GridGraph, start: Array, goal: Array, nq: Array, *, lanes: int, cap: int,
-            max_jp: int, trace_steps: int):
+def search(
+    graph: GridGraph,
+    start: Array,
+    goal: Array,
+    nq: Array,
+    *,
+    lanes: int,
+    cap: int,
+    max_jp: int,
+    trace_steps: int,
+):
     """Solves queries ``0..nq-1`` of ``start``/``goal`` (flat cells ``(N,)``, valid, reachable, distinct).
 
     Returns per query ``(status, cost, jump points goal-first (N, max_jp), count (N,))``.
@@ -341,39 +365,89 @@ def search(graph: GridGraph, start: Array, goal: Array, nq: Array, *, lanes: int
 
         # -- one search step in every lane -------------------------------------------
         (word, of, orow, stack, top, used), (reached, g_goal, exhausted, overflow) = vstep(
-            jump, st["word"], st["of"], st["orow"], st["stack"], top, used, take, tok, s0, g0,
-            mode == _SEARCH)
+            jump,
+            st["word"],
+            st["of"],
+            st["orow"],
+            st["stack"],
+            top,
+            used,
+            take,
+            tok,
+            s0,
+            g0,
+            mode == _SEARCH,
+        )
         mode = jnp.where(exhausted | overflow, _IDLE, jnp.where(reached, _TRACE, mode))
         cost_l = jnp.where(reached, g_goal, st["cost_l"])
         cur = jnp.where(reached, g0, st["cur"])
         j = jnp.where(reached, 0, st["j"])
 
         # -- lanes that reached their goal follow the parent links back to the start -----
-        jp, cur, j, done, too_long = _trace_back(word, st["jp"], cur, j, s0, q, mode == _TRACE,
-                                                 width=w, n=n, max_jp=max_jp,
-                                                 trace_steps=trace_steps)
+        jp, cur, j, done, too_long = _trace_back(
+            word,
+            st["jp"],
+            cur,
+            j,
+            s0,
+            q,
+            mode == _TRACE,
+            width=w,
+            n=n,
+            max_jp=max_jp,
+            trace_steps=trace_steps,
+        )
         # -- record finished queries: one row (status, cost bits, #jump points) each ------
         fin = exhausted | overflow | done
-        code = jnp.where(exhausted, PlanStatus.NO_PATH,
-                         jnp.where(overflow | too_long, PlanStatus.TIMEOUT, PlanStatus.SOLVED))
+        code = jnp.where(
+            exhausted,
+            PlanStatus.NO_PATH,
+            jnp.where(overflow | too_long, PlanStatus.TIMEOUT, PlanStatus.SOLVED),
+        )
         res_row = jnp.stack([code, lax.bitcast_convert_type(cost_l, jnp.int32), j + 1], -1)
         res = st["res"].at[jnp.where(fin, q, n)].set(res_row, mode="drop")
         mode = jnp.where(done, _IDLE, mode)
-        return dict(mode=mode, q=q, next=nxt, word=word, of=of, orow=orow, stack=stack, top=top,
-                    used=used, res=res, cost_l=cost_l, cur=cur, j=j, jp=jp)
+        return dict(
+            mode=mode,
+            q=q,
+            next=nxt,
+            word=word,
+            of=of,
+            orow=orow,
+            stack=stack,
+            top=top,
+            used=used,
+            res=res,
+            cost_l=cost_l,
+            cur=cur,
+            j=j,
+            jp=jp,
+        )
 
     st = dict(
-        mode=jnp.zeros(b, jnp.int32), q=jnp.zeros(b, jnp.int32), next=jnp.int32(0),
-        word=jnp.zeros((b, hw), jnp.uint32), of=jnp.full((b, cap), inf),
-        orow=jnp.zeros((b, cap, 3), jnp.int32), stack=jnp.zeros((b, cap), jnp.int32),
-        top=jnp.zeros(b, jnp.int32), used=jnp.zeros(b, jnp.int32),
-        res=jnp.zeros((n, 3), jnp.int32), cost_l=jnp.zeros(b),
-        cur=jnp.zeros(b, jnp.int32), j=jnp.zeros(b, jnp.int32),
-        jp=jnp.zeros(n * max_jp, jnp.int32))
+        mode=jnp.zeros(b, jnp.int32),
+        q=jnp.zeros(b, jnp.int32),
+        next=jnp.int32(0),
+        word=jnp.zeros((b, hw), jnp.uint32),
+        of=jnp.full((b, cap), inf),
+        orow=jnp.zeros((b, cap, 3), jnp.int32),
+        stack=jnp.zeros((b, cap), jnp.int32),
+        top=jnp.zeros(b, jnp.int32),
+        used=jnp.zeros(b, jnp.int32),
+        res=jnp.zeros((n, 3), jnp.int32),
+        cost_l=jnp.zeros(b),
+        cur=jnp.zeros(b, jnp.int32),
+        j=jnp.zeros(b, jnp.int32),
+        jp=jnp.zeros(n * max_jp, jnp.int32),
+    )
     st = lax.while_loop(cond, body, st)
     res = st["res"]
-    return (res[:, 0].astype(jnp.int8), lax.bitcast_convert_type(res[:, 1], jnp.float32),
-            st["jp"].reshape(n, max_jp), res[:, 2])
+    return (
+        res[:, 0].astype(jnp.int8),
+        lax.bitcast_convert_type(res[:, 1], jnp.float32),
+        st["jp"].reshape(n, max_jp),
+        res[:, 2],
+    )
 
 
 def cells_from_jump_points(jp: Array, njp: Array, width: int, max_len: int):
@@ -395,13 +469,19 @@ def cells_from_jump_points(jp: Array, njp: Array, width: int, max_len: int):
     vseg = valid[:, 1:]
     seg = jnp.where(vseg, jnp.maximum(jnp.abs(dr), jnp.abs(dc)), 0)
     pos = jnp.concatenate([jnp.zeros((n, 1), jnp.int32), jnp.cumsum(seg, axis=1)], axis=1)
-    total = jnp.where(njp > 0, jnp.take_along_axis(pos, jnp.maximum(njp - 1, 0)[:, None], 1)[:, 0] + 1, 0)
+    total = jnp.where(
+        njp > 0, jnp.take_along_axis(pos, jnp.maximum(njp - 1, 0)[:, None], 1)[:, 0] + 1, 0
+    )
     step = jnp.where(vseg, jnp.sign(dr) * width + jnp.sign(dc), 0)  # flat unit step of each segment
     change = step - jnp.concatenate([jnp.zeros((n, 1), jnp.int32), step[:, :-1]], 1)
     at = pos[:, :-1]
     flat = jnp.where(at < max_len, at * n + jnp.arange(n)[:, None], max_len * n)
-    delta = jnp.zeros(max_len * n, jnp.int32).at[flat.reshape(-1)].add(
-        change.reshape(-1), mode="drop").reshape(max_len, n)
+    delta = (
+        jnp.zeros(max_len * n, jnp.int32)
+        .at[flat.reshape(-1)]
+        .add(change.reshape(-1), mode="drop")
+        .reshape(max_len, n)
+    )
 
     def advance(carry, d):
         unit, cell = carry

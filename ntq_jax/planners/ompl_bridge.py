@@ -52,8 +52,8 @@ from typing import Mapping
 import numpy as np
 
 from ntq_jax.planners.ompl_checker import NumpyChecker
-from ntq_jax.planners.options import bool_option, float_option, int_option, motion_check_option
 from ntq_jax.planners.ompl_worker import LOG_LEVELS, BridgeOutcome, worker_main
+from ntq_jax.planners.options import bool_option, float_option, int_option, motion_check_option
 from ntq_jax.planners.verify import finalize, valid_queries
 from ntq_jax.types import PlanResult, PlanStatus
 
@@ -80,12 +80,23 @@ def query_seeds(seed: int, n: int) -> np.ndarray:
     return out
 
 
-def plan_bitstar(env, queries, *, padding: float | None = None, seed: int = 0,
-                 time_budget: float = 1.0, workers: int = 0, stop_on_first: bool = False,
-                 chunk_size: int | None = None, ompl_log_level: str = "error",
-                 hang_timeout: float | None = None, startup_timeout: float = 300.0,
-                 check: str = "discretized", keep_workers: bool = False,
-                 _crash_on: Mapping[int, int] | None = None) -> PlanResult:
+def plan_bitstar(
+    env,
+    queries,
+    *,
+    padding: float | None = None,
+    seed: int = 0,
+    time_budget: float = 1.0,
+    workers: int = 0,
+    stop_on_first: bool = False,
+    chunk_size: int | None = None,
+    ompl_log_level: str = "error",
+    hang_timeout: float | None = None,
+    startup_timeout: float = 300.0,
+    check: str = "discretized",
+    keep_workers: bool = False,
+    _crash_on: Mapping[int, int] | None = None,
+) -> PlanResult:
     """Solves a batch of queries with OMPL's BIT* in parallel worker processes.
 
     Args:
@@ -138,9 +149,17 @@ def plan_bitstar(env, queries, *, padding: float | None = None, seed: int = 0,
     """
     if getattr(env.robot, "kind", None) == "serial_arm":  # no NumPy geometry: JAX, in process
         from ntq_jax.planners.ompl_rrtconnect import plan_bitstar_jax
-        return plan_bitstar_jax(env, queries, padding=padding, seed=seed,
-                                time_budget=time_budget, stop_on_first=stop_on_first,
-                                check=check, ompl_log_level=ompl_log_level)
+
+        return plan_bitstar_jax(
+            env,
+            queries,
+            padding=padding,
+            seed=seed,
+            time_budget=time_budget,
+            stop_on_first=stop_on_first,
+            check=check,
+            ompl_log_level=ompl_log_level,
+        )
     t_wall = time.perf_counter()
     q = _check_arguments(env, queries, time_budget, ompl_log_level)
     workers = int_option("bitstar", "workers", workers, 0) or (os.cpu_count() or 1)
@@ -159,13 +178,33 @@ def plan_bitstar(env, queries, *, padding: float | None = None, seed: int = 0,
     results.outcome[~ok] = BridgeOutcome.BAD_QUERY
     todo = collections.deque(int(i) for i in np.flatnonzero(ok))
     if todo:
-        checker = NumpyChecker(env.robot, np.asarray(env.world.bounds),
-                               np.asarray(env.world.boxes), np.asarray(env.world.discs), pad)
-        worker_args = (checker, float(time_budget), bool(stop_on_first), ompl_log_level,
-                       dict(_crash_on or {}))
+        checker = NumpyChecker(
+            env.robot,
+            np.asarray(env.world.bounds),
+            np.asarray(env.world.boxes),
+            np.asarray(env.world.discs),
+            pad,
+        )
+        worker_args = (
+            checker,
+            float(time_budget),
+            bool(stop_on_first),
+            ompl_log_level,
+            dict(_crash_on or {}),
+        )
         hang = 3.0 * time_budget + 30.0 if hang_timeout is None else hang_timeout
-        pool = _WorkerPool(worker_args, q, seeds, todo, min(workers, len(todo)), chunk_size,
-                           hang, startup_timeout, results, keep=keep_workers)
+        pool = _WorkerPool(
+            worker_args,
+            q,
+            seeds,
+            todo,
+            min(workers, len(todo)),
+            chunk_size,
+            hang,
+            startup_timeout,
+            results,
+            keep=keep_workers,
+        )
         pool.run()
     res = _verified_result(env, q, pad, results, seeds, time_budget, check)
     res.info["wall_time"] = time.perf_counter() - t_wall
@@ -192,33 +231,62 @@ def _check_arguments(env, queries, time_budget, ompl_log_level) -> np.ndarray:
 class _Results:
     """What the workers report, per query (N queries), before verification."""
 
-    outcome: np.ndarray        # (N,) int8 BridgeOutcome
-    paths: list                # (L_i, d) float64 arrays, or None unless found
+    outcome: np.ndarray  # (N,) int8 BridgeOutcome
+    paths: list  # (L_i, d) float64 arrays, or None unless found
     planner_costs: np.ndarray  # (N,) float64
-    solve_times: np.ndarray    # (N,) float64
+    solve_times: np.ndarray  # (N,) float64
     info: dict
 
     @classmethod
     def empty(cls, n: int) -> "_Results":
-        info = {"workers": 0, "worker_deaths": 0, "startup_time": 0.0, "n_valid_calls": 0,
-                "n_motion_calls": 0, "errors": {}}
-        return cls(np.full(n, BridgeOutcome.NOT_FOUND, np.int8), [None] * n, np.full(n, np.inf),
-                   np.zeros(n), info)
+        info = {
+            "workers": 0,
+            "worker_deaths": 0,
+            "startup_time": 0.0,
+            "n_valid_calls": 0,
+            "n_motion_calls": 0,
+            "errors": {},
+        }
+        return cls(
+            np.full(n, BridgeOutcome.NOT_FOUND, np.int8),
+            [None] * n,
+            np.full(n, np.inf),
+            np.zeros(n),
+            info,
+        )
 
 
-def _verified_result(env, q: np.ndarray, pad: float, r: _Results, seeds: np.ndarray,
-                     time_budget: float, check: str = "discretized") -> PlanResult:
+def _verified_result(
+    env,
+    q: np.ndarray,
+    pad: float,
+    r: _Results,
+    seeds: np.ndarray,
+    time_budget: float,
+    check: str = "discretized",
+) -> PlanResult:
     """The workers' raw paths verified by :func:`finalize`, statuses through PLAN_STATUS."""
     k, d = q.shape[0], q.shape[2]
     status = np.array([PLAN_STATUS[BridgeOutcome(o)] for o in r.outcome], np.int8)
-    lengths = np.array([len(p) if (p is not None and s == PlanStatus.SOLVED) else 0
-                        for p, s in zip(r.paths, status)], np.int32)
+    lengths = np.array(
+        [
+            len(p) if (p is not None and s == PlanStatus.SOLVED) else 0
+            for p, s in zip(r.paths, status)
+        ],
+        np.int32,
+    )
     paths = np.full((k, max(2, int(lengths.max(initial=0))), d), np.nan, np.float32)
     for i in np.flatnonzero(lengths):
-        paths[i, :lengths[i]] = r.paths[i]
+        paths[i, : lengths[i]] = r.paths[i]
     info = dict(r.info)
-    info.update(planner="bitstar", bitstar_status=r.outcome, solve_times=r.solve_times,
-                planner_costs=r.planner_costs, seeds=seeds, time_budget=time_budget)
+    info.update(
+        planner="bitstar",
+        bitstar_status=r.outcome,
+        solve_times=r.solve_times,
+        planner_costs=r.planner_costs,
+        seeds=seeds,
+        time_budget=time_budget,
+    )
     res = finalize(q, paths, lengths, status, info, env, pad, check)
     # a path BIT* found that fails the package's steer_to: finalize made it NO_PATH
     r.outcome[(r.outcome == BridgeOutcome.EXACT) & ~res.solved] = BridgeOutcome.REJECTED
@@ -277,14 +345,15 @@ class _Worker:
     def __init__(self, ctx, args):
         parent, child = ctx.Pipe(duplex=True)
         self.conn = parent
-        self.proc = ctx.Process(target=worker_main, args=(child,) + args, daemon=True,
-                                name="ntq_jax-bitstar")
+        self.proc = ctx.Process(
+            target=worker_main, args=(child,) + args, daemon=True, name="ntq_jax-bitstar"
+        )
         with _main_hidden():
             self.proc.start()
         child.close()
         self.assigned: list[int] = []  # indices sent and not finished
         self.current: int | None = None  # started, not finished
-        self.since = time.monotonic()   # start of the current query (or of the process)
+        self.since = time.monotonic()  # start of the current query (or of the process)
         self.spawned = self.since
         self.ready = False
 
@@ -301,10 +370,19 @@ class _WorkerPool:
     :meth:`run` returns when every query in ``todo`` has an outcome in ``results``.
     """
 
-    def __init__(self, worker_args: tuple, q: np.ndarray, seeds: np.ndarray,
-                 todo: collections.deque, n_workers: int, chunk_size: int | None,
-                 hang_timeout: float, startup_timeout: float, results: _Results,
-                 keep: bool = False):
+    def __init__(
+        self,
+        worker_args: tuple,
+        q: np.ndarray,
+        seeds: np.ndarray,
+        todo: collections.deque,
+        n_workers: int,
+        chunk_size: int | None,
+        hang_timeout: float,
+        startup_timeout: float,
+        results: _Results,
+        keep: bool = False,
+    ):
         if chunk_size is None:
             chunk_size = max(1, min(8, len(todo) // (4 * n_workers)))
         self.chunk_size = max(1, int(chunk_size))
@@ -363,8 +441,15 @@ class _WorkerPool:
         w.since = time.monotonic()
         q, seeds, attempts = self.q, self.seeds, self.attempts
         try:
-            w.conn.send(("task", [(i, q[i, 0].tolist(), q[i, 1].tolist(), int(seeds[i]),
-                                   attempts[i]) for i in chunk]))
+            w.conn.send(
+                (
+                    "task",
+                    [
+                        (i, q[i, 0].tolist(), q[i, 1].tolist(), int(seeds[i]), attempts[i])
+                        for i in chunk
+                    ],
+                )
+            )
         except OSError:  # the worker just died: its sentinel reports it next
             pass
 
@@ -395,25 +480,38 @@ class _WorkerPool:
                 _stop_workers(_IDLE.pop(other))
             idle = _IDLE.setdefault(self.key, [])
             for w in list(self.pool):
-                if (w.ready and not w.assigned and w.current is None and w.proc.is_alive()
-                        and len(idle) < (os.cpu_count() or 1)):
+                if (
+                    w.ready
+                    and not w.assigned
+                    and w.current is None
+                    and w.proc.is_alive()
+                    and len(idle) < (os.cpu_count() or 1)
+                ):
                     idle.append(w)
                     self.pool.remove(w)
         _stop_workers(self.pool)
 
     def _give_up(self) -> None:
         why = self.info["errors"].get("worker", "workers died before getting ready")
-        warnings.warn("plan_bitstar: BIT* workers cannot start; the remaining "
-                      f"{len(self.remaining)} queries are marked CRASHED:\n{why}",
-                      RuntimeWarning, stacklevel=4)
+        warnings.warn(
+            "plan_bitstar: BIT* workers cannot start; the remaining "
+            f"{len(self.remaining)} queries are marked CRASHED:\n{why}",
+            RuntimeWarning,
+            stacklevel=4,
+        )
         for i in list(self.remaining):
             self.finish(i, BridgeOutcome.CRASHED)
 
     def _kill_stuck(self) -> None:
         now = time.monotonic()
         for w in list(self.pool):
-            limit = (self.startup_timeout if not w.ready
-                     else self.hang_timeout if w.assigned else math.inf)
+            limit = (
+                self.startup_timeout
+                if not w.ready
+                else self.hang_timeout
+                if w.assigned
+                else math.inf
+            )
             if now - w.since > limit:
                 self.died(w, f"worker killed after {now - w.since:.0f} s without progress")
 
@@ -473,8 +571,11 @@ class _WorkerPool:
             i = msg[1]
             w.current = None
             info["errors"][i] = msg[2]
-            warnings.warn(f"plan_bitstar: query {i} raised in the worker (status CRASHED):\n"
-                          f"{msg[2]}", RuntimeWarning, stacklevel=5)
+            warnings.warn(
+                f"plan_bitstar: query {i} raised in the worker (status CRASHED):\n{msg[2]}",
+                RuntimeWarning,
+                stacklevel=5,
+            )
             self.finish(i, BridgeOutcome.CRASHED)
         elif kind == "fatal":  # the worker could not start; it exits next
             info["errors"].setdefault("worker", msg[1])

@@ -99,8 +99,13 @@ class NumpyChecker:
     def from_env(cls, env, padding: float | None = None) -> "NumpyChecker":
         """The checker of ``env`` at ``padding`` (default: the environment's)."""
         w = env.world
-        return cls(env.robot, np.asarray(w.bounds), np.asarray(w.boxes), np.asarray(w.discs),
-                   env.resolve_padding(padding))
+        return cls(
+            env.robot,
+            np.asarray(w.bounds),
+            np.asarray(w.boxes),
+            np.asarray(w.discs),
+            env.resolve_padding(padding),
+        )
 
     # -- metric ----------------------------------------------------------------
     def distance(self, a, b) -> float:
@@ -108,8 +113,10 @@ class NumpyChecker:
         a = np.asarray(a, np.float64)
         b = np.asarray(b, np.float64)
         if self.kind == "rigid_body":
-            return float(math.hypot(b[0] - a[0], b[1] - a[1])
-                         + self.angle_weight * abs(wrap_angle(float(b[2] - a[2]))))
+            return float(
+                math.hypot(b[0] - a[0], b[1] - a[1])
+                + self.angle_weight * abs(wrap_angle(float(b[2] - a[2])))
+            )
         return float(np.sqrt(np.sum((b - a) ** 2)))
 
     def interpolate(self, a, b, t) -> np.ndarray:
@@ -167,9 +174,16 @@ class NumpyChecker:
         x1, x2, x3, x4 = x + a - b, x - a - b, x - a + b, x + a + b
         y1, y2, y3, y4 = y + e + f, y - e + f, y - e - f, y + e - f
         xmin, xmax, ymin, ymax = self.xmin, self.xmax, self.ymin, self.ymax
-        if not (xmin <= x1 <= xmax and xmin <= x2 <= xmax and xmin <= x3 <= xmax
-                and xmin <= x4 <= xmax and ymin <= y1 <= ymax and ymin <= y2 <= ymax
-                and ymin <= y3 <= ymax and ymin <= y4 <= ymax):
+        if not (
+            xmin <= x1 <= xmax
+            and xmin <= x2 <= xmax
+            and xmin <= x3 <= xmax
+            and xmin <= x4 <= xmax
+            and ymin <= y1 <= ymax
+            and ymin <= y2 <= ymax
+            and ymin <= y3 <= ymax
+            and ymin <= y4 <= ymax
+        ):
             return False
         ac, as_ = abs(c), abs(s)
         ex = hl * ac + hw * as_  # half extents of the rectangle's axis-aligned bounding box
@@ -181,9 +195,12 @@ class NumpyChecker:
             atx, aty = abs(tx), abs(ty)
             if atx > bw + ex + reach or aty > bh + ey + reach:
                 continue  # bounding boxes farther apart than the padding: no test can hit
-            if (atx <= bw + ex and aty <= bh + ey
-                    and abs(tx * c + ty * s) <= hl + bw * ac + bh * as_
-                    and abs(-tx * s + ty * c) <= hw + bw * as_ + bh * ac):
+            if (
+                atx <= bw + ex
+                and aty <= bh + ey
+                and abs(tx * c + ty * s) <= hl + bw * ac + bh * as_
+                and abs(-tx * s + ty * c) <= hw + bw * as_ + bh * ac
+            ):
                 return False
             if p == 0.0:
                 continue
@@ -239,8 +256,12 @@ class NumpyChecker:
         adx, ady = abs(dx), abs(dy)
         dd = dx * dx + dy * dy
         for cx, cy, hw, hh in self._box_list:
-            if (lox > cx + hw + reach or hix < cx - hw - reach
-                    or loy > cy + hh + reach or hiy < cy - hh - reach):
+            if (
+                lox > cx + hw + reach
+                or hix < cx - hw - reach
+                or loy > cy + hh + reach
+                or hiy < cy - hh - reach
+            ):
                 continue
             ux, uy = 0.5 * (x0 + x1) - cx, 0.5 * (y0 + y1) - cy
             ex, ey = abs(ux), abs(uy)
@@ -296,10 +317,12 @@ class NumpyChecker:
         joints = list(arm_joints(self.base, self.links, q.T, np.cos, np.sin))
         X = np.stack([np.broadcast_to(x, (k,)) for x, _ in joints], 1)  # (k, n + 1)
         Y = np.stack([np.broadcast_to(y, (k,)) for _, y in joints], 1)
-        ok &= np.all((X >= self.xmin) & (X <= self.xmax) & (Y >= self.ymin) & (Y <= self.ymax),
-                     axis=1)
-        free = segments_free(X[:, :-1], Y[:, :-1], X[:, 1:], Y[:, 1:], self.boxes, self.discs,
-                             self.padding)
+        ok &= np.all(
+            (X >= self.xmin) & (X <= self.xmax) & (Y >= self.ymin) & (Y <= self.ymax), axis=1
+        )
+        free = segments_free(
+            X[:, :-1], Y[:, :-1], X[:, 1:], Y[:, 1:], self.boxes, self.discs, self.padding
+        )
         return ok & np.all(free, axis=1)
 
     # -- edges -------------------------------------------------------------------------
@@ -320,8 +343,11 @@ class NumpyChecker:
         a = [float(v) for v in a]
         b = [float(v) for v in b]
         if self.kind == "point":
-            return (self.point_valid(a[0], a[1]) and self.point_valid(b[0], b[1])
-                    and self.segment_free(a[0], a[1], b[0], b[1]))
+            return (
+                self.point_valid(a[0], a[1])
+                and self.point_valid(b[0], b[1])
+                and self.segment_free(a[0], a[1], b[0], b[1])
+            )
         rigid = self.kind == "rigid_body"
         if rigid:
             dth = wrap_angle(b[2] - a[2])

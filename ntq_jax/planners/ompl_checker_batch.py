@@ -36,8 +36,9 @@ def points_free(x, y, bounds, boxes, discs, p: float) -> np.ndarray:
     if len(boxes):
         X, Y = x[:, None], y[:, None]
         if p == 0.0:
-            hit = ((np.abs(X - boxes[:, 0]) <= boxes[:, 2])
-                   & (np.abs(Y - boxes[:, 1]) <= boxes[:, 3]))
+            hit = (np.abs(X - boxes[:, 0]) <= boxes[:, 2]) & (
+                np.abs(Y - boxes[:, 1]) <= boxes[:, 3]
+            )
         else:
             dx = np.maximum(np.abs(X - boxes[:, 0]) - boxes[:, 2], 0.0)
             dy = np.maximum(np.abs(Y - boxes[:, 1]) - boxes[:, 3], 0.0)
@@ -68,9 +69,12 @@ def rects_free(x, y, th, hl: float, hw: float, bounds, boxes, discs, p: float) -
             cx, cy, bw, bh = cx[bi], cy[bi], bw[bi], bh[bi]
             xk, yk, ck, sk, ac, as_ = x[ki], y[ki], c[ki], s[ki], AC[ki, 0], AS[ki, 0]
             tx, ty = cx - xk, cy - yk
-            hit = ((np.abs(tx) <= bw + EX[ki, 0]) & (np.abs(ty) <= bh + EY[ki, 0])
-                   & (np.abs(tx * ck + ty * sk) <= hl + bw * ac + bh * as_)
-                   & (np.abs(-tx * sk + ty * ck) <= hw + bw * as_ + bh * ac))
+            hit = (
+                (np.abs(tx) <= bw + EX[ki, 0])
+                & (np.abs(ty) <= bh + EY[ki, 0])
+                & (np.abs(tx * ck + ty * sk) <= hl + bw * ac + bh * as_)
+                & (np.abs(-tx * sk + ty * ck) <= hw + bw * as_ + bh * ac)
+            )
             if p > 0.0:
                 p2 = p * p
                 dx = np.maximum(np.abs(PX[ki] - cx[:, None]) - bw[:, None], 0.0)
@@ -101,8 +105,12 @@ def segments_free(x0, y0, x1, y1, boxes, discs, p: float) -> np.ndarray:
         lox, hix = np.minimum(x0, x1)[:, None], np.maximum(x0, x1)[:, None]
         loy, hiy = np.minimum(y0, y1)[:, None], np.maximum(y0, y1)[:, None]
         cx, cy, hw, hh = boxes[:, 0], boxes[:, 1], boxes[:, 2], boxes[:, 3]
-        si, bi = np.nonzero((lox <= cx + hw + reach) & (hix >= cx - hw - reach)
-                            & (loy <= cy + hh + reach) & (hiy >= cy - hh - reach))
+        si, bi = np.nonzero(
+            (lox <= cx + hw + reach)
+            & (hix >= cx - hw - reach)
+            & (loy <= cy + hh + reach)
+            & (hiy >= cy - hh - reach)
+        )
         if len(si):
             free[si[_segment_box_hits(x0[si], y0[si], x1[si], y1[si], boxes[bi], p)]] = False
     if len(discs):

@@ -32,14 +32,16 @@ from ntq_jax.geometry import KERNEL_COMPILER_OPTIONS
 __all__ = ["JaxChecker"]
 
 
-@functools.partial(jax.jit, static_argnames=("robot", "padding"),
-                   compiler_options=KERNEL_COMPILER_OPTIONS)
+@functools.partial(
+    jax.jit, static_argnames=("robot", "padding"), compiler_options=KERNEL_COMPILER_OPTIONS
+)
 def _valid_one(robot, world, q, padding):
     return robot.is_valid(q, world, padding)
 
 
-@functools.partial(jax.jit, static_argnames=("robot", "padding"),
-                   compiler_options=KERNEL_COMPILER_OPTIONS)
+@functools.partial(
+    jax.jit, static_argnames=("robot", "padding"), compiler_options=KERNEL_COMPILER_OPTIONS
+)
 def _steer_one(robot, world, a, b, padding):
     return robot.steer_to(a, b, world, padding)
 
@@ -61,8 +63,10 @@ class JaxChecker:
     def __init__(self, env, padding: float | None = None):
         robot, world = env.robot, env.world
         if robot.kind == "rigid_body":
-            raise ValueError("JaxChecker: the rigid body's SE(2) space is not supported; "
-                             "use the 'bitstar' planner (NumpyChecker) for it")
+            raise ValueError(
+                "JaxChecker: the rigid body's SE(2) space is not supported; "
+                "use the 'bitstar' planner (NumpyChecker) for it"
+            )
         self.kind = robot.kind
         self.dim = int(robot.dim)
         self.padding = float(env.resolve_padding(padding))
@@ -83,14 +87,20 @@ class JaxChecker:
     def is_valid(self, q) -> bool:
         """Whether state ``q`` (``d`` numbers) is valid at the padding."""
         self.n_valid += 1
-        return bool(_valid_one(self._robot, self._world, np.asarray(q, np.float32),
-                               self.padding))
+        return bool(_valid_one(self._robot, self._world, np.asarray(q, np.float32), self.padding))
 
     def steer_to(self, a, b) -> bool:
         """Whether the straight motion ``a -> b`` passes the discretised check."""
         self.n_motion += 1
-        return bool(_steer_one(self._robot, self._world, np.asarray(a, np.float32),
-                               np.asarray(b, np.float32), self.padding))
+        return bool(
+            _steer_one(
+                self._robot,
+                self._world,
+                np.asarray(a, np.float32),
+                np.asarray(b, np.float32),
+                self.padding,
+            )
+        )
 
     def distance(self, a, b) -> float:
         """The Euclidean distance of two states (the cost metric of these robots)."""

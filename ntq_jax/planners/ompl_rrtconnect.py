@@ -65,10 +65,18 @@ __all__ = ["plan_rrtconnect", "plan_bitstar_jax", "ARM_RANGE"]
 ARM_RANGE = 1.0
 
 
-def plan_rrtconnect(env, queries, *, padding: float | None = None, seed: int = 0,
-                    time_budget: float = 10.0, simplify: bool = True,
-                    range_: float | None = None, check: str = "discretized",
-                    ompl_log_level: str = "error") -> PlanResult:
+def plan_rrtconnect(
+    env,
+    queries,
+    *,
+    padding: float | None = None,
+    seed: int = 0,
+    time_budget: float = 10.0,
+    simplify: bool = True,
+    range_: float | None = None,
+    check: str = "discretized",
+    ompl_log_level: str = "error",
+) -> PlanResult:
     """Plans each query with OMPL's RRT-Connect (+ simplification) on the package's checks.
 
     Args:
@@ -100,15 +108,35 @@ def plan_rrtconnect(env, queries, *, padding: float | None = None, seed: int = 0
     range_ = float_option("rrtconnect", "range_", range_, none_ok=True)
     if range_ is None and env.robot.kind == "serial_arm":
         range_ = ARM_RANGE
-    info = {"planner": "rrtconnect", "range": range_, "simplify": simplify,
-            "time_budget": time_budget}
-    return _plan_in_process(env, queries, padding, seed, check, ompl_log_level, info,
-                            {"planner": "rrtconnect", "simplify": simplify, "range_": range_})
+    info = {
+        "planner": "rrtconnect",
+        "range": range_,
+        "simplify": simplify,
+        "time_budget": time_budget,
+    }
+    return _plan_in_process(
+        env,
+        queries,
+        padding,
+        seed,
+        check,
+        ompl_log_level,
+        info,
+        {"planner": "rrtconnect", "simplify": simplify, "range_": range_},
+    )
 
 
-def plan_bitstar_jax(env, queries, *, padding: float | None = None, seed: int = 0,
-                     time_budget: float = 1.0, stop_on_first: bool = False,
-                     check: str = "discretized", ompl_log_level: str = "error") -> PlanResult:
+def plan_bitstar_jax(
+    env,
+    queries,
+    *,
+    padding: float | None = None,
+    seed: int = 0,
+    time_budget: float = 1.0,
+    stop_on_first: bool = False,
+    check: str = "discretized",
+    ompl_log_level: str = "error",
+) -> PlanResult:
     """Plans each query with OMPL's BIT* (default parameters) on the package's JAX checks.
 
     Args:
@@ -132,22 +160,31 @@ def plan_bitstar_jax(env, queries, *, padding: float | None = None, seed: int = 
     """
     time_budget = float_option("bitstar_jax", "time_budget", time_budget)
     stop_on_first = bool_option("bitstar_jax", "stop_on_first", stop_on_first)
-    info = {"planner": "bitstar_jax", "stop_on_first": stop_on_first,
-            "time_budget": time_budget}
-    return _plan_in_process(env, queries, padding, seed, check, ompl_log_level, info,
-                            {"planner": "bitstar", "stop_on_first": stop_on_first})
+    info = {"planner": "bitstar_jax", "stop_on_first": stop_on_first, "time_budget": time_budget}
+    return _plan_in_process(
+        env,
+        queries,
+        padding,
+        seed,
+        check,
+        ompl_log_level,
+        info,
+        {"planner": "bitstar", "stop_on_first": stop_on_first},
+    )
 
 
-def _plan_in_process(env, queries, padding, seed, check, ompl_log_level, info: dict,
-                     problem_options: dict) -> PlanResult:
+def _plan_in_process(
+    env, queries, padding, seed, check, ompl_log_level, info: dict, problem_options: dict
+) -> PlanResult:
     """The shared route: each valid query solved by one in-process :class:`OmplProblem`
     (``problem_options``: its planner and settings) on a :class:`JaxChecker`, then
     verified; ``info`` (the planner's own entries) is completed and returned in the result."""
     name = info["planner"]
     check = motion_check_option(name, check)
     if ompl_log_level not in LOG_LEVELS:
-        raise ValueError(f"{name}: ompl_log_level must be one of {LOG_LEVELS}, "
-                         f"got {ompl_log_level!r}")
+        raise ValueError(
+            f"{name}: ompl_log_level must be one of {LOG_LEVELS}, got {ompl_log_level!r}"
+        )
     if importlib.util.find_spec("ompl") is None:
         raise ImportError(f"{name} needs OMPL's Python bindings: pip install 'ompl>=2.0.1'")
     pad = env.resolve_padding(padding)
@@ -165,8 +202,9 @@ def _plan_in_process(env, queries, padding, seed, check, ompl_log_level, info: d
     if ok.any():
         checker = JaxChecker(env, pad)
         checker.compile(q[np.flatnonzero(ok)[0], 0])  # not in the first query's budget
-        problem = OmplProblem(checker, info["time_budget"], log_level=ompl_log_level,
-                              **problem_options)
+        problem = OmplProblem(
+            checker, info["time_budget"], log_level=ompl_log_level, **problem_options
+        )
         info["setup_time"] = time.perf_counter() - t0
         seeds = query_seeds(seed, nq)
         found = {}
@@ -181,12 +219,18 @@ def _plan_in_process(env, queries, padding, seed, check, ompl_log_level, info: d
             width = max(len(p) for p in found.values())
             paths = np.full((nq, width, d), np.nan, np.float32)
             for i, p in found.items():
-                paths[i, :len(p)], lengths[i] = p, len(p)
+                paths[i, : len(p)], lengths[i] = p, len(p)
     status = np.array([PLAN_STATUS[BridgeOutcome(o)] for o in outcome], np.int8)
-    info.update(ompl_status=outcome, solve_times=solve_t, simplify_times=simp_t,
-                planner_costs=own, n_valid_calls=int(n_valid.sum()),
-                n_motion_calls=int(n_motion.sum()), n_valid_per_query=n_valid,
-                n_motion_per_query=n_motion)
+    info.update(
+        ompl_status=outcome,
+        solve_times=solve_t,
+        simplify_times=simp_t,
+        planner_costs=own,
+        n_valid_calls=int(n_valid.sum()),
+        n_motion_calls=int(n_motion.sum()),
+        n_valid_per_query=n_valid,
+        n_motion_per_query=n_motion,
+    )
     res = finalize(q, paths, lengths, status, info, env, pad, check)
     info["time"] = time.perf_counter() - t0
     return res

@@ -42,15 +42,20 @@ class BridgeOutcome(enum.IntEnum):
     :class:`ntq_jax.types.PlanStatus` in one table.
     """
 
-    EXACT = 0      #: BIT* found an exact solution
+    EXACT = 0  #: BIT* found an exact solution
     NOT_FOUND = 1  #: no exact solution within the time budget (unsolvable or timed out)
     BAD_QUERY = 2  #: start or goal invalid at the planning padding (checked before planning)
-    CRASHED = 3    #: the worker died on this query twice (or raised: see ``info["errors"]``)
-    REJECTED = 4   #: BIT*'s path failed the package's ``steer_to`` (float32 tangency)
+    CRASHED = 3  #: the worker died on this query twice (or raised: see ``info["errors"]``)
+    REJECTED = 4  #: BIT*'s path failed the package's ``steer_to`` (float32 tangency)
 
 
-_OMPL_LOG_LEVELS = {"debug": "LOG_DEBUG", "info": "LOG_INFO", "warn": "LOG_WARN",
-                    "error": "LOG_ERROR", "none": "LOG_NONE"}
+_OMPL_LOG_LEVELS = {
+    "debug": "LOG_DEBUG",
+    "info": "LOG_INFO",
+    "warn": "LOG_WARN",
+    "error": "LOG_ERROR",
+    "none": "LOG_NONE",
+}
 LOG_LEVELS = tuple(_OMPL_LOG_LEVELS)
 
 
@@ -88,17 +93,25 @@ class OmplProblem:
             the space's extent).
     """
 
-    def __init__(self, checker: NumpyChecker, time_budget: float, stop_on_first: bool = False,
-                 motion_validator: str = "python", log_level: str = "error",
-                 planner: str = "bitstar", simplify: bool = False,
-                 range_: float | None = None):
+    def __init__(
+        self,
+        checker: NumpyChecker,
+        time_budget: float,
+        stop_on_first: bool = False,
+        motion_validator: str = "python",
+        log_level: str = "error",
+        planner: str = "bitstar",
+        simplify: bool = False,
+        range_: float | None = None,
+    ):
         import ompl.base as ob
         import ompl.geometric as og
         import ompl.util as ou
 
         if motion_validator not in ("python", "ompl"):
-            raise ValueError("motion_validator must be 'python' or 'ompl', "
-                             f"got {motion_validator!r}")
+            raise ValueError(
+                f"motion_validator must be 'python' or 'ompl', got {motion_validator!r}"
+            )
         if planner not in ("bitstar", "rrtconnect"):
             raise ValueError(f"planner must be 'bitstar' or 'rrtconnect', got {planner!r}")
         self.planner, self.simplify, self.range = planner, bool(simplify), range_
@@ -109,7 +122,7 @@ class OmplProblem:
         self.time_budget = float(time_budget)
         self.stop_on_first = bool(stop_on_first)
         self.motion_validator = motion_validator
-        self.n_valid = 0   # Python state-validity callbacks (cumulative)
+        self.n_valid = 0  # Python state-validity callbacks (cumulative)
         self.n_motion = 0  # Python motion-validator callbacks (cumulative)
         if checker.kind == "rigid_body":
             self.space, self._get, self._put, self._valid = self._se2_space()
@@ -204,9 +217,16 @@ class OmplProblem:
         (Python callbacks in this query) and ``n_edges`` (motions the planner checked)."""
         start = np.asarray(start, np.float64)
         goal = np.asarray(goal, np.float64)
-        out = {"outcome": int(BridgeOutcome.NOT_FOUND), "path": None, "planner_cost": math.inf,
-               "solve_time": 0.0, "simplify_time": 0.0, "n_valid": 0, "n_motion": 0,
-               "n_edges": 0}
+        out = {
+            "outcome": int(BridgeOutcome.NOT_FOUND),
+            "path": None,
+            "planner_cost": math.inf,
+            "solve_time": 0.0,
+            "simplify_time": 0.0,
+            "n_valid": 0,
+            "n_motion": 0,
+            "n_edges": 0,
+        }
         if not (self.checker.is_valid(start) and self.checker.is_valid(goal)):
             out["outcome"] = int(BridgeOutcome.BAD_QUERY)
             return out
@@ -227,11 +247,11 @@ class OmplProblem:
         out["n_edges"] = out["n_motion"] if mv is not None else int(si.getCheckedMotionCount())
         if ss.haveExactSolutionPath():
             p = ss.getSolutionPath()
-            path = np.array([self._get(p.getState(i)) for i in range(p.getStateCount())],
-                            np.float64)
+            path = np.array(
+                [self._get(p.getState(i)) for i in range(p.getStateCount())], np.float64
+            )
             path[0], path[-1] = start, goal  # exactly the query (OMPL wraps SE(2) yaw)
-            out.update(outcome=int(BridgeOutcome.EXACT), path=path,
-                       planner_cost=float(p.length()))
+            out.update(outcome=int(BridgeOutcome.EXACT), path=path, planner_cost=float(p.length()))
         del mv, keep, ss
         return out
 
@@ -275,8 +295,14 @@ class OmplProblem:
         return ss, si, mv, (planner, s, g)
 
 
-def worker_main(conn, checker: NumpyChecker, time_budget: float, stop_on_first: bool,
-                log_level: str, crash_on: dict) -> None:  # pragma: no cover (child process)
+def worker_main(
+    conn,
+    checker: NumpyChecker,
+    time_budget: float,
+    stop_on_first: bool,
+    log_level: str,
+    crash_on: dict,
+) -> None:  # pragma: no cover (child process)
     """Worker loop: ``("task", [(idx, start, goal, seed, attempt), ...])`` or ``("stop",)``.
 
     Sends ``("ready", pid)`` once, then per query ``("start", idx)`` and

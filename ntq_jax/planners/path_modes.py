@@ -49,8 +49,9 @@ def planner_smooth(mode, planner: str) -> bool | None:
     return mode != "raw"
 
 
-def shape_paths(env, result: PlanResult, mode, planner: str, padding: float,
-                check: str = "discretized") -> tuple[PlanResult, dict]:
+def shape_paths(
+    env, result: PlanResult, mode, planner: str, padding: float, check: str = "discretized"
+) -> tuple[PlanResult, dict]:
     """The data paths of ``mode`` from a planned pool (see the module doc).
 
     Args:
@@ -70,8 +71,10 @@ def shape_paths(env, result: PlanResult, mode, planner: str, padding: float,
         passed because the discretised check then samples other states of the
         same segments).
     """
-    if not (mode in (None, "raw", "shortcut") or (isinstance(mode, (int, float))
-                                                  and not isinstance(mode, bool) and mode > 0)):
+    if not (
+        mode in (None, "raw", "shortcut")
+        or (isinstance(mode, (int, float)) and not isinstance(mode, bool) and mode > 0)
+    ):
         raise ValueError(f"data_paths must be raw, shortcut, a spacing > 0 or None; got {mode!r}")
     info = {"mode": mode, "shortcut_kept": 0, "resample_kept": 0}
     if mode is None or mode == "raw":
@@ -81,15 +84,18 @@ def shape_paths(env, result: PlanResult, mode, planner: str, padding: float,
     if not len(rows):
         return result, info
     if planner not in SMOOTHING_PLANNERS:  # shortcut here
-        sp, sl, ok = shortcut_paths(env.robot, env.world, paths[rows], lengths[rows], padding,
-                                    check=check)
+        sp, sl, ok = shortcut_paths(
+            env.robot, env.world, paths[rows], lengths[rows], padding, check=check
+        )
         paths, lengths, costs, info["shortcut_kept"] = _merge(
-            paths, lengths, costs, rows, sp, sl, ok, env, padding, check)
+            paths, lengths, costs, rows, sp, sl, ok, env, padding, check
+        )
     rows = rows[lengths[rows] > 2]  # a direct connection stays its two ends (BIT*'s)
     if mode != "shortcut" and len(rows):
         rp, rl = resample_paths(env.robot, paths[rows], lengths[rows], float(mode))
         paths, lengths, costs, info["resample_kept"] = _merge(
-            paths, lengths, costs, rows, rp, rl, np.ones(len(rows), bool), env, padding, check)
+            paths, lengths, costs, rows, rp, rl, np.ones(len(rows), bool), env, padding, check
+        )
     return PlanResult(paths, lengths, costs, result.status, dict(result.info)), info
 
 
@@ -101,9 +107,9 @@ def _merge(paths, lengths, costs, rows, new_paths, new_lengths, ok, env, padding
     take = rows[ok]
     k, width = paths.shape[0], max(paths.shape[1], new_paths.shape[1])
     out = np.full((k, width, paths.shape[2]), np.nan, np.float32)
-    out[:, :paths.shape[1]] = paths
+    out[:, : paths.shape[1]] = paths
     out[take] = np.nan
-    out[take, :new_paths.shape[1]] = new_paths[ok]
+    out[take, : new_paths.shape[1]] = new_paths[ok]
     lengths, costs = lengths.copy(), costs.copy()
     lengths[take], costs[take] = new_lengths[ok], new_costs[ok]
-    return out[:, :max(2, int(lengths.max(initial=2)))], lengths, costs, int((~ok).sum())
+    return out[:, : max(2, int(lengths.max(initial=2)))], lengths, costs, int((~ok).sum())

@@ -10,11 +10,18 @@ from __future__ import annotations
 
 import numpy as np
 
-from ntq_jax.planners import (astar, bitree, ompl_bridge, ompl_rrtconnect, roadmap, vamp_bridge,
-                              visgraph)
+from ntq_jax.planners import (
+    astar,
+    bitree,
+    ompl_bridge,
+    ompl_rrtconnect,
+    roadmap,
+    vamp_bridge,
+    visgraph,
+)
 from ntq_jax.planners.options import check_option_names
-from ntq_jax.validation import check_count
 from ntq_jax.types import PlannerFn, PlanResult
+from ntq_jax.validation import check_count
 
 _REGISTRY: dict[str, PlannerFn] = {}
 
@@ -39,8 +46,9 @@ def available_planners() -> tuple[str, ...]:
     return tuple(sorted(_REGISTRY))
 
 
-def plan(env, queries, planner: str = "astar", *, padding: float | None = None, seed: int = 0,
-         **options) -> PlanResult:
+def plan(
+    env, queries, planner: str = "astar", *, padding: float | None = None, seed: int = 0, **options
+) -> PlanResult:
     """Plans a batch of queries with a registered planner.
 
     Args:
@@ -63,14 +71,18 @@ def plan(env, queries, planner: str = "astar", *, padding: float | None = None, 
             message names it); a non-integer or negative ``seed``.
     """
     if not isinstance(planner, str) or planner not in _REGISTRY:
-        raise ValueError(f"unknown planner {planner!r}; available: {', '.join(available_planners())}")
+        raise ValueError(
+            f"unknown planner {planner!r}; available: {', '.join(available_planners())}"
+        )
     seed = check_count("seed", seed)
     pad = env.resolve_padding(padding)
     try:
         q = np.asarray(queries, np.float32)
     except (TypeError, ValueError):
-        raise TypeError(f"queries must be a numeric (K, 2, {env.dim}) array of (start, goal) "
-                        f"states for {env.name}, got {type(queries).__name__}") from None
+        raise TypeError(
+            f"queries must be a numeric (K, 2, {env.dim}) array of (start, goal) "
+            f"states for {env.name}, got {type(queries).__name__}"
+        ) from None
     if q.ndim != 3 or q.shape[1:] != (2, env.dim):
         raise ValueError(f"queries must have shape (K, 2, {env.dim}) for {env.name}, got {q.shape}")
     fn = _REGISTRY[planner]

@@ -37,8 +37,7 @@ def _interpolate_batch(robot, a, b, t):
     return jax.vmap(robot.interpolate)(a, b, t)
 
 
-def segment_counts(robot, paths: np.ndarray, lengths: np.ndarray, spacing: float
-                   ) -> np.ndarray:
+def segment_counts(robot, paths: np.ndarray, lengths: np.ndarray, spacing: float) -> np.ndarray:
     """``(B, L-1)`` int pieces per segment (0 past a path's end) for ``spacing``."""
     b, l, d = paths.shape
     seg = np.arange(max(l - 1, 0))[None, :] < (np.asarray(lengths)[:, None] - 1)
@@ -71,8 +70,9 @@ def resample_paths(robot, paths, lengths, spacing: float) -> tuple[np.ndarray, n
     p = np.asarray(paths, np.float32)
     n = np.asarray(lengths, np.int64).reshape(-1)
     if p.ndim != 3 or p.shape[2] != robot.dim or p.shape[0] != n.shape[0]:
-        raise ValueError(f"paths must be (B, L, {robot.dim}) with lengths (B,), got "
-                         f"{p.shape} and {n.shape}")
+        raise ValueError(
+            f"paths must be (B, L, {robot.dim}) with lengths (B,), got {p.shape} and {n.shape}"
+        )
     bsz, l, d = p.shape
     n = np.clip(n, 0, l)
     if bsz == 0:
@@ -94,8 +94,13 @@ def resample_paths(robot, paths, lengths, spacing: float) -> tuple[np.ndarray, n
         seg_b, seg_i = np.repeat(sb, cnt), np.repeat(si, cnt)
         j = np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt) + 1
         t = (j / k[seg_b, seg_i]).astype(np.float32)
-        new = map_chunks(lambda a, b_, tt: _interpolate_batch(robot, a, b_, tt),
-                         p[seg_b, seg_i], p[seg_b, seg_i + 1], t, chunk=CHECK_CHUNK,
-                         empty=np.zeros((0, d), np.float32))
+        new = map_chunks(
+            lambda a, b_, tt: _interpolate_batch(robot, a, b_, tt),
+            p[seg_b, seg_i],
+            p[seg_b, seg_i + 1],
+            t,
+            chunk=CHECK_CHUNK,
+            empty=np.zeros((0, d), np.float32),
+        )
         out[seg_b, start[seg_b, seg_i] + j] = new
     return out, out_len.astype(np.int32)

@@ -20,7 +20,8 @@ Frazzoli 2011):
    outgoing and goals only incoming edges, so every query is solved on the
    roadmap alone, independently of the other queries of the batch (and of the
    chunking). A* per query (:mod:`ntq_jax.planners.graph_search`, the robot's
-   metric to the goal as heuristic, queries in parallel); the node sequence is shortcut (:mod:`ntq_jax.planners.smoothing`) and verified
+   metric to the goal as heuristic, queries in parallel); the node sequence is shortcut
+   (:mod:`ntq_jax.planners.smoothing`) and verified
    (:mod:`ntq_jax.planners.verify`).
 3. **Growth**: a query whose ends are not connected is retried on a roadmap
    with twice the milestones (another sample), at most ``grow_rounds`` times,
@@ -45,8 +46,12 @@ from ntq_jax import artifacts
 from ntq_jax.geometry import World
 from ntq_jax.planners.env_cache import EnvCache
 from ntq_jax.planners.graph_search import heuristic_metric, search_graph, shortest_paths
-from ntq_jax.planners.options import (bool_option, int_option, motion_check_option,
-                                     roadmap_memory_option)
+from ntq_jax.planners.options import (
+    bool_option,
+    int_option,
+    motion_check_option,
+    roadmap_memory_option,
+)
 from ntq_jax.planners.roadmap_ends import query_edges
 from ntq_jax.planners.smoothing import SHORTCUT_GROUP, shortcut_paths
 from ntq_jax.planners.verify import finalize, motions_free, valid_queries
@@ -54,8 +59,18 @@ from ntq_jax.queries import sample_states
 from ntq_jax.robots.batch import distances
 from ntq_jax.types import PlanResult, PlanStatus
 
-__all__ = ["Roadmap", "MetricIndex", "prm_star_k", "build_roadmap", "roadmap_for", "plan_roadmap",
-           "roadmap_defaults", "DEFAULT_MILESTONES", "ARM_DEFAULTS", "ALGORITHM_VERSION"]
+__all__ = [
+    "Roadmap",
+    "MetricIndex",
+    "prm_star_k",
+    "build_roadmap",
+    "roadmap_for",
+    "plan_roadmap",
+    "roadmap_defaults",
+    "DEFAULT_MILESTONES",
+    "ARM_DEFAULTS",
+    "ALGORITHM_VERSION",
+]
 
 ALGORITHM_VERSION = 1  # bump when a roadmap built from the same settings changes
 DEFAULT_MILESTONES = 20_000
@@ -79,9 +94,13 @@ DEFAULT_MILESTONES = 20_000
 #:   replaced by the roadmap edges it skipped, certified in turn
 #:   (:func:`ntq_jax.planners.verify.finalize`'s ``fallback``), so every SOLVED
 #:   path's every segment passes ``check`` all the same.
-ARM_DEFAULTS = {"milestones": 4000, "k": 10, "attach": 4, "edge_check": "discretized",
-                "end_rounds": 8}
-
+ARM_DEFAULTS = {
+    "milestones": 4000,
+    "k": 10,
+    "attach": 4,
+    "edge_check": "discretized",
+    "end_rounds": 8,
+}
 
 
 def roadmap_defaults(robot) -> dict:
@@ -89,8 +108,13 @@ def roadmap_defaults(robot) -> dict:
     (None: ``k`` by PRM*'s rule, ``attach`` = ``k``, ``edge_check`` = ``check``)."""
     if getattr(robot, "kind", None) == "serial_arm":
         return dict(ARM_DEFAULTS)
-    return {"milestones": DEFAULT_MILESTONES, "k": None, "attach": None, "edge_check": None,
-            "end_rounds": 0}
+    return {
+        "milestones": DEFAULT_MILESTONES,
+        "k": None,
+        "attach": None,
+        "edge_check": None,
+        "end_rounds": 0,
+    }
 
 
 class Roadmap(NamedTuple):
@@ -125,8 +149,9 @@ class MetricIndex:
     def _embed(self, x: np.ndarray) -> np.ndarray:
         return np.mod(self._w * (np.asarray(x, np.float64) - self._lo), self._box)
 
-    def query(self, x: np.ndarray, k: int, exclude_self: bool = False
-              ) -> tuple[np.ndarray, np.ndarray]:
+    def query(
+        self, x: np.ndarray, k: int, exclude_self: bool = False
+    ) -> tuple[np.ndarray, np.ndarray]:
         """``(idx (M, k) int64, dist (M, k) float64)``, nearest first, by the exact metric."""
         x = np.asarray(x, np.float32)
         n = len(self.points)
@@ -158,14 +183,23 @@ def undirected_pairs(i: np.ndarray, j: np.ndarray, n: int) -> np.ndarray:
     return np.stack([code // n, code % n], 1)
 
 
-def build_roadmap(robot, world: World, padding: float, *, milestones: int, k: int,
-                  key: jax.Array, check: str = "discretized") -> Roadmap:
+def build_roadmap(
+    robot,
+    world: World,
+    padding: float,
+    *,
+    milestones: int,
+    k: int,
+    key: jax.Array,
+    check: str = "discretized",
+) -> Roadmap:
     """Samples ``milestones`` valid states and keeps the free edges to their ``k`` nearest."""
     states = sample_states(robot, world, key, int(milestones), padding)
     index = MetricIndex(robot, world, states)
     nbr, _ = index.query(states, k, exclude_self=True)
-    pairs = undirected_pairs(np.repeat(np.arange(len(states)), nbr.shape[1]), nbr.reshape(-1),
-                             len(states))
+    pairs = undirected_pairs(
+        np.repeat(np.arange(len(states)), nbr.shape[1]), nbr.reshape(-1), len(states)
+    )
     a, b = states[pairs[:, 0]], states[pairs[:, 1]]
     free = motions_free(robot, world, a, b, padding, check=check)
     edges = pairs[free].astype(np.int32)
@@ -176,9 +210,17 @@ def build_roadmap(robot, world: World, padding: float, *, milestones: int, k: in
 _MEMORY = EnvCache(per_env=4)
 
 
-def roadmap_for(env, padding: float, *, milestones: int, k: int, roadmap_seed: int,
-                round_: int = 0, cache_dir: str | Path | None = None,
-                check: str = "discretized") -> Roadmap:
+def roadmap_for(
+    env,
+    padding: float,
+    *,
+    milestones: int,
+    k: int,
+    roadmap_seed: int,
+    round_: int = 0,
+    cache_dir: str | Path | None = None,
+    check: str = "discretized",
+) -> Roadmap:
     """The roadmap of ``env`` for these settings: from memory, from ``cache_dir``, or built.
 
     Round ``r`` uses ``milestones * 2**r`` milestones and its own sample.
@@ -196,13 +238,32 @@ def roadmap_for(env, padding: float, *, milestones: int, k: int, roadmap_seed: i
             return Roadmap(**build())
         # the discretised check's fingerprint is the one from before ``check`` existed
         extra = () if check == "discretized" else (check,)
-        fp = artifacts.fingerprint(ALGORITHM_VERSION, env.to_json(), float(padding), n, int(k),
-                                   int(roadmap_seed), int(round_), *extra)
+        fp = artifacts.fingerprint(
+            ALGORITHM_VERSION,
+            env.to_json(),
+            float(padding),
+            n,
+            int(k),
+            int(roadmap_seed),
+            int(round_),
+            *extra,
+        )
         got = artifacts.compute_or_load(Path(cache_dir) / f"roadmap_{fp}.npz", fp, build)
         return Roadmap(*(np.asarray(got[f]) for f in Roadmap._fields))
 
-    return _MEMORY.get(env, (float(padding), n, int(k), int(roadmap_seed), int(round_),
-                             None if cache_dir is None else str(cache_dir), check), load)
+    return _MEMORY.get(
+        env,
+        (
+            float(padding),
+            n,
+            int(k),
+            int(roadmap_seed),
+            int(round_),
+            None if cache_dir is None else str(cache_dir),
+            check,
+        ),
+        load,
+    )
 
 
 # ---------------------------------------------------------------------------
@@ -225,16 +286,42 @@ def _graph_for(rm: Roadmap):
     return graph
 
 
-def _search(robot, world, rm: Roadmap, q: np.ndarray, k: int, padding: float, threads: int,
-            check: str, attach: int | None = None, end_rounds: int = 0, seed: int = 0,
-            reach: int = 0, direct: bool = True) -> list[np.ndarray | None]:
+def _search(
+    robot,
+    world,
+    rm: Roadmap,
+    q: np.ndarray,
+    k: int,
+    padding: float,
+    threads: int,
+    check: str,
+    attach: int | None = None,
+    end_rounds: int = 0,
+    seed: int = 0,
+    reach: int = 0,
+    direct: bool = True,
+) -> list[np.ndarray | None]:
     """Per query, the states of its shortest roadmap path (start ... goal), or None
     (see :func:`ntq_jax.planners.graph_search.shortest_paths`; the other arguments:
     :func:`ntq_jax.planners.roadmap_ends.query_edges`)."""
-    ends = query_edges(robot, world, rm, MetricIndex(robot, world, rm.milestones), q, k, padding,
-                       check, attach, end_rounds, seed, reach, direct)
-    _, seqs = shortest_paths(_graph_for(rm), q[:, 1], ends.edges, heuristic_metric(robot),
-                             threads=threads)
+    ends = query_edges(
+        robot,
+        world,
+        rm,
+        MetricIndex(robot, world, rm.milestones),
+        q,
+        k,
+        padding,
+        check,
+        attach,
+        end_rounds,
+        seed,
+        reach,
+        direct,
+    )
+    _, seqs = shortest_paths(
+        _graph_for(rm), q[:, 1], ends.edges, heuristic_metric(robot), threads=threads
+    )
     out: list[np.ndarray | None] = []
     for i, s in enumerate(seqs):
         if s is None:
@@ -252,17 +339,29 @@ def _pack(paths: list[np.ndarray | None], d: int) -> tuple[np.ndarray, np.ndarra
     out = np.full((len(paths), max(2, int(lengths.max(initial=0))), d), np.nan, np.float32)
     for i, p in enumerate(paths):
         if p is not None:
-            out[i, :len(p)] = p
+            out[i, : len(p)] = p
     return out, lengths
 
 
-def plan_roadmap(env, queries, *, padding: float | None = None, seed: int = 0,
-                 milestones: int | None = None, k: int | None = None,
-                 grow_rounds: int = 2, roadmap_seed: int = 0, smooth: bool = True,
-                 smooth_chunk: int = SHORTCUT_GROUP, cache_dir: str | Path | None = None,
-                 threads: int | None = None, check: str = "discretized",
-                 attach: int | None = None, edge_check: str | None = None,
-                 end_rounds: int | None = None) -> PlanResult:
+def plan_roadmap(
+    env,
+    queries,
+    *,
+    padding: float | None = None,
+    seed: int = 0,
+    milestones: int | None = None,
+    k: int | None = None,
+    grow_rounds: int = 2,
+    roadmap_seed: int = 0,
+    smooth: bool = True,
+    smooth_chunk: int = SHORTCUT_GROUP,
+    cache_dir: str | Path | None = None,
+    threads: int | None = None,
+    check: str = "discretized",
+    attach: int | None = None,
+    edge_check: str | None = None,
+    end_rounds: int | None = None,
+) -> PlanResult:
     """Plans every query on the environment's roadmap (the registry's ``"roadmap"``).
 
     Args:
@@ -320,21 +419,26 @@ def plan_roadmap(env, queries, *, padding: float | None = None, seed: int = 0,
     k = int_option("roadmap", "k", k, 1, none_ok=True)
     attach = int_option("roadmap", "attach", attach, 1, none_ok=True)
     end_rounds = int_option("roadmap", "end_rounds", end_rounds, 0, 64, none_ok=True)
-    opts = {"grow_rounds": int_option("roadmap", "grow_rounds", grow_rounds, 0, 8),
-            "roadmap_seed": int_option("roadmap", "roadmap_seed", roadmap_seed, 0),
-            "check": motion_check_option("roadmap", check),
-            "milestones": defaults["milestones"] if milestones is None else milestones,
-            "attach": defaults["attach"] if attach is None else attach,
-            "end_rounds": defaults["end_rounds"] if end_rounds is None else end_rounds}
+    opts = {
+        "grow_rounds": int_option("roadmap", "grow_rounds", grow_rounds, 0, 8),
+        "roadmap_seed": int_option("roadmap", "roadmap_seed", roadmap_seed, 0),
+        "check": motion_check_option("roadmap", check),
+        "milestones": defaults["milestones"] if milestones is None else milestones,
+        "attach": defaults["attach"] if attach is None else attach,
+        "end_rounds": defaults["end_rounds"] if end_rounds is None else end_rounds,
+    }
     smooth = bool_option("roadmap", "smooth", smooth)
     smooth_chunk = int_option("roadmap", "smooth_chunk", smooth_chunk, 1)
     threads = int_option("roadmap", "threads", threads, 1, none_ok=True)
     opts["threads"] = (os.cpu_count() or 1) if threads is None else int(threads)
     opts["edge_check"] = motion_check_option(
-        "roadmap", edge_check if edge_check is not None else defaults["edge_check"] or check)
+        "roadmap", edge_check if edge_check is not None else defaults["edge_check"] or check
+    )
     if cache_dir is not None and not isinstance(cache_dir, (str, os.PathLike)):
-        raise TypeError(f"roadmap: cache_dir must be a folder path or None, got {cache_dir!r} "
-                        f"({type(cache_dir).__name__})")
+        raise TypeError(
+            f"roadmap: cache_dir must be a folder path or None, got {cache_dir!r} "
+            f"({type(cache_dir).__name__})"
+        )
     opts["cache_dir"] = cache_dir
     k = defaults["k"] if k is None else k
     padding = env.resolve_padding(padding)
@@ -345,23 +449,52 @@ def plan_roadmap(env, queries, *, padding: float | None = None, seed: int = 0,
     roadmap_memory_option("roadmap", opts["milestones"], d, opts["k"], opts["grow_rounds"])
     status = np.full(nq, PlanStatus.NO_PATH, np.int8)
     status[~valid_queries(env, q, padding)] = PlanStatus.INVALID
-    info: dict = {"planner": "roadmap", "milestones": opts["milestones"], "k": opts["k"],
-                  "attach": opts["attach"], "edge_check": opts["edge_check"],
-                  "end_rounds": opts["end_rounds"], "rounds": 0, "build_time": 0.0,
-                  "search_time": 0.0, "smooth_time": 0.0, "check_time": 0.0, "replanned": 0}
-    paths = _roadmap_paths(env, q, np.flatnonzero(status == PlanStatus.NO_PATH), padding,
-                           opts, info, opts["edge_check"])
-    res = _finish(env, q, paths, status, info, padding, opts["check"], opts["edge_check"],
-                  smooth, smooth_chunk)
+    info: dict = {
+        "planner": "roadmap",
+        "milestones": opts["milestones"],
+        "k": opts["k"],
+        "attach": opts["attach"],
+        "edge_check": opts["edge_check"],
+        "end_rounds": opts["end_rounds"],
+        "rounds": 0,
+        "build_time": 0.0,
+        "search_time": 0.0,
+        "smooth_time": 0.0,
+        "check_time": 0.0,
+        "replanned": 0,
+    }
+    paths = _roadmap_paths(
+        env,
+        q,
+        np.flatnonzero(status == PlanStatus.NO_PATH),
+        padding,
+        opts,
+        info,
+        opts["edge_check"],
+    )
+    res = _finish(
+        env,
+        q,
+        paths,
+        status,
+        info,
+        padding,
+        opts["check"],
+        opts["edge_check"],
+        smooth,
+        smooth_chunk,
+    )
     if opts["edge_check"] != opts["check"]:
-        res = _plan_rejected_again(env, q, paths, res, status, padding, opts, info, smooth,
-                                   smooth_chunk)
+        res = _plan_rejected_again(
+            env, q, paths, res, status, padding, opts, info, smooth, smooth_chunk
+        )
     info["time"] = time.perf_counter() - t0
     return res
 
 
-def _roadmap_paths(env, q: np.ndarray, rows: np.ndarray, padding: float, opts: dict, info: dict,
-                   query_check: str) -> list[np.ndarray | None]:
+def _roadmap_paths(
+    env, q: np.ndarray, rows: np.ndarray, padding: float, opts: dict, info: dict, query_check: str
+) -> list[np.ndarray | None]:
     """The raw roadmap paths (start ... goal states, or None) of the queries ``rows``
     (the others: None), over the growth rounds, the queries' own edges (ends, direct
     connection, end trees) checked with ``query_check``; times and sizes added to
@@ -372,27 +505,57 @@ def _roadmap_paths(env, q: np.ndarray, rows: np.ndarray, padding: float, opts: d
         if not len(todo):
             break
         tb = time.perf_counter()
-        rm = roadmap_for(env, padding, milestones=opts["milestones"], k=opts["k"],
-                         roadmap_seed=opts["roadmap_seed"], round_=r,
-                         cache_dir=opts["cache_dir"], check=opts["edge_check"])
+        rm = roadmap_for(
+            env,
+            padding,
+            milestones=opts["milestones"],
+            k=opts["k"],
+            roadmap_seed=opts["roadmap_seed"],
+            round_=r,
+            cache_dir=opts["cache_dir"],
+            check=opts["edge_check"],
+        )
         ts = time.perf_counter()
-        found = _search(env.robot, env.world, rm, q[todo], opts["k"], padding,
-                        threads=opts["threads"], check=query_check,
-                        attach=opts["attach"], end_rounds=opts["end_rounds"] if r == 0 else 0,
-                        seed=opts["roadmap_seed"], reach=opts.get("reach", 0),
-                        direct=opts.get("direct", True))
+        found = _search(
+            env.robot,
+            env.world,
+            rm,
+            q[todo],
+            opts["k"],
+            padding,
+            threads=opts["threads"],
+            check=query_check,
+            attach=opts["attach"],
+            end_rounds=opts["end_rounds"] if r == 0 else 0,
+            seed=opts["roadmap_seed"],
+            reach=opts.get("reach", 0),
+            direct=opts.get("direct", True),
+        )
         for i, p in zip(todo, found):
             paths[i] = p
         info["rounds"] = r + 1
         info["build_time"] += ts - tb
         info["search_time"] += time.perf_counter() - ts
-        info[f"round{r}"] = {"milestones": len(rm.milestones), "edges": len(rm.edges),
-                             "queries": len(todo)}
+        info[f"round{r}"] = {
+            "milestones": len(rm.milestones),
+            "edges": len(rm.edges),
+            "queries": len(todo),
+        }
     return paths
 
 
-def _finish(env, q: np.ndarray, paths: list, status: np.ndarray, info: dict, padding: float,
-            check: str, edge_check: str, smooth: bool, smooth_chunk: int) -> PlanResult:
+def _finish(
+    env,
+    q: np.ndarray,
+    paths: list,
+    status: np.ndarray,
+    info: dict,
+    padding: float,
+    check: str,
+    edge_check: str,
+    smooth: bool,
+    smooth_chunk: int,
+) -> PlanResult:
     """The raw paths shortcut (``edge_check``) and verified (``check``, with the raw paths as
     the fallback when the two differ)."""
     nq, d = q.shape[0], q.shape[2]
@@ -403,9 +566,16 @@ def _finish(env, q: np.ndarray, paths: list, status: np.ndarray, info: dict, pad
     fallback = None
     t1 = time.perf_counter()
     if smooth and found.any():
-        sp, sl, _, idx = shortcut_paths(env.robot, env.world, out[found], lengths[found],
-                                        padding, chunk_size=int(smooth_chunk), check=edge_check,
-                                        return_index=True)
+        sp, sl, _, idx = shortcut_paths(
+            env.robot,
+            env.world,
+            out[found],
+            lengths[found],
+            padding,
+            chunk_size=int(smooth_chunk),
+            check=edge_check,
+            return_index=True,
+        )
         if edge_check != check:
             index = np.full((nq, sp.shape[1]), -1, np.int32)
             index[found] = idx
@@ -425,18 +595,28 @@ def _replace_rows(res: PlanResult, rows: np.ndarray, sub: PlanResult) -> PlanRes
     width = max(res.paths.shape[1], sub.paths.shape[1])
     k, _, d = res.paths.shape
     paths = np.full((k, width, d), np.nan, np.float32)
-    paths[:, :res.paths.shape[1]] = res.paths
+    paths[:, : res.paths.shape[1]] = res.paths
     paths[rows] = np.nan
-    paths[rows, :sub.paths.shape[1]] = sub.paths
+    paths[rows, : sub.paths.shape[1]] = sub.paths
     lengths, costs, status = res.lengths.copy(), res.costs.copy(), res.status.copy()
     lengths[rows], costs[rows], status[rows] = sub.lengths, sub.costs, sub.status
-    return PlanResult(paths[:, :max(2, int(lengths.max(initial=0)))], lengths, costs, status,
-                      res.info)
+    return PlanResult(
+        paths[:, : max(2, int(lengths.max(initial=0)))], lengths, costs, status, res.info
+    )
 
 
-def _plan_rejected_again(env, q: np.ndarray, paths: list, res: PlanResult, status: np.ndarray,
-                         padding: float, opts: dict, info: dict, smooth: bool,
-                         smooth_chunk: int) -> PlanResult:
+def _plan_rejected_again(
+    env,
+    q: np.ndarray,
+    paths: list,
+    res: PlanResult,
+    status: np.ndarray,
+    padding: float,
+    opts: dict,
+    info: dict,
+    smooth: bool,
+    smooth_chunk: int,
+) -> PlanResult:
     """``res`` with the queries the final check rejected planned again with ``check`` on
     all but the roadmap's edges (a direct connection, an end's edge or an unrepairable
     shortcut failed it); ``info``'s times, ``replanned``, ``rejected`` and
@@ -446,21 +626,40 @@ def _plan_rejected_again(env, q: np.ndarray, paths: list, res: PlanResult, statu
     # an end no motion passing ``check`` can reach (certified: within about half the
     # check's margin of contact) fails its null motion: not worth planning again
     ends = q[again].reshape(-1, d)
-    reachable = motions_free(env.robot, env.world, ends, ends, padding,
-                             opts["check"]).reshape(-1, 2).all(axis=1)
+    reachable = (
+        motions_free(env.robot, env.world, ends, ends, padding, opts["check"])
+        .reshape(-1, 2)
+        .all(axis=1)
+    )
     info["unreachable_ends"] = int((~reachable).sum())
     again = again[reachable]
     if len(again):
-        sub_info = {"rounds": 0, "build_time": 0.0, "search_time": 0.0, "smooth_time": 0.0,
-                    "check_time": 0.0}
+        sub_info = {
+            "rounds": 0,
+            "build_time": 0.0,
+            "search_time": 0.0,
+            "smooth_time": 0.0,
+            "check_time": 0.0,
+        }
         # the costly check on the queries' own edges: their ``attach`` nearest milestones
         # only, no end trees, and not the direct connection (it failed ``check``, or was
         # blocked already by ``edge_check``)
         sub_opts = dict(opts, end_rounds=0, reach=opts["attach"] or opts["k"], direct=False)
-        sub_paths = _roadmap_paths(env, q[again], np.arange(len(again)), padding, sub_opts,
-                                   sub_info, opts["check"])
-        sub = _finish(env, q[again], sub_paths, status[again], sub_info, padding,
-                      opts["check"], opts["check"], smooth, smooth_chunk)
+        sub_paths = _roadmap_paths(
+            env, q[again], np.arange(len(again)), padding, sub_opts, sub_info, opts["check"]
+        )
+        sub = _finish(
+            env,
+            q[again],
+            sub_paths,
+            status[again],
+            sub_info,
+            padding,
+            opts["check"],
+            opts["check"],
+            smooth,
+            smooth_chunk,
+        )
         res = _replace_rows(res, again, sub)
         for key in ("build_time", "search_time", "smooth_time", "check_time"):
             info[key] += sub_info[key]

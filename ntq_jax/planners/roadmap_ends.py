@@ -24,8 +24,16 @@ from ntq_jax.planners.graph_search import QueryEdges
 from ntq_jax.planners.verify import motions_free
 from ntq_jax.robots.batch import distances
 
-__all__ = ["Ends", "attach_ends", "query_edges", "main_components", "ATTACH_REACH",
-           "END_SAMPLES", "END_STEP", "MAIN_COMPONENT"]
+__all__ = [
+    "Ends",
+    "attach_ends",
+    "query_edges",
+    "main_components",
+    "ATTACH_REACH",
+    "END_SAMPLES",
+    "END_STEP",
+    "MAIN_COMPONENT",
+]
 
 #: Lazy attachment (``attach`` set): an end tries at most this many milestones (or ``k``).
 ATTACH_REACH = 64
@@ -38,9 +46,18 @@ END_STEP = 0.5
 MAIN_COMPONENT = 0.01
 
 
-def attach_ends(robot, world, index, points: np.ndarray, k: int, padding: float,
-            outgoing: bool, check: str, first: int | None = None, reach: int = 0
-            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def attach_ends(
+    robot,
+    world,
+    index,
+    points: np.ndarray,
+    k: int,
+    padding: float,
+    outgoing: bool,
+    check: str,
+    first: int | None = None,
+    reach: int = 0,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Edges between ``points`` and the nearest milestones they see: ``(point row,
     milestone, cost)``; ``outgoing``: point -> milestone, else milestone -> point.
 
@@ -88,19 +105,33 @@ class Ends(NamedTuple):
     goal_chains: dict
 
 
-def query_edges(robot, world, rm, index, q: np.ndarray, k: int, padding: float,
-                 check: str, attach: int | None = None, end_rounds: int = 0,
-                 seed: int = 0, reach: int = 0, direct: bool = True) -> Ends:
+def query_edges(
+    robot,
+    world,
+    rm,
+    index,
+    q: np.ndarray,
+    k: int,
+    padding: float,
+    check: str,
+    attach: int | None = None,
+    end_rounds: int = 0,
+    seed: int = 0,
+    reach: int = 0,
+    direct: bool = True,
+) -> Ends:
     """The checked edges of the queries' ends: each start to the nearest ``k``
     milestones it reaches, the nearest ``k`` milestones that reach its goal to the
     goal (``attach``, ``reach``: lazily, see :func:`attach_ends`), and (``direct``) the start
     to its goal when that connection is free. With ``end_rounds``, an end that reaches
     no milestone grows a tree for that many rounds
     (:func:`ntq_jax.planners.end_trees.grow_end_trees`)."""
-    s_row, s_m, s_c = attach_ends(robot, world, index, q[:, 0], k, padding, True, check, attach,
-                              reach)
-    g_row, g_m, g_c = attach_ends(robot, world, index, q[:, 1], k, padding, False, check, attach,
-                              reach)
+    s_row, s_m, s_c = attach_ends(
+        robot, world, index, q[:, 0], k, padding, True, check, attach, reach
+    )
+    g_row, g_m, g_c = attach_ends(
+        robot, world, index, q[:, 1], k, padding, False, check, attach, reach
+    )
     chains: list[dict] = [{}, {}]
     if end_rounds:
         big = main_components(rm)
@@ -110,23 +141,44 @@ def query_edges(robot, world, rm, index, q: np.ndarray, k: int, padding: float,
             lone = np.setdiff1d(np.arange(len(q)), rows[big[ms]])
             if not len(lone):
                 continue
-            links = grow_end_trees(robot, world, index, q[lone, side], outgoing, padding, check,
-                                   rounds=end_rounds, samples=END_SAMPLES, step=END_STEP,
-                                   attach=attach or k, seed=seed, targets=big)
+            links = grow_end_trees(
+                robot,
+                world,
+                index,
+                q[lone, side],
+                outgoing,
+                padding,
+                check,
+                rounds=end_rounds,
+                samples=END_SAMPLES,
+                step=END_STEP,
+                attach=attach or k,
+                seed=seed,
+                targets=big,
+            )
             extra = [(i, link) for i, link in zip(lone, links) if link is not None]
             for i, link in extra:
                 chains[side][int(i)] = link.chain if outgoing else link.chain[::-1]
             if extra:
-                grown[side] = [np.concatenate([grown[side][0]] + [np.full(len(l.milestones), i)
-                                                                   for i, l in extra]),
-                               np.concatenate([grown[side][1]] + [l.milestones for _, l in extra]),
-                               np.concatenate([grown[side][2]] + [l.costs for _, l in extra])]
+                grown[side] = [
+                    np.concatenate(
+                        [grown[side][0]] + [np.full(len(l.milestones), i) for i, l in extra]
+                    ),
+                    np.concatenate([grown[side][1]] + [l.milestones for _, l in extra]),
+                    np.concatenate([grown[side][2]] + [l.costs for _, l in extra]),
+                ]
         (s_row, s_m, s_c), (g_row, g_m, g_c) = grown
-    d_row = (np.flatnonzero(motions_free(robot, world, q[:, 0], q[:, 1], padding, check=check))
-             if direct else np.zeros(0, np.int64))
+    d_row = (
+        np.flatnonzero(motions_free(robot, world, q[:, 0], q[:, 1], padding, check=check))
+        if direct
+        else np.zeros(0, np.int64)
+    )
     d_c = distances(robot, q[d_row, 0], q[d_row, 1]).astype(np.float64)
-    return Ends(QueryEdges.from_rows(len(q), s_row, s_m, s_c, g_row, g_m, g_c, d_row, d_c),
-                 chains[0], chains[1])
+    return Ends(
+        QueryEdges.from_rows(len(q), s_row, s_m, s_c, g_row, g_m, g_c, d_row, d_c),
+        chains[0],
+        chains[1],
+    )
 
 
 def main_components(rm) -> np.ndarray:

@@ -47,8 +47,9 @@ Array = jax.Array
 SHORTCUT_GROUP = 4096
 
 
-def shortcut_batch(robot, world: World, paths: Array, lengths: Array, padding: float,
-                   check: str = "discretized"):
+def shortcut_batch(
+    robot, world: World, paths: Array, lengths: Array, padding: float, check: str = "discretized"
+):
     """Greedy farthest-visible shortcutting of a batch of paths (traceable, static shapes).
 
     Args:
@@ -102,14 +103,25 @@ def shortcut_batch(robot, world: World, paths: Array, lengths: Array, padding: f
     return out, n, ok
 
 
-shortcut = jax.jit(shortcut_batch, static_argnames=("robot", "padding", "check"),
-                   compiler_options=KERNEL_COMPILER_OPTIONS)
+shortcut = jax.jit(
+    shortcut_batch,
+    static_argnames=("robot", "padding", "check"),
+    compiler_options=KERNEL_COMPILER_OPTIONS,
+)
 shortcut.__doc__ = shortcut_batch.__doc__
 
 
-def shortcut_paths(robot, world: World, paths, lengths, padding: float, *,
-                   chunk_size: int = SHORTCUT_GROUP, check: str = "discretized",
-                   return_index: bool = False) -> tuple[np.ndarray, ...]:
+def shortcut_paths(
+    robot,
+    world: World,
+    paths,
+    lengths,
+    padding: float,
+    *,
+    chunk_size: int = SHORTCUT_GROUP,
+    check: str = "discretized",
+    return_index: bool = False,
+) -> tuple[np.ndarray, ...]:
     """Shortcuts a batch of NaN-padded paths (greedy farthest-visible rule), any batch size.
 
     The same rule and the same waypoints as :func:`shortcut_batch`, driven from the
@@ -144,8 +156,9 @@ def shortcut_paths(robot, world: World, paths, lengths, padding: float, *,
     p = np.asarray(paths, np.float32)
     n_in = np.asarray(lengths, np.int64).reshape(-1)
     if p.ndim != 3 or p.shape[2] != d or p.shape[0] != n_in.shape[0]:
-        raise ValueError(f"paths must be (B, L, {d}) with lengths (B,), got {p.shape} "
-                         f"and {n_in.shape}")
+        raise ValueError(
+            f"paths must be (B, L, {d}) with lengths (B,), got {p.shape} and {n_in.shape}"
+        )
     bsz = p.shape[0]
     if bsz == 0:
         out = np.zeros((0, 2, d), np.float32), np.zeros(0, np.int32), np.zeros(0, bool)
@@ -166,7 +179,11 @@ def shortcut_paths(robot, world: World, paths, lengths, padding: float, *,
     take = np.clip(keep[:, :width], 0, None)
     if take.shape[1] < width:
         take = np.pad(take, ((0, 0), (0, width - take.shape[1])))
-    out = np.take_along_axis(p, take[:, :, None], axis=1) if p.shape[1] else np.zeros((bsz, width, d), np.float32)
+    out = (
+        np.take_along_axis(p, take[:, :, None], axis=1)
+        if p.shape[1]
+        else np.zeros((bsz, width, d), np.float32)
+    )
     inside = cols[None, :] < n_out[:, None]
     out = np.where(inside[:, :, None], out, np.float32(np.nan))
     if return_index:
@@ -184,8 +201,9 @@ def _greedy_rounds(robot, world, p, n_in, rows, keep, n_out, ok, padding, check)
         count = n_in[r] - 1 - c  # the later waypoints of each live path
         owner = np.repeat(np.arange(len(r)), count)
         j = c[owner] + 1 + (np.arange(owner.size) - np.repeat(np.cumsum(count) - count, count))
-        vis = motions_free(robot, world, p[r[owner], c[owner]], p[r[owner], j], padding,
-                           check=check)
+        vis = motions_free(
+            robot, world, p[r[owner], c[owner]], p[r[owner], j], padding, check=check
+        )
         far = np.full(len(r), -1, np.int64)
         np.maximum.at(far, owner[vis], j[vis])
         seen = far > c

@@ -56,12 +56,13 @@ from ntq_jax.planners.options import bool_option, motion_check_option
 from ntq_jax.planners.verify import finalize, valid_queries
 from ntq_jax.types import PlanResult, PlanStatus
 
-__all__ = ["plan_vamp", "require_vamp", "vamp_environment", "cuboid_euler_xyz",
-           "BUILD_HINT"]
+__all__ = ["plan_vamp", "require_vamp", "vamp_environment", "cuboid_euler_xyz", "BUILD_HINT"]
 
-BUILD_HINT = ("VAMP is not importable: build it with `pip install vamp-planner` (needs Eigen 3, "
-              "a C++17 compiler and GitHub access at build time; see "
-              "ntq_jax/planners/vamp_bridge.py)")
+BUILD_HINT = (
+    "VAMP is not importable: build it with `pip install vamp-planner` (needs Eigen 3, "
+    "a C++17 compiler and GitHub access at build time; see "
+    "ntq_jax/planners/vamp_bridge.py)"
+)
 
 
 def require_vamp():
@@ -99,16 +100,24 @@ def vamp_environment(world, vamp=None):
     for x, y, z, r in np.asarray(world.spheres, np.float64):
         venv.add_sphere(vamp.Sphere([x, y, z], r))
     for row in np.asarray(world.cuboids, np.float64):
-        venv.add_cuboid(vamp.Cuboid(row[:3].tolist(), list(cuboid_euler_xyz(row[6:15])),
-                                    row[3:6].tolist()))
+        venv.add_cuboid(
+            vamp.Cuboid(row[:3].tolist(), list(cuboid_euler_xyz(row[6:15])), row[3:6].tolist())
+        )
     for row in np.asarray(world.capsules, np.float64):
         venv.add_capsule(vamp.Cylinder(row[:3].tolist(), row[3:6].tolist(), float(row[6])))
     return venv
 
 
-def plan_vamp(env, queries, *, padding: float | None = None, seed: int = 0,
-              simplify: bool = True, check: str = "discretized",
-              sampler: str = "halton") -> PlanResult:
+def plan_vamp(
+    env,
+    queries,
+    *,
+    padding: float | None = None,
+    seed: int = 0,
+    simplify: bool = True,
+    check: str = "discretized",
+    sampler: str = "halton",
+) -> PlanResult:
     """Plans each query with VAMP's RRT-Connect (+ simplification), verified by the package.
 
     Args:
@@ -135,8 +144,10 @@ def plan_vamp(env, queries, *, padding: float | None = None, seed: int = 0,
     simplify = bool_option("vamp", "simplify", simplify)
     check = motion_check_option("vamp", check)
     if env.robot.kind != "serial_arm" or env.robot.to_json().get("preset") != "panda":
-        raise ValueError(f"vamp: {env.name} does not have the Panda preset; VAMP plans its "
-                         "own compiled Panda only")
+        raise ValueError(
+            f"vamp: {env.name} does not have the Panda preset; VAMP plans its "
+            "own compiled Panda only"
+        )
     pad = env.resolve_padding(padding)
     if pad != 0.0:
         raise ValueError(f"vamp: padding must be 0 (VAMP has no clearance margin), got {pad}")
@@ -144,7 +155,8 @@ def plan_vamp(env, queries, *, padding: float | None = None, seed: int = 0,
     nq, d = q.shape[0], q.shape[2]
     t0 = time.perf_counter()
     module, planner, settings, simp_settings = vamp.configure_robot_and_planner_with_kwargs(
-        "panda", "rrtc")
+        "panda", "rrtc"
+    )
     venv = vamp_environment(env.world, vamp)
     rng = getattr(module, sampler)()
     status = np.full(nq, PlanStatus.NO_PATH, np.int8)
@@ -171,9 +183,15 @@ def plan_vamp(env, queries, *, padding: float | None = None, seed: int = 0,
     paths = np.full((nq, width, d), np.nan, np.float32)
     lengths = np.zeros(nq, np.int32)
     for i, p in found.items():
-        paths[i, :len(p)], lengths[i] = p, len(p)
-    info = {"planner": "vamp", "simplify": simplify, "sampler": sampler, "vamp_times": times,
-            "iterations": iters, "planner_costs": own}
+        paths[i, : len(p)], lengths[i] = p, len(p)
+    info = {
+        "planner": "vamp",
+        "simplify": simplify,
+        "sampler": sampler,
+        "vamp_times": times,
+        "iterations": iters,
+        "planner_costs": own,
+    }
     res = finalize(q, paths, lengths, status, info, env, pad, check)
     info["time"] = time.perf_counter() - t0
     return res

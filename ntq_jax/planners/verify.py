@@ -57,9 +57,16 @@ def _segment_costs(env, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return distances(env.robot, a, b).astype(np.float64)
 
 
-def check_paths(env, paths: np.ndarray, lengths: np.ndarray, padding: float,
-                check: str = "discretized", *, chunk: int | None = None,
-                segments: bool = False):
+def check_paths(
+    env,
+    paths: np.ndarray,
+    lengths: np.ndarray,
+    padding: float,
+    check: str = "discretized",
+    *,
+    chunk: int | None = None,
+    segments: bool = False,
+):
     """Verifies NaN-padded paths with the exact kernel and computes their costs.
 
     Args:
@@ -105,9 +112,19 @@ def check_paths(env, paths: np.ndarray, lengths: np.ndarray, padding: float,
     return ok, np.where(ok, costs, np.inf), verdict
 
 
-def finalize(q: np.ndarray, paths: np.ndarray, lengths: np.ndarray, status: np.ndarray,
-             info: dict, env, padding: float, check: str = "discretized", *,
-             fallback: tuple | None = None, chunk: int | None = None) -> PlanResult:
+def finalize(
+    q: np.ndarray,
+    paths: np.ndarray,
+    lengths: np.ndarray,
+    status: np.ndarray,
+    info: dict,
+    env,
+    padding: float,
+    check: str = "discretized",
+    *,
+    fallback: tuple | None = None,
+    chunk: int | None = None,
+) -> PlanResult:
     """A planner's raw output as a verified :class:`PlanResult`.
 
     Rows with ``status == SOLVED`` get the query's exact endpoints and are checked
@@ -138,8 +155,9 @@ def finalize(q: np.ndarray, paths: np.ndarray, lengths: np.ndarray, status: np.n
         ok, costs = check_paths(env, out, lengths, padding, check, chunk=chunk)
         info["repaired"] = 0
     else:
-        out, lengths, ok, costs = _check_with_fallback(q, out, lengths, fallback, env, padding,
-                                                       check, chunk, info)
+        out, lengths, ok, costs = _check_with_fallback(
+            q, out, lengths, fallback, env, padding, check, chunk, info
+        )
     status = status.astype(np.int8).copy()
     rejected = (status == PlanStatus.SOLVED) & ~ok
     status[rejected] = PlanStatus.NO_PATH
@@ -185,21 +203,25 @@ def _check_with_fallback(q, out, lengths, fallback, env, padding, check, chunk, 
         verdicts.append(known)
     if new_a:
         a, b = np.asarray(new_a), np.asarray(new_b)
-        new_free = iter(motions_free(env.robot, env.world, a, b, padding, check) if chunk is None
-                        else steer_to_pairs(env.robot, env.world, a, b, padding, check=check,
-                                            chunk=chunk))
+        new_free = iter(
+            motions_free(env.robot, env.world, a, b, padding, check)
+            if chunk is None
+            else steer_to_pairs(env.robot, env.world, a, b, padding, check=check, chunk=chunk)
+        )
         verdicts = [[next(new_free) if v is None else v for v in known] for known in verdicts]
     width = max(out.shape[1], max(len(p) for p in spliced))
     if width > out.shape[1]:
-        out = np.concatenate([out, np.full((out.shape[0], width - out.shape[1], out.shape[2]),
-                                           np.nan, np.float32)], axis=1)
+        out = np.concatenate(
+            [out, np.full((out.shape[0], width - out.shape[1], out.shape[2]), np.nan, np.float32)],
+            axis=1,
+        )
     lengths = lengths.copy()
     ok, costs = ok.copy(), costs.copy()
     for r, p, v in zip(fix, spliced, verdicts):
         if not all(v) or not np.isfinite(p).all():
             continue
         out[r] = np.nan
-        out[r, :len(p)] = p
+        out[r, : len(p)] = p
         lengths[r] = len(p)
         ok[r] = True
         costs[r] = float(_segment_costs(env, p[:-1], p[1:]).sum())

@@ -55,8 +55,12 @@ from scipy.sparse.csgraph import shortest_path
 from ntq_jax.batching import bucket_size, map_chunks
 from ntq_jax.geometry import KERNEL_COMPILER_OPTIONS, World
 from ntq_jax.planners.env_cache import EnvCache
-from ntq_jax.planners.options import (float_option, int_option, motion_check_option,
-                                      unsupported_robot)
+from ntq_jax.planners.options import (
+    float_option,
+    int_option,
+    motion_check_option,
+    unsupported_robot,
+)
 from ntq_jax.planners.verify import finalize
 from ntq_jax.robots.batch import is_valid_cm, steer_to_cm, steer_to_pairs, valid_states
 from ntq_jax.types import PlanResult, PlanStatus
@@ -76,8 +80,10 @@ NODE_PAD = 8
 # Graph construction (once per environment)
 # ---------------------------------------------------------------------------
 
-def obstacle_vertices(world: World, padding: float, eps: float,
-                      arc_step: float = DEFAULT_ARC_STEP) -> np.ndarray:
+
+def obstacle_vertices(
+    world: World, padding: float, eps: float, arc_step: float = DEFAULT_ARC_STEP
+) -> np.ndarray:
     """Candidate graph nodes: obstacle vertices pushed outwards by ``eps`` (float64 ``(M, 2)``).
 
     Box corners at ``padding == 0``: ``corner + eps (sx, sy)`` with ``(sx, sy)``
@@ -157,10 +163,21 @@ def _routes(pred: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 # Queries (jitted, one call per chunk)
 # ---------------------------------------------------------------------------
 
-@functools.partial(jax.jit, static_argnames=("robot", "padding"),
-                   compiler_options=KERNEL_COMPILER_OPTIONS)
-def _solve(robot, world: World, nodes_cm: Array, dist: Array, routes: Array, route_len: Array,
-           s_cm: Array, g_cm: Array, padding: float):
+
+@functools.partial(
+    jax.jit, static_argnames=("robot", "padding"), compiler_options=KERNEL_COMPILER_OPTIONS
+)
+def _solve(
+    robot,
+    world: World,
+    nodes_cm: Array,
+    dist: Array,
+    routes: Array,
+    route_len: Array,
+    s_cm: Array,
+    g_cm: Array,
+    padding: float,
+):
     """Plans a chunk of queries: statuses, first / last graph nodes and the assembled paths.
 
     Args:
@@ -197,8 +214,9 @@ def _solve(robot, world: World, nodes_cm: Array, dist: Array, routes: Array, rou
     last = jnp.argmin(dist[first] + dg, axis=1).astype(jnp.int32)
     via = valid & ~direct & jnp.isfinite(jnp.min(total, axis=1))
     solved = valid & (direct | via)
-    status = jnp.where(~valid, PlanStatus.INVALID,
-                       jnp.where(solved, PlanStatus.SOLVED, PlanStatus.NO_PATH)).astype(jnp.int8)
+    status = jnp.where(
+        ~valid, PlanStatus.INVALID, jnp.where(solved, PlanStatus.SOLVED, PlanStatus.NO_PATH)
+    ).astype(jnp.int8)
     inner = jnp.where(via, route_len[first, last], 0)
     length = jnp.where(solved, inner + 2, 0)
     # waypoint k: 0 -> start, 1..inner -> route nodes, inner + 1 -> goal, then NaN
@@ -208,9 +226,15 @@ def _solve(robot, world: World, nodes_cm: Array, dist: Array, routes: Array, rou
     for d in range(2):
         pts = nodes_cm[d][seq]
         pts = jnp.concatenate([pts[:, :1], pts, pts[:, :1]], axis=1)  # aligned with k
-        c = jnp.where(k == 0, s_cm[d][:, None],
-                      jnp.where(k <= inner[:, None], pts,
-                                jnp.where(k == inner[:, None] + 1, g_cm[d][:, None], jnp.nan)))
+        c = jnp.where(
+            k == 0,
+            s_cm[d][:, None],
+            jnp.where(
+                k <= inner[:, None],
+                pts,
+                jnp.where(k == inner[:, None] + 1, g_cm[d][:, None], jnp.nan),
+            ),
+        )
         coords.append(jnp.where(solved[:, None], c, jnp.nan))
     return status, via, first, last, length, jnp.stack(coords, axis=-1)
 
@@ -218,6 +242,7 @@ def _solve(robot, world: World, nodes_cm: Array, dist: Array, routes: Array, rou
 # ---------------------------------------------------------------------------
 # Public API
 # ---------------------------------------------------------------------------
+
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class VisGraph:
@@ -257,8 +282,13 @@ class VisGraph:
         return int(self.nodes.shape[0])
 
     @staticmethod
-    def build(env, padding: float | None = None, *, eps: float | None = None,
-              arc_step: float = DEFAULT_ARC_STEP) -> "VisGraph":
+    def build(
+        env,
+        padding: float | None = None,
+        *,
+        eps: float | None = None,
+        arc_step: float = DEFAULT_ARC_STEP,
+    ) -> "VisGraph":
         """Builds the graph of ``env`` (a point-robot :class:`ntq_jax.Env`).
 
         Args:
@@ -272,7 +302,9 @@ class VisGraph:
             ValueError: not a point robot, or bad ``eps`` / ``arc_step``.
         """
         if env.robot.kind != "point":
-            raise ValueError(f"the visibility graph plans for a point robot, got {env.robot.kind!r}")
+            raise ValueError(
+                f"the visibility graph plans for a point robot, got {env.robot.kind!r}"
+            )
         pad = env.resolve_padding(padding)
         bounds = np.asarray(env.world.bounds, np.float64)
         if eps is None:
@@ -290,15 +322,17 @@ class VisGraph:
         ii, jj = np.triu_indices(v, 1)
         visible = np.zeros((v, v), bool)
         if len(ii):
-            vis = (steer_to_pairs(env.robot, env.world, nodes[ii], nodes[jj], pad)
-                   & steer_to_pairs(env.robot, env.world, nodes[jj], nodes[ii], pad))
+            vis = steer_to_pairs(env.robot, env.world, nodes[ii], nodes[jj], pad) & steer_to_pairs(
+                env.robot, env.world, nodes[jj], nodes[ii], pad
+            )
             visible[ii, jj] = visible[jj, ii] = vis
         n64 = nodes.astype(np.float64)
         edge = np.linalg.norm(n64[:, None] - n64[None], axis=-1)
         weights = np.where(visible, edge, 0.0)  # 0 = no edge for scipy's dense input
         if v:
-            dist, pred = shortest_path(weights, method="D", directed=False,
-                                       return_predecessors=True)
+            dist, pred = shortest_path(
+                weights, method="D", directed=False, return_predecessors=True
+            )
         else:
             dist, pred = np.zeros((0, 0)), np.zeros((0, 0), np.int32)
         routes, route_len = _routes(pred)
@@ -310,8 +344,19 @@ class VisGraph:
             m = max(3, math.ceil(2 * math.pi / arc_step - 1e-9))
             r_max = float(np.max(np.asarray(env.world.discs)[:, 2])) + pad
             delta = max(delta, r_max * (1 / math.cos(math.pi / m) - 1))
-        return VisGraph(env.robot, env.world, pad, float(eps), float(arc_step), float(delta),
-                        nodes, visible, dist, routes, route_len)
+        return VisGraph(
+            env.robot,
+            env.world,
+            pad,
+            float(eps),
+            float(arc_step),
+            float(delta),
+            nodes,
+            visible,
+            dist,
+            routes,
+            route_len,
+        )
 
     def _padded_tables(self, table_size: int = 0) -> tuple[Array, Array, Array, Array]:
         """``(nodes_cm, dist, routes, route_len)`` padded to multiples of ``NODE_PAD`` (and to at
@@ -357,25 +402,47 @@ class VisGraph:
             raise ValueError(f"queries must have shape (N, 2, 2), got {q.shape}")
         tables = self._padded_tables(int(table_size))
         width = tables[2].shape[-1] + 2
-        empty = (np.zeros(0, np.int8), np.zeros(0, bool), np.zeros(0, np.int32),
-                 np.zeros(0, np.int32), np.zeros(0, np.int32), np.zeros((0, width, 2), np.float32))
+        empty = (
+            np.zeros(0, np.int8),
+            np.zeros(0, bool),
+            np.zeros(0, np.int32),
+            np.zeros(0, np.int32),
+            np.zeros(0, np.int32),
+            np.zeros((0, width, 2), np.float32),
+        )
         status, via, first, last, length, paths = map_chunks(
-            lambda part: _solve(self.robot, self.world, *tables, jnp.asarray(part[:, 0].T),
-                                jnp.asarray(part[:, 1].T), self.padding),
-            q, chunk=bucket_size(min(q.shape[0], chunk_size), 64), empty=empty)
+            lambda part: _solve(
+                self.robot,
+                self.world,
+                *tables,
+                jnp.asarray(part[:, 0].T),
+                jnp.asarray(part[:, 1].T),
+                self.padding,
+            ),
+            q,
+            chunk=bucket_size(min(q.shape[0], chunk_size), 64),
+            empty=empty,
+        )
         # float64 costs: |s - n_first| + dist[first, last] + |n_last - g|, or |s - g|
         s64, g64 = q[:, 0].astype(np.float64), q[:, 1].astype(np.float64)
         costs = np.linalg.norm(g64 - s64, axis=1)
         if self.num_nodes:
             nodes64 = self.nodes.astype(np.float64)
             f, l = np.where(via, first, 0), np.where(via, last, 0)
-            graph_cost = (np.linalg.norm(nodes64[f] - s64, axis=1) + self.dist[f, l]
-                          + np.linalg.norm(g64 - nodes64[l], axis=1))
+            graph_cost = (
+                np.linalg.norm(nodes64[f] - s64, axis=1)
+                + self.dist[f, l]
+                + np.linalg.norm(g64 - nodes64[l], axis=1)
+            )
             costs = np.where(via, graph_cost, costs)
         costs = np.where(status == PlanStatus.SOLVED, costs, np.inf)
         width = max(2, int(length.max(initial=0)))
-        info = {"planner": "visgraph", "nodes": self.num_nodes, "exact": self.exact,
-                "delta": self.delta}
+        info = {
+            "planner": "visgraph",
+            "nodes": self.num_nodes,
+            "exact": self.exact,
+            "delta": self.delta,
+        }
         return PlanResult(np.ascontiguousarray(paths[:, :width]), length, costs, status, info)
 
 
@@ -393,14 +460,24 @@ def check_size(env) -> None:
     """ValueError when ``env`` has more than :data:`MAX_OBSTACLES` obstacles (see there)."""
     n = env.world.num_boxes + env.world.num_discs
     if n > MAX_OBSTACLES:
-        raise ValueError(f"the 'visgraph' planner builds all-pairs tables and is limited to "
-                         f"{MAX_OBSTACLES} obstacles; {env.name} has {n}: use 'astar' (on a map "
-                         "imported from a grid it plans on the map's own cells) or 'bitstar'")
+        raise ValueError(
+            f"the 'visgraph' planner builds all-pairs tables and is limited to "
+            f"{MAX_OBSTACLES} obstacles; {env.name} has {n}: use 'astar' (on a map "
+            "imported from a grid it plans on the map's own cells) or 'bitstar'"
+        )
 
 
-def plan_visgraph(env, queries, *, padding: float | None = None, seed: int = 0,
-                  eps: float | None = None, arc_step: float | None = None,
-                  chunk_size: int = 8192, check: str = "discretized") -> PlanResult:
+def plan_visgraph(
+    env,
+    queries,
+    *,
+    padding: float | None = None,
+    seed: int = 0,
+    eps: float | None = None,
+    arc_step: float | None = None,
+    chunk_size: int = 8192,
+    check: str = "discretized",
+) -> PlanResult:
     """Plans on ``env``'s visibility graph (built once per environment and settings, cached
     while ``env`` lives) and verifies every path (the registry's ``"visgraph"``).
 
@@ -435,8 +512,9 @@ def plan_visgraph(env, queries, *, padding: float | None = None, seed: int = 0,
     q = np.asarray(queries, np.float32)
     step = DEFAULT_ARC_STEP if arc_step is None else arc_step
     t0 = time.perf_counter()
-    graph = _GRAPHS.get(env, (pad, eps, step),
-                        lambda: VisGraph.build(env, pad, eps=eps, arc_step=step))
+    graph = _GRAPHS.get(
+        env, (pad, eps, step), lambda: VisGraph.build(env, pad, eps=eps, arc_step=step)
+    )
     t1 = time.perf_counter()
     res = graph.plan(q, chunk_size=chunk_size)
     info = dict(res.info, build_time=t1 - t0, plan_time=time.perf_counter() - t1)
@@ -449,8 +527,10 @@ def plan_visgraph(env, queries, *, padding: float | None = None, seed: int = 0,
 # Throughput measurement
 # ---------------------------------------------------------------------------
 
-def benchmark_visgraph(env, n: int = 100_000, *, padding: float = 0.0, seed: int = 0,
-                       repeats: int = 3, **build_options) -> dict:
+
+def benchmark_visgraph(
+    env, n: int = 100_000, *, padding: float = 0.0, seed: int = 0, repeats: int = 3, **build_options
+) -> dict:
     """Measures build time and planning throughput (costs and paths) on ``n`` uniform queries.
 
     Starts and goals are drawn uniformly among valid states (``env.sample_states``).
@@ -475,11 +555,25 @@ def benchmark_visgraph(env, n: int = 100_000, *, padding: float = 0.0, seed: int
         t0 = time.perf_counter()
         res = graph.plan(q)
         best = min(best, time.perf_counter() - t0)
-    return {"env": env.name, "padding": pad, "nodes": graph.num_nodes, "build_s": build_s,
-            "n": n, "plan_s": best, "queries_per_s": n / best,
-            "solved": float(np.mean(res.solved)),
-            "direct": float(np.mean(res.lengths == 2)), "devices": jax.device_count()}
+    return {
+        "env": env.name,
+        "padding": pad,
+        "nodes": graph.num_nodes,
+        "build_s": build_s,
+        "n": n,
+        "plan_s": best,
+        "queries_per_s": n / best,
+        "solved": float(np.mean(res.solved)),
+        "direct": float(np.mean(res.lengths == 2)),
+        "devices": jax.device_count(),
+    }
 
 
-__all__ = ["VisGraph", "plan_visgraph", "obstacle_vertices", "benchmark_visgraph",
-           "DEFAULT_ARC_STEP", "DEFAULT_EPS_REL"]
+__all__ = [
+    "VisGraph",
+    "plan_visgraph",
+    "obstacle_vertices",
+    "benchmark_visgraph",
+    "DEFAULT_ARC_STEP",
+    "DEFAULT_EPS_REL",
+]

@@ -73,6 +73,8 @@ def rotation(axis, sin, cos):
         r[i][i], r[j][j], r[i][j], r[j][i] = cos, cos, -s, s
         return r
     v = 1.0 - cos
-    return [[cos + ux * ux * v, ux * uy * v - uz * sin, ux * uz * v + uy * sin],
-            [uy * ux * v + uz * sin, cos + uy * uy * v, uy * uz * v - ux * sin],
-            [uz * ux * v - uy * sin, uz * uy * v + ux * sin, cos + uz * uz * v]]
+    return [
+        [cos + ux * ux * v, ux * uy * v - uz * sin, ux * uz * v + uy * sin],
+        [uy * ux * v + uz * sin, cos + uy * uy * v, uy * uz * v - ux * sin],
+        [uz * ux * v - uy * sin, uz * uy * v + ux * sin, cos + uz * uz * v],
+    ]

@@ -54,8 +54,9 @@ class Robot(Protocol):
     def steer_to(self, a: Array, b: Array, world: World, padding: float) -> Array:
         """True when the steering curve from ``a`` to ``b`` is collision-free."""
 
-    def steer_to_batch(self, a: Array, b: Array, world: World, padding: float,
-                       mask: Array | None = None) -> Array:
+    def steer_to_batch(
+        self, a: Array, b: Array, world: World, padding: float, mask: Array | None = None
+    ) -> Array:
         """``steer_to`` over coordinate-major ``(d, N)`` batches; ``mask`` False: blocked, unchecked."""
 
     def to_json(self) -> dict:
@@ -72,8 +73,9 @@ class DiscretizedSteering:
     def steer_to(self, a: Array, b: Array, world: World, padding: float) -> Array:
         return discretized_steer_to(self, a, b, world, padding, self.resolution)
 
-    def steer_to_batch(self, a: Array, b: Array, world: World, padding: float,
-                       mask: Array | None = None) -> Array:
+    def steer_to_batch(
+        self, a: Array, b: Array, world: World, padding: float, mask: Array | None = None
+    ) -> Array:
         """Coordinate-major ``(d, N), (d, N) -> (N,)``: the same answers as ``steer_to``, batched."""
         return discretized_steer_to_batch(self, a, b, world, padding, self.resolution, mask)
 
@@ -91,8 +93,9 @@ CHECKS_PER_STEP = 8  # states each lane checks per iteration of the work queue
 def _steps(robot, a: Array, b: Array, resolution: float) -> Array:
     """``n = ceil(distance / resolution)`` (>= 1) intervals; 0 for non-finite input."""
     dist = robot.distance(a, b)
-    return jnp.where(jnp.isfinite(dist), jnp.maximum(jnp.ceil(dist / resolution), 1.0),
-                     0.0).astype(jnp.int32)
+    return jnp.where(jnp.isfinite(dist), jnp.maximum(jnp.ceil(dist / resolution), 1.0), 0.0).astype(
+        jnp.int32
+    )
 
 
 def _check_index(c: Array, n: Array) -> Array:
@@ -113,8 +116,9 @@ def _check_index(c: Array, n: Array) -> Array:
     return o + CHECK_STRIDE * (c - (o * q + jnp.minimum(o, r1)))
 
 
-def discretized_steer_to(robot, a: Array, b: Array, world: World, padding: float,
-                         resolution: float) -> Array:
+def discretized_steer_to(
+    robot, a: Array, b: Array, world: World, padding: float, resolution: float
+) -> Array:
     """Checks the states at ``t = k / n``, ``k = 0..n``, ``n = ceil(distance(a, b) / resolution)``.
 
     Consecutive checked states are at most ``resolution`` apart in the robot's
@@ -187,16 +191,26 @@ def flag_queue(flags: Array) -> tuple:
         r = pos - (ends[w] - jax.lax.population_count(word[w]).astype(jnp.int32))
         bits, j = word[w], jnp.zeros_like(pos)
         for s in (16, 8, 4, 2, 1):  # the r-th set bit: the largest j with r set bits below it
-            below = jax.lax.population_count(bits & (jnp.left_shift(jnp.uint32(1), (j + s).astype(jnp.uint32)) - 1))
+            below = jax.lax.population_count(
+                bits & (jnp.left_shift(jnp.uint32(1), (j + s).astype(jnp.uint32)) - 1)
+            )
             j = jnp.where(below.astype(jnp.int32) <= r, j + s, j)
         return jnp.minimum(w * 32 + j, num - 1)
 
     return pick, ends[-1]
 
 
-def discretized_steer_to_batch(robot, a: Array, b: Array, world: World, padding: float,
-                               resolution: float, mask: Array | None = None,
-                               lanes: int = QUEUE_LANES, per_step: int = CHECKS_PER_STEP) -> Array:
+def discretized_steer_to_batch(
+    robot,
+    a: Array,
+    b: Array,
+    world: World,
+    padding: float,
+    resolution: float,
+    mask: Array | None = None,
+    lanes: int = QUEUE_LANES,
+    per_step: int = CHECKS_PER_STEP,
+) -> Array:
     """:func:`discretized_steer_to` for a coordinate-major batch ``(d, N), (d, N) -> (N,)``.
 
     Same states, same answers, scheduled as a work queue: ``lanes`` lanes each
@@ -214,11 +228,16 @@ def discretized_steer_to_batch(robot, a: Array, b: Array, world: World, padding:
     if num == 0:
         return jnp.zeros((0,), bool)
     n = jax.vmap(_steps, in_axes=(None, 1, 1, None))(robot, a, b, resolution)
-    interpolate = jax.vmap(jax.vmap(robot.interpolate, in_axes=(None, None, 0), out_axes=1),
-                           in_axes=(1, 1, 1), out_axes=2)
+    interpolate = jax.vmap(
+        jax.vmap(robot.interpolate, in_axes=(None, None, 0), out_axes=1),
+        in_axes=(1, 1, 1),
+        out_axes=2,
+    )
     # traced once (jit) for the loop's two uses of it, then batched at each
-    is_valid = jax.vmap(jax.vmap(jax.jit(robot.is_valid, static_argnums=2), in_axes=(1, None, None)),
-                        in_axes=(1, None, None))
+    is_valid = jax.vmap(
+        jax.vmap(jax.jit(robot.is_valid, static_argnums=2), in_axes=(1, None, None)),
+        in_axes=(1, None, None),
+    )
 
     def valid_at(ap, bp, t):
         return is_valid(interpolate(ap, bp, t), world, padding)
@@ -226,9 +245,17 @@ def discretized_steer_to_batch(robot, a: Array, b: Array, world: World, padding:
     return check_queue(a, b, n, valid_at, mask, lanes, per_step)
 
 
-def check_queue(a: Array, b: Array, n: Array, valid_at, mask: Array | None = None,
-                lanes: int = QUEUE_LANES, per_step: int = CHECKS_PER_STEP,
-                queue: tuple | None = None, tail_lanes: int | None = None) -> Array:
+def check_queue(
+    a: Array,
+    b: Array,
+    n: Array,
+    valid_at,
+    mask: Array | None = None,
+    lanes: int = QUEUE_LANES,
+    per_step: int = CHECKS_PER_STEP,
+    queue: tuple | None = None,
+    tail_lanes: int | None = None,
+) -> Array:
     """The work queue of :func:`discretized_steer_to_batch` for any per-motion check.
 
     Motion ``i`` (columns of the coordinate-major ``a``, ``b`` ``(d, N)``) is free
@@ -256,7 +283,9 @@ def check_queue(a: Array, b: Array, n: Array, valid_at, mask: Array | None = Non
     if mask is not None:
         n = jnp.where(mask, n, 0)
     if queue is None:
-        order = _longest_first(n)  # the queue, longest motions first; the n = 0 ones (not checked) last
+        order = _longest_first(
+            n
+        )  # the queue, longest motions first; the n = 0 ones (not checked) last
         work = jnp.sum(n > 0, dtype=jnp.int32)  # queue positions >= work hold nothing to check
 
         def pick(pos):
@@ -266,19 +295,41 @@ def check_queue(a: Array, b: Array, n: Array, valid_at, mask: Array | None = Non
     cache = queue is not None  # the lanes' motions carried through the loop, picked once
     if tail_lanes is None or tail_lanes >= lanes:
         return _queue_loop(a, b, n, valid_at, pick, work, per_step, lanes, cache=cache)
-    _, pos, k, out = _queue_loop(a, b, n, valid_at, pick, work, per_step, lanes,
-                                 stop_lanes=tail_lanes, cache=cache)
+    _, pos, k, out = _queue_loop(
+        a, b, n, valid_at, pick, work, per_step, lanes, stop_lanes=tail_lanes, cache=cache
+    )
     # the (at most tail_lanes) lanes still busy, moved to the first tail lanes (the others idle)
     busy = pos < work
     slot = jnp.where(busy, jnp.cumsum(busy, dtype=jnp.int32) - 1, tail_lanes)
     pos = jnp.full((tail_lanes,), work, jnp.int32).at[slot].set(pos, mode="drop")
     k = jnp.zeros((tail_lanes,), jnp.int32).at[slot].set(k, mode="drop")
-    return _queue_loop(a, b, n, valid_at, pick, work, per_step * lanes // tail_lanes, tail_lanes,
-                       (work, pos, k, out), cache=cache)
+    return _queue_loop(
+        a,
+        b,
+        n,
+        valid_at,
+        pick,
+        work,
+        per_step * lanes // tail_lanes,
+        tail_lanes,
+        (work, pos, k, out),
+        cache=cache,
+    )
 
 
-def _queue_loop(a, b, n, valid_at, pick, work, per_step: int, lanes: int, state=None,
-                stop_lanes: int | None = None, cache: bool = False):
+def _queue_loop(
+    a,
+    b,
+    n,
+    valid_at,
+    pick,
+    work,
+    per_step: int,
+    lanes: int,
+    state=None,
+    stop_lanes: int | None = None,
+    cache: bool = False,
+):
     """The loop of :func:`check_queue`, from the first ``lanes`` motions of the queue or from
     ``state = (head, pos, k, out)``: until every lane is idle (returns ``out``), or
     (``stop_lanes``) until the queue is empty and at most ``stop_lanes`` lanes are busy

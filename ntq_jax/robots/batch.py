@@ -26,10 +26,16 @@ import jax
 import numpy as np
 
 from ntq_jax.geometry import KERNEL_COMPILER_OPTIONS, World
-from ntq_jax.robots.certified import MOTION_CHECKS
 from ntq_jax.robots import rows
-from ntq_jax.robots.rows import (RowPlan, aligned_head, aligned_period, host_rows, plan_rows,
-                                 run_rows)
+from ntq_jax.robots.certified import MOTION_CHECKS
+from ntq_jax.robots.rows import (
+    RowPlan,
+    aligned_head,
+    aligned_period,
+    host_rows,
+    plan_rows,
+    run_rows,
+)
 
 Array = jax.Array
 
@@ -62,8 +68,9 @@ def _steer_to_batch(robot, world: World, a: Array, b: Array, padding: float, che
     return motion_check(robot, check)(a.T, b.T, world, padding)
 
 
-def steer_to_batch(robot, world: World, a: Array, b: Array, padding: float,
-                   check: str = "discretized") -> Array:
+def steer_to_batch(
+    robot, world: World, a: Array, b: Array, padding: float, check: str = "discretized"
+) -> Array:
     """``(N, d), (N, d) -> (N,)`` bool, True where the connection is collision-free.
 
     ``check``: see :func:`motion_check`. One compiled program per robot, padding,
@@ -83,8 +90,15 @@ def is_valid_cm(robot, world: World, states_cm: Array, padding: float) -> Array:
     return jax.vmap(robot.is_valid, in_axes=(1, None, None))(states_cm, world, padding)
 
 
-def steer_to_cm(robot, world: World, a_cm: Array, b_cm: Array, padding: float,
-                mask: Array | None = None, check: str = "discretized") -> Array:
+def steer_to_cm(
+    robot,
+    world: World,
+    a_cm: Array,
+    b_cm: Array,
+    padding: float,
+    mask: Array | None = None,
+    check: str = "discretized",
+) -> Array:
     """Coordinate-major ``(d, N), (d, N) -> (N,)``, for use inside other jitted code.
 
     ``mask`` (optional, ``(N,)`` bool): only these connections are checked, the
@@ -109,8 +123,9 @@ CHECK_CHUNK = 2048  # states per compiled call of valid_states / distances
 
 
 @functools.partial(_kernel_jit, static_argnames=("robot", "padding", "check"))
-def _steer_masked(robot, world: World, a: Array, b: Array, mask: Array, padding: float,
-                  check: str) -> Array:
+def _steer_masked(
+    robot, world: World, a: Array, b: Array, mask: Array, padding: float, check: str
+) -> Array:
     return steer_to_cm(robot, world, a.T, b.T, padding, mask=mask, check=check)
 
 
@@ -158,12 +173,18 @@ def _flexible(arrays, robot=None) -> RowPlan:
     top = max(rows.PIECE_MIN, top)
     if n < rows.PIECE_MIN:
         return plan_rows(n, 0, top, rows.PIECE_MIN)
-    return plan_rows(n, aligned_head(arrays), top, rows.PIECE_MIN,
-                     period=aligned_period(arrays[0]))
+    return plan_rows(n, aligned_head(arrays), top, rows.PIECE_MIN, period=aligned_period(arrays[0]))
 
 
-def steer_rows(robot, world: World, a: np.ndarray, b: np.ndarray, padding: float,
-               check: str = "discretized", whole: tuple[Array, Array] | None = None) -> Array:
+def steer_rows(
+    robot,
+    world: World,
+    a: np.ndarray,
+    b: np.ndarray,
+    padding: float,
+    check: str = "discretized",
+    whole: tuple[Array, Array] | None = None,
+) -> Array:
     """``steer_to`` of host ``(N, d)`` float32 pairs (:func:`~ntq_jax.robots.rows.host_rows`)
     as a JAX array, not waited for (see :func:`~ntq_jax.robots.rows.run_rows`).
 
@@ -174,26 +195,35 @@ def steer_rows(robot, world: World, a: np.ndarray, b: np.ndarray, padding: float
     (see :func:`~ntq_jax.robots.rows.run_rows`).
     """
     plan = _certified([a, b]) if check == "certified" else _flexible([a, b], robot)
-    return run_rows(lambda x, y, m: _steer_masked(robot, world, x, y, m, padding, check),
-                    [a, b], plan, whole)
+    return run_rows(
+        lambda x, y, m: _steer_masked(robot, world, x, y, m, padding, check), [a, b], plan, whole
+    )
 
 
-def valid_rows(robot, world: World, states: np.ndarray, padding: float,
-               whole: tuple[Array] | None = None) -> Array:
+def valid_rows(
+    robot, world: World, states: np.ndarray, padding: float, whole: tuple[Array] | None = None
+) -> Array:
     """``is_valid`` of host ``(N, d)`` float32 states as a JAX array (as :func:`steer_rows`)."""
-    return run_rows(lambda x, m: is_valid_batch(robot, world, x, padding), [states],
-                    _flexible([states], robot), whole)
+    return run_rows(
+        lambda x, m: is_valid_batch(robot, world, x, padding),
+        [states],
+        _flexible([states], robot),
+        whole,
+    )
 
 
-def distance_rows(robot, a: np.ndarray, b: np.ndarray,
-                  whole: tuple[Array, Array] | None = None) -> Array:
+def distance_rows(
+    robot, a: np.ndarray, b: np.ndarray, whole: tuple[Array, Array] | None = None
+) -> Array:
     """The cost metric of host ``(N, d)`` float32 pairs as a JAX array (as :func:`steer_rows`)."""
-    return run_rows(lambda x, y, m: distance_batch(robot, x, y), [a, b],
-                    _flexible([a, b], robot), whole)
+    return run_rows(
+        lambda x, y, m: distance_batch(robot, x, y), [a, b], _flexible([a, b], robot), whole
+    )
 
 
-def steer_to_pairs(robot, world: World, a, b, padding: float,
-                   chunk: int | None = None, check: str = "discretized") -> np.ndarray:
+def steer_to_pairs(
+    robot, world: World, a, b, padding: float, chunk: int | None = None, check: str = "discretized"
+) -> np.ndarray:
     """``steer_to`` over any number of ``(N, d)`` pairs in fixed-size compiled chunks.
 
     ``chunk``: pairs per compiled call; None = :data:`CERTIFIED_CHUNK` for the
@@ -209,19 +239,24 @@ def steer_to_pairs(robot, world: World, a, b, padding: float,
     a, b = _float_pairs(a, b, robot.dim)
     if a.shape[0] == 0:
         return np.zeros(0, bool)
-    out = run_rows(lambda x, y, m: _steer_masked(robot, world, x, y, m, padding, check),
-                   [a, b], _fixed(chunk, [a, b]))
+    out = run_rows(
+        lambda x, y, m: _steer_masked(robot, world, x, y, m, padding, check),
+        [a, b],
+        _fixed(chunk, [a, b]),
+    )
     return np.asarray(out).astype(bool)
 
 
-def valid_states(robot, world: World, states, padding: float,
-                 chunk: int = CHECK_CHUNK) -> np.ndarray:
+def valid_states(
+    robot, world: World, states, padding: float, chunk: int = CHECK_CHUNK
+) -> np.ndarray:
     """``is_valid`` over any number of ``(N, d)`` states in fixed-size compiled chunks."""
     states = _float_rows(states, robot.dim)
     if states.shape[0] == 0:
         return np.zeros(0, bool)
-    out = run_rows(lambda x, m: is_valid_batch(robot, world, x, padding), [states],
-                   _fixed(chunk, [states]))
+    out = run_rows(
+        lambda x, m: is_valid_batch(robot, world, x, padding), [states], _fixed(chunk, [states])
+    )
     return np.asarray(out).astype(bool)
 
 

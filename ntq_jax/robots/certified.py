@@ -56,7 +56,9 @@ CERT_LANES = 512  # lanes of the work queue's first phase (at most; see CERT_LAN
 CERT_LANE_BYTES = 1 << 17
 CERT_MIN_LANES = 2
 CERT_POINTS = 8  # configurations each lane evaluates per iteration
-CERT_GROWTH = 1.5  # initial step of the sweep: CERT_GROWTH * c(front) / D (see certified_steer_to_batch)
+CERT_GROWTH = (
+    1.5  # initial step of the sweep: CERT_GROWTH * c(front) / D (see certified_steer_to_batch)
+)
 CERT_PHASE_STEPS = 48  # iterations per motion in the wide first phase
 CERT_TAIL_LANES = 32  # lanes of the second phase (the few motions the first left undecided)
 CERT_TAIL_POINTS = 32  # configurations per lane and iteration in the second phase
@@ -70,20 +72,30 @@ class CertifiedSteering:
     """Mixin: :func:`certified_steer_to_batch` as a method, for robots with
     ``part_clearances`` and ``part_sweep_bounds``."""
 
-    def certified_steer_to_batch(self, a: Array, b: Array, world: World, padding: float,
-                                 mask: Array | None = None) -> Array:
+    def certified_steer_to_batch(
+        self, a: Array, b: Array, world: World, padding: float, mask: Array | None = None
+    ) -> Array:
         """Coordinate-major ``(d, N), (d, N) -> (N,)``: True only for motions proven free."""
         return certified_steer_to_batch(self, a, b, world, padding, mask)
 
 
-def certified_steer_to_batch(robot, a: Array, b: Array, world: World, padding: float,
-                             mask: Array | None = None, *, lanes: int = CERT_LANES,
-                             points: int = CERT_POINTS, growth: float = CERT_GROWTH,
-                             phase_steps: int = CERT_PHASE_STEPS,
-                             tail_lanes: int = CERT_TAIL_LANES,
-                             tail_points: int = CERT_TAIL_POINTS,
-                             max_evals: int = CERT_MAX_EVALS,
-                             margin: float = CERT_MARGIN) -> Array:
+def certified_steer_to_batch(
+    robot,
+    a: Array,
+    b: Array,
+    world: World,
+    padding: float,
+    mask: Array | None = None,
+    *,
+    lanes: int = CERT_LANES,
+    points: int = CERT_POINTS,
+    growth: float = CERT_GROWTH,
+    phase_steps: int = CERT_PHASE_STEPS,
+    tail_lanes: int = CERT_TAIL_LANES,
+    tail_points: int = CERT_TAIL_POINTS,
+    max_evals: int = CERT_MAX_EVALS,
+    margin: float = CERT_MARGIN,
+) -> Array:
     """Certified ``steer_to`` over a coordinate-major batch ``(d, N), (d, N) -> (N,)`` bool.
 
     True only for motions proven collision-free at ``padding`` (see the module
@@ -132,8 +144,9 @@ def certified_steer_to_batch(robot, a: Array, b: Array, world: World, padding: f
     sweep = _Sweep(robot, part_clearances, a, b, world, padding, cb, dist, points, margin)
     g0 = jnp.full((num,), growth, a.dtype)
     lanes = min(lanes, cache_lanes(ca.shape[0], points))
-    free, left, lo, clo, g = sweep.run(hard, jnp.zeros((num,), a.dtype), ca, g0, True,
-                                       min(lanes, num), phase_steps)
+    free, left, lo, clo, g = sweep.run(
+        hard, jnp.zeros((num,), a.dtype), ca, g0, True, min(lanes, num), phase_steps
+    )
     tail_steps = (max_evals - phase_steps * points) // tail_points
     if tail_steps > 0:
         tail = _Sweep(robot, part_clearances, a, b, world, padding, cb, dist, tail_points, margin)
@@ -160,11 +173,17 @@ class _Sweep:
     def __init__(self, robot, part_clearances, a, b, world, padding, cb, dist, points, margin):
         self.a, self.b, self.world, self.padding = a, b, world, padding
         self.cb, self.dist, self.points, self.margin = cb, dist, points, margin
-        self.interpolate = jax.vmap(jax.vmap(robot.interpolate, in_axes=(None, None, 0), out_axes=1),
-                                    in_axes=(1, 1, 1), out_axes=2)
+        self.interpolate = jax.vmap(
+            jax.vmap(robot.interpolate, in_axes=(None, None, 0), out_axes=1),
+            in_axes=(1, 1, 1),
+            out_axes=2,
+        )
         # (d, points, lanes) -> (points, m, lanes)
-        self.clear = jax.vmap(jax.vmap(part_clearances, in_axes=(1, None, None), out_axes=1),
-                              in_axes=(1, None, None), out_axes=0)
+        self.clear = jax.vmap(
+            jax.vmap(part_clearances, in_axes=(1, None, None), out_axes=1),
+            in_axes=(1, None, None),
+            out_axes=0,
+        )
         self.ks = jnp.arange(1, points + 1, dtype=a.dtype)[:, None]  # (points, 1)
 
     def ahead(self, i, lo, clo, g, first):
@@ -186,8 +205,13 @@ class _Sweep:
         undecided, and where their sweeps stopped.
         """
         num = todo.shape[0]
-        order = _longest_first(jnp.where(
-            todo, 1 + jnp.minimum(jnp.max(self.dist, axis=0) * 64.0, 2.0 ** 30).astype(jnp.int32), 0))
+        order = _longest_first(
+            jnp.where(
+                todo,
+                1 + jnp.minimum(jnp.max(self.dist, axis=0) * 64.0, 2.0**30).astype(jnp.int32),
+                0,
+            )
+        )
         work = jnp.sum(todo, dtype=jnp.int32)
         points, margin, dist, cb = self.points, self.margin, self.dist, self.cb
 
@@ -230,8 +254,11 @@ class _Sweep:
             pos = jnp.where(done, head + jnp.cumsum(done, dtype=jnp.int32) - 1, pos)
             head = head + jnp.sum(done, dtype=jnp.int32)
             j = motion(pos)
-            lo, clo, g = (jnp.where(done, lo0[j], lo), jnp.where(done, clo0[:, j], clo),
-                          jnp.where(done, g0[j], g))
+            lo, clo, g = (
+                jnp.where(done, lo0[j], lo),
+                jnp.where(done, clo0[:, j], clo),
+                jnp.where(done, g0[j], g),
+            )
             steps = jnp.where(done, 0, steps)
             ts, cs = self.ahead(j, lo, clo, g, done & first)
             return head, pos, lo, clo, g, steps, ts, cs, free, left, out_lo, out_clo, out_g
@@ -248,8 +275,20 @@ class _Sweep:
         lo, clo, g = lo0[i], clo0[:, i], g0[i]
         no = jnp.zeros((num,), bool)
         m = clo0.shape[0]
-        init = (jnp.int32(0), pos, lo, clo, g, jnp.zeros((lanes,), jnp.int32),
-                jnp.zeros((points, lanes), lo0.dtype), jnp.zeros((points, m, lanes), clo0.dtype),
-                no, no, lo0, clo0, g0)
+        init = (
+            jnp.int32(0),
+            pos,
+            lo,
+            clo,
+            g,
+            jnp.zeros((lanes,), jnp.int32),
+            jnp.zeros((points, lanes), lo0.dtype),
+            jnp.zeros((points, m, lanes), clo0.dtype),
+            no,
+            no,
+            lo0,
+            clo0,
+            g0,
+        )
         out = jax.lax.while_loop(cond, body, init)
         return out[8:]

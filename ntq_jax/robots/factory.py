@@ -11,8 +11,7 @@ from ntq_jax.robots.rigid_body import RigidBody
 from ntq_jax.robots.serial_arm import DEFAULT_RESOLUTION, SerialArm
 from ntq_jax.validation import number, short_repr
 
-_KINDS = {"point": PointRobot, "rigid_body": RigidBody, "nlink": NLinkArm,
-          "serial_arm": SerialArm}
+_KINDS = {"point": PointRobot, "rigid_body": RigidBody, "nlink": NLinkArm, "serial_arm": SerialArm}
 #: The parameters of a ``serial_arm``: a preset (``"panda"``), or a URDF (and an SRDF's
 #: disabled collision pairs) with the chain's tip link; and the discretised check's resolution.
 SERIAL_ARM_KEYS = ("preset", "urdf", "srdf", "tip", "resolution")
@@ -25,20 +24,27 @@ def _serial_arm(params: dict, where: str) -> SerialArm:
     to the working directory)."""
     unknown = sorted(set(params) - set(SERIAL_ARM_KEYS))
     if unknown:
-        raise ValueError(f"{where}: unknown parameter(s) {unknown} for kind 'serial_arm'; "
-                         f"allowed: {list(SERIAL_ARM_KEYS)}")
-    resolution = number(params.get("resolution", DEFAULT_RESOLUTION), f"{where}.resolution",
-                        minimum=0, strict=True)
+        raise ValueError(
+            f"{where}: unknown parameter(s) {unknown} for kind 'serial_arm'; "
+            f"allowed: {list(SERIAL_ARM_KEYS)}"
+        )
+    resolution = number(
+        params.get("resolution", DEFAULT_RESOLUTION), f"{where}.resolution", minimum=0, strict=True
+    )
     if "preset" in params:
         if set(params) - {"preset", "resolution"}:
             raise ValueError(f"{where}: a serial_arm preset takes only 'resolution' beside it")
         if params["preset"] not in SERIAL_ARM_PRESETS:
-            raise ValueError(f"{where}.preset {short_repr(params['preset'])} is unknown; use one "
-                             f"of {list(SERIAL_ARM_PRESETS)} or give 'urdf' (and 'srdf', 'tip')")
+            raise ValueError(
+                f"{where}.preset {short_repr(params['preset'])} is unknown; use one "
+                f"of {list(SERIAL_ARM_PRESETS)} or give 'urdf' (and 'srdf', 'tip')"
+            )
         return SerialArm.panda(resolution)
     if not isinstance(params.get("urdf"), str):
-        raise ValueError(f"{where}: a serial_arm needs 'preset' or 'urdf' (the path of a URDF "
-                         f"file), got {short_repr(params.get('urdf'))}")
+        raise ValueError(
+            f"{where}: a serial_arm needs 'preset' or 'urdf' (the path of a URDF "
+            f"file), got {short_repr(params.get('urdf'))}"
+        )
     for key in ("srdf", "tip"):
         if params.get(key) is not None and not isinstance(params[key], str):
             raise ValueError(f"{where}.{key} must be a string, got {short_repr(params[key])}")
@@ -54,8 +60,9 @@ def robot_from_json(spec: dict, where: str = "robot") -> Robot:
             ``link_lengths`` must be a list of numbers, never a string).
     """
     if not isinstance(spec, dict) or "kind" not in spec:
-        raise ValueError(f"{where} must be an object with a 'kind' in {sorted(_KINDS)}, got "
-                         f"{short_repr(spec)}")
+        raise ValueError(
+            f"{where} must be an object with a 'kind' in {sorted(_KINDS)}, got {short_repr(spec)}"
+        )
     kind = spec["kind"]
     if not isinstance(kind, str) or kind not in _KINDS:
         raise ValueError(f"{where}.kind {kind!r} is unknown; use one of {sorted(_KINDS)}")
@@ -70,8 +77,9 @@ def robot_from_json(spec: dict, where: str = "robot") -> Robot:
     allowed = {f.name for f in dataclasses.fields(cls) if f.init}
     unknown = sorted(set(params) - allowed)
     if unknown:
-        raise ValueError(f"{where}: unknown parameter(s) {unknown} for kind {kind!r}; "
-                         f"allowed: {sorted(allowed)}")
+        raise ValueError(
+            f"{where}: unknown parameter(s) {unknown} for kind {kind!r}; allowed: {sorted(allowed)}"
+        )
     try:
         return cls(**params)  # each robot's __post_init__ checks its parameters strictly
     except (TypeError, ValueError) as e:

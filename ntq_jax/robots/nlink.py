@@ -43,16 +43,23 @@ class NLinkArm(DiscretizedSteering, CertifiedSteering):
     kind: str = dataclasses.field(default="nlink", init=False)
 
     def __post_init__(self):
-        lengths = validation.number_list(self.link_lengths, "nlink.link_lengths",
-                                         "[l1, l2, ...] of link lengths > 0", min_length=1)
+        lengths = validation.number_list(
+            self.link_lengths,
+            "nlink.link_lengths",
+            "[l1, l2, ...] of link lengths > 0",
+            min_length=1,
+        )
         for i, v in enumerate(lengths):
             if not v > 0:
                 raise ValueError(f"nlink.link_lengths[{i}] is {v:g}: link lengths must be > 0")
         base = validation.number_list(self.base, "nlink.base", "[x, y]", length=2)
         object.__setattr__(self, "link_lengths", lengths)
         object.__setattr__(self, "base", base)
-        object.__setattr__(self, "resolution", validation.number(
-            self.resolution, "nlink.resolution", minimum=0, strict=True))
+        object.__setattr__(
+            self,
+            "resolution",
+            validation.number(self.resolution, "nlink.resolution", minimum=0, strict=True),
+        )
 
     def longest_motion(self, world: World) -> float:
         """The longest motion between two valid states in the cost metric (radians): the
@@ -113,8 +120,13 @@ class NLinkArm(DiscretizedSteering, CertifiedSteering):
         xs, ys = self.joint_xy(q)
         ok = ok & geometry.in_bounds(xs[0], ys[0], world.bounds)
         for k in range(self.dim):
-            ok = ok & geometry.segment_free(jnp.stack([xs[k], ys[k]]), jnp.stack([xs[k + 1], ys[k + 1]]),
-                                            world, padding, check_bounds=False)
+            ok = ok & geometry.segment_free(
+                jnp.stack([xs[k], ys[k]]),
+                jnp.stack([xs[k + 1], ys[k + 1]]),
+                world,
+                padding,
+                check_bounds=False,
+            )
             ok = ok & geometry.in_bounds(xs[k + 1], ys[k + 1], world.bounds)
         return ok
 
@@ -127,9 +139,11 @@ class NLinkArm(DiscretizedSteering, CertifiedSteering):
         base = geometry.wall_clearance(xs[0], ys[0], world.bounds)
         parts = []
         for k in range(self.dim):
-            c = jnp.minimum(geometry.segment_clearance(xs[k], ys[k], xs[k + 1], ys[k + 1], world,
-                                                      padding)
-                            - padding, geometry.wall_clearance(xs[k + 1], ys[k + 1], world.bounds))
+            c = jnp.minimum(
+                geometry.segment_clearance(xs[k], ys[k], xs[k + 1], ys[k + 1], world, padding)
+                - padding,
+                geometry.wall_clearance(xs[k + 1], ys[k + 1], world.bounds),
+            )
             parts.append(jnp.minimum(c, base) if k == 0 else c)
         c = jnp.stack(parts)
         ok = jnp.all(jnp.isfinite(q)) & jnp.all(jnp.abs(q) <= jnp.pi) & jnp.all(jnp.isfinite(c))
@@ -143,7 +157,7 @@ class NLinkArm(DiscretizedSteering, CertifiedSteering):
         for k in range(self.dim):
             total = jnp.float32(0.0)
             for j in range(k + 1):
-                total = total + float(sum(self.link_lengths[j:k + 1])) * dq[j]
+                total = total + float(sum(self.link_lengths[j : k + 1])) * dq[j]
             out.append(total)
         return jnp.stack(out)
 
@@ -170,5 +184,9 @@ class NLinkArm(DiscretizedSteering, CertifiedSteering):
         return jnp.sqrt(jnp.sum((b - a) ** 2))
 
     def to_json(self) -> dict:
-        return {"kind": "nlink", "link_lengths": list(self.link_lengths), "base": list(self.base),
-                "resolution": self.resolution}
+        return {
+            "kind": "nlink",
+            "link_lengths": list(self.link_lengths),
+            "base": list(self.base),
+            "resolution": self.resolution,
+        }

@@ -48,8 +48,9 @@ class PointRobot:
         """Exact: the closed segment ``a -> b`` is farther than ``padding`` from every obstacle."""
         return geometry.segment_free(a, b, world, padding)
 
-    def steer_to_batch(self, a: Array, b: Array, world: World, padding: float,
-                       mask: Array | None = None) -> Array:
+    def steer_to_batch(
+        self, a: Array, b: Array, world: World, padding: float, mask: Array | None = None
+    ) -> Array:
         """Coordinate-major ``(2, N), (2, N) -> (N,)``; ``mask`` False reports blocked.
 
         On a world with a broad-phase index (:mod:`ntq_jax.broadphase`) the segments
@@ -75,8 +76,9 @@ class PointRobot:
         free = jax.vmap(self.steer_to, in_axes=(1, 1, None, None))(a, b, world, padding)
         return free if mask is None else free & mask
 
-    def certified_steer_to_batch(self, a: Array, b: Array, world: World, padding: float,
-                                 mask: Array | None = None) -> Array:
+    def certified_steer_to_batch(
+        self, a: Array, b: Array, world: World, padding: float, mask: Array | None = None
+    ) -> Array:
         """The certified check: the exact segment test already proves every point clear."""
         return self.steer_to_batch(a, b, world, padding, mask)
 
@@ -94,21 +96,31 @@ INDEXED_TAIL_LANES = 32
 BITMAP_SAMPLES = 8
 
 
-def _indexed_steer_batch(a: Array, b: Array, world: World, padding: float,
-                         mask: Array | None) -> Array:
+def _indexed_steer_batch(
+    a: Array, b: Array, world: World, padding: float, mask: Array | None
+) -> Array:
     """:meth:`PointRobot.steer_to_batch` through the broad phase (see there)."""
     x0, y0, x1, y1 = a[0], a[1], b[0], b[1]
-    ok = (jnp.isfinite(x0 + y0 + x1 + y1) & geometry.in_bounds(x0, y0, world.bounds)
-          & geometry.in_bounds(x1, y1, world.bounds))
+    ok = (
+        jnp.isfinite(x0 + y0 + x1 + y1)
+        & geometry.in_bounds(x0, y0, world.bounds)
+        & geometry.in_bounds(x1, y1, world.bounds)
+    )
     if world.discs.shape[0]:
-        disc_free = jax.vmap(lambda p, q: geometry.segment_free(
-            p, q, dataclasses.replace(world, boxes=world.boxes[:0], index=None), padding),
-            in_axes=(1, 1))(a, b)
+        disc_free = jax.vmap(
+            lambda p, q: geometry.segment_free(
+                p, q, dataclasses.replace(world, boxes=world.boxes[:0], index=None), padding
+            ),
+            in_axes=(1, 1),
+        )(a, b)
         ok = ok & disc_free
     index = world.index
     mask = ok if mask is None else ok & mask
-    hits = jax.vmap(jax.vmap(geometry.segment_hits_near, in_axes=(None, None, None, None, 0, None, None)),
-                    in_axes=(0, 0, 0, 0, 1, None, None), out_axes=1)
+    hits = jax.vmap(
+        jax.vmap(geometry.segment_hits_near, in_axes=(None, None, None, None, 0, None, None)),
+        in_axes=(0, 0, 0, 0, 1, None, None),
+        out_axes=1,
+    )
 
     def valid_at(ap, bp, t):
         return ~hits(ap[0], ap[1], bp[0], bp[1], t, world, padding)
@@ -122,15 +134,25 @@ def _indexed_steer_batch(a: Array, b: Array, world: World, padding: float,
         todo = mask & ~blocked  # finite, so n >= 1: n is computed for the queue's lanes only
 
         def steps(i):  # sliced here, inside the queue's loop: no copies of the rows
-            return geometry.segment_cover_steps(a[0][i], a[1][i], b[0][i], b[1][i], index.reach, padding)
+            return geometry.segment_cover_steps(
+                a[0][i], a[1][i], b[0][i], b[1][i], index.reach, padding
+            )
 
-        return check_queue(a, b, steps, valid_at, per_step=INDEXED_CHECKS_PER_STEP,
-                           queue=flag_queue(todo), tail_lanes=INDEXED_TAIL_LANES)
+        return check_queue(
+            a,
+            b,
+            steps,
+            valid_at,
+            per_step=INDEXED_CHECKS_PER_STEP,
+            queue=flag_queue(todo),
+            tail_lanes=INDEXED_TAIL_LANES,
+        )
     # a cheap first pass over every segment: the boxes near its two ends (where most blocked
     # segments of a cluttered map are caught); only the others enter the work queue
     for t in (0.0, 1.0):
         ok = ok & ~jax.vmap(geometry.segment_hits_near, in_axes=(0, 0, 0, 0, None, None, None))(
-            x0, y0, x1, y1, jnp.float32(t), world, padding)
+            x0, y0, x1, y1, jnp.float32(t), world, padding
+        )
     mask = ok & mask
     n = geometry.segment_cover_steps(x0, y0, x1, y1, index.reach, padding)
     return check_queue(a, b, n, valid_at, mask, per_step=INDEXED_CHECKS_PER_STEP)

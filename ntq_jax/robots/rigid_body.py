@@ -45,8 +45,12 @@ ANGLE_LIMIT = 1.0e8
 
 # 2 pi in 12-bit parts (the last one in float32); |k| < 2^24 split in two 12-bit halves
 # makes every product k_half * part exact, so x - k * 2 pi is exact up to the last steps.
-_TWO_PI_PARTS = (6.283203125, -1.7814338207244873e-05, -3.4824552130885422e-09,
-                 2.4893487878679954e-13)
+_TWO_PI_PARTS = (
+    6.283203125,
+    -1.7814338207244873e-05,
+    -3.4824552130885422e-09,
+    2.4893487878679954e-13,
+)
 _INV_TWO_PI = 0.15915493667125702
 _PI32 = 3.1415927410125732  # float32(pi) > pi: float32 angles >= it are >= pi
 _PI32_BELOW = 3.1415925025939941  # the largest float32 < pi
@@ -54,7 +58,7 @@ _PI32_BELOW = 3.1415925025939941  # the largest float32 < pi
 
 def _reduce_by(x: Array, k: Array) -> Array:
     """``x - k * 2 pi`` for float32 integers ``|k| < 2^24``, exact except the last steps."""
-    kh = jnp.round(k * jnp.float32(2.0 ** -12)) * jnp.float32(2.0 ** 12)
+    kh = jnp.round(k * jnp.float32(2.0**-12)) * jnp.float32(2.0**12)
     kl = k - kh
     r = x
     for part in _TWO_PI_PARTS[:3]:
@@ -181,5 +185,10 @@ class RigidBody(DiscretizedSteering, CertifiedSteering):
         return jnp.sqrt(dx * dx + dy * dy) + self.half_diagonal * jnp.abs(dth)
 
     def to_json(self) -> dict:
-        return {"kind": "rigid_body", "length": self.length, "width": self.width,
-                "angle_weight": self.angle_weight, "resolution": self.resolution}
+        return {
+            "kind": "rigid_body",
+            "length": self.length,
+            "width": self.width,
+            "angle_weight": self.angle_weight,
+            "resolution": self.resolution,
+        }

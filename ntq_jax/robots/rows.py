@@ -12,7 +12,8 @@ the rows already lie, never copied as a whole:
   ``piece_max`` rows as fit, then smaller powers of two down to ``piece_min``,
   the last one allowed to overlap the others by a few rows when that saves
   pieces) and an *edge*: the fewer than ``piece_min`` rows left at the end,
-  plus the up to :data:`HOST_HEAD` rows before the first aligned one, copied into one small array padded to a power of two.
+  plus the up to :data:`HOST_HEAD` rows before the first aligned one, copied into one small array
+  padded to a power of two.
 * :func:`run_rows` calls the kernel on every piece and on the edge (the calls
   are dispatched asynchronously, so they overlap) and joins the per-row answers
   in row order: one trivial concatenation, or none when the batch is one piece.
@@ -70,8 +71,15 @@ class RowPlan(NamedTuple):
         return self.head + self.n - self.tail
 
 
-def plan_rows(n: int, head: int = 0, piece_max: int = PIECE_MAX, piece_min: int = PIECE_MIN,
-              min_bucket: int = MIN_BUCKET, period: int = 1, two_sizes: bool = False) -> RowPlan:
+def plan_rows(
+    n: int,
+    head: int = 0,
+    piece_max: int = PIECE_MAX,
+    piece_min: int = PIECE_MIN,
+    min_bucket: int = MIN_BUCKET,
+    period: int = 1,
+    two_sizes: bool = False,
+) -> RowPlan:
     """Splits ``n`` rows into in-place pieces from row ``head`` on, and an edge.
 
     Pieces (``piece_max`` and ``piece_min`` powers of two, or equal): as many of
@@ -136,7 +144,7 @@ def _aligned_empty(shape: tuple[int, ...], dtype=np.float32) -> np.ndarray:
     nbytes = int(np.prod(shape)) * np.dtype(dtype).itemsize
     buf = np.empty(nbytes + HOST_ALIGN, np.uint8)
     off = -buf.ctypes.data % HOST_ALIGN
-    return buf[off:off + nbytes].view(dtype).reshape(shape)
+    return buf[off : off + nbytes].view(dtype).reshape(shape)
 
 
 def on_host(x) -> bool:
@@ -175,8 +183,11 @@ def host_rows(x) -> np.ndarray | None:
     out = _aligned_empty(x.shape)
     flat_in, flat_out = x.reshape(x.shape[0], -1), out.reshape(x.shape[0], -1)
     for lo in range(0, x.shape[0], _CAST_CHUNK_ROWS):  # chunks stay in cache
-        np.copyto(flat_out[lo:lo + _CAST_CHUNK_ROWS], flat_in[lo:lo + _CAST_CHUNK_ROWS],
-                  casting="unsafe")
+        np.copyto(
+            flat_out[lo : lo + _CAST_CHUNK_ROWS],
+            flat_in[lo : lo + _CAST_CHUNK_ROWS],
+            casting="unsafe",
+        )
     return out
 
 
@@ -199,14 +210,15 @@ def _pad(xs: tuple[Array, ...], size: int) -> tuple[Array, ...]:
 
 
 @functools.partial(jax.jit, static_argnames=("head", "tail", "skips"))
-def _join(edge: Array | None, pieces: tuple[Array, ...], head: int, tail: int,
-          skips: tuple[int, ...]) -> Array:
+def _join(
+    edge: Array | None, pieces: tuple[Array, ...], head: int, tail: int, skips: tuple[int, ...]
+) -> Array:
     """The answers in row order: the edge's head rows, the pieces (each without its first
     ``skips`` rows, shared with the previous piece), the edge's tail rows."""
     body = [p[k:] for p, k in zip(pieces, skips)]
     if edge is None:
         return jnp.concatenate(body)
-    return jnp.concatenate([edge[:head], *body, edge[head:head + tail]])
+    return jnp.concatenate([edge[:head], *body, edge[head : head + tail]])
 
 
 @functools.partial(jax.jit, static_argnames=("n",))
@@ -214,8 +226,12 @@ def _first(x: Array, n: int) -> Array:
     return x[:n]
 
 
-def run_rows(kernel: Callable[..., Array], arrays: Sequence[np.ndarray], plan: RowPlan,
-             whole: Sequence[Array] | None = None) -> Array:
+def run_rows(
+    kernel: Callable[..., Array],
+    arrays: Sequence[np.ndarray],
+    plan: RowPlan,
+    whole: Sequence[Array] | None = None,
+) -> Array:
     """``kernel`` over the rows of ``arrays`` (host NumPy, same length) as ``plan`` splits them.
 
     ``kernel(*rows, mask)`` gets ``m``-row arrays (JAX or NumPy) and an ``(m,)``
@@ -230,13 +246,17 @@ def run_rows(kernel: Callable[..., Array], arrays: Sequence[np.ndarray], plan: R
     wait (``block_until_ready``) before they may change.
     """
     n, m = plan.n, plan.bucket
-    if whole is not None and not plan.head and (
-            plan.pieces == ((0, n),) or (not plan.pieces and m)):
+    if (
+        whole is not None
+        and not plan.head
+        and (plan.pieces == ((0, n),) or (not plan.pieces and m))
+    ):
         if not m or m == n:  # one piece, or an edge of exactly a bucket: the whole batch
             return kernel(*whole, _all_rows(n))
         return _first(kernel(*_pad(tuple(whole), m), _first_rows(n, m)), n)
-    outs = [kernel(*[x[lo:lo + size] for x in arrays], _all_rows(size))
-            for lo, size in plan.pieces]
+    outs = [
+        kernel(*[x[lo : lo + size] for x in arrays], _all_rows(size)) for lo, size in plan.pieces
+    ]
     ends = [plan.head] + [lo + size for lo, size in plan.pieces]
     skips = tuple(max(0, end - lo) for end, (lo, _) in zip(ends, plan.pieces))
     if not m:
@@ -245,8 +265,8 @@ def run_rows(kernel: Callable[..., Array], arrays: Sequence[np.ndarray], plan: R
     edge_in = []
     for x in arrays:
         e = np.zeros((m,) + x.shape[1:], x.dtype)
-        e[:plan.head] = x[:plan.head]
-        e[plan.head:rows] = x[plan.tail:]
+        e[: plan.head] = x[: plan.head]
+        e[plan.head : rows] = x[plan.tail :]
         edge_in.append(e)
     edge = kernel(*edge_in, _first_rows(rows, m))
     if not outs:

@@ -114,13 +114,19 @@ class SerialArm(DiscretizedSteering, CertifiedSteering):
 
     def __post_init__(self):
         n, s = len(self.joint_names), len(self.sphere_radii)
-        sizes = [len(getattr(self, k)) for k in ("joint_types", "joint_origins", "joint_axes",
-                                                 "lower", "upper")]
-        if sizes != [n] * 5 or [len(self.sphere_frames), len(self.sphere_offsets),
-                                len(self.sphere_links)] != [s] * 3:
+        sizes = [
+            len(getattr(self, k))
+            for k in ("joint_types", "joint_origins", "joint_axes", "lower", "upper")
+        ]
+        if (
+            sizes != [n] * 5
+            or [len(self.sphere_frames), len(self.sphere_offsets), len(self.sphere_links)]
+            != [s] * 3
+        ):
             raise ValueError("serial_arm: per-joint and per-sphere fields differ in length")
         if list(self.sphere_frames) != sorted(self.sphere_frames) or not all(
-                0 <= f <= n for f in self.sphere_frames):
+            0 <= f <= n for f in self.sphere_frames
+        ):
             raise ValueError("serial_arm.sphere_frames must be non-decreasing frames 0..n")
         if not all(0 <= i0 < i1 <= k0 < k1 <= s for i0, i1, k0, k1 in self.self_blocks):
             raise ValueError("serial_arm.self_blocks must be sphere ranges i0 < i1 <= k0 < k1")
@@ -131,22 +137,33 @@ class SerialArm(DiscretizedSteering, CertifiedSteering):
     # ------------------------------------------------------------------ construction
 
     @staticmethod
-    def from_model(model: urdf.ArmModel, resolution: float = DEFAULT_RESOLUTION,
-                   source: tuple = ()) -> "SerialArm":
+    def from_model(
+        model: urdf.ArmModel, resolution: float = DEFAULT_RESOLUTION, source: tuple = ()
+    ) -> "SerialArm":
         """The arm of a model read by :func:`ntq_jax.robots.urdf.read_arm`."""
         js = model.joints
         return SerialArm(
-            name=model.name, joint_names=tuple(j.name for j in js),
-            joint_types=tuple(j.kind for j in js), joint_origins=tuple(j.origin for j in js),
-            joint_axes=tuple(j.axis for j in js), lower=tuple(j.lower for j in js),
-            upper=tuple(j.upper for j in js), tip_transform=model.tip_transform,
-            sphere_frames=model.sphere_frames, sphere_offsets=model.sphere_centers,
-            sphere_radii=model.sphere_radii, sphere_links=model.sphere_links,
-            self_blocks=model.self_blocks, resolution=resolution, source=source)
+            name=model.name,
+            joint_names=tuple(j.name for j in js),
+            joint_types=tuple(j.kind for j in js),
+            joint_origins=tuple(j.origin for j in js),
+            joint_axes=tuple(j.axis for j in js),
+            lower=tuple(j.lower for j in js),
+            upper=tuple(j.upper for j in js),
+            tip_transform=model.tip_transform,
+            sphere_frames=model.sphere_frames,
+            sphere_offsets=model.sphere_centers,
+            sphere_radii=model.sphere_radii,
+            sphere_links=model.sphere_links,
+            self_blocks=model.self_blocks,
+            resolution=resolution,
+            source=source,
+        )
 
     @staticmethod
-    def from_urdf(urdf_path, srdf_path=None, tip: str | None = None,
-                  resolution: float = DEFAULT_RESOLUTION) -> "SerialArm":
+    def from_urdf(
+        urdf_path, srdf_path=None, tip: str | None = None, resolution: float = DEFAULT_RESOLUTION
+    ) -> "SerialArm":
         """Reads the arm from a URDF (and an SRDF's disabled collision pairs).
 
         Raises:
@@ -215,12 +232,14 @@ class SerialArm(DiscretizedSteering, CertifiedSteering):
         out["resolution"] = self.resolution
         return out
 
-    def steer_to_batch(self, a: Array, b: Array, world: World3D, padding: float,
-                       mask: Array | None = None) -> Array:
+    def steer_to_batch(
+        self, a: Array, b: Array, world: World3D, padding: float, mask: Array | None = None
+    ) -> Array:
         """Coordinate-major ``(d, N), (d, N) -> (N,)``: the discretised check's work queue
         on :data:`QUEUE_LANES` lanes (the same answers as ``steer_to``)."""
-        return discretized_steer_to_batch(self, a, b, world, padding, self.resolution, mask,
-                                          lanes=QUEUE_LANES)
+        return discretized_steer_to_batch(
+            self, a, b, world, padding, self.resolution, mask, lanes=QUEUE_LANES
+        )
 
     # ------------------------------------------------------------------ kinematics
 
@@ -319,8 +338,9 @@ class SerialArm(DiscretizedSteering, CertifiedSteering):
         x, y, z = self._sphere_xyz(q)
         ok = self._q_ok(q)
         radii = jnp.asarray(self.sphere_radii, jnp.float32)
-        ok = ok & jnp.all(spheres_clearance(jnp.stack([x, y, z], axis=1), radii, world,
-                                            padding) > 0.0)
+        ok = ok & jnp.all(
+            spheres_clearance(jnp.stack([x, y, z], axis=1), radii, world, padding) > 0.0
+        )
         return ok & self._self_free(x, y, z)
 
     def _self_free(self, x, y, z) -> Array:
@@ -336,8 +356,12 @@ class SerialArm(DiscretizedSteering, CertifiedSteering):
     @property
     def self_pairs(self) -> tuple[tuple[int, int], ...]:
         """The checked sphere pairs ``(i, k)``, in the order of the pair parts."""
-        return tuple((i, k) for i0, i1, k0, k1 in self.self_blocks
-                     for i in range(i0, i1) for k in range(k0, k1))
+        return tuple(
+            (i, k)
+            for i0, i1, k0, k1 in self.self_blocks
+            for i in range(i0, i1)
+            for k in range(k0, k1)
+        )
 
     # ------------------------------------------------------------------ certified check
 
@@ -362,7 +386,7 @@ class SerialArm(DiscretizedSteering, CertifiedSteering):
         the sphere parts of :meth:`part_clearances`): ``> 0`` iff no sphere is within
         ``padding`` of an obstacle. Self-collision is NOT in it (it is in the pair parts
         and :meth:`is_valid`); -1 for non-finite ``q`` or one outside the joint limits."""
-        return jnp.min(self.part_clearances(q, world, padding)[:self.num_spheres])
+        return jnp.min(self.part_clearances(q, world, padding)[: self.num_spheres])
 
     @functools.cached_property
     def _radii_table(self) -> np.ndarray:
@@ -376,8 +400,10 @@ class SerialArm(DiscretizedSteering, CertifiedSteering):
         offsets = [np.asarray(o[1], np.float64) for o in self.joint_origins]
         rots = [np.asarray(o[0], np.float64).reshape(3, 3) for o in self.joint_origins]
         axes = [np.asarray(a, np.float64) for a in self.joint_axes]
-        stroke = [max(abs(lo), abs(hi)) if kind == "prismatic" else 0.0
-                  for kind, lo, hi in zip(self.joint_types, self.lower, self.upper)]
+        stroke = [
+            max(abs(lo), abs(hi)) if kind == "prismatic" else 0.0
+            for kind, lo, hi in zip(self.joint_types, self.lower, self.upper)
+        ]
         table = np.zeros((s, n))
         for si in range(s):
             f = self.sphere_frames[si]
@@ -402,8 +428,7 @@ class SerialArm(DiscretizedSteering, CertifiedSteering):
                     first = max(off_axis(a + lo * d), off_axis(a + hi * d))
                 else:
                     first = off_axis(a)
-                rest = sum(float(np.linalg.norm(offsets[k])) + stroke[k]
-                           for k in range(j + 2, f))
+                rest = sum(float(np.linalg.norm(offsets[k])) + stroke[k] for k in range(j + 2, f))
                 table[si, j] = first + rest + float(np.linalg.norm(c))
         return table
 
@@ -419,7 +444,7 @@ class SerialArm(DiscretizedSteering, CertifiedSteering):
         for i0, i1, k0, k1 in self.self_blocks:
             # frames are non-decreasing, so f_i <= f_k; the joints after frame f_i only
             rel = table[k0:k1].copy()
-            rel[:, :frames[i0]] = 0.0  # a block's rows are on one frame
+            rel[:, : frames[i0]] = 0.0  # a block's rows are on one frame
             pair = jnp.sum(jnp.asarray(rel) * dq[None, :], axis=1)  # (nk,)
             parts.append(jnp.broadcast_to(pair[None, :], (i1 - i0, k1 - k0)).ravel())
         return jnp.concatenate(parts)
@@ -427,11 +452,15 @@ class SerialArm(DiscretizedSteering, CertifiedSteering):
     def step_motion(self) -> float:
         """How far a sphere centre can move between two states ``resolution`` apart:
         ``max_s sqrt(sum_j R_sj^2) * resolution`` (Cauchy-Schwarz on the sweep bound)."""
-        return float(np.max(np.sqrt(np.sum(self._radii_table ** 2, axis=1)))) * self.resolution
+        return float(np.max(np.sqrt(np.sum(self._radii_table**2, axis=1)))) * self.resolution
 
 
 @functools.lru_cache(maxsize=None)
 def _panda(resolution: float) -> SerialArm:
-    arm = SerialArm.from_urdf(PANDA_DIR / "panda_spherized.urdf", PANDA_DIR / "panda.srdf",
-                              tip="panda_hand", resolution=resolution)
+    arm = SerialArm.from_urdf(
+        PANDA_DIR / "panda_spherized.urdf",
+        PANDA_DIR / "panda.srdf",
+        tip="panda_hand",
+        resolution=resolution,
+    )
     return dataclasses.replace(arm, source=("preset:panda", None, "panda_hand"))

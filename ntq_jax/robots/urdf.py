@@ -109,17 +109,26 @@ def rpy_matrix(roll: float, pitch: float, yaw: float) -> tuple[float, ...]:
     cr, sr = math.cos(roll), math.sin(roll)
     cp, sp = math.cos(pitch), math.sin(pitch)
     cy, sy = math.cos(yaw), math.sin(yaw)
-    return (cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr,
-            sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr,
-            -sp, cp * sr, cp * cr)
+    return (
+        cy * cp,
+        cy * sp * sr - sy * cr,
+        cy * sp * cr + sy * sr,
+        sy * cp,
+        sy * sp * sr + cy * cr,
+        sy * sp * cr - cy * sr,
+        -sp,
+        cp * sr,
+        cp * cr,
+    )
 
 
 def compose(a: Transform, b: Transform) -> Transform:
     """``a b`` (apply ``b``, then ``a``)."""
     ra, ta = a
     rb, tb = b
-    r = tuple(sum(ra[3 * i + m] * rb[3 * m + j] for m in range(3))
-              for i in range(3) for j in range(3))
+    r = tuple(
+        sum(ra[3 * i + m] * rb[3 * m + j] for m in range(3)) for i in range(3) for j in range(3)
+    )
     t = tuple(sum(ra[3 * i + m] * tb[m] for m in range(3)) + ta[i] for i in range(3))
     return r, t
 
@@ -154,12 +163,15 @@ class _Reader:
         for el in self.root_el.findall("joint"):
             j = self._joint(el)
             if j["name"] in self.joints:
-                self._fail(f"<joint name='{j['name']}'> appears twice", "give each joint a "
-                           "unique name")
+                self._fail(
+                    f"<joint name='{j['name']}'> appears twice", "give each joint a unique name"
+                )
             if j["child"] in self.parent_joint:
-                self._fail(f"link '{j['child']}' is the child of joints "
-                           f"'{self.parent_joint[j['child']]['name']}' and '{j['name']}'",
-                           "a serial arm's links form a tree: give each link one parent joint")
+                self._fail(
+                    f"link '{j['child']}' is the child of joints "
+                    f"'{self.parent_joint[j['child']]['name']}' and '{j['name']}'",
+                    "a serial arm's links form a tree: give each link one parent joint",
+                )
             self.joints[j["name"]] = j
             self.parent_joint[j["child"]] = j
             self.children[j["parent"]].append(j)
@@ -179,8 +191,11 @@ class _Reader:
         except OSError as e:
             self._fail(f"cannot be read ({e.strerror})", "give a readable file", path)
         if root.tag != root_tag:
-            self._fail(f"the root element is <{root.tag}>", f"give a URDF / SRDF file "
-                       f"(its root element is <{root_tag}>)", path)
+            self._fail(
+                f"the root element is <{root.tag}>",
+                f"give a URDF / SRDF file (its root element is <{root_tag}>)",
+                path,
+            )
         return root
 
     def _attr(self, el: ET.Element, key: str, where: str) -> str:
@@ -220,8 +235,10 @@ class _Reader:
         where = f"<joint name='{name}'>"
         kind = self._attr(el, "type", where)
         if kind not in JOINT_TYPES:
-            self._fail(f"{where} has type '{kind}'", f"a serial arm takes joints of type "
-                       f"{', '.join(JOINT_TYPES)}")
+            self._fail(
+                f"{where} has type '{kind}'",
+                f"a serial arm takes joints of type {', '.join(JOINT_TYPES)}",
+            )
         ends = {}
         for tag in ("parent", "child"):
             e = el.find(tag)
@@ -229,17 +246,23 @@ class _Reader:
                 self._fail(f"{where} has no <{tag} link=>", f"name the joint's {tag} link")
             ends[tag] = self._attr(e, "link", f"{where} <{tag}>")
             if ends[tag] not in self.links:
-                self._fail(f"{where} names the {tag} link '{ends[tag]}', which is not a <link>",
-                           "add the link or correct the name")
+                self._fail(
+                    f"{where} names the {tag} link '{ends[tag]}', which is not a <link>",
+                    "add the link or correct the name",
+                )
         j = {"name": name, "kind": kind, "origin": self._origin(el, where), **ends}
         if kind == "fixed":
             return j
         if el.find("mimic") is not None:
-            self._fail(f"{where} is a {kind} joint with <mimic>", "a serial arm's movable "
-                       "joints are independent: make the joint fixed or drop the <mimic>")
+            self._fail(
+                f"{where} is a {kind} joint with <mimic>",
+                "a serial arm's movable "
+                "joints are independent: make the joint fixed or drop the <mimic>",
+            )
         a = el.find("axis")
-        axis = (1.0, 0.0, 0.0) if a is None else self._numbers(a.get("xyz"), 3,
-                                                                 f"{where} <axis xyz=>")
+        axis = (
+            (1.0, 0.0, 0.0) if a is None else self._numbers(a.get("xyz"), 3, f"{where} <axis xyz=>")
+        )
         norm = math.sqrt(sum(v * v for v in axis))
         if norm < 1e-6:
             self._fail(f"{where} has the zero axis {axis}", "give the joint a nonzero <axis xyz=>")
@@ -249,13 +272,17 @@ class _Reader:
             return j
         lim = el.find("limit")
         if lim is None or lim.get("lower") is None or lim.get("upper") is None:
-            self._fail(f"{where} ({kind}) has no <limit lower= upper=>", "give the joint's "
-                       "lower and upper limits (or make it continuous)")
+            self._fail(
+                f"{where} ({kind}) has no <limit lower= upper=>",
+                "give the joint's lower and upper limits (or make it continuous)",
+            )
         lower = self._number(lim, "lower", f"{where} <limit>")
         upper = self._number(lim, "upper", f"{where} <limit>")
         if not lower < upper:
-            self._fail(f"{where} has <limit lower={lower:g} upper={upper:g}>", "lower must be "
-                       "below upper (a joint that cannot move should be fixed)")
+            self._fail(
+                f"{where} has <limit lower={lower:g} upper={upper:g}>",
+                "lower must be below upper (a joint that cannot move should be fixed)",
+            )
         j["lower"], j["upper"] = lower, upper
         return j
 
@@ -264,8 +291,10 @@ class _Reader:
     def _root(self) -> str:
         roots = [name for name in self.links if name not in self.parent_joint]
         if len(roots) != 1:
-            self._fail(f"{len(roots)} links are no joint's child ({', '.join(roots) or 'a cycle'})",
-                       "a URDF's links form one tree with a single root link")
+            self._fail(
+                f"{len(roots)} links are no joint's child ({', '.join(roots) or 'a cycle'})",
+                "a URDF's links form one tree with a single root link",
+            )
         seen, stack = set(), roots[:]
         while stack:  # every link reachable from the root (else there is a cycle)
             name = stack.pop()
@@ -273,8 +302,10 @@ class _Reader:
             stack.extend(j["child"] for j in self.children[name])
         if len(seen) != len(self.links):
             cut = sorted(set(self.links) - seen)
-            self._fail(f"links {cut} are not reachable from the root link '{roots[0]}'",
-                       "the joints must form a tree without cycles")
+            self._fail(
+                f"links {cut} are not reachable from the root link '{roots[0]}'",
+                "the joints must form a tree without cycles",
+            )
         return roots[0]
 
     def _path(self, root: str, tip: str) -> list[dict]:
@@ -299,13 +330,17 @@ class _Reader:
 
         walk(root, 0)
         if not best:
-            self._fail("the URDF has no movable joint", "a serial arm needs at least one "
-                       "revolute, continuous or prismatic joint")
+            self._fail(
+                "the URDF has no movable joint",
+                "a serial arm needs at least one revolute, continuous or prismatic joint",
+            )
         top = max(best.values())
         ends = sorted(name for name, d in best.items() if d == top)
         if len(ends) > 1:
-            self._fail(f"chains to {ends} have {top} movable joints each", "name the chain's "
-                       "tip link (tip=...)")
+            self._fail(
+                f"chains to {ends} have {top} movable joints each",
+                "name the chain's tip link (tip=...)",
+            )
         return ends[0]
 
     def read(self, srdf: Path | None, tip: str | None) -> ArmModel:
@@ -313,42 +348,62 @@ class _Reader:
         if tip is None:
             tip = self._default_tip(root)
         elif tip not in self.links:
-            self._fail(f"the tip '{tip}' is not a <link>", f"name one of the links "
-                       f"({', '.join(sorted(self.links))})")
+            self._fail(
+                f"the tip '{tip}' is not a <link>",
+                f"name one of the links ({', '.join(sorted(self.links))})",
+            )
         chain = {j["name"] for j in self._path(root, tip) if j["kind"] in MOVABLE}
         if not chain:
-            self._fail(f"the chain from '{root}' to '{tip}' has no movable joint",
-                       "name a tip beyond a revolute, continuous or prismatic joint")
+            self._fail(
+                f"the chain from '{root}' to '{tip}' has no movable joint",
+                "name a tip beyond a revolute, continuous or prismatic joint",
+            )
         joints, frame_of, off_chain = self._frames(root, chain)
         spheres = []  # (frame, document order, link, centre in the frame, radius)
         for order, name in enumerate(self.links):
             found = self._spheres(name)
             if found and name in off_chain:
-                self._fail(f"link '{name}' has collision spheres but moves through the joint "
-                           f"'{off_chain[name]}', which is not on the chain from '{root}' to "
-                           f"'{tip}'", "name a tip beyond that joint, or make it fixed")
+                self._fail(
+                    f"link '{name}' has collision spheres but moves through the joint "
+                    f"'{off_chain[name]}', which is not on the chain from '{root}' to "
+                    f"'{tip}'",
+                    "name a tip beyond that joint, or make it fixed",
+                )
             f, tf = frame_of.get(name, (0, IDENTITY))
-            spheres += [(f, order, name, tuple(_snap(v) for v in apply(tf, c)), r)
-                        for c, r in found]
+            spheres += [
+                (f, order, name, tuple(_snap(v) for v in apply(tf, c)), r) for c, r in found
+            ]
         if not spheres:
-            self._fail("no link has a <collision><geometry><sphere radius=>", "spherize the "
-                       "robot's collision geometry (a sphere per <collision>)")
+            self._fail(
+                "no link has a <collision><geometry><sphere radius=>",
+                "spherize the robot's collision geometry (a sphere per <collision>)",
+            )
         spheres.sort(key=lambda s: s[:2])  # stable: a link's spheres stay in file order
         links = [s[2] for s in spheres]
-        span = {name: (links.index(name), len(links) - links[::-1].index(name))
-                for name in links}
+        span = {name: (links.index(name), len(links) - links[::-1].index(name)) for name in links}
         disabled = self._disabled(srdf, frame_of)
-        blocks = [span[a] + span[b] for a in span for b in span
-                  if span[a] < span[b] and frame_of[a][0] != frame_of[b][0]
-                  and _pair(a, b) not in disabled]
+        blocks = [
+            span[a] + span[b]
+            for a in span
+            for b in span
+            if span[a] < span[b]
+            and frame_of[a][0] != frame_of[b][0]
+            and _pair(a, b) not in disabled
+        ]
         blocks = merge_blocks(blocks, [s[0] for s in spheres])
         return ArmModel(
-            name=self.root_el.get("name", self.path.stem), root=root, tip=tip,
-            joints=tuple(joints), tip_transform=_snapped(frame_of[tip][1]),
-            sphere_frames=tuple(s[0] for s in spheres), sphere_links=tuple(links),
+            name=self.root_el.get("name", self.path.stem),
+            root=root,
+            tip=tip,
+            joints=tuple(joints),
+            tip_transform=_snapped(frame_of[tip][1]),
+            sphere_frames=tuple(s[0] for s in spheres),
+            sphere_links=tuple(links),
             sphere_centers=tuple(s[3] for s in spheres),
-            sphere_radii=tuple(s[4] for s in spheres), self_blocks=blocks,
-            disabled_links=tuple(sorted(disabled)))
+            sphere_radii=tuple(s[4] for s in spheres),
+            self_blocks=blocks,
+            disabled_links=tuple(sorted(disabled)),
+        )
 
     def _frames(self, root: str, chain: set[str]):
         """Walks the tree from the root: the chain's joints, every link's ``(frame, pose in
@@ -369,8 +424,16 @@ class _Reader:
                     frame_of[child] = (f, compose(tf, j["origin"]))
                 elif j["name"] in chain:
                     f, tf = frame_of[name]
-                    joints.append(Joint(j["name"], j["kind"], _snapped(compose(tf, j["origin"])),
-                                        j["axis"], float(j["lower"]), float(j["upper"])))
+                    joints.append(
+                        Joint(
+                            j["name"],
+                            j["kind"],
+                            _snapped(compose(tf, j["origin"])),
+                            j["axis"],
+                            float(j["lower"]),
+                            float(j["upper"]),
+                        )
+                    )
                     frame_of[child] = (f + 1, IDENTITY)
                 else:
                     off_chain[child] = j["name"]
@@ -385,22 +448,29 @@ class _Reader:
             geom = col.find("geometry")
             shapes = [] if geom is None else list(geom)
             if len(shapes) != 1:
-                self._fail(f"{where} has {len(shapes)} shapes in <geometry>", "give exactly one "
-                           "<sphere radius=> per <collision>")
+                self._fail(
+                    f"{where} has {len(shapes)} shapes in <geometry>",
+                    "give exactly one <sphere radius=> per <collision>",
+                )
             shape = shapes[0]
             if shape.tag == "mesh":
                 meshes += 1
                 continue
             if shape.tag != "sphere":
-                self._fail(f"{where} is a <{shape.tag}>", "a serial arm collides with spheres "
-                           "only: replace it by spheres (spherize the link)")
+                self._fail(
+                    f"{where} is a <{shape.tag}>",
+                    "a serial arm collides with spheres "
+                    "only: replace it by spheres (spherize the link)",
+                )
             r = self._number(shape, "radius", f"{where} <sphere>")
             if not r > 0:
                 self._fail(f"{where} has <sphere radius={r:g}>", "give a radius > 0")
             out.append((self._origin(col, where)[1], r))
         if out and meshes:
-            self._fail(f"<link name='{name}'> mixes {len(out)} spheres with {meshes} meshes",
-                       "spherize the whole link (the meshes would be ignored)")
+            self._fail(
+                f"<link name='{name}'> mixes {len(out)} spheres with {meshes} meshes",
+                "spherize the whole link (the meshes would be ignored)",
+            )
         return out
 
     def _disabled(self, srdf: Path | None, frame_of) -> set[tuple[str, str]]:
@@ -419,8 +489,11 @@ class _Reader:
             for key in ("link1", "link2"):
                 value = d.get(key)
                 if value is None or value not in self.links:
-                    self._fail(f"{where} has {key}={value!r}, not a link of {self.path.name}",
-                               "name links of the URDF", srdf)
+                    self._fail(
+                        f"{where} has {key}={value!r}, not a link of {self.path.name}",
+                        "name links of the URDF",
+                        srdf,
+                    )
                 names.append(value)
             pairs.add(_pair(*names))
         return pairs

@@ -37,8 +37,15 @@ from ntq_jax.scenes import moveit
 Array = jax.Array
 
 #: The scenes, in MotionBenchMaker's (alphabetical) order.
-SCENES = ("bookshelf_small", "bookshelf_tall", "bookshelf_thin", "box", "cage", "table_pick",
-          "table_under_pick")
+SCENES = (
+    "bookshelf_small",
+    "bookshelf_tall",
+    "bookshelf_thin",
+    "box",
+    "cage",
+    "table_pick",
+    "table_under_pick",
+)
 #: The problem numbers of every scene (those of the archive's files).
 NUMBERS = range(1, 101)
 #: The Panda's arm joints, the order of :attr:`MBMProblem.start` and ``goal``.
@@ -91,8 +98,9 @@ def _members() -> dict[tuple[str, str, int], bytes]:
 
 def _check_scene(scene: str) -> str:
     if scene not in SCENES:
-        raise ValueError(f"unknown MotionBenchMaker scene {scene!r}: expected one of "
-                         f"{', '.join(SCENES)}")
+        raise ValueError(
+            f"unknown MotionBenchMaker scene {scene!r}: expected one of {', '.join(SCENES)}"
+        )
     return scene
 
 
@@ -102,19 +110,35 @@ def _scene(scene: str) -> tuple[MBMProblem, ...]:
     cylinder_as = "cuboid" if scene in BOX_CONVENTION_SCENES else "capsule"
     problems = []
     for n in NUMBERS:
-        src = {k: f"{_ARCHIVE}:problems/{scene}_panda/{k}{n:04d}.yaml"
-               for k in ("scene", "request")}
+        src = {
+            k: f"{_ARCHIVE}:problems/{scene}_panda/{k}{n:04d}.yaml" for k in ("scene", "request")
+        }
         for kind, name in src.items():
             if (scene, kind, n) not in members:
                 raise moveit.SceneFormatError(f"{name}: missing from the archive")
-        req = moveit.parse_request(moveit.load_yaml(members[(scene, "request", n)],
-                                                    src["request"]),
-                                   JOINT_NAMES, src["request"])
+        req = moveit.parse_request(
+            moveit.load_yaml(members[(scene, "request", n)], src["request"]),
+            JOINT_NAMES,
+            src["request"],
+        )
         bounds = req.bounds if req.bounds is not None else moveit.DEFAULT_BOUNDS
-        sc = moveit.parse_scene(moveit.load_yaml(members[(scene, "scene", n)], src["scene"]),
-                                src["scene"], bounds=bounds, cylinder_as=cylinder_as)
-        problems.append(MBMProblem(scene, n, sc.world, sc.names, jnp.asarray(req.start),
-                                   jnp.asarray(req.goal), JOINT_NAMES))
+        sc = moveit.parse_scene(
+            moveit.load_yaml(members[(scene, "scene", n)], src["scene"]),
+            src["scene"],
+            bounds=bounds,
+            cylinder_as=cylinder_as,
+        )
+        problems.append(
+            MBMProblem(
+                scene,
+                n,
+                sc.world,
+                sc.names,
+                jnp.asarray(req.start),
+                jnp.asarray(req.goal),
+                JOINT_NAMES,
+            )
+        )
     return tuple(problems)
 
 
@@ -134,8 +158,13 @@ def load_problem(scene: str, number: int) -> MBMProblem:
         ValueError: an unknown scene or number (the message names the valid ones).
     """
     _check_scene(scene)
-    if (isinstance(number, bool) or not isinstance(number, numbers.Integral)
-            or int(number) not in NUMBERS):
-        raise ValueError(f"MotionBenchMaker problem number must be an int from {NUMBERS[0]} "
-                         f"to {NUMBERS[-1]}, got {number!r}")
+    if (
+        isinstance(number, bool)
+        or not isinstance(number, numbers.Integral)
+        or int(number) not in NUMBERS
+    ):
+        raise ValueError(
+            f"MotionBenchMaker problem number must be an int from {NUMBERS[0]} "
+            f"to {NUMBERS[-1]}, got {number!r}"
+        )
     return _scene(scene)[int(number) - NUMBERS[0]]

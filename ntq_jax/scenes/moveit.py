@@ -55,8 +55,11 @@ except ImportError:  # pragma: no cover - PyYAML without libyaml
 #: The workspace box of a scene read without one: MotionBenchMaker's requests' ``[-1, 1]^3``.
 DEFAULT_BOUNDS = ((-1.0, 1.0), (-1.0, 1.0), (-1.0, 1.0))
 
-_DIMENSIONS = {"sphere": ("[radius]", 1), "box": ("[x, y, z]", 3),
-               "cylinder": ("[height, radius]", 2)}
+_DIMENSIONS = {
+    "sphere": ("[radius]", 1),
+    "box": ("[x, y, z]", 3),
+    "cylinder": ("[height, radius]", 2),
+}
 
 
 class SceneFormatError(ValueError):
@@ -105,8 +108,9 @@ def _field(data: Any, key: str, where: str, kind: type | tuple[type, ...]) -> An
     value = data[key]
     if not isinstance(value, kind):
         names = kind.__name__ if isinstance(kind, type) else " or ".join(k.__name__ for k in kind)
-        raise SceneFormatError(f"{where}.{key} is {validation.short_repr(value)}: expected a "
-                               f"{names}")
+        raise SceneFormatError(
+            f"{where}.{key} is {validation.short_repr(value)}: expected a {names}"
+        )
     return value
 
 
@@ -124,15 +128,20 @@ def _vector(value: Any, where: str, names: str) -> tuple[float, ...]:
 def _pose(value: Any, where: str) -> np.ndarray:
     """The ``(4, 4)`` float64 transform of a pose ``{position, orientation}``."""
     if not isinstance(value, dict):
-        raise SceneFormatError(f"{where} is {validation.short_repr(value)}: expected a mapping "
-                               "{position: [x, y, z], orientation: [x, y, z, w]}")
+        raise SceneFormatError(
+            f"{where} is {validation.short_repr(value)}: expected a mapping "
+            "{position: [x, y, z], orientation: [x, y, z, w]}"
+        )
     p = _vector(_field(value, "position", where, (list, dict)), f"{where}.position", "[x, y, z]")
-    q = _vector(_field(value, "orientation", where, (list, dict)), f"{where}.orientation",
-                "[x, y, z, w]")
+    q = _vector(
+        _field(value, "orientation", where, (list, dict)), f"{where}.orientation", "[x, y, z, w]"
+    )
     norm = float(np.linalg.norm(q))
     if abs(norm - 1.0) > QUAT_TOL:
-        raise SceneFormatError(f"{where}.orientation is {list(q)}: expected a unit quaternion "
-                               f"[x, y, z, w] (norm within {QUAT_TOL:g} of 1, got {norm:.6g})")
+        raise SceneFormatError(
+            f"{where}.orientation is {list(q)}: expected a unit quaternion "
+            f"[x, y, z, w] (norm within {QUAT_TOL:g} of 1, got {norm:.6g})"
+        )
     t = np.eye(4)
     t[:3, :3] = quat_to_matrix(q)
     t[:3, 3] = p
@@ -142,8 +151,10 @@ def _pose(value: Any, where: str) -> np.ndarray:
 def _primitive(prim: Any, where: str) -> tuple[str, tuple[float, ...]]:
     kind = _field(prim, "type", where, str)
     if kind not in _DIMENSIONS:
-        raise SceneFormatError(f"{where}.type is {kind!r}: expected one of "
-                               f"{sorted(_DIMENSIONS)} (other primitives are not supported)")
+        raise SceneFormatError(
+            f"{where}.type is {kind!r}: expected one of "
+            f"{sorted(_DIMENSIONS)} (other primitives are not supported)"
+        )
     form, n = _DIMENSIONS[kind]
     dims = prim.get("dimensions")
     try:
@@ -151,14 +162,19 @@ def _primitive(prim: Any, where: str) -> tuple[str, tuple[float, ...]]:
     except ValueError as e:
         raise SceneFormatError(f"{e} for a {kind}") from None
     if min(dims) < 0:
-        raise SceneFormatError(f"{where}.dimensions is {list(dims)}: expected {form} >= 0 "
-                               f"for a {kind}")
+        raise SceneFormatError(
+            f"{where}.dimensions is {list(dims)}: expected {form} >= 0 for a {kind}"
+        )
     return kind, dims
 
 
-def parse_scene(data: Any, source: str = "<scene>", *,
-                bounds: Sequence[Sequence[float]] = DEFAULT_BOUNDS,
-                cylinder_as: Literal["capsule", "cuboid"] = "capsule") -> MoveItScene:
+def parse_scene(
+    data: Any,
+    source: str = "<scene>",
+    *,
+    bounds: Sequence[Sequence[float]] = DEFAULT_BOUNDS,
+    cylinder_as: Literal["capsule", "cuboid"] = "capsule",
+) -> MoveItScene:
     """The :class:`MoveItScene` of a loaded MoveIt planning-scene YAML document.
 
     ``source`` names the file in error messages; ``bounds`` is the world's workspace box;
@@ -175,8 +191,10 @@ def parse_scene(data: Any, source: str = "<scene>", *,
     if objects is None:
         objects = []
     if not isinstance(objects, list):
-        raise SceneFormatError(f"{source}: world.collision_objects is "
-                               f"{validation.short_repr(objects)}: expected a list")
+        raise SceneFormatError(
+            f"{source}: world.collision_objects is "
+            f"{validation.short_repr(objects)}: expected a list"
+        )
     rows = {"spheres": [], "cuboids": [], "capsules": []}
     names = {k: [] for k in rows}
     for i, obj in enumerate(objects):
@@ -188,18 +206,23 @@ def parse_scene(data: Any, source: str = "<scene>", *,
             raise SceneFormatError(f"{where}: missing field 'id' (a non-empty string)")
         where = f"{source}: collision object {i} ({name!r})"
         if obj.get("operation", 0) not in (0, "ADD", "add"):
-            raise SceneFormatError(f"{where}.operation is {obj['operation']!r}: only ADD (0) "
-                                   "is supported")
+            raise SceneFormatError(
+                f"{where}.operation is {obj['operation']!r}: only ADD (0) is supported"
+            )
         for key in ("meshes", "planes"):
             if obj.get(key):
-                raise SceneFormatError(f"{where}.{key} is not empty: only primitives (sphere, "
-                                       "box, cylinder) are supported")
+                raise SceneFormatError(
+                    f"{where}.{key} is not empty: only primitives (sphere, "
+                    "box, cylinder) are supported"
+                )
         base = _pose(obj["pose"], f"{where}.pose") if "pose" in obj else np.eye(4)
         prims = _field(obj, "primitives", where, list)
         poses = _field(obj, "primitive_poses", where, list)
         if not prims or len(poses) != len(prims):
-            raise SceneFormatError(f"{where}: {len(prims)} primitives and {len(poses)} "
-                                   "primitive_poses: expected the same number, at least one")
+            raise SceneFormatError(
+                f"{where}: {len(prims)} primitives and {len(poses)} "
+                "primitive_poses: expected the same number, at least one"
+            )
         for j, (prim, pose) in enumerate(zip(prims, poses)):
             kind, dims = _primitive(prim, f"{where}.primitives[{j}]")
             t = base @ _pose(pose, f"{where}.primitive_poses[{j}]")
@@ -222,20 +245,26 @@ def parse_scene(data: Any, source: str = "<scene>", *,
     return MoveItScene(w, tuple(names["spheres"] + names["cuboids"] + names["capsules"]))
 
 
-def read_scene(path: str | os.PathLike, *, bounds: Sequence[Sequence[float]] = DEFAULT_BOUNDS,
-               cylinder_as: Literal["capsule", "cuboid"] = "capsule") -> MoveItScene:
+def read_scene(
+    path: str | os.PathLike,
+    *,
+    bounds: Sequence[Sequence[float]] = DEFAULT_BOUNDS,
+    cylinder_as: Literal["capsule", "cuboid"] = "capsule",
+) -> MoveItScene:
     """:func:`parse_scene` of the YAML file ``path``."""
     return parse_scene(_read(path), os.fspath(path), bounds=bounds, cylinder_as=cylinder_as)
 
 
-def _joint_values(names: list, values: list, joint_names: Sequence[str], where: str,
-                  what: str) -> np.ndarray:
+def _joint_values(
+    names: list, values: list, joint_names: Sequence[str], where: str, what: str
+) -> np.ndarray:
     out = []
     for j in joint_names:
         hits = [k for k, n in enumerate(names) if n == j]
         if len(hits) != 1:
-            raise SceneFormatError(f"{where}: joint {j!r} appears {len(hits)} times in the "
-                                   f"{what} (expected once)")
+            raise SceneFormatError(
+                f"{where}: joint {j!r} appears {len(hits)} times in the {what} (expected once)"
+            )
         try:
             out.append(validation.number(values[hits[0]], f"{where}: the {what} position of {j!r}"))
         except ValueError as e:
@@ -243,8 +272,9 @@ def _joint_values(names: list, values: list, joint_names: Sequence[str], where: 
     return np.asarray(out, np.float32)
 
 
-def parse_request(data: Any, joint_names: Sequence[str],
-                  source: str = "<request>") -> MoveItRequest:
+def parse_request(
+    data: Any, joint_names: Sequence[str], source: str = "<request>"
+) -> MoveItRequest:
     """The :class:`MoveItRequest` of a loaded MoveIt motion-plan request YAML document.
 
     Raises:
@@ -253,8 +283,9 @@ def parse_request(data: Any, joint_names: Sequence[str],
     joint_names = tuple(joint_names)
     if not joint_names or not all(isinstance(j, str) for j in joint_names):
         raise ValueError(f"joint_names must be a non-empty list of strings, got {joint_names!r}")
-    js = _field(_field(data, "start_state", source, dict), "joint_state",
-                f"{source}: start_state", dict)
+    js = _field(
+        _field(data, "start_state", source, dict), "joint_state", f"{source}: start_state", dict
+    )
     where = f"{source}: start_state.joint_state"
     names, positions = _field(js, "name", where, list), _field(js, "position", where, list)
     if len(names) != len(positions):
@@ -262,8 +293,9 @@ def parse_request(data: Any, joint_names: Sequence[str],
     start = _joint_values(names, positions, joint_names, where, "start state")
     goals = _field(data, "goal_constraints", source, list)
     if len(goals) != 1:
-        raise SceneFormatError(f"{source}: goal_constraints has {len(goals)} entries: expected "
-                               "exactly one")
+        raise SceneFormatError(
+            f"{source}: goal_constraints has {len(goals)} entries: expected exactly one"
+        )
     where = f"{source}: goal_constraints[0]"
     constraints = _field(goals[0], "joint_constraints", where, list)
     gn, gp = [], []
@@ -275,13 +307,16 @@ def parse_request(data: Any, joint_names: Sequence[str],
     ws = data.get("workspace_parameters")
     if ws is not None:
         where = f"{source}: workspace_parameters"
-        lo = _vector(_field(ws, "min_corner", where, (list, dict)), f"{where}.min_corner",
-                     "[x, y, z]")
-        hi = _vector(_field(ws, "max_corner", where, (list, dict)), f"{where}.max_corner",
-                     "[x, y, z]")
+        lo = _vector(
+            _field(ws, "min_corner", where, (list, dict)), f"{where}.min_corner", "[x, y, z]"
+        )
+        hi = _vector(
+            _field(ws, "max_corner", where, (list, dict)), f"{where}.max_corner", "[x, y, z]"
+        )
         if not all(a < b for a, b in zip(lo, hi)):
-            raise SceneFormatError(f"{where}: min_corner {list(lo)} must be below max_corner "
-                                   f"{list(hi)} on every axis")
+            raise SceneFormatError(
+                f"{where}: min_corner {list(lo)} must be below max_corner {list(hi)} on every axis"
+            )
         bounds = tuple(zip(lo, hi))
     return MoveItRequest(start, goal, joint_names, bounds)
 

@@ -66,9 +66,11 @@ _LIGHT = np.array([-0.4, -0.5, 0.77])
 
 def _plt():
     import matplotlib
+
     if "matplotlib.pyplot" not in sys.modules:
         matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
     return plt
 
 
@@ -76,10 +78,10 @@ def _plt():
 # Meshes: (F, 4, 3) quads (a degenerate quad is a triangle)
 # ---------------------------------------------------------------------------------------
 
+
 def _grid_quads(p: np.ndarray) -> np.ndarray:
     """The quads of a ``(rows, cols, 3)`` grid of points (columns wrap around)."""
-    q = np.stack([p[:-1], np.roll(p[:-1], -1, axis=1), np.roll(p[1:], -1, axis=1), p[1:]],
-                 axis=2)
+    q = np.stack([p[:-1], np.roll(p[:-1], -1, axis=1), np.roll(p[1:], -1, axis=1), p[1:]], axis=2)
     return q.reshape(-1, 4, 3)
 
 
@@ -108,8 +110,9 @@ def _capsule_quads(a, b, radius: float, n: int) -> np.ndarray:
     axis = (b - a) / length
     u, v = _frame(axis)
     half = max(n // 4, 2)
-    lat = np.concatenate([np.linspace(-math.pi / 2, 0, half + 1),
-                          np.linspace(0, math.pi / 2, half + 1)])
+    lat = np.concatenate(
+        [np.linspace(-math.pi / 2, 0, half + 1), np.linspace(0, math.pi / 2, half + 1)]
+    )
     ends = np.concatenate([np.zeros(half + 1), np.ones(half + 1)])  # 0: around a, 1: around b
     lon = np.linspace(0, 2 * math.pi, n, endpoint=False)
     la, lo = np.meshgrid(lat, lon, indexing="ij")
@@ -134,8 +137,10 @@ def world_quads(world, n: int = 24) -> np.ndarray:
     solid)."""
     parts = [np.zeros((0, 4, 3))]
     parts += [_cuboid_quads(r) for r in np.asarray(world.cuboids, np.float64)]
-    parts += [_capsule_quads(r[:3], r[3:6], float(r[6]), n)
-              for r in np.asarray(world.capsules, np.float64)]
+    parts += [
+        _capsule_quads(r[:3], r[3:6], float(r[6]), n)
+        for r in np.asarray(world.capsules, np.float64)
+    ]
     parts += [_sphere_quads(r[:3], float(r[3]), n) for r in np.asarray(world.spheres, np.float64)]
     return np.concatenate(parts)
 
@@ -145,10 +150,15 @@ def auto_view(world) -> tuple[float, float]:
     towards the obstacles' centre, turned by :data:`VIEW_TURN`, from
     :data:`DEFAULT_ELEVATION` above (MotionBenchMaker's shelves, cages and tables stand on
     different sides of the robot)."""
-    centres = [np.asarray(world.cuboids, np.float64)[:, :3],
-               np.asarray(world.spheres, np.float64)[:, :3],
-               (np.asarray(world.capsules, np.float64)[:, :3]
-                + np.asarray(world.capsules, np.float64)[:, 3:6]) / 2]
+    centres = [
+        np.asarray(world.cuboids, np.float64)[:, :3],
+        np.asarray(world.spheres, np.float64)[:, :3],
+        (
+            np.asarray(world.capsules, np.float64)[:, :3]
+            + np.asarray(world.capsules, np.float64)[:, 3:6]
+        )
+        / 2,
+    ]
     c = np.concatenate(centres)
     if not len(c) or np.hypot(*c[:, :2].mean(axis=0)) < 1e-6:
         return DEFAULT_ELEVATION, -60.0 + VIEW_TURN  # matplotlib's default azimuth, turned
@@ -175,6 +185,7 @@ def _shade(quads: np.ndarray, rgba: np.ndarray) -> np.ndarray:
 # The arm
 # ---------------------------------------------------------------------------------------
 
+
 @functools.lru_cache(maxsize=8)
 def _arm_kernel(robot):
     """``(q (k, d), world, padding) -> centres (k, S, 3), clearances (k, S)``, compiled."""
@@ -196,6 +207,7 @@ def _arm_kernel(robot):
 def _tip_kernel(robot):
     """``q (k, d) -> (k, 3)``: the tip link's origin, compiled."""
     import jax
+
     return jax.jit(jax.vmap(lambda q: robot.tip_pose(q)[:3, 3]))
 
 
@@ -214,8 +226,9 @@ def _states(x, d: int, what: str) -> np.ndarray:
     if a.ndim == 1:
         a = a[None]
     if a.ndim != 2 or a.shape[1] != d:
-        raise ValueError(f"{what} must be (k, {d}) joint states (or one (d,) state), "
-                         f"got shape {a.shape}")
+        raise ValueError(
+            f"{what} must be (k, {d}) joint states (or one (d,) state), got shape {a.shape}"
+        )
     if not np.all(np.isfinite(a)):
         raise ValueError(f"{what} holds non-finite joint values")
     return a
@@ -225,12 +238,26 @@ def _states(x, d: int, what: str) -> np.ndarray:
 # The figure
 # ---------------------------------------------------------------------------------------
 
-def draw_scene(env, states=None, path=None, ax=None, *, labels: Sequence[str] | None = None,
-               path_states: int = 6, title: str | None = None,
-               view: tuple[float, float] | None = None, mark_collisions: bool = True,
-               resolution: int = 24, arm_resolution: int = 10, figsize=(6.4, 5.6),
-               legend: bool = True, limits=None, progress: Progress = None,
-               log: Callable[[str], None] | None = None):
+
+def draw_scene(
+    env,
+    states=None,
+    path=None,
+    ax=None,
+    *,
+    labels: Sequence[str] | None = None,
+    path_states: int = 6,
+    title: str | None = None,
+    view: tuple[float, float] | None = None,
+    mark_collisions: bool = True,
+    resolution: int = 24,
+    arm_resolution: int = 10,
+    figsize=(6.4, 5.6),
+    legend: bool = True,
+    limits=None,
+    progress: Progress = None,
+    log: Callable[[str], None] | None = None,
+):
     """Draws ``env``'s obstacles and its arm at ``states`` (and along ``path``); returns the
     figure.
 
@@ -268,9 +295,11 @@ def draw_scene(env, states=None, path=None, ax=None, *, labels: Sequence[str] | 
 
     world, robot = env.world, env.robot
     if not isinstance(world, World3D) or not hasattr(robot, "sphere_centers"):
-        raise ValueError(f"{getattr(env, 'name', env)!r}: draw_scene draws a 3-D world with an "
-                         "arm of collision spheres; draw a planar map with "
-                         "ntq_jax.plotting.draw_map")
+        raise ValueError(
+            f"{getattr(env, 'name', env)!r}: draw_scene draws a 3-D world with an "
+            "arm of collision spheres; draw a planar map with "
+            "ntq_jax.plotting.draw_map"
+        )
     d = robot.dim
     states, labels, path, ghosts = _drawn_states(env, d, states, path, labels, path_states)
     box = None if limits is None else _limits(limits, world)
@@ -285,8 +314,12 @@ def draw_scene(env, states=None, path=None, ax=None, *, labels: Sequence[str] | 
         fig = plt.figure(figsize=figsize)
         ax = fig.add_subplot(projection="3d")
     fig = ax.figure
-    bar = open_bar(progress, desc=f"draw {getattr(env, 'name', '')}",
-                   total=len(states) + len(ghosts), unit="state")
+    bar = open_bar(
+        progress,
+        desc=f"draw {getattr(env, 'name', '')}",
+        total=len(states) + len(ghosts),
+        unit="state",
+    )
 
     quads = [world_quads(world, resolution)]
     colors = [np.tile(to_rgba(OBSTACLE_COLOR, OBSTACLE_ALPHA), (len(quads[0]), 1))]
@@ -296,40 +329,60 @@ def draw_scene(env, states=None, path=None, ax=None, *, labels: Sequence[str] | 
 
     drawn = np.concatenate([ghosts, states]) if len(ghosts) + len(states) else np.zeros((0, d))
     with bar:
-        touching = _arm_faces(env, drawn, len(ghosts), arm_quads, mark_collisions, quads, colors,
-                              bar)
+        touching = _arm_faces(
+            env, drawn, len(ghosts), arm_quads, mark_collisions, quads, colors, bar
+        )
     faces = np.concatenate(quads)
     face_colors = _shade(faces, np.concatenate(colors))
-    coll = Poly3DCollection(faces, facecolors=face_colors, edgecolors="none", linewidths=0,
-                            zsort="average")
+    coll = Poly3DCollection(
+        faces, facecolors=face_colors, edgecolors="none", linewidths=0, zsort="average"
+    )
     ax.add_collection3d(coll)
 
     handles = [Patch(color=OBSTACLE_COLOR, alpha=OBSTACLE_ALPHA, label="obstacles")]
-    handles += [Patch(color=STATE_COLORS[i % len(STATE_COLORS)], label=lab)
-                for i, lab in enumerate(labels)]
+    handles += [
+        Patch(color=STATE_COLORS[i % len(STATE_COLORS)], label=lab) for i, lab in enumerate(labels)
+    ]
     points = [faces.reshape(-1, 3)]
     if path is not None and len(path) > 1:
         dense = _along(path, max(64, 8 * len(path)))
         tip = np.asarray(_tip_kernel(robot)(np.asarray(dense, np.float32)), np.float64)
         ax.plot(tip[:, 0], tip[:, 1], tip[:, 2], color=PATH_COLOR, lw=1.6, zorder=10)
         points.append(tip)
-        handles.append(Line2D([], [], color=PATH_COLOR, lw=1.6,
-                              label=f"path: hand trace, {len(ghosts)} states"))
+        handles.append(
+            Line2D(
+                [], [], color=PATH_COLOR, lw=1.6, label=f"path: hand trace, {len(ghosts)} states"
+            )
+        )
     if mark_collisions and touching.any():
         handles.append(Patch(color=COLLISION_COLOR, label="sphere touching an obstacle"))
     if log is not None:
-        log(f"draw_scene {getattr(env, 'name', '')}: {len(faces):,} faces; spheres touching "
-            f"an obstacle: {touching[len(ghosts):].tolist()} in the {len(states)} states, "
-            f"{touching[:len(ghosts)].tolist()} in the {len(ghosts)} path states")
+        log(
+            f"draw_scene {getattr(env, 'name', '')}: {len(faces):,} faces; spheres touching "
+            f"an obstacle: {touching[len(ghosts) :].tolist()} in the {len(states)} states, "
+            f"{touching[: len(ghosts)].tolist()} in the {len(ghosts)} path states"
+        )
 
-    _finish_axes(ax, np.concatenate(points) if box is None else box,
-                 auto_view(world) if view is None else view,
-                 getattr(env, "name", "") if title is None else title, handles if legend else None)
+    _finish_axes(
+        ax,
+        np.concatenate(points) if box is None else box,
+        auto_view(world) if view is None else view,
+        getattr(env, "name", "") if title is None else title,
+        handles if legend else None,
+    )
     return fig
 
 
-def _arm_faces(env, drawn: np.ndarray, n_ghosts: int, arm_quads: np.ndarray,
-               mark_collisions: bool, quads: list, colors: list, bar) -> np.ndarray:
+def _arm_faces(
+    env,
+    drawn: np.ndarray,
+    n_ghosts: int,
+    arm_quads: np.ndarray,
+    mark_collisions: bool,
+    quads: list,
+    colors: list,
+    bar,
+) -> np.ndarray:
     """Appends the arm's sphere faces at each ``drawn`` state (the first ``n_ghosts`` faded
     path states, then the states in their colours) to ``quads`` and their colours to
     ``colors``; returns the number of spheres touching an obstacle per drawn state."""
@@ -338,8 +391,9 @@ def _arm_faces(env, drawn: np.ndarray, n_ghosts: int, arm_quads: np.ndarray,
     touching = np.zeros(len(drawn), int)
     if not len(drawn):
         return touching
-    centres, clear = _arm_kernel(env.robot)(np.asarray(drawn, np.float32), env.world,
-                                            float(env.padding))
+    centres, clear = _arm_kernel(env.robot)(
+        np.asarray(drawn, np.float32), env.world, float(env.padding)
+    )
     centres, clear = np.asarray(centres, np.float64), np.asarray(clear)
     for i in range(len(drawn)):
         if i < n_ghosts:  # fades in towards the goal
@@ -371,8 +425,7 @@ def _drawn_states(env, d: int, states, path, labels, path_states: int):
             states, default_labels = np.asarray(env.query, np.float64), ["start", "goal"]
         else:
             states = np.zeros((0, d))
-    states = (np.zeros((0, d)) if np.asarray(states).size == 0
-              else _states(states, d, "states"))
+    states = np.zeros((0, d)) if np.asarray(states).size == 0 else _states(states, d, "states")
     if labels is None:
         labels = default_labels or [f"state {i}" for i in range(len(states))]
     if len(labels) != len(states):
@@ -406,8 +459,10 @@ def _limits(limits, world) -> np.ndarray:
     except (TypeError, ValueError):
         box = np.zeros(0)
     if box.shape != (3, 2) or not np.all(np.isfinite(box)) or np.any(box[:, 1] < box[:, 0]):
-        raise ValueError("limits must be None, 'bounds' or [[xmin, xmax], [ymin, ymax], "
-                         f"[zmin, zmax]], got {limits!r}")
+        raise ValueError(
+            "limits must be None, 'bounds' or [[xmin, xmax], [ymin, ymax], "
+            f"[zmin, zmax]], got {limits!r}"
+        )
     return box.T
 
 

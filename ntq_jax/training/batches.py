@@ -18,11 +18,20 @@ from typing import NamedTuple, Sequence
 
 import numpy as np
 
-from ntq_jax import artifacts, batching
-from ntq_jax import data
+from ntq_jax import artifacts, batching, data
 
-__all__ = ["VAL_CHUNK", "MemberData", "infer_path_index", "as_arrays", "split_by_path",
-           "prepare_member", "Schedule", "BatchPlan", "stack_rows", "val_chunks"]
+__all__ = [
+    "VAL_CHUNK",
+    "MemberData",
+    "infer_path_index",
+    "as_arrays",
+    "split_by_path",
+    "prepare_member",
+    "Schedule",
+    "BatchPlan",
+    "stack_rows",
+    "val_chunks",
+]
 
 VAL_CHUNK = 4096  # validation rows per member per compiled evaluation chunk
 
@@ -57,8 +66,9 @@ def infer_path_index(inputs: np.ndarray, targets: np.ndarray) -> np.ndarray:
     n, d = targets.shape
     if n == 0:
         return np.zeros((0,), np.int32)
-    cont = (np.all(inputs[1:, :d] == targets[:-1], axis=1)
-            & np.all(inputs[1:, d:] == inputs[:-1, d:], axis=1))
+    cont = np.all(inputs[1:, :d] == targets[:-1], axis=1) & np.all(
+        inputs[1:, d:] == inputs[:-1, d:], axis=1
+    )
     return np.concatenate([[0], np.cumsum(~cont)]).astype(np.int32)
 
 
@@ -71,15 +81,18 @@ def as_arrays(ds) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         x, y, pi = ds.inputs, ds.targets, ds.path_index
     else:
         if not isinstance(ds, (tuple, list)) or len(ds) not in (2, 3):
-            raise TypeError("each dataset must be a Dataset or an (inputs, targets[, path_index]) "
-                            f"tuple, got {type(ds).__name__}")
+            raise TypeError(
+                "each dataset must be a Dataset or an (inputs, targets[, path_index]) "
+                f"tuple, got {type(ds).__name__}"
+            )
         x, y = ds[0], ds[1]
         pi = ds[2] if len(ds) == 3 else None
     x = np.asarray(x, np.float32)
     y = np.asarray(y, np.float32)
     if x.ndim != 2 or y.ndim != 2 or x.shape[0] != y.shape[0] or x.shape[1] != 2 * y.shape[1]:
-        raise ValueError(f"dataset arrays must be inputs (N, 2d) and targets (N, d), got "
-                         f"{x.shape} and {y.shape}")
+        raise ValueError(
+            f"dataset arrays must be inputs (N, 2d) and targets (N, d), got {x.shape} and {y.shape}"
+        )
     if not (np.all(np.isfinite(x)) and np.all(np.isfinite(y))):
         raise ValueError("dataset contains NaN or infinite values in inputs/targets")
     pi = infer_path_index(x, y) if pi is None else np.asarray(pi, np.int32)
@@ -88,8 +101,9 @@ def as_arrays(ds) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return x, y, pi
 
 
-def split_by_path(path_index: np.ndarray, val_fraction: float, seed: int,
-                  member_id: int) -> tuple[np.ndarray, np.ndarray, int, int]:
+def split_by_path(
+    path_index: np.ndarray, val_fraction: float, seed: int, member_id: int
+) -> tuple[np.ndarray, np.ndarray, int, int]:
     """Row indices of the training and validation sides, whole paths on each side.
 
     ``round(val_fraction * P)`` of the ``P`` paths (at least one when
@@ -154,8 +168,9 @@ class Schedule:
         out = []
         for s, tot in zip(self.steps_per_epoch, self.member_steps):
             done = min(step, tot)
-            out.append({"steps": done, "epoch": done // s, "batch": done % s,
-                        "finished": step >= tot})
+            out.append(
+                {"steps": done, "epoch": done // s, "batch": done % s, "finished": step >= tot}
+            )
         return out
 
     def epochs_done(self, step: int) -> list[float]:
@@ -197,9 +212,9 @@ class BatchPlan:
                     continue
                 spe = sch.steps_per_epoch[m]
                 epoch, b = divmod(g, spe)
-                rows = self._permutation(m, epoch)[b * bsz:(b + 1) * bsz]
-                idx[j, m, :len(rows)] = rows
-                mask[j, m, :len(rows)] = 1.0
+                rows = self._permutation(m, epoch)[b * bsz : (b + 1) * bsz]
+                idx[j, m, : len(rows)] = rows
+                mask[j, m, : len(rows)] = 1.0
                 active[j, m] = True
         return idx, mask, active
 
@@ -224,5 +239,8 @@ def val_chunks(members: Sequence[MemberData]) -> tuple[np.ndarray, np.ndarray, n
     y = stack_rows([md.val_y for md in members], rows)
     mask = np.stack([(np.arange(rows) < len(md.val_x)).astype(np.float32) for md in members])
     num = len(members)
-    return (x.reshape(num, nch, chunk, -1), y.reshape(num, nch, chunk, -1),
-            mask.reshape(num, nch, chunk))
+    return (
+        x.reshape(num, nch, chunk, -1),
+        y.reshape(num, nch, chunk, -1),
+        mask.reshape(num, nch, chunk),
+    )

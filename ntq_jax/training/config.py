@@ -59,18 +59,37 @@ class TrainConfig:
         _check(self.seed is None or self.seed >= 0, f"{p}.seed", f"must be >= 0, got {self.seed}")
         _check(self.epochs >= 1, f"{p}.epochs", f"must be >= 1, got {self.epochs}")
         _check(self.batch_size >= 1, f"{p}.batch_size", f"must be >= 1, got {self.batch_size}")
-        _check(self.optimizer in ("adagrad", "adam", "sgd"), f"{p}.optimizer",
-               f"must be adagrad, adam or sgd; got {self.optimizer!r}")
-        _check(self.adagrad_initial_accumulator >= 0.0, f"{p}.adagrad_initial_accumulator",
-               f"must be >= 0, got {self.adagrad_initial_accumulator}")
-        _check(self.learning_rate > 0, f"{p}.learning_rate",
-               f"must be > 0, got {self.learning_rate}")
-        _check(0.0 <= self.val_fraction < 1.0, f"{p}.val_fraction",
-               f"must be in [0, 1), got {self.val_fraction}")
-        _check(self.checkpoint_every >= 1, f"{p}.checkpoint_every",
-               f"must be >= 1, got {self.checkpoint_every}")
+        _check(
+            self.optimizer in ("adagrad", "adam", "sgd"),
+            f"{p}.optimizer",
+            f"must be adagrad, adam or sgd; got {self.optimizer!r}",
+        )
+        _check(
+            self.adagrad_initial_accumulator >= 0.0,
+            f"{p}.adagrad_initial_accumulator",
+            f"must be >= 0, got {self.adagrad_initial_accumulator}",
+        )
+        _check(
+            self.learning_rate > 0, f"{p}.learning_rate", f"must be > 0, got {self.learning_rate}"
+        )
+        _check(
+            0.0 <= self.val_fraction < 1.0,
+            f"{p}.val_fraction",
+            f"must be in [0, 1), got {self.val_fraction}",
+        )
+        _check(
+            self.checkpoint_every >= 1,
+            f"{p}.checkpoint_every",
+            f"must be >= 1, got {self.checkpoint_every}",
+        )
         _check(self.eval_every >= 0, f"{p}.eval_every", f"must be >= 0, got {self.eval_every}")
-        _check(self.steps_per_call >= 1, f"{p}.steps_per_call",
-               f"must be >= 1, got {self.steps_per_call}")
-        _check(self.keep_checkpoints >= 1, f"{p}.keep_checkpoints",
-               f"must be >= 1, got {self.keep_checkpoints}")
+        _check(
+            self.steps_per_call >= 1,
+            f"{p}.steps_per_call",
+            f"must be >= 1, got {self.steps_per_call}",
+        )
+        _check(
+            self.keep_checkpoints >= 1,
+            f"{p}.keep_checkpoints",
+            f"must be >= 1, got {self.keep_checkpoints}",
+        )

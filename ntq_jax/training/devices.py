@@ -25,7 +25,8 @@ def use_cpu_devices(count: int | None = None) -> int:
 
     On a CPU, :func:`ntq_jax.training.train_ensemble` then shards the member axis
     over these devices (:func:`member_mesh`): each device runs its members on its
-    own core instead of every small matmul being split over all cores. Results differ from a one-device run at float level, hence
+    own core instead of every small matmul being split over all cores. Results differ from a
+    one-device run at float level, hence
     the scripts' default of one device. Other computations keep running on
     device 0 with all cores.
 
@@ -42,7 +43,9 @@ def use_cpu_devices(count: int | None = None) -> int:
         RuntimeError: JAX has already run a computation in this process (the device
             count is fixed then); call this before any JAX operation.
     """
-    forced = re.search(r"--xla_force_host_platform_device_count=(\d+)", os.environ.get("XLA_FLAGS", ""))
+    forced = re.search(
+        r"--xla_force_host_platform_device_count=(\d+)", os.environ.get("XLA_FLAGS", "")
+    )
     if forced:
         return int(forced.group(1))
     count = min(os.cpu_count() or 1, 4) if count is None else int(count)
@@ -52,8 +55,10 @@ def use_cpu_devices(count: int | None = None) -> int:
         try:
             jax.config.update("jax_num_cpu_devices", count)
         except RuntimeError as e:
-            raise RuntimeError("use_cpu_devices must be called before any JAX operation "
-                               f"(right after `import jax`): {e}") from None
+            raise RuntimeError(
+                "use_cpu_devices must be called before any JAX operation "
+                f"(right after `import jax`): {e}"
+            ) from None
     return count
 
 
@@ -79,8 +84,10 @@ def member_mesh(num_members: int, shard: bool | None = None):
     if shard is False or (shard is None and size < 2):
         return None
     if size < 2:
-        raise ValueError(f"shard=True needs >= 2 devices and a member count they divide; "
-                         f"found {len(devices)} device(s) for {num_members} members")
+        raise ValueError(
+            f"shard=True needs >= 2 devices and a member count they divide; "
+            f"found {len(devices)} device(s) for {num_members} members"
+        )
     return jax.sharding.Mesh(np.array(devices[:size]), ("member",))
 
 

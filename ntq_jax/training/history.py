@@ -44,10 +44,10 @@ class History(NamedTuple):
         if not records:
             z = np.zeros((0, num))
             return cls(np.zeros((0,), np.int64), z, z.copy(), z.copy())
-        f = lambda k: np.array([[np.nan if v is None else v for v in r[k]] for r in records],
-                               float)
-        return cls(np.array([r["step"] for r in records]), f("epoch"), f("train_loss"),
-                   f("val_loss"))
+        f = lambda k: np.array([[np.nan if v is None else v for v in r[k]] for r in records], float)
+        return cls(
+            np.array([r["step"] for r in records]), f("epoch"), f("train_loss"), f("val_loss")
+        )
 
 
 def write_history(out: Path, records: list[dict], labels: Sequence[str], png: bool = True):
@@ -67,8 +67,9 @@ def write_history(out: Path, records: list[dict], labels: Sequence[str], png: bo
             lines.append(f"{r['step']},{m},{lab},{r['epoch'][m]:.6g},{fmt(t)},{fmt(v)}")
     artifacts.write_text(out / "history.csv", "\n".join(lines) + "\n")
     if png:
-        plotting.curves_figure(History.from_records(records, len(labels)), labels,
-                               out / "curves.png")
+        plotting.curves_figure(
+            History.from_records(records, len(labels)), labels, out / "curves.png"
+        )
 
 
 class LossMeter:
@@ -93,19 +94,27 @@ class LossMeter:
         self.last = np.where(self.active > 0, summed / np.maximum(self.active, 1), self.last)
 
     def postfix(self, labels: Sequence[str]) -> str:
-        return " ".join(f"{lab}={self.last[m]:.4g}{'' if self.active[m] else '(done)'}"
-                        for m, lab in enumerate(labels))
+        return " ".join(
+            f"{lab}={self.last[m]:.4g}{'' if self.active[m] else '(done)'}"
+            for m, lab in enumerate(labels)
+        )
 
-    def record(self, step: int, epochs: Sequence[float], val: np.ndarray,
-               has_val: Sequence[bool]) -> dict:
+    def record(
+        self, step: int, epochs: Sequence[float], val: np.ndarray, has_val: Sequence[bool]
+    ) -> dict:
         """The record at ``step`` (val_loss None for members without validation rows or
         without training steps since the previous record); resets the sums."""
         num = len(self.total)
-        rec = {"step": step, "epoch": list(epochs),
-               "train_loss": [float(self.total[m] / self.count[m]) if self.count[m] else None
-                              for m in range(num)],
-               "val_loss": [float(val[m]) if has_val[m] and self.count[m] else None
-                            for m in range(num)]}
+        rec = {
+            "step": step,
+            "epoch": list(epochs),
+            "train_loss": [
+                float(self.total[m] / self.count[m]) if self.count[m] else None for m in range(num)
+            ],
+            "val_loss": [
+                float(val[m]) if has_val[m] and self.count[m] else None for m in range(num)
+            ],
+        }
         self.total[:] = 0
         self.count[:] = 0
         return rec

@@ -47,16 +47,27 @@ import jax.numpy as jnp
 import numpy as np
 
 from ntq_jax import artifacts, data, models
-from ntq_jax.models import ModelConfig
-from ntq_jax.training.config import TrainConfig
 from ntq_jax.data.format import DatasetError
 from ntq_jax.envs import make_env
+from ntq_jax.models import ModelConfig
 from ntq_jax.progress import Bar, Progress, open_bar
 from ntq_jax.training import devices
-from ntq_jax.training.batches import (BatchPlan, MemberData, Schedule, prepare_member,
-                                      stack_rows, val_chunks)
-from ntq_jax.training.checkpoint import (Checkpoints, CheckpointError, checkpoint_meta,
-                                         run_fingerprint, save_ensemble)
+from ntq_jax.training.batches import (
+    BatchPlan,
+    MemberData,
+    Schedule,
+    prepare_member,
+    stack_rows,
+    val_chunks,
+)
+from ntq_jax.training.checkpoint import (
+    CheckpointError,
+    Checkpoints,
+    checkpoint_meta,
+    run_fingerprint,
+    save_ensemble,
+)
+from ntq_jax.training.config import TrainConfig
 from ntq_jax.training.history import History, LossMeter, write_history
 from ntq_jax.training.step import TrainState, make_optimizer, train_chunk
 
@@ -84,6 +95,7 @@ class _Run(NamedTuple):
 # Setup: members, model and devices
 # ---------------------------------------------------------------------------
 
+
 def _member_ids(num: int, member_ids, labels) -> tuple[list[int], list[str]]:
     if num < 1:
         raise ValueError("train_ensemble needs at least one dataset")
@@ -97,16 +109,18 @@ def _prepare_members(datasets, ids, labels, env, spec, train_cfg, seed) -> list[
     members = [prepare_member(ds, train_cfg.val_fraction, seed, i) for ds, i in zip(datasets, ids)]
     for md, lab in zip(members, labels):
         if md.train_x.shape[1] != 2 * spec.dim:
-            raise ValueError(f"dataset {lab}: inputs have {md.train_x.shape[1]} columns, the "
-                             f"{env.robot.kind} robot needs {2 * spec.dim}")
+            raise ValueError(
+                f"dataset {lab}: inputs have {md.train_x.shape[1]} columns, the "
+                f"{env.robot.kind} robot needs {2 * spec.dim}"
+            )
     return members
 
 
-def _setup(members, ids, labels, spec, train_cfg, seed, mesh
-           ) -> tuple[_Run, TrainState, Any]:
+def _setup(members, ids, labels, spec, train_cfg, seed, mesh) -> tuple[_Run, TrainState, Any]:
     """The initial (placed) state, the run's fixed arrays, and the ensemble's graphdef."""
-    schedule = Schedule(tuple(len(md.train_x) for md in members), train_cfg.batch_size,
-                        train_cfg.epochs)
+    schedule = Schedule(
+        tuple(len(md.train_x) for md in members), train_cfg.batch_size, train_cfg.epochs
+    )
     root = jax.random.key(seed)
     ens = models.init_ensemble(spec, jax.random.fold_in(root, 0), member_ids=ids)
     tx = make_optimizer(train_cfg)
@@ -114,19 +128,25 @@ def _setup(members, ids, labels, spec, train_cfg, seed, mesh
     keys = jnp.stack([jax.random.fold_in(jax.random.fold_in(root, 1), i) for i in ids])
     nmax = max(len(md.train_x) for md in members)
     run = _Run(
-        labels=labels, schedule=schedule, plan=BatchPlan(schedule, seed, ids),
-        train_cfg=train_cfg, eval_every=train_cfg.eval_every or max(schedule.steps_per_epoch),
-        mesh=mesh, chunk_fn=train_chunk(ens.graphdef, train_cfg),
+        labels=labels,
+        schedule=schedule,
+        plan=BatchPlan(schedule, seed, ids),
+        train_cfg=train_cfg,
+        eval_every=train_cfg.eval_every or max(schedule.steps_per_epoch),
+        mesh=mesh,
+        chunk_fn=train_chunk(ens.graphdef, train_cfg),
         dropout_keys=devices.place(keys, mesh),
         x=devices.place(jnp.asarray(stack_rows([md.train_x for md in members], nmax)), mesh),
         y=devices.place(jnp.asarray(stack_rows([md.train_y for md in members], nmax)), mesh),
         val=tuple(devices.place(jnp.asarray(a), mesh) for a in val_chunks(members)),
-        has_val=[len(md.val_x) > 0 for md in members])
+        has_val=[len(md.val_x) > 0 for md in members],
+    )
     return run, state, ens.graphdef
 
 
-def _resume(ckpts: Checkpoints | None, run: _Run, state: TrainState, fingerprint: dict
-            ) -> tuple[TrainState, int, list[dict]]:
+def _resume(
+    ckpts: Checkpoints | None, run: _Run, state: TrainState, fingerprint: dict
+) -> tuple[TrainState, int, list[dict]]:
     """``(state, step, records)`` of the latest checkpoint, or the initial ones."""
     latest = None if ckpts is None else ckpts.latest_step()
     if latest is None:
@@ -134,14 +154,17 @@ def _resume(ckpts: Checkpoints | None, run: _Run, state: TrainState, fingerprint
     state, meta = ckpts.restore(latest, state, fingerprint)
     g = int(meta["step"])
     if meta.get("position") != json.loads(json.dumps(run.schedule.position(g))):
-        raise CheckpointError(f"checkpoint {ckpts.root / str(latest)}: data-loader "
-                              "position does not match its step; delete it")
+        raise CheckpointError(
+            f"checkpoint {ckpts.root / str(latest)}: data-loader "
+            "position does not match its step; delete it"
+        )
     return devices.place(state, run.mesh), g, list(meta.get("history", []))
 
 
 # ---------------------------------------------------------------------------
 # The loop
 # ---------------------------------------------------------------------------
+
 
 def _run_chunk(run: _Run, state: TrainState, g0: int, do_eval: bool, train: bool = True):
     """One compiled call from global step ``g0``: ``(state, losses, val, active)``."""
@@ -150,8 +173,9 @@ def _run_chunk(run: _Run, state: TrainState, g0: int, do_eval: bool, train: bool
     if not train:
         active[:] = False
     batch = (devices.place(jnp.asarray(a), run.mesh, 1) for a in (idx, mask, active))
-    st, losses, val = run.chunk_fn(state, run.x, run.y, run.dropout_keys, jnp.int32(g0),
-                                   *batch, *run.val, jnp.bool_(do_eval))
+    st, losses, val = run.chunk_fn(
+        state, run.x, run.y, run.dropout_keys, jnp.int32(g0), *batch, *run.val, jnp.bool_(do_eval)
+    )
     return st, np.asarray(losses), np.asarray(val), active
 
 
@@ -159,18 +183,30 @@ def _baseline(run: _Run, state: TrainState) -> tuple[TrainState, dict]:
     """The untrained validation loss: the curves' first record (step 0)."""
     state, _, val, _ = _run_chunk(run, state, 0, True, train=False)
     num = len(run.labels)
-    return state, {"step": 0, "epoch": [0.0] * num, "train_loss": [None] * num,
-                   "val_loss": [float(v) if hv else None for v, hv in zip(val, run.has_val)]}
+    return state, {
+        "step": 0,
+        "epoch": [0.0] * num,
+        "train_loss": [None] * num,
+        "val_loss": [float(v) if hv else None for v, hv in zip(val, run.has_val)],
+    }
 
 
 def _next(g: int, every: int) -> int:
     return (g // every + 1) * every
 
 
-def _train_loop(run: _Run, state: TrainState, g: int, end: int, records: list[dict],
-                bar: Bar, out: Path | None, ckpts: Checkpoints | None,
-                meta: Callable[[int], dict], on_checkpoint: Callable[[int], None] | None
-                ) -> tuple[TrainState, int]:
+def _train_loop(
+    run: _Run,
+    state: TrainState,
+    g: int,
+    end: int,
+    records: list[dict],
+    bar: Bar,
+    out: Path | None,
+    ckpts: Checkpoints | None,
+    meta: Callable[[int], dict],
+    on_checkpoint: Callable[[int], None] | None,
+) -> tuple[TrainState, int]:
     """Steps from ``g`` to ``end``; evaluates, records and checkpoints on the way."""
     total, every_ckpt = run.schedule.total_steps, run.train_cfg.checkpoint_every
     meter = LossMeter(len(run.labels))
@@ -197,8 +233,14 @@ def _train_loop(run: _Run, state: TrainState, g: int, end: int, records: list[di
     return state, g
 
 
-def _write_outputs(out: Path, ens: models.Ensemble, records: list[dict], labels: list[str],
-                   finished: bool, info: dict) -> None:
+def _write_outputs(
+    out: Path,
+    ens: models.Ensemble,
+    records: list[dict],
+    labels: list[str],
+    finished: bool,
+    info: dict,
+) -> None:
     """The final curves (unless a checkpoint drew them) and, when finished, ``ensemble/``."""
     if not (out / "curves.png").exists() or not records:
         write_history(out, records, labels)
@@ -210,14 +252,24 @@ def _write_outputs(out: Path, ens: models.Ensemble, records: list[dict], labels:
 # Entry points
 # ---------------------------------------------------------------------------
 
-def train_ensemble(datasets: Sequence[Any], env, model_cfg: ModelConfig, train_cfg: TrainConfig,
-                   *, seed: int, ckpt_dir: str | os.PathLike | None = None,
-                   progress: Progress = True, member_ids: Sequence[int] | None = None,
-                   labels: Sequence[str] | None = None, shard: bool | None = None,
-                   stop_after: int | None = None, extra_fingerprint: dict | None = None,
-                   on_checkpoint: Callable[[int], None] | None = None,
-                   resolved_config: dict | None = None,
-                   ) -> tuple[models.Ensemble, History]:
+
+def train_ensemble(
+    datasets: Sequence[Any],
+    env,
+    model_cfg: ModelConfig,
+    train_cfg: TrainConfig,
+    *,
+    seed: int,
+    ckpt_dir: str | os.PathLike | None = None,
+    progress: Progress = True,
+    member_ids: Sequence[int] | None = None,
+    labels: Sequence[str] | None = None,
+    shard: bool | None = None,
+    stop_after: int | None = None,
+    extra_fingerprint: dict | None = None,
+    on_checkpoint: Callable[[int], None] | None = None,
+    resolved_config: dict | None = None,
+) -> tuple[models.Ensemble, History]:
     """Trains one PNet per dataset, all members together (see the module docstring).
 
     Args:
@@ -258,13 +310,23 @@ def train_ensemble(datasets: Sequence[Any], env, model_cfg: ModelConfig, train_c
     members = _prepare_members(datasets, ids, labels, env, spec, train_cfg, seed)
 
     # -- model, optimizer, devices ---------------------------------------------
-    run, state, graphdef = _setup(members, ids, labels, spec, train_cfg, seed,
-                                  devices.member_mesh(len(ids), shard))
-    fingerprint = run_fingerprint(model_cfg, train_cfg, seed=seed, member_ids=ids, env=env,
-                                  spec=spec, data=[md.fingerprint for md in members],
-                                  extra=extra_fingerprint)
-    config = resolved_config or {"model": fingerprint["model"],
-                                 "train": dataclasses.asdict(train_cfg)}
+    run, state, graphdef = _setup(
+        members, ids, labels, spec, train_cfg, seed, devices.member_mesh(len(ids), shard)
+    )
+    fingerprint = run_fingerprint(
+        model_cfg,
+        train_cfg,
+        seed=seed,
+        member_ids=ids,
+        env=env,
+        spec=spec,
+        data=[md.fingerprint for md in members],
+        extra=extra_fingerprint,
+    )
+    config = resolved_config or {
+        "model": fingerprint["model"],
+        "train": dataclasses.asdict(train_cfg),
+    }
 
     # -- resume ----------------------------------------------------------------
     out = None if ckpt_dir is None else Path(ckpt_dir)
@@ -273,8 +335,14 @@ def train_ensemble(datasets: Sequence[Any], env, model_cfg: ModelConfig, train_c
     ckpts = None if out is None else Checkpoints(out, train_cfg.keep_checkpoints)
     try:
         state, g, records = _resume(ckpts, run, state, fingerprint)
-        meta = functools.partial(checkpoint_meta, schedule=run.schedule, fingerprint=fingerprint,
-                                 labels=labels, records=records, config=config)
+        meta = functools.partial(
+            checkpoint_meta,
+            schedule=run.schedule,
+            fingerprint=fingerprint,
+            labels=labels,
+            records=records,
+            config=config,
+        )
 
         # -- train -------------------------------------------------------------
         total = run.schedule.total_steps
@@ -282,28 +350,48 @@ def train_ensemble(datasets: Sequence[Any], env, model_cfg: ModelConfig, train_c
         if g == 0 and not records and any(run.has_val):
             state, first = _baseline(run, state)
             records.append(first)
-        with open_bar(progress if g < total else None, desc="train", total=total,
-                      unit="step", initial=g) as bar:
-            state, g = _train_loop(run, state, g, end, records, bar, out, ckpts, meta,
-                                   on_checkpoint)
+        with open_bar(
+            progress if g < total else None, desc="train", total=total, unit="step", initial=g
+        ) as bar:
+            state, g = _train_loop(
+                run, state, g, end, records, bar, out, ckpts, meta, on_checkpoint
+            )
 
         # -- outputs -----------------------------------------------------------
         params = jax.device_put(state.params, jax.devices()[0])
         result = models.Ensemble(graphdef=graphdef, params=params, spec=spec)
         if out is not None:
-            _write_outputs(out, result, records, labels, finished=g >= total,
-                           info={"labels": labels, "member_ids": ids, "steps": total,
-                                 "env": env.name, "fingerprint": fingerprint})
+            _write_outputs(
+                out,
+                result,
+                records,
+                labels,
+                finished=g >= total,
+                info={
+                    "labels": labels,
+                    "member_ids": ids,
+                    "steps": total,
+                    "env": env.name,
+                    "fingerprint": fingerprint,
+                },
+            )
     finally:
         if ckpts is not None:
             ckpts.close()
     return result, History.from_records(records, len(ids))
 
 
-def train_from_folder(env_dir: str | os.PathLike, out_dir: str | os.PathLike, *,
-                      model: ModelConfig | None = None, train: TrainConfig | None = None,
-                      seed: int = 0, progress: Progress = True, shard: bool | None = None,
-                      record: dict | None = None):
+def train_from_folder(
+    env_dir: str | os.PathLike,
+    out_dir: str | os.PathLike,
+    *,
+    model: ModelConfig | None = None,
+    train: TrainConfig | None = None,
+    seed: int = 0,
+    progress: Progress = True,
+    shard: bool | None = None,
+    record: dict | None = None,
+):
     """Trains the ensemble on ``<env_dir>/D0..D3`` (written by :mod:`ntq_jax.data`).
 
     Args:
@@ -328,17 +416,36 @@ def train_from_folder(env_dir: str | os.PathLike, out_dir: str | os.PathLike, *,
     datasets = data.load_datasets(env_dir)
     for i, ds in enumerate(datasets):
         if len(ds.inputs) == 0:  # one line with the generator's reason, before any training
-            why = next((w for w in ds.meta.get("warnings", []) if "no samples" in w),
-                       f"{env_dir} D{i} has no samples")
-            raise DatasetError(f"{why}. PNet_{i} cannot be trained on an empty dataset: drop "
-                               f"D{i} from data.datasets (or use a map where it has samples)")
+            why = next(
+                (w for w in ds.meta.get("warnings", []) if "no samples" in w),
+                f"{env_dir} D{i} has no samples",
+            )
+            raise DatasetError(
+                f"{why}. PNet_{i} cannot be trained on an empty dataset: drop "
+                f"D{i} from data.datasets (or use a map where it has samples)"
+            )
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     if record is None:
-        record = json.loads(json.dumps({"model": dataclasses.asdict(model),
-                                        "train": dataclasses.asdict(train), "seed": seed}))
+        record = json.loads(
+            json.dumps(
+                {
+                    "model": dataclasses.asdict(model),
+                    "train": dataclasses.asdict(train),
+                    "seed": seed,
+                }
+            )
+        )
     artifacts.write_text(out / "config.json", json.dumps(record, indent=1))
-    return train_ensemble(datasets, env, model, train, seed=train.seed_for(seed), ckpt_dir=out,
-                          progress=progress, labels=[f"D{i}" for i in range(len(datasets))],
-                          shard=shard, resolved_config=record)
-
+    return train_ensemble(
+        datasets,
+        env,
+        model,
+        train,
+        seed=train.seed_for(seed),
+        ckpt_dir=out,
+        progress=progress,
+        labels=[f"D{i}" for i in range(len(datasets))],
+        shard=shard,
+        resolved_config=record,
+    )

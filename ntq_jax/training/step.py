@@ -23,8 +23,14 @@ from flax import nnx
 
 from ntq_jax.training.config import TrainConfig
 
-__all__ = ["TrainState", "make_optimizer", "member_step", "member_val_loss", "make_train_chunk",
-           "train_chunk"]
+__all__ = [
+    "TrainState",
+    "make_optimizer",
+    "member_step",
+    "member_val_loss",
+    "make_train_chunk",
+    "train_chunk",
+]
 
 Array = jax.Array
 
@@ -46,8 +52,9 @@ def make_optimizer(train_cfg: TrainConfig) -> optax.GradientTransformation:
     """
     lr = train_cfg.learning_rate
     if train_cfg.optimizer == "adagrad":
-        return optax.adagrad(lr, initial_accumulator_value=train_cfg.adagrad_initial_accumulator,
-                             eps=1e-10)
+        return optax.adagrad(
+            lr, initial_accumulator_value=train_cfg.adagrad_initial_accumulator, eps=1e-10
+        )
     if train_cfg.optimizer == "adam":
         return optax.adam(lr)
     return optax.sgd(lr)
@@ -65,14 +72,14 @@ def member_step(graphdef, tx, params, opt_state, x, y, key, idx, mask, active):
     Returns:
         ``(params, opt_state, loss)``.
     """
+
     def loss_fn(p):
         return nnx.merge(graphdef, p).loss(x[idx], y[idx], mask, key)
 
     loss, grads = jax.value_and_grad(loss_fn)(params)
     updates, new_opt = tx.update(grads, opt_state, params)
     new_params = optax.apply_updates(params, updates)
-    return (_tree_where(active, new_params, params), _tree_where(active, new_opt, opt_state),
-            loss)
+    return (_tree_where(active, new_params, params), _tree_where(active, new_opt, opt_state), loss)
 
 
 def member_val_loss(graphdef, params, x, y, mask):
@@ -106,6 +113,7 @@ def make_train_chunk(graphdef, tx, steps: int) -> Callable:
         ``do_eval`` (validation arrays as in :func:`member_val_loss`, with a member axis).
         ``state`` is donated.
     """
+
     def one(p, o, x, y, k, i, mk, a):
         return member_step(graphdef, tx, p, o, x, y, k, i, mk, a)
 
@@ -117,8 +125,20 @@ def make_train_chunk(graphdef, tx, steps: int) -> Callable:
 
     veval = jax.vmap(lambda p, x, y, mk: member_val_loss(graphdef, p, x, y, mk))
 
-    def chunk(state: TrainState, x, y, dropout_keys, g0, idx, mask, active, val_x, val_y,
-              val_mask, do_eval):
+    def chunk(
+        state: TrainState,
+        x,
+        y,
+        dropout_keys,
+        g0,
+        idx,
+        mask,
+        active,
+        val_x,
+        val_y,
+        val_mask,
+        do_eval,
+    ):
         def body(carry, inp):
             k, idx_k, mask_k, act_k = inp
 
@@ -134,9 +154,14 @@ def make_train_chunk(graphdef, tx, steps: int) -> Callable:
             return jax.lax.cond(jnp.any(act_k), step, skip, carry)
 
         (params, opt), losses = jax.lax.scan(
-            body, (state.params, state.opt_state), (jnp.arange(steps), idx, mask, active))
-        val = jax.lax.cond(do_eval, lambda p: veval(p, val_x, val_y, val_mask),
-                           lambda p: jnp.zeros(val_mask.shape[:1], jnp.float32), params)
+            body, (state.params, state.opt_state), (jnp.arange(steps), idx, mask, active)
+        )
+        val = jax.lax.cond(
+            do_eval,
+            lambda p: veval(p, val_x, val_y, val_mask),
+            lambda p: jnp.zeros(val_mask.shape[:1], jnp.float32),
+            params,
+        )
         return TrainState(params, opt), losses, val
 
     return jax.jit(chunk, donate_argnums=(0,))
@@ -149,13 +174,22 @@ def train_chunk(graphdef, train_cfg: TrainConfig) -> Callable:
     repeated trainings of one architecture (members trained alone, a resume in the
     same process) reuse one compilation.
     """
-    return _cached_chunk(graphdef, train_cfg.optimizer, train_cfg.learning_rate,
-                         train_cfg.adagrad_initial_accumulator, train_cfg.steps_per_call)
+    return _cached_chunk(
+        graphdef,
+        train_cfg.optimizer,
+        train_cfg.learning_rate,
+        train_cfg.adagrad_initial_accumulator,
+        train_cfg.steps_per_call,
+    )
 
 
 @functools.lru_cache(maxsize=16)
-def _cached_chunk(graphdef, optimizer: str, learning_rate: float, initial_accumulator: float,
-                  steps: int) -> Callable:
-    cfg = TrainConfig(optimizer=optimizer, learning_rate=learning_rate,
-                      adagrad_initial_accumulator=initial_accumulator)
+def _cached_chunk(
+    graphdef, optimizer: str, learning_rate: float, initial_accumulator: float, steps: int
+) -> Callable:
+    cfg = TrainConfig(
+        optimizer=optimizer,
+        learning_rate=learning_rate,
+        adagrad_initial_accumulator=initial_accumulator,
+    )
     return make_train_chunk(graphdef, make_optimizer(cfg), steps)

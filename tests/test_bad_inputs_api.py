@@ -181,7 +181,7 @@ def test_api_query_arguments_accept_numpy_ints(point_env):
             "nope",
             {},
             ValueError,
-            r"unknown planner 'nope'; available: astar, .*bitstar, roadmap, .*visgraph",
+            r"unknown planner 'nope'; available: astar, .*bitstar, .*roadmap, .*visgraph",
         ),
         ("astar", {"seed": 1.5}, TypeError, r"seed must be an int >= 0"),
     ],

@@ -137,29 +137,14 @@ def plan_bitstar(
         ``startup_time`` (slowest worker's seconds to get ready), ``n_valid_calls``
         and ``n_motion_calls`` (Python callbacks, summed) and ``wall_time``.
 
-    A 3-D serial arm (the Panda) has no NumPy geometry for the workers: its queries
-    go to :func:`ntq_jax.planners.ompl_rrtconnect.plan_bitstar_jax` (the same BIT*,
-    in this process, on the package's JAX checks; ``workers``, ``chunk_size``,
-    ``hang_timeout``, ``startup_timeout`` and ``keep_workers`` do not apply there and
-    are ignored), whose ``info`` it returns.
+    A 3-D serial arm (the Panda) has no NumPy geometry for the workers: the
+    registry's ``"bitstar"`` sends its queries to
+    :func:`ntq_jax.planners.ompl_rrtconnect.plan_bitstar_jax` instead.
 
     Raises:
         TypeError, ValueError: malformed arguments (the message names the option);
             ImportError: ``ompl`` is not installed.
     """
-    if getattr(env.robot, "kind", None) == "serial_arm":  # no NumPy geometry: JAX, in process
-        from ntq_jax.planners.ompl_rrtconnect import plan_bitstar_jax
-
-        return plan_bitstar_jax(
-            env,
-            queries,
-            padding=padding,
-            seed=seed,
-            time_budget=time_budget,
-            stop_on_first=stop_on_first,
-            check=check,
-            ompl_log_level=ompl_log_level,
-        )
     t_wall = time.perf_counter()
     q = _check_arguments(env, queries, time_budget, ompl_log_level)
     workers = int_option("bitstar", "workers", workers, 0) or (os.cpu_count() or 1)

@@ -8,6 +8,9 @@ See :mod:`ntq_jax.planners` for each planner and its options.
 
 from __future__ import annotations
 
+import functools
+import inspect
+
 import numpy as np
 
 from ntq_jax.planners import (
@@ -90,9 +93,25 @@ def plan(
     return fn(env, q, padding=pad, seed=seed, **options)
 
 
+@functools.wraps(ompl_bridge.plan_bitstar)
+def _bitstar(env, queries, **options) -> PlanResult:
+    """``"bitstar"``: :func:`ntq_jax.planners.ompl_bridge.plan_bitstar` (worker processes on
+    the NumPy geometry), or for a 3-D serial arm, which has no NumPy geometry,
+    :func:`ntq_jax.planners.ompl_rrtconnect.plan_bitstar_jax` (the same BIT*, in this
+    process, on the package's JAX checks; the worker options ``workers``,
+    ``chunk_size``, ``hang_timeout``, ``startup_timeout`` and ``keep_workers`` do not
+    apply there and are ignored)."""
+    if getattr(env.robot, "kind", None) != "serial_arm":
+        return ompl_bridge.plan_bitstar(env, queries, **options)
+    takes = inspect.signature(ompl_rrtconnect.plan_bitstar_jax).parameters
+    return ompl_rrtconnect.plan_bitstar_jax(
+        env, queries, **{k: v for k, v in options.items() if k in takes}
+    )
+
+
 register_planner("astar", astar.plan_astar)
 register_planner("visgraph", visgraph.plan_visgraph)
-register_planner("bitstar", ompl_bridge.plan_bitstar)
+register_planner("bitstar", _bitstar)
 register_planner("roadmap", roadmap.plan_roadmap)
 register_planner("bitree", bitree.plan_bitree)
 register_planner("rrtconnect", ompl_rrtconnect.plan_rrtconnect)

@@ -55,6 +55,14 @@ import sys
 import tempfile
 import threading
 import traceback
+from importlib.util import find_spec
+
+if find_spec("jax") is None or find_spec("ntq_jax") is None:  # an expected error: one line
+    sys.exit(
+        f"error: {sys.executable} has no {'jax' if find_spec('jax') is None else 'ntq_jax'}: "
+        "run the check with the package's Python (pip install -e . first, or activate its "
+        "virtual environment)"
+    )
 
 import bench_data
 import bench_gamma

@@ -6,7 +6,7 @@ Both build the distinct undirected ``(min, max)`` pairs of a k-nearest-neighbour
 ``--milestones`` nodes with PRM*'s ``k`` (random neighbours, as many rows as the roadmap
 planner's default first round): ``unique_rows`` is ``np.unique(..., axis=0)`` on the
 stacked pairs with the self-loops dropped (what ``build_roadmap`` did),
-``undirected_pairs`` is :func:`ntq_jax.planners.roadmap.undirected_pairs`. Repeats are
+``undirected_pairs`` is :func:`ntq_jax.planners.roadmap_build.undirected_pairs`. Repeats are
 interleaved; medians and their ratio are printed, and the two results are checked equal.
 """
 
@@ -17,7 +17,7 @@ import argparse
 import numpy as np
 from common import interleaved
 
-from ntq_jax.planners.roadmap import prm_star_k, undirected_pairs
+from ntq_jax.planners.roadmap_build import prm_star_k, undirected_pairs
 
 
 def unique_rows(i: np.ndarray, j: np.ndarray) -> np.ndarray:

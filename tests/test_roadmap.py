@@ -16,6 +16,7 @@ from shapely.ops import unary_union
 
 import ntq_jax as nj
 from ntq_jax.planners import roadmap as R
+from ntq_jax.planners import roadmap_build as RB
 from ntq_jax.types import PlanStatus
 
 M = 3000  # milestones: small roadmaps keep the tests fast
@@ -98,7 +99,7 @@ def test_same_seed_same_paths_and_independent_of_the_batch():
     env = nj.make_env("rigid/1")
     q = _queries(env, 30, seed=3)
     a = nj.plan(env, q, "roadmap", milestones=M)
-    R._MEMORY.clear()
+    RB._MEMORY.clear()
     b = nj.plan(env, q[::-1], "roadmap", milestones=M)  # rebuilt, other batch order
     c = nj.plan(env, q[:7], "roadmap", milestones=M)
     np.testing.assert_array_equal(a.status, b.status[::-1])
@@ -112,12 +113,12 @@ def test_same_seed_same_paths_and_independent_of_the_batch():
 def test_roadmap_cache_reused_and_invalidated_when_the_map_changes(tmp_path):
     env = nj.make_env("point/2")
     q = _queries(env, 20)
-    R._MEMORY.clear()
+    RB._MEMORY.clear()
     a = nj.plan(env, q, "roadmap", milestones=800, cache_dir=tmp_path)
     files = sorted(tmp_path.glob("roadmap_*.npz"))
     assert len(files) == 1
     stamp = files[0].stat().st_mtime_ns
-    R._MEMORY.clear()
+    RB._MEMORY.clear()
     b = nj.plan(env, q, "roadmap", milestones=800, cache_dir=tmp_path)  # read from disk
     assert files[0].stat().st_mtime_ns == stamp and len(list(tmp_path.glob("roadmap_*"))) == 1
     np.testing.assert_array_equal(a.costs, b.costs)
@@ -159,6 +160,6 @@ def test_undirected_pairs_equal_numpys_unique_rows(n, per_node):
     j = rng.integers(0, n, i.size)
     ref = np.unique(np.stack([np.minimum(i, j), np.maximum(i, j)], 1), axis=0)
     ref = ref[ref[:, 0] != ref[:, 1]]
-    got = R.undirected_pairs(i, j, n)
+    got = RB.undirected_pairs(i, j, n)
     assert got.dtype == ref.dtype and got.shape[1] == 2
     np.testing.assert_array_equal(got, ref)

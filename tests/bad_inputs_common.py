@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from conftest import TINY_RUN
 from script_loader import load_script
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -40,19 +41,7 @@ def _one_error_line(err: str, status_lines: int = 0) -> str:
     return lines[-1]
 
 
-TINY = [
-    "envs=[point/2]",
-    "data.k_train=40",
-    "data.gamma_queries=2000",
-    "data.gamma_eval=false",
-    "train.epochs=2",
-    "model.hidden=[32,32]",
-    "eval.k_test=16",
-    "eval.n_plan=20",
-    "eval.replan_rounds=2",
-    "eval.replan_steps=6",
-    "eval.gamma_queries=2000",
-]
+TINY = TINY_RUN  # the suite's tiny point/2 run (conftest.py)
 
 
 def _files(folder: Path) -> set:

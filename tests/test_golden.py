@@ -68,24 +68,13 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+from conftest import TINY_RUN
 
 ROOT = Path(__file__).resolve().parents[1]
 GOLDEN = ROOT / "tests" / "golden.json"
 GOLDEN_PARAMS = ROOT / "tests" / "golden_params.npz"
 LOCAL = ROOT / "tests" / ".golden_local.json"
-TINY = [
-    "envs=[point/2]",
-    "data.k_train=40",
-    "data.gamma_queries=2000",
-    "data.gamma_eval=false",
-    "train.epochs=2",
-    "model.hidden=[32,32]",
-    "eval.k_test=16",
-    "eval.n_plan=20",
-    "eval.replan_rounds=2",
-    "eval.replan_steps=6",
-    "eval.gamma_queries=2000",
-]
+TINY = TINY_RUN  # the suite's tiny point/2 run (conftest.py)
 ARM = [
     "envs=[nlink/2]",
     "data.k_train=30",

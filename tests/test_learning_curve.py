@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import TINY_RUN
 
 from ntq_jax import data, make_env
 from ntq_jax.experiment import config as C
@@ -21,19 +22,7 @@ from ntq_jax.experiment.curve import prefix_dataset, run_curve
 from ntq_jax.experiment.pipeline import load_config
 
 ROOT = Path(__file__).resolve().parents[1]
-TINY = [
-    "envs=[point/2]",
-    "data.k_train=40",
-    "data.gamma_queries=2000",
-    "data.gamma_eval=false",
-    "train.epochs=2",
-    "model.hidden=[32,32]",
-    "eval.k_test=16",
-    "eval.n_plan=20",
-    "eval.replan_rounds=2",
-    "eval.replan_steps=6",
-    "eval.gamma_queries=2000",
-]
+TINY = TINY_RUN  # the suite's tiny point/2 run (conftest.py)
 SIZES = [20, 40]
 
 

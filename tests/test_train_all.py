@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import TINY_RUN
 from shapely.geometry import LineString, Point
 from shapely.geometry import box as shapely_box
 from shapely.ops import unary_union
@@ -23,19 +24,7 @@ from ntq_jax import make_env
 from ntq_jax.experiment.pipeline import PipelineError, load_config, prepare_run, run_pipeline
 
 ROOT = Path(__file__).resolve().parents[1]
-TINY = [
-    "envs=[point/2]",
-    "data.k_train=40",
-    "data.gamma_queries=2000",
-    "data.gamma_eval=false",
-    "train.epochs=2",
-    "model.hidden=[32,32]",
-    "eval.k_test=16",
-    "eval.n_plan=20",
-    "eval.replan_rounds=2",
-    "eval.replan_steps=6",
-    "eval.gamma_queries=2000",
-]
+TINY = TINY_RUN  # the suite's tiny point/2 run (conftest.py)
 
 
 def _script(name):

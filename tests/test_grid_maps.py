@@ -522,7 +522,7 @@ def test_imported_grid_agrees_with_cells(tmp_path, pad):
 def test_astar_plans_on_the_maps_own_grid(tmp_path):
     p = grid_maps.write_movingai(tmp_path / "m.map", grid_maps.maze_grid(33, 3, seed=1))
     env = nj.make_env(p)
-    from ntq_jax.planners.astar import config_grid
+    from ntq_jax.planners.astar_planner import config_grid
 
     assert np.array_equal(config_grid(env, 1.0, 0.0).occ, env.grid.occupied)
     s = env.sample_states(jax.random.key(0), 8)

@@ -30,7 +30,7 @@ own (data-generation) geometry, ``padding=0`` in the evaluation geometry.
 Planners
 --------
 ``"astar"`` (2-D configuration spaces: the point robot and the 2-link arm)
-    :func:`ntq_jax.planners.astar.plan_astar`: the configuration box gridded at
+    :func:`ntq_jax.planners.astar_planner.plan_astar`: the configuration box gridded at
     ``resolution`` (default 0.1), batched exact grid A* (jump point search),
     greedy shortcutting (``smooth=True``). Options: ``resolution``, ``smooth``,
     ``chunk_size``, ``smooth_chunk`` and any :func:`ntq_jax.planners.astar.astar`
@@ -92,7 +92,7 @@ from typing import TYPE_CHECKING
 from ntq_jax.lazy import lazy_exports
 
 if TYPE_CHECKING:  # the names below, for type checkers and the API docs
-    from ntq_jax.planners.astar import config_grid
+    from ntq_jax.planners.astar_planner import config_grid
     from ntq_jax.planners.registry import available_planners, plan, register_planner
     from ntq_jax.planners.verify import check_paths, finalize, valid_queries
     from ntq_jax.types import STATUS_NAMES, PlanResult, PlanStatus
@@ -109,7 +109,7 @@ _EXPORTS = {
     "check_paths": "ntq_jax.planners.verify",
     "valid_queries": "ntq_jax.planners.verify",
     "finalize": "ntq_jax.planners.verify",
-    "config_grid": "ntq_jax.planners.astar",
+    "config_grid": "ntq_jax.planners.astar_planner",
 }
 
 __all__ = [

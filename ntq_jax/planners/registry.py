@@ -14,7 +14,7 @@ import inspect
 import numpy as np
 
 from ntq_jax.planners import (
-    astar,
+    astar_planner,
     bitree,
     ompl_bridge,
     ompl_rrtconnect,
@@ -109,7 +109,7 @@ def _bitstar(env, queries, **options) -> PlanResult:
     )
 
 
-register_planner("astar", astar.plan_astar)
+register_planner("astar", astar_planner.plan_astar)
 register_planner("visgraph", visgraph.plan_visgraph)
 register_planner("bitstar", _bitstar)
 register_planner("roadmap", roadmap.plan_roadmap)

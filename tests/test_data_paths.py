@@ -16,6 +16,7 @@ from ntq_jax.planners import plan
 from ntq_jax.planners.jobs import planner_options
 from ntq_jax.planners.path_modes import shape_paths
 from ntq_jax.planners.resample import resample_paths
+from ntq_jax.planners.verify import finalize
 from ntq_jax.robots.batch import distances
 
 WALLS = {
@@ -185,6 +186,56 @@ def test_config_key_reaches_the_data_planner_and_the_fingerprint():
             config.load(None, [f"planner.data_paths={bad}"])
     with pytest.raises(ConfigError, match=r"planner\.smooth_data"):
         config.load(None, ["planner.smooth_data=false", "planner.data_paths=raw"])
+
+
+def test_data_check_reaches_the_planner_the_verification_and_the_fingerprint():
+    """planner.data_check: absent from the hash when unset, passed to the data planner (not
+    to the evaluation, which has eval.motion_check), to a user's planner's verification, and
+    into the datasets' fingerprint; a bad value is one config error."""
+    from ntq_jax.data.generate import resolve_run
+
+    base = config.load(None, [])
+    assert "data_check" not in base.to_dict()["planner"]
+    assert "check" not in planner_options(config.planner_settings(base, "rigid/0"), "roadmap")
+    cfg = config.load(None, ["planner.data_check=certified", "eval.motion_check=discretized"])
+    assert cfg.hash() != base.hash()
+    ps = config.planner_settings(cfg, "rigid/0")
+    assert planner_options(ps, "roadmap")["check"] == "certified"
+    assert planner_options(ps, "roadmap", evaluation=True)["check"] == "discretized"
+    env = make_env("point/0")
+    runs = [
+        resolve_run(env, config.data_options(c, "point/0"), "/tmp/x", "point/0", None)
+        for c in (base, cfg)
+    ]
+    assert runs[0].data_check == "discretized" and runs[1].data_check == "certified"
+    assert runs[0].fingerprint != runs[1].fingerprint
+    with pytest.raises(ConfigError, match=r"planner\.data_check"):
+        config.load(None, ["planner.data_check=exact"])
+
+
+def test_a_user_planner_is_verified_with_the_data_check(monkeypatch):
+    """plan_chunk's ``verify`` names the check its verification (``finalize``) uses:
+    ``True`` the discretised one, ``"certified"`` the certified one, ``False`` none."""
+    from ntq_jax.planners import jobs
+    from ntq_jax.types import PlanResult, PlanStatus
+
+    env = Env.from_json(WALLS)
+    q = np.array([[[1, 1], [1, 9]]], np.float32)
+    seen = []
+
+    def spy(*args, **kw):
+        seen.append(args[7] if len(args) > 7 else kw.get("check", "discretized"))
+        return finalize(*args, **kw)
+
+    def planner(env, queries, *, padding, seed):
+        status = np.full(1, PlanStatus.SOLVED, np.int8)
+        return PlanResult(queries.copy(), np.array([2], np.int32), np.zeros(1), status, {})
+
+    monkeypatch.setattr(jobs, "finalize", spy)
+    for verify in (True, "certified", False):
+        res, rejected = jobs.plan_chunk(None, env, q, planner, verify, env.padding, 0)
+        assert res.solved.all() and not rejected.any()
+    assert seen == ["discretized", "certified"]
 
 
 def test_a_spacing_too_fine_for_the_map_is_refused_before_any_work(tmp_path, capsys):

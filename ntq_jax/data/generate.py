@@ -123,6 +123,7 @@ class RunSpec(NamedTuple):
     fingerprint: str
     data_paths: float | str | None = None  # planner.data_paths (ntq_jax.planners.path_modes)
     record: dict | None = None  # data.per_env's paths_from: records.provenance of the record
+    data_check: str = "discretized"  # the motion check of the data paths (planner.data_check)
 
     @property
     def n_u(self) -> int:
@@ -185,6 +186,12 @@ def resolve_run(env, opts: DataOptions, out_dir, env_name: str | None, planner) 
                 if isinstance(mode, (int, float)) and not isinstance(mode, bool)
                 else {}
             ),
+            # only when set: every data path passes this check (a user's planner's too)
+            **(
+                {}
+                if opts.planner.data_check == "discretized"
+                else {"data_check": opts.planner.data_check}
+            ),
             # the record's chunks, by content: a changed record makes the datasets again
             **({} if record is None else {"paths_from": str(source), "record": record["digest"]}),
         },
@@ -208,6 +215,7 @@ def resolve_run(env, opts: DataOptions, out_dir, env_name: str | None, planner) 
         fp,
         mode,
         record,
+        opts.planner.data_check,
     )
 
 
@@ -466,7 +474,7 @@ def generate_datasets(
                 env,
                 pools.queries,
                 run.plan_fn,
-                verify=run.verify,
+                verify=run.verify and run.data_check,
                 padding=run.padding,
                 seed=opts.seed,
                 chunk=opts.chunk,
@@ -483,6 +491,7 @@ def generate_datasets(
                 run.data_paths,
                 "custom" if run.verify else run.planner_name,
                 run.padding,
+                run.data_check,
             )
             planned = planned._replace(result=shaped)
         with _timed(timings, "check"):

@@ -368,6 +368,7 @@ def planner_settings(cfg: Config, env_name: str) -> PlannerSettings:
         workers=pc.workers,
         data_paths=pc.data_paths_for(env_name),
         motion_check=cfg.eval.motion_check,
+        data_check=pc.data_check or "discretized",
     )
 
 

@@ -284,6 +284,11 @@ class PlannerConfig:
             BIT*-like density) or null (the planner's default: shortcut for
             ``astar``/``roadmap``, raw for ``bitstar``/``visgraph``; left out of the
             config hash). The evaluation reference is always the default.
+        data_check: the motion check every data path passes (``discretized``, the
+            paper's steerTo at its resolution, or ``certified``: every segment proven
+            free); null = ``discretized``, left out of the config hash. The planner
+            plans and verifies with it; the blocked-ness of a query and includeData's
+            pruning stay the discretised steerTo, as in the paper.
         smooth_data: the earlier spelling of ``data_paths`` (``false`` = ``raw``,
             ``true`` = ``shortcut``); kept so that older configs load and hash as
             they did. Not together with ``data_paths``.
@@ -301,9 +306,10 @@ class PlannerConfig:
     eval_time_budget: float = 2.0
     workers: int = 0
     data_paths: typing.Union[float, str, None] = None
+    data_check: Optional[str] = None
     smooth_data: Optional[bool] = None
     per_env: tuple[PlannerEnvOverride, ...] = ()
-    _OMIT_NONE = ("data_paths", "smooth_data")
+    _OMIT_NONE = ("data_paths", "data_check", "smooth_data")
 
     def validate(self, p: str):
         _check(
@@ -332,6 +338,11 @@ class PlannerConfig:
         _check(self.workers >= 0, f"{p}.workers", f"must be >= 0, got {self.workers}")
         why = validate_mode(self.data_paths)
         _check(why is None, f"{p}.data_paths", why or "")
+        _check(
+            self.data_check in (None, "discretized", "certified"),
+            f"{p}.data_check",
+            f"must be certified, discretized or null; got {self.data_check!r}",
+        )
         _check(
             self.data_paths is None or self.smooth_data is None,
             f"{p}.smooth_data",

@@ -64,6 +64,8 @@ class PlannerSettings:
             (:mod:`ntq_jax.planners.path_modes`; None: the planner's default).
         motion_check: the evaluation's motion check (``certified`` or ``discretized``),
             used with ``evaluation=True``.
+        data_check: the motion check of the data planner's paths (the paper's
+            ``discretized``, or ``certified``: every data path proven free).
     """
 
     name: str = "astar"
@@ -77,6 +79,7 @@ class PlannerSettings:
     workers: int = 0
     data_paths: Union[float, str, None] = None
     motion_check: str = "certified"
+    data_check: str = "discretized"
 
 
 def planner_options(
@@ -87,14 +90,18 @@ def planner_options(
     ``name`` defaults to ``settings.name``; ``evaluation`` picks BIT*'s
     evaluation budget instead of the data-generation one, and the evaluation's
     motion check (``settings.motion_check``) for the planner's checks and the
-    verification of its paths. Data generation keeps the planners' default, the
-    discretised check (the paper's), at the data padding, and passes the
+    verification of its paths. Data generation uses ``settings.data_check`` (passed
+    only when it is not the planners' default, the discretised check, the paper's),
+    at the data padding, and passes the
     ``smooth`` option of ``settings.data_paths`` (when set) to ``astar`` and
     ``roadmap`` (:func:`ntq_jax.planners.path_modes.planner_smooth`).
     """
     ps = settings
     name = name or ps.name
-    extra = {"check": ps.motion_check} if evaluation else {}
+    if evaluation:
+        extra = {"check": ps.motion_check}
+    else:
+        extra = {} if ps.data_check == "discretized" else {"check": ps.data_check}
     smooth = None if evaluation else planner_smooth(ps.data_paths, name)
     if smooth is not None:
         extra["smooth"] = smooth
@@ -225,7 +232,7 @@ def _load_chunk(path: Path, queries: np.ndarray) -> tuple[PlanResult, np.ndarray
 
 
 def _plan_chunk(
-    env, queries: np.ndarray, plan_fn: Callable, verify: bool, padding: float, seed: int
+    env, queries: np.ndarray, plan_fn: Callable, verify: bool | str, padding: float, seed: int
 ) -> tuple[PlanResult, np.ndarray]:
     raw = plan_fn(env, queries, padding=padding, seed=seed)
     k, d = queries.shape[0], queries.shape[2]
@@ -235,8 +242,16 @@ def _plan_chunk(
     if paths.ndim != 3 or paths.shape[0] != k or paths.shape[2] != d:
         raise ValueError(f"planner returned paths of shape {paths.shape}, expected ({k}, L, {d})")
     status = np.asarray(raw.status, np.int8)
+    check = verify if isinstance(verify, str) else "discretized"
     res = finalize(
-        queries, paths, np.asarray(raw.lengths, np.int32), status, dict(raw.info), env, padding
+        queries,
+        paths,
+        np.asarray(raw.lengths, np.int32),
+        status,
+        dict(raw.info),
+        env,
+        padding,
+        check,
     )
     return res, (status == PlanStatus.SOLVED) & ~res.solved
 
@@ -270,7 +285,7 @@ def plan_chunk(
     env,
     queries: np.ndarray,
     plan_fn: Callable,
-    verify: bool,
+    verify: bool | str,
     padding: float,
     seed: int,
 ) -> tuple[PlanResult, np.ndarray]:
@@ -294,7 +309,7 @@ def plan_pool(
     pool: np.ndarray,
     plan_fn: Callable,
     *,
-    verify: bool,
+    verify: bool | str,
     padding: float,
     seed: int,
     chunk: int,
@@ -308,7 +323,8 @@ def plan_pool(
     Args:
         plan_fn: ``(env, queries, *, padding, seed) -> PlanResult`` (:func:`resolve_planner`).
         verify: verify ``plan_fn``'s results with ``verify.finalize`` (a user's
-            callable; the registry's planners verify their own).
+            callable; the registry's planners verify their own): ``True`` with the
+            discretised check, a motion check's name (``"certified"``) with that one.
         padding: the planning clearance (a number).
         seed: the run's seed (each chunk gets :func:`chunk_seed`).
         chunk: queries per new chunk.

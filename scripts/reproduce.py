@@ -21,6 +21,12 @@ from every summary there (:mod:`ntq_jax.experiment.reproduction`). A map whose s
 was made from the same config is skipped, so an interrupted reproduction keeps
 every finished map; commit each summary as it lands.
 
+A map that is a MotionBenchMaker problem (``panda/<scene>/<n>``, ``configs/panda.yaml``)
+also gets ``problems.json`` beside its summary: the scene's 100 problems planned by its
+PNets and by OMPL's RRT-Connect (:mod:`ntq_jax.experiment.problems`); it needs the map's
+run folder (its PNets). For a root of Panda runs the page is "Beyond the paper: a 7-DoF
+arm" (:mod:`ntq_jax.experiment.panda_page`) instead of the paper's tables.
+
 ``--train-seeds 1,2`` also trains the map's PNets again with those training
 seeds on the same data (the datasets are hard-linked from the map's run) and
 writes their summaries to ``<results>/<task>/<map>/seeds/train_seed_<k>/``, for
@@ -31,6 +37,7 @@ code 2.
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import time
 from pathlib import Path
@@ -70,6 +77,7 @@ def _one(
     old = read_summary(out)
     if old is not None and old.get("config_hash") == cfg.hash():
         print(f"[{name}] summary up to date: {out / 'summary.json'}", flush=True)
+        _problems(cfg, name, env, run, out)
         return
     from ntq_jax.experiment.cli import executor_of
 
@@ -87,6 +95,45 @@ def _one(
     )
     path = write_summary(run, name, env, out, command=command)
     print(f"[{name}] done in {time.perf_counter() - t0:.0f} s; summary: {path}", flush=True)
+    _problems(cfg, name, env, run, out)
+
+
+def _problems(cfg, name: str, env, run: Path, out: Path) -> None:
+    """A MotionBenchMaker problem's map: its scene's 100 problems as a third query kind
+    (:mod:`ntq_jax.experiment.problems`), ``<out>/problems.json``. Needs the map's run
+    folder (its PNets); without it (a fresh machine, the summary committed) it is skipped
+    with a note, unless ``problems.json`` is there already."""
+    from ntq_jax import artifacts
+    from ntq_jax.envs import env_slug
+    from ntq_jax.experiment import problems
+    from ntq_jax.experiment.summaries import models_fingerprint
+
+    if problems.scene_of(name) is None:
+        return
+    slug = env_slug(name, env)
+    model_dir = run / "models" / slug
+    target = out / "problems.json"
+    fp = models_fingerprint(model_dir)
+    if target.is_file():
+        if fp is None or json.loads(target.read_text()).get("models_fingerprint") == fp:
+            print(f"[{name}] problems up to date: {target}", flush=True)
+            return
+    if fp is None:
+        print(f"[{name}] problems: no PNets in {model_dir}; skipped", flush=True)
+        return
+    from ntq_jax.models import member_pnets
+    from ntq_jax.training import load_ensemble
+
+    ens = load_ensemble(model_dir)
+    t0 = time.perf_counter()
+    got = problems.evaluate_problems(
+        name, member_pnets(ens), cfg, run / "eval" / slug, model_fingerprint=fp
+    )
+    names = [f"PNet_{m}" for m in range(ens.num_members)]
+    summary = problems.summarize(got, names, cfg.planner.eval_time_budget)
+    summary.update(models_fingerprint=fp, seconds=round(time.perf_counter() - t0, 1))
+    artifacts.write_json(target, summary)
+    print(f"[{name}] problems: {target}", flush=True)
 
 
 def _report(results: Path) -> None:
@@ -164,8 +211,8 @@ def _main(argv) -> int:
         raise UsageError("--check goes with --report-only")
     if args.config is None:
         raise UsageError(
-            "--config is required (configs/point.yaml, configs/rigid.yaml or "
-            "configs/nlink.yaml), unless --report-only"
+            "--config is required (configs/point.yaml, configs/rigid.yaml, "
+            "configs/nlink.yaml or configs/panda.yaml), unless --report-only"
         )
     seeds = _seeds(args.train_seeds)
     check_writable_folder(results, "--results")

@@ -126,3 +126,32 @@ def test_gathered_certified_segments_equal_the_whole_buffer():
     want, _ = jax.jit(whole)(p, n, mask)
     assert 0 < int(np.sum(np.asarray(got))) < int(np.sum(np.asarray(seg)))  # both answers occur
     np.testing.assert_array_equal(np.asarray(got), np.asarray(want))
+
+
+def test_benchmark_problems_as_a_third_query_kind(run, tmp_path):
+    """The scene's MotionBenchMaker problems, each in its own world, planned by every PNet
+    (the run's, stand-ins here for speed: one that steps straight to the goal, one that
+    never moves): each success is a path proven free by the evaluation's check from the
+    problem's start to its goal; the file is reused on a rerun; the summary counts match."""
+    from ntq_jax.experiment import problems
+
+    out, cfg = run
+    straight = lambda key, c, g: g  # noqa: E731
+    still = lambda key, c, g: c  # noqa: E731
+    got = problems.evaluate_problems(
+        ENV, [straight, still], cfg, tmp_path, numbers=[1, 2], peers=(), log=lambda _: None
+    )
+    assert got["neural_success"].shape == (2, 2) and got["valid"].all()
+    assert not got["neural_success"][1].any()  # a PNet that never moves solves nothing
+    for i, n in enumerate([1, 2]):
+        env = nj.make_env(f"panda/box/{n}")
+        direct = bool(np.asarray(env.steer_to(env.query[:1], env.query[1:]))[0])
+        # the straight PNet's plan is the direct motion (steerTo first, then its step)
+        assert bool(got["neural_success"][0, i]) == direct
+    again = problems.evaluate_problems(
+        ENV, [straight, still], cfg, tmp_path, numbers=[1, 2], peers=(), log=None
+    )
+    assert again["fingerprint"] == got["fingerprint"]
+    s = problems.summarize(got, ["PNet_0", "PNet_1"], 2.0)
+    assert s["models"]["PNet_1"]["solved"] == 0 and s["valid"] == 2
+    assert s["models"]["PNet_best-of-2"]["solved"] == int(got["neural_success"][0].sum())

@@ -442,12 +442,23 @@ def render(root, factors=None) -> str:
 
 
 def write(root) -> Path:
-    """Writes ``<root>/REPRODUCTION.md`` (atomically) and returns its path."""
+    """Writes ``<root>/REPRODUCTION.md`` (atomically) and returns its path: the paper's
+    tables, or for a root of Panda runs (``<root>/panda/``) the page of
+    :mod:`ntq_jax.experiment.panda_page`."""
+    from ntq_jax.experiment import panda_page
+
+    if panda_page.is_panda_root(root):
+        return panda_page.write(root)
     return artifacts.write_text(Path(root) / DOC_NAME, render(root))
 
 
 def check(root) -> str | None:
-    """None if ``<root>/REPRODUCTION.md`` is what :func:`render` gives, else why not (one line)."""
+    """None if ``<root>/REPRODUCTION.md`` is what :func:`render` (or, for a root of Panda
+    runs, :func:`ntq_jax.experiment.panda_page.render`) gives, else why not (one line)."""
+    from ntq_jax.experiment import panda_page
+
+    if panda_page.is_panda_root(root):
+        return panda_page.check(root)
     path = Path(root) / DOC_NAME
     current = path.read_text(encoding="utf-8") if path.exists() else None
     if current == render(root):

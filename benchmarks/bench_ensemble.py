@@ -12,11 +12,11 @@ with the run's evaluation options, interleaved, ``--repeats`` times (the
 median is reported; compilation is excluded: every planner is warmed up first
 and any compile time inside a timed call is subtracted):
 
-* ``member m``: :func:`ntq_jax.neural_planner.plan_batch` with member ``m``;
+* ``member m``: :func:`ntq_jax.neural.plan_batch` with member ``m``;
 * ``ens``: the per-step ensemble rule (``plan_batch`` with the members' list);
 * ``members``: every member on every query in one batch
-  (:func:`ntq_jax.neural_planner.plan_members`, what best-of-N plans);
-* ``cascade``: :func:`ntq_jax.neural_planner.plan_cascade` in the run's
+  (:func:`ntq_jax.neural.plan_members`, what best-of-N plans);
+* ``cascade``: :func:`ntq_jax.neural.plan_cascade` in the run's
   validation order (``paths/<env>/validation.npz``; ``0..M-1`` if absent).
 
 Ratios are against the mean member time. Successes are printed for orientation
@@ -37,7 +37,7 @@ def bench_env(run: Path, env_name: str, repeats: int) -> list[dict]:
     import numpy as np
 
     from ntq_jax import make_env
-    from ntq_jax import neural_planner as NP
+    from ntq_jax import neural as NP
     from ntq_jax.envs import env_slug
     from ntq_jax.experiment import config as C
     from ntq_jax.models import member_pnets

@@ -7,7 +7,7 @@ Examples::
     python benchmarks/bench_plan.py --env rigid/0 --env nlink/4 --loop-queries 100
     python benchmarks/bench_plan.py --run runs/point-xxxx --env point/3   # a trained PNet_3
 
-The same compiled planner (:func:`ntq_jax.neural_planner.plan_batch`, the
+The same compiled planner (:func:`ntq_jax.neural.plan_batch`, the
 evaluation options of the config) plans the same test queries (half uniform,
 half non-trivial, padding 0) once as one batch and once one query at a time
 (batch size 1). Compilation is excluded from both (each shape is warmed up
@@ -50,24 +50,45 @@ def _load_source(name: str, src: str):
     return mod
 
 
+#: The neural planner's modules in import order, the one with ``plan_batch`` last: the
+#: ``ntq_jax.neural`` package (issue 51), else the flat modules before it.
+PLANNER_LAYOUTS = (
+    tuple(
+        f"ntq_jax.neural.{m}"
+        for m in ("options", "motions", "proposals", "steps", "repair", "driver")
+    ),
+    (
+        "ntq_jax.neural_options",
+        "ntq_jax.neural_motions",
+        "ntq_jax.neural_steps",
+        "ntq_jax.neural_planner",
+    ),
+)
+
+
 def planner_at(rev: str):
-    """The ``ntq_jax.neural_planner`` module of git revision ``rev``, as a separate module
-    (with that revision's ``ntq_jax.neural_steps``, where it has one)."""
-    src = _git_show(rev, "ntq_jax/neural_planner.py")
-    if src is None:
-        raise SystemExit(f"git revision {rev!r} has no ntq_jax/neural_planner.py")
-    steps = _git_show(rev, "ntq_jax/neural_steps.py")
-    if steps is None:
-        return _load_source(f"neural_planner_{rev}", src)
-    current = sys.modules.get("ntq_jax.neural_steps")
-    sys.modules["ntq_jax.neural_steps"] = _load_source(f"neural_steps_{rev}", steps)
-    try:  # the revision's planner binds the revision's steps at import
-        return _load_source(f"neural_planner_{rev}", src)
+    """The neural planner module (the one with ``plan_batch``) of git revision ``rev``, as a
+    separate module, bound to that revision's other modules of the planner (those it has)."""
+    for names in PLANNER_LAYOUTS:
+        srcs = {n: _git_show(rev, n.replace(".", "/") + ".py") for n in names}
+        if srcs[names[-1]] is not None:
+            break
+    else:
+        raise SystemExit(f"git revision {rev!r} has no neural planner ({PLANNER_LAYOUTS[0][-1]})")
+    import ntq_jax.neural  # noqa: F401  (this tree's package first: the swaps below stay put)
+
+    saved = {n: sys.modules.get(n) for n in names}
+    try:  # each of the revision's modules binds the revision's modules before it at import
+        for n in names:
+            if srcs[n] is not None:
+                sys.modules[n] = _load_source(f"{n.rsplit('.', 1)[-1]}_{rev}", srcs[n])
+        return sys.modules[names[-1]]
     finally:
-        if current is None:
-            del sys.modules["ntq_jax.neural_steps"]
-        else:
-            sys.modules["ntq_jax.neural_steps"] = current
+        for n, mod in saved.items():
+            if mod is None:
+                sys.modules.pop(n, None)
+            else:
+                sys.modules[n] = mod
 
 
 def _options(mod, cfg):
@@ -84,7 +105,7 @@ def against(env, pnet, q, key, cfg, other, repeats: int) -> dict:
     import jax
     import numpy as np
 
-    from ntq_jax import neural_planner as current
+    from ntq_jax.neural import driver as current
 
     times = {"current": [], "other": []}
     for mod in (current, other):  # compile both first
@@ -118,7 +139,7 @@ def bench(
     from ntq_jax.envs import env_slug
     from ntq_jax.experiment import config as C
     from ntq_jax.models import member_pnets
-    from ntq_jax.neural_planner import plan_batch
+    from ntq_jax.neural import plan_batch
 
     env = make_env(env_name)
     if run is not None:

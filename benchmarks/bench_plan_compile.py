@@ -38,7 +38,11 @@ _CHILD = r"""
 import hashlib, json, sys, time
 from pathlib import Path
 import jax, numpy as np
-from ntq_jax import make_env, neural_planner as NP
+from ntq_jax import make_env
+try:
+    from ntq_jax import neural as NP
+except ImportError:  # a checkout from before the ntq_jax.neural package (issue 51)
+    from ntq_jax import neural_planner as NP
 from ntq_jax.experiment import config as C
 from ntq_jax.envs import env_slug
 from ntq_jax.models import member_pnets

@@ -8,6 +8,11 @@ Public API (stable):
 * :func:`plan` ``(env, queries, planner="astar" | "visgraph" | "bitstar" | "roadmap", **options)``
   -> :class:`PlanResult` (paths, lengths, costs, :class:`PlanStatus` per query);
   :func:`register_planner`; :class:`PlanCause` (the neural planner's outcomes).
+* :func:`plan_batch` ``(env, pnet, queries, key, PlannerOptions(...))`` ->
+  :class:`NeuralPlanResult`: the neural planner of the paper (Alg. 1) with a PNet
+  ``pnet(key, current, goal) -> next``, or a list of PNets (the ensemble planner);
+  :func:`plan_members` (every PNet on its own, all in one batch) and
+  :func:`plan_cascade` (the PNets as fallbacks).
 """
 
 from __future__ import annotations
@@ -20,6 +25,13 @@ from ntq_jax.version import __version__
 if TYPE_CHECKING:  # the names below, for type checkers and the API docs
     from ntq_jax.envs import Env, EnvError, make_env
     from ntq_jax.geometry import World
+    from ntq_jax.neural import (
+        NeuralPlanResult,
+        PlannerOptions,
+        plan_batch,
+        plan_cascade,
+        plan_members,
+    )
     from ntq_jax.planners import PlanResult, plan, register_planner
     from ntq_jax.presets import PAPER_GAMMA, PRESETS
     from ntq_jax.queries import NON_TRIVIAL, NT_EXHAUSTED, UNIFORM, FreeSpaceTooSmall, GammaEstimate
@@ -35,6 +47,11 @@ _EXPORTS = {
     "PlanResult": "ntq_jax.planners",
     "plan": "ntq_jax.planners",
     "register_planner": "ntq_jax.planners",
+    "plan_batch": "ntq_jax.neural",
+    "plan_members": "ntq_jax.neural",
+    "plan_cascade": "ntq_jax.neural",
+    "PlannerOptions": "ntq_jax.neural",
+    "NeuralPlanResult": "ntq_jax.neural",
     "PRESETS": "ntq_jax.presets",
     "PAPER_GAMMA": "ntq_jax.presets",
     "GammaEstimate": "ntq_jax.queries",
@@ -63,6 +80,11 @@ __all__ = [
     "PlanStatus",
     "PlanCause",
     "register_planner",
+    "plan_batch",
+    "plan_members",
+    "plan_cascade",
+    "PlannerOptions",
+    "NeuralPlanResult",
     "__version__",
 ]
 

@@ -93,7 +93,7 @@ def plan_one(
 
     from ntq_jax.experiment import config as C
     from ntq_jax.models import member_pnets
-    from ntq_jax.neural_planner import plan_batch
+    from ntq_jax.neural import plan_batch
     from ntq_jax.training import CheckpointError, load_ensemble
 
     run = Path(run)

@@ -202,7 +202,7 @@ def test_the_config_maps_onto_the_cores_options():
     says, and a config's per-env settings reach them."""
     from ntq_jax.data import DataOptions
     from ntq_jax.models import ModelConfig
-    from ntq_jax.neural_options import PlannerOptions
+    from ntq_jax.neural import PlannerOptions
     from ntq_jax.training import TrainConfig
 
     base = config.load(None)

@@ -5,7 +5,7 @@
   ``pnet_calls`` counts the four members' predictions), with stochastic
   (dropout-like) stand-ins and with real PNets, through replanning and the
   bidirectional coarse plan.
-* The rule (:func:`ntq_jax.neural_steps.choose`) on hand-made candidates, and the
+* The rule (:func:`ntq_jax.neural.proposals.choose`) on hand-made candidates, and the
   ensemble of a useless and a good member planning like the good one.
 * Best-of-N (:func:`ntq_jax.experiment.metrics.best_of`): never costlier than any member's
   successful path on a query, succeeds iff some member succeeds.
@@ -23,8 +23,7 @@ from test_neural_planner import OPTS, ORACLE, SEEKER, STAY, make, optimum, pnet,
 from ntq_jax import make_env, models
 from ntq_jax.experiment import metrics as M
 from ntq_jax.models import ModelConfig
-from ntq_jax.neural_planner import PlannerOptions, plan_batch
-from ntq_jax.neural_steps import choose
+from ntq_jax.neural import PlannerOptions, choose, plan_batch
 from ntq_jax.types import PlanCause
 
 FIELDS = ("paths", "lengths", "success", "costs", "cause", "replans")
@@ -275,7 +274,7 @@ def test_group_chunks_of_one_group_are_padded_chunks():
 def test_plan_members_equals_each_member_alone(real):
     """Members side by side in one batch plan exactly like each member alone, with its key
     (stand-ins: the per-member loop; real PNets of one ensemble: the vmapped members)."""
-    from ntq_jax.neural_planner import plan_members
+    from ntq_jax.neural import plan_members
 
     if real:
         env, q = _point2()
@@ -309,7 +308,7 @@ def test_plan_members_equals_each_member_alone(real):
 
 
 def test_cascade_keeps_the_first_success_and_replans_only_the_failures():
-    from ntq_jax.neural_planner import plan_cascade
+    from ntq_jax.neural import plan_cascade
 
     env = make("wall")
     q = np.asarray(
@@ -355,8 +354,7 @@ def test_cascade_keeps_the_first_success_and_replans_only_the_failures():
 def test_cascade_compiles_nothing_beyond_its_members_programs():
     """Each attempt plans its (smaller) batch with the whole batch's shapes: once every
     member planned the K queries on its own, the cascade adds no compiled stage."""
-    from ntq_jax import neural_steps
-    from ntq_jax.neural_planner import plan_cascade
+    from ntq_jax.neural import plan_cascade, steps
 
     env = make("wall")
     q = np.asarray(
@@ -378,9 +376,9 @@ def test_cascade_compiles_nothing_beyond_its_members_programs():
     key = jax.random.key(4)
     for net in nets:
         plan_batch(env, net, q, key, OPTS)
-    before = set(neural_steps._COMPILED)
+    before = set(steps._COMPILED)
     res = plan_cascade(env, nets, q, key, OPTS)
-    assert set(neural_steps._COMPILED) <= before
+    assert set(steps._COMPILED) <= before
     assert len(np.unique(res.member)) > 1  # later members did plan smaller batches
     with pytest.raises(ValueError, match="rows"):
         plan_batch(env, nets[0], q, key, OPTS, rows=0)

@@ -30,8 +30,9 @@ from shapely.geometry import box as shapely_box
 from shapely.ops import unary_union
 
 from ntq_jax import Env
-from ntq_jax.neural_planner import PlannerOptions, plan_batch, repair_windows, splice
-from ntq_jax.neural_steps import contract
+from ntq_jax.neural import PlannerOptions, plan_batch
+from ntq_jax.neural.repair import repair_windows, splice
+from ntq_jax.neural.steps import contract
 from ntq_jax.planners.visgraph import VisGraph
 from ntq_jax.robots.batch import steer_to_cm
 from ntq_jax.types import PlanCause
@@ -538,9 +539,9 @@ def _stay(key, current, goal):
 
 
 def test_compiled_stages_are_bounded(monkeypatch):
-    from ntq_jax import neural_steps
+    from ntq_jax.neural import steps
 
-    monkeypatch.setattr(neural_steps, "COMPILED_CACHE_SIZE", 2)
+    monkeypatch.setattr(steps, "COMPILED_CACHE_SIZE", 2)
     env = make("straight")
     q = np.asarray([[[1, 2], [9, 8]]], np.float32)
     # three option sets the tests above compile too (stand-ins, BATCH rows): the bound is
@@ -555,9 +556,9 @@ def test_compiled_stages_are_bounded(monkeypatch):
     assert len({o.for_stage("coarse") for o in sets}) == 3
     for opts in sets:  # the coarse stage, then the shared check stage
         res = plan_batch(env, pnet("straight", STAY), q, jax.random.key(0), opts, rows=BATCH)
-        assert res.success[0] and len(neural_steps._COMPILED) <= 2
+        assert res.success[0] and len(steps._COMPILED) <= 2
     # the least recently used went first: the first two coarse stages
-    assert [s[:3] for s in neural_steps._COMPILED] == [
+    assert [s[:3] for s in steps._COMPILED] == [
         ("coarse", env.robot, sets[2].for_stage("coarse")),
         ("check", env.robot, sets[0].for_stage("check")),
     ]
@@ -566,19 +567,19 @@ def test_compiled_stages_are_bounded(monkeypatch):
 def test_check_stage_compiles_once_for_every_batch_size():
     """The contraction and feasibility check run on CHECK_ROWS paths per call, so batches of
     other sizes (the cascade's fallbacks) reuse its one compilation; results are per row."""
-    from ntq_jax import neural_steps
+    from ntq_jax.neural import steps
 
     env = make("wall")
     opts = PlannerOptions(n_plan=12, replan_rounds=0, replan_steps=8)  # as the tests above
     rng = np.random.default_rng(3)
     q = rng.uniform(0.5, 9.5, (300, 2, 2)).astype(np.float32)
-    neural_steps._COMPILED.clear()
+    steps._COMPILED.clear()
     big = plan_batch(env, _stay, q, jax.random.key(0), opts)
     small = plan_batch(env, _stay, q[:5], jax.random.key(0), opts)
-    checks = [s for s in neural_steps._COMPILED if s[0] == "check"]
-    coarse = [s for s in neural_steps._COMPILED if s[0] == "coarse"]
+    checks = [s for s in steps._COMPILED if s[0] == "check"]
+    coarse = [s for s in steps._COMPILED if s[0] == "coarse"]
     assert len(checks) == 1 and len(coarse) == 2
-    assert (neural_steps.CHECK_ROWS,) in [shape for shape, _ in checks[0][-1]]  # the mask
+    assert (steps.CHECK_ROWS,) in [shape for shape, _ in checks[0][-1]]  # the mask
     assert 0 < big.success.sum() < len(q)  # both kinds of rows
     np.testing.assert_array_equal(small.success, big.success[:5])
     np.testing.assert_array_equal(small.lengths, big.lengths[:5])
@@ -603,16 +604,16 @@ def test_each_stage_reads_only_the_options_in_its_compile_key(monkeypatch):
     """Every stage, traced with options that record their reads, reads only the fields of
     ``STAGE_FIELDS`` (the rest are left out of its compile key), on every path through the
     planner: steerTo, each nosteer_check, bidirectional, the l2 goal test, no contraction."""
-    from ntq_jax import neural_steps
-    from ntq_jax.neural_options import STAGE_FIELDS
+    from ntq_jax.neural import steps
+    from ntq_jax.neural.options import STAGE_FIELDS
 
     cores = {
-        "coarse": neural_steps.coarse_core,
-        "valid": neural_steps.valid_core,
-        "connect": neural_steps.connect_core,
-        "check": neural_steps.check_core,
+        "coarse": steps.coarse_core,
+        "valid": steps.valid_core,
+        "connect": steps.connect_core,
+        "check": steps.check_core,
     }
-    for_stage, compiled = PlannerOptions.for_stage, neural_steps._compiled
+    for_stage, compiled = PlannerOptions.for_stage, steps._compiled
     reads = {name: set() for name in cores}
 
     def spy(name, args):
@@ -622,7 +623,7 @@ def test_each_stage_reads_only_the_options_in_its_compile_key(monkeypatch):
         return compiled(name, (args[0], for_stage(proxy.opts, name)) + args[2:])
 
     monkeypatch.setattr(PlannerOptions, "for_stage", lambda self, stage: _Reads(self))
-    monkeypatch.setattr(neural_steps, "_compiled", spy)
+    monkeypatch.setattr(steps, "_compiled", spy)
     s, g = (2.0, 5.0), (8.0, 5.0)
     kw = dict(jump=((s, g, (7.3, 5.0)), NO_JUMP))
     nosteer = dict(n_plan=12, steer=False, delta=1.0)

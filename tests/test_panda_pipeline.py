@@ -23,7 +23,7 @@ import pytest
 import ntq_jax as nj
 from ntq_jax.data import load_datasets
 from ntq_jax.experiment.pipeline import load_config, prepare_run, run_pipeline
-from ntq_jax.neural_motions import segments, steer
+from ntq_jax.neural.motions import segments, steer
 
 ROOT = Path(__file__).resolve().parents[1]
 ENV = "panda/box/1"
@@ -93,7 +93,7 @@ def test_table_has_the_four_pnets(run):
 
 
 def test_gathered_certified_segments_equal_the_whole_buffer():
-    """neural_motions.segments checks only the existing segments with the certified check
+    """neural.motions.segments checks only the existing segments with the certified check
     (gathered, in chunks): the same answers as checking the whole masked buffer. On the
     point robot, whose certified check is cheap to compile; the gathering is the robot's
     business nowhere."""

@@ -50,7 +50,7 @@ from ntq_jax.experiment.sections import (
     validate_mode,
 )
 from ntq_jax.models import ModelConfig
-from ntq_jax.neural_options import PlannerOptions
+from ntq_jax.neural.options import PlannerOptions
 from ntq_jax.planners.jobs import PlannerSettings
 from ntq_jax.training.config import TrainConfig
 
@@ -400,7 +400,7 @@ def train_args(cfg: Config) -> dict:
 
 
 def neural_options(ev: EvalConfig, steer: bool | None = None) -> PlannerOptions:
-    """The neural planner's :class:`~ntq_jax.neural_options.PlannerOptions` of ``ev``
+    """The neural planner's :class:`~ntq_jax.neural.options.PlannerOptions` of ``ev``
     (``steer`` overrides its first entry)."""
     return PlannerOptions(
         n_plan=ev.n_plan,

@@ -5,18 +5,18 @@ test queries (keys derived from the run seed with a tag no other stage uses, so
 they are disjoint from the training queries), solved by the classical reference
 planner (the task's planner on the evaluation geometry, padding 0, at the
 evaluation budget) and, for point robots, by the exact visibility graph; then by
-the neural planner (:mod:`ntq_jax.neural_planner`) with every ensemble member,
+the neural planner (:mod:`ntq_jax.neural`) with every ensemble member,
 with and/or without steerTo (``config.eval.steer``), and (``config.eval.ensemble``,
 with at least two members, when every member is evaluated) rows of the
 members together, measured the same way on the same queries:
 
 * ``PNet_ens``: the ensemble neural planner (every member proposes each next
-  state, a fixed rule picks one: :func:`ntq_jax.neural_steps.choose`), planned
+  state, a fixed rule picks one: :func:`ntq_jax.neural.proposals.choose`), planned
   with its own key;
 * ``PNet_best-of-<N>``: per query the cheapest successful path of the N members'
   own plans (:func:`best_of`), from their saved paths files without replanning;
 * ``PNet_cascade``: the members as fallbacks
-  (:func:`ntq_jax.neural_planner.plan_cascade`), in the order of their success
+  (:func:`ntq_jax.neural.driver.plan_cascade`), in the order of their success
   on validation queries (:func:`validation_order`): best-of-N's successes at
   about one member's work plus the fallbacks' on the failures.
 
@@ -70,11 +70,12 @@ import jax
 import numpy as np
 
 from ntq_jax import artifacts
-from ntq_jax import neural_planner as NP
+from ntq_jax import neural as NP
 from ntq_jax.envs import env_slug
 from ntq_jax.experiment import config as C
 from ntq_jax.experiment.metrics import band_metrics, best_of, in_band, metrics
 from ntq_jax.models import member_pnets
+from ntq_jax.neural.options import ALGORITHM_VERSION
 from ntq_jax.planners import plan, visgraph
 from ntq_jax.planners.jobs import plan_pool, planner_options, resolve_planner
 from ntq_jax.types import QUERY_KINDS, TASK_OF_ROBOT
@@ -395,7 +396,7 @@ def _cell(
         kind,
         steer,
         str(ctx.ref["fingerprint"]),
-        NP.ALGORITHM_VERSION,
+        ALGORITHM_VERSION,
         *extra,
         *([] if order is None else [list(map(int, order))]),
     )
@@ -414,7 +415,7 @@ def _best_cell(ctx: _EnvEval, members: list[dict], kind: str, steer) -> dict:
         kind,
         steer,
         str(ctx.ref["fingerprint"]),
-        NP.ALGORITHM_VERSION,
+        ALGORITHM_VERSION,
         [str(z["fingerprint"]) for z in members],
     )
 
@@ -441,7 +442,7 @@ def validation_order(ctx: _EnvEval, pnets: list, steer) -> list[int]:
     cfg = ctx.cfg
     f = Path(ctx.run_dir) / "paths" / ctx.slug / f"validation{'' if steer else '_nosteer'}.npz"
     fp = artifacts.fingerprint(
-        cfg.hash(), ctx.slug, "validation", steer, len(pnets), NP.ALGORITHM_VERSION
+        cfg.hash(), ctx.slug, "validation", steer, len(pnets), ALGORITHM_VERSION
     )
 
     def compute():

@@ -15,7 +15,7 @@ import typing
 from typing import Optional
 
 from ntq_jax.errors import check_config as _check
-from ntq_jax.neural_options import NOSTEER_CHECKS
+from ntq_jax.neural.options import NOSTEER_CHECKS
 
 __all__ = [
     "SamplingConfig",
@@ -434,13 +434,13 @@ class EvalConfig:
         ensemble: the ensemble rows evaluated beside the members' (needs at least two
             members): ``ens`` is the ensemble neural planner (``PNet_ens``: every
             member proposes each next state and a fixed rule picks one; see
-            :mod:`ntq_jax.neural_planner`), ``best`` the best-of-N baseline
+            :mod:`ntq_jax.neural.driver`), ``best`` the best-of-N baseline
             (``PNet_best-of-<N>``: per query the cheapest successful path of the N
             members' own plans, computed from their saved results without
             replanning, timed as the sum of their planning times), ``cascade`` the
             members as fallbacks (``PNet_cascade``: the member with the best success
             on validation queries plans every query, the next the ones still
-            unsolved, and so on; :func:`ntq_jax.neural_planner.plan_cascade`).
+            unsolved, and so on; :func:`ntq_jax.neural.driver.plan_cascade`).
             ``null`` (default) is all three, ``[ens, best, cascade]``; ``[]``
             evaluates the members only. Left out of the config hash when null, so
             run folders made before the option existed are reopened (and get the

@@ -22,7 +22,7 @@ metric and a :class:`ntq_jax.types.PlanCause` (names in
 planner asks for a next state (every coarse-plan step, every step of a
 bidirectional connection, so also neural replanning) every member predicts
 from the same key, current state and target, in one jitted call, and
-:func:`ntq_jax.neural_steps.choose` picks one by a fixed rule: a candidate
+:func:`ntq_jax.neural.proposals.choose` picks one by a fixed rule: a candidate
 whose steerTo to the target is free first (the cheapest path ``current ->
 candidate -> target`` among them, those also reachable from the current state
 first), else the one that most reduces the remaining cost-to-go in the
@@ -38,13 +38,14 @@ robot: it only uses the robot's kernels (:mod:`ntq_jax.robots.batch`) and the
 package's path shortcutting (:mod:`ntq_jax.planners.smoothing`). The
 algorithm (coarse plan, lazy states contraction, feasibility check, neural
 replanning; the variant without steerTo) is described step by step in
-:func:`plan_batch`; its jitted steps are in :mod:`ntq_jax.neural_steps`, this
-module drives them over chunks of queries (throughput: ``benchmarks/bench_plan.py``).
+:func:`plan_batch`; its jitted steps are in :mod:`ntq_jax.neural.steps`, this
+module and :mod:`ntq_jax.neural.repair` (neural replanning's windows and splices, the
+per-query state of a batch) drive them over chunks of queries (throughput:
+``benchmarks/bench_plan.py``).
 """
 
 from __future__ import annotations
 
-import dataclasses
 from typing import Callable
 
 import jax
@@ -52,132 +53,21 @@ import jax.numpy as jnp
 import numpy as np
 from jax.tree_util import Partial
 
-from ntq_jax.batching import bucket_size, group_chunks, pad_rows, padded_chunks
+from ntq_jax.batching import bucket_size, group_chunks, pad_rows
 from ntq_jax.geometry import World
-from ntq_jax.neural_options import ALGORITHM_VERSION, DELTA_NORMS, NeuralPlanResult, PlannerOptions  # noqa: F401
-from ntq_jax.neural_steps import (
-    CHECK_ROWS,
-    EnsemblePNet,
-    MemberBlocks,
-    Stages,
-    cost_jit,
-    fold_in,
-    is_key_stack,
-    split2,
-)
+from ntq_jax.neural.options import NeuralPlanResult, PlannerOptions
+from ntq_jax.neural.proposals import EnsemblePNet, MemberBlocks, fold_in, is_key_stack, split2
+from ntq_jax.neural.repair import _Batch, _recheck, _replan_round
+from ntq_jax.neural.steps import Stages, cost_jit
 from ntq_jax.types import CAUSE_RANK, PlanCause
 from ntq_jax.validation import check_count
 
 Array = jax.Array
 
-# ---------------------------------------------------------------------------
-# Host side: windows, splices and the per-query state of a batch
-# ---------------------------------------------------------------------------
-
-
-def repair_windows(blocked: np.ndarray, ok: np.ndarray, n: int) -> list[tuple[int, int]]:
-    """The windows ``(ia, ib)`` one replanning round reconnects in a path, last first.
-
-    Take the last blocked segment ``(k, k+1)`` not yet covered, widen it to the
-    nearest states not in collision (``ia <= k`` and ``ib > k``; the start and
-    the goal are always valid), and continue left of ``min(ia, k)``. Windows never
-    overlap (neighbours may share an end state), so splicing them right to left
-    never moves a window still to splice, and all of them can be connected at once.
-
-    Args:
-        blocked: ``(L-1,)`` blocked segments of the path.
-        ok: ``(L,)`` validity of its states (False beyond its end).
-        n: its length.
-    """
-    length = ok.shape[0]
-    segs = np.flatnonzero(blocked[: max(n - 1, 0)])
-    good = np.flatnonzero(ok[:n])
-    out, cursor = [], length
-    for k in segs[::-1]:
-        if k >= cursor:
-            continue
-        left = good[good <= k]
-        right = good[good > k]
-        ia = int(left[-1]) if len(left) else 0
-        ib = min(int(right[0]) if len(right) else length, n - 1)
-        out.append((ia, ib))
-        cursor = min(ia, int(k))
-    return out
-
-
-def splice(path: np.ndarray, n: int, ia: int, ib: int, sub: np.ndarray):
-    """``path[:ia] + sub + path[ib+1:n]`` NaN-padded to ``len(path)`` rows, and its length.
-
-    The states ``ia..ib`` of the first ``n`` are replaced by ``sub`` (which runs
-    from ``path[ia]`` to ``path[ib]``). Returns ``(new_path, new_length)``, or
-    None when the result would not fit in ``len(path)`` rows.
-    """
-    nn = n - (ib - ia + 1) + len(sub)
-    if nn > path.shape[0]:
-        return None
-    out = np.full_like(path, np.nan)
-    out[:ia] = path[:ia]
-    out[ia : ia + len(sub)] = sub
-    out[ia + len(sub) : nn] = path[ib + 1 : n]
-    return out, nn
-
-
-@dataclasses.dataclass
-class _Batch:
-    """The per-query state of a :func:`plan_batch` call (host arrays, updated stage by stage).
-
-    With several members (:func:`plan_members`) the rows are ``members`` blocks of
-    the same ``K`` queries, one block per member.
-    """
-
-    paths: np.ndarray  # (K, L, d) float32, NaN padded
-    lengths: np.ndarray  # (K,) int32
-    valid: np.ndarray  # (K,) bool: start and goal valid on the evaluation geometry
-    reached: np.ndarray  # (K,) bool: the coarse plan reached the goal
-    feasible: np.ndarray  # (K,) bool: every segment free on the evaluation geometry
-    blocked: np.ndarray  # (K, L-1) bool: segments in collision
-    calls: np.ndarray  # (K,) int32 PNet predictions
-    replans: np.ndarray  # (K,) int32 replanning rounds
-    members: int = 1  # planners side by side: rows m*K/M.. (m+1)*K/M-1 are member m's
-
-    @staticmethod
-    def empty(k: int, length: int, d: int, members: int = 1) -> "_Batch":
-        return _Batch(
-            np.full((k, length, d), np.nan, np.float32),
-            np.zeros(k, np.int32),
-            np.zeros(k, bool),
-            np.zeros(k, bool),
-            np.zeros(k, bool),
-            np.zeros((k, length - 1), bool),
-            np.zeros(k, np.int32),
-            np.zeros(k, np.int32),
-            members,
-        )
-
-    def cause(self) -> np.ndarray:
-        """``(K,)`` int8 :class:`PlanCause` of every query."""
-        success = self.reached & self.feasible
-        return np.where(
-            ~self.valid,
-            PlanCause.INVALID_QUERY,
-            np.where(
-                ~self.reached,
-                PlanCause.NO_PATH,
-                np.where(success, PlanCause.SUCCESS, PlanCause.INFEASIBLE),
-            ),
-        ).astype(np.int8)
-
 
 # ---------------------------------------------------------------------------
 # The stages of plan_batch
 # ---------------------------------------------------------------------------
-
-
-def _member_rows(b: _Batch, rows: np.ndarray) -> list[np.ndarray]:
-    """Positions in ``rows`` (batch rows) of each member's rows, in order (one group per member)."""
-    k = b.paths.shape[0] // b.members
-    who = np.asarray(rows) // k
-    return [np.flatnonzero(who == m) for m in range(b.members)]
 
 
 def _coarse(stages: Stages, b: _Batch, q: np.ndarray, key, size: int) -> None:
@@ -198,80 +88,6 @@ def _coarse(stages: Stages, b: _Batch, q: np.ndarray, key, size: int) -> None:
         for dst, src in zip((b.paths, b.lengths, b.valid, b.reached, b.calls), out):
             dst[rows[act]] = src[act]
     _recheck(stages, b, np.flatnonzero(b.reached))
-
-
-def _window_validity(stages: Stages, b: _Batch, todo: np.ndarray, width: int) -> np.ndarray:
-    """``(len(todo), L)`` validity of the states of the paths ``todo``."""
-    ok = np.zeros((len(todo), b.paths.shape[1]), bool)
-    for lo, m, (sel,), _ in padded_chunks([np.arange(len(todo))], width):
-        (o,) = stages("valid", jnp.asarray(b.paths[todo[sel]]), jnp.asarray(b.lengths[todo[sel]]))
-        ok[lo : lo + m] = o[:m]
-    return ok
-
-
-def _reconnect(stages: Stages, b: _Batch, rows, wa, wb, key, width: int):
-    """Neural connections of the windows ``paths[rows, wa] -> paths[rows, wb]``.
-
-    Each member's windows are connected by its own PNet, ``width`` of each per call.
-    Returns ``(sub, ns, connected)``; the PNet calls are added to ``b.calls``.
-    """
-    d = b.paths.shape[2]
-    sub = np.zeros((len(rows), stages.opts.replan_steps + 2, d), np.float32)
-    ns = np.zeros(len(rows), np.int64)
-    conn = np.zeros(len(rows), bool)
-    a, z = b.paths[rows, wa], b.paths[rows, wb]
-    for lo, sel, mask in group_chunks(_member_rows(b, rows), width):
-        o = stages(
-            "connect",
-            stages.pnet,
-            fold_in(key, lo // width),
-            jnp.asarray(a[sel]),
-            jnp.asarray(z[sel]),
-            jnp.asarray(mask),
-        )
-        part = sel[mask]
-        sub[part], ns[part], conn[part] = o[0][mask], o[1][mask], o[2][mask]
-        np.add.at(b.calls, rows[part], o[3][mask])
-    return sub, ns, conn
-
-
-def _recheck(stages: Stages, b: _Batch, todo: np.ndarray) -> None:
-    """Contraction and feasibility check of the paths ``todo`` (:data:`CHECK_ROWS` per call)."""
-    for lo, m, (sel,), mask in padded_chunks([np.arange(len(todo))], CHECK_ROWS):
-        o = stages(
-            "check",
-            jnp.asarray(b.paths[todo[sel]]),
-            jnp.asarray(b.lengths[todo[sel]]),
-            jnp.asarray(mask),
-        )
-        idx = todo[lo : lo + m]
-        b.paths[idx], b.lengths[idx], b.feasible[idx], b.blocked[idx] = (x[:m] for x in o)
-
-
-def _replan_round(stages: Stages, b: _Batch, todo: np.ndarray, key, width: int) -> None:
-    """Step 4, one round on the infeasible paths ``todo``.
-
-    The windows of every blocked segment of every path in ``todo``
-    (:func:`repair_windows`) are reconnected in one batch of neural connections
-    (chunks of ``width``), spliced in right to left (:func:`splice`; a splice that
-    would overflow the path buffer is skipped), and the paths contracted and
-    checked again.
-    """
-    ok = _window_validity(stages, b, todo, width)
-    wins = [
-        (i, ia, ib)
-        for j, i in enumerate(todo)
-        for ia, ib in repair_windows(b.blocked[i], ok[j], int(b.lengths[i]))
-    ]
-    rows, wa, wb = np.array(wins, np.int64).reshape(-1, 3).T
-    sub, ns, conn = _reconnect(stages, b, rows, wa, wb, key, width)
-    for w in np.flatnonzero(conn):  # each path's windows are listed last first
-        i = rows[w]
-        out = splice(b.paths[i], int(b.lengths[i]), wa[w], wb[w], sub[w, : ns[w]])
-        if out is not None:
-            b.paths[i], b.lengths[i] = out
-    _recheck(stages, b, todo)
-    b.replans[todo] += 1
 
 
 def _costs(robot, b: _Batch, success: np.ndarray) -> np.ndarray:
@@ -298,7 +114,7 @@ def as_pnet(pnet) -> Partial | EnsemblePNet:
     arguments, e.g. the parameters, are traced; only the function is part of the
     compile key), so build PNets as ``Partial(apply_fn, params)`` to share one
     compilation across ensemble members. A list or tuple of PNets becomes an
-    :class:`ntq_jax.neural_steps.EnsemblePNet` (the ensemble planner; one PNet
+    :class:`ntq_jax.neural.proposals.EnsemblePNet` (the ensemble planner; one PNet
     alone is that PNet).
 
     Raises:
@@ -378,7 +194,7 @@ def plan_batch(
 
     The planner's own ``steerTo`` calls use ``plan_padding``. With a sequence of
     PNets (the ensemble planner, see the module docstring) every prediction
-    above is every member's, chosen by :func:`ntq_jax.neural_steps.choose`.
+    above is every member's, chosen by :func:`ntq_jax.neural.proposals.choose`.
 
     Args:
         env: a :class:`ntq_jax.Env` (any robot).
@@ -424,7 +240,7 @@ def plan_members(
 
     The result of member ``m`` is the one :func:`plan_batch` returns for
     ``pnets[m]`` with key ``key[m]`` (or ``key``, when one key is given for all):
-    the members' rows are planned side by side (:class:`ntq_jax.neural_steps.
+    the members' rows are planned side by side (:class:`ntq_jax.neural.proposals.
     MemberBlocks`: each jitted call carries ``chunk`` rows of every member and
     each member predicts for its own rows), which only changes how the work is
     batched, not what is computed. This is what a best-of-N planner runs

@@ -1,4 +1,4 @@
-"""The neural planner's motion checks inside its jitted steps (:mod:`ntq_jax.neural_steps`).
+"""The neural planner's motion checks inside its jitted steps (:mod:`ntq_jax.neural.steps`).
 
 :func:`steer` is the planner's steerTo on row-major pairs; :func:`segments` checks
 every segment of a batch of NaN-padded paths. A path buffer has room for the

@@ -1,7 +1,7 @@
 """The neural planner's contract: its options (:class:`PlannerOptions`) and its per-query results
 (:class:`NeuralPlanResult`).
 
-:mod:`ntq_jax.neural_planner` takes the one and returns the other.
+:mod:`ntq_jax.neural.driver` takes the one and returns the other.
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ NOSTEER_CHECKS = (True, False, "states", "replan")
 
 
 #: The :class:`PlannerOptions` fields each compiled stage of the neural planner reads
-#: (:mod:`ntq_jax.neural_steps`; a test traces each stage and checks it reads no other).
+#: (:mod:`ntq_jax.neural.steps`; a test traces each stage and checks it reads no other).
 STAGE_FIELDS = {
     "coarse": (
         "n_plan",

@@ -1,4 +1,4 @@
-"""Paired comparisons (ntq_jax.stats) and their report (ntq_jax.experiment.report.comparisons):
+"""Paired comparisons (ntq_jax.stats) and their report (ntq_jax.experiment.paired.comparisons):
 McNemar's exact test against scipy and a hand-computed case, the coverage of Newcombe's
 paired interval and of the paired bootstrap in seeded simulations, the bootstrap's
 determinism per seed, the Wilcoxon edge cases, and the comparison table of a small
@@ -16,6 +16,7 @@ from scipy.stats import binomtest, wilcoxon
 
 from ntq_jax import stats as S
 from ntq_jax.artifacts import save_npz
+from ntq_jax.experiment import paired as P
 from ntq_jax.experiment import report as R
 
 # ---------------------------------------------------------------------------
@@ -235,7 +236,7 @@ def _synthetic_run(tmp_path):
 
 def test_report_shows_the_paired_comparisons(tmp_path):
     rows = _synthetic_run(tmp_path)
-    assert ("PNet_ens", R.BEST_MEMBER) in R.DEFAULT_PAIRS  # the ensemble vs its best member
+    assert ("PNet_ens", P.BEST_MEMBER) in P.DEFAULT_PAIRS  # the ensemble vs its best member
     R.write_report(tmp_path, [r for r in rows], figures=False)
     md = (tmp_path / "tables.md").read_text()
     assert "Detail, paired comparisons" in md
@@ -253,7 +254,7 @@ def test_report_shows_the_paired_comparisons(tmp_path):
     assert c["cost_ratio_diff"] == pytest.approx(1.1 - 1.2)
     assert c["wilcoxon_p"] < 0.05 and c["cost_n"] == c["both"]
     ens = [c for c in comps if c["model"] == "PNet_ens"]
-    assert {c["baseline_rule"] for c in ens} == {R.BEST_MEMBER}
+    assert {c["baseline_rule"] for c in ens} == {P.BEST_MEMBER}
     assert all(c["cost_ratio_diff"] == pytest.approx(0.0) and c["wilcoxon_p"] is None for c in ens)
     # results.csv: each row's first comparison in the vs_* columns
     lines = list(csv.DictReader(io.StringIO((tmp_path / "results.csv").read_text())))
@@ -269,14 +270,14 @@ def test_comparisons_leave_out_what_they_cannot_pair(tmp_path):
     rows = _synthetic_run(tmp_path)
     (tmp_path / rows[0]["paths_file"]).unlink()  # PNet_0 uniform
     with pytest.warns(UserWarning, match="1 paths file"):
-        comps = R.comparisons(tmp_path, rows, n_boot=100)
+        comps = P.comparisons(tmp_path, rows, n_boot=100)
     assert {(c["model"], c["query_kind"]) for c in comps} == {
         (f"PNet_{m}", "nontrivial") for m in (1, 2, 3)
     } | {  # the ensemble vs PNet_3: both kinds
         ("PNet_ens", k) for k in ("uniform", "nontrivial")
     }
     # a baseline absent from the rows, and a model against itself: nothing
-    assert R.comparisons(tmp_path, rows, [("PNet_1", "PNet_9"), ("PNet_1", "PNet_1")]) == []
-    assert R.best_member({r["model"]: r for r in rows if r["query_kind"] == "uniform"}) == "PNet_3"
+    assert P.comparisons(tmp_path, rows, [("PNet_1", "PNet_9"), ("PNet_1", "PNet_1")]) == []
+    assert P.best_member({r["model"]: r for r in rows if r["query_kind"] == "uniform"}) == "PNet_3"
     tie = {m: {"successes": 5} for m in ("PNet_2", "PNet_1", "PNet_ens")}
-    assert R.best_member(tie) == "PNet_1" and R.best_member({"PNet_ens": {"successes": 1}}) is None
+    assert P.best_member(tie) == "PNet_1" and P.best_member({"PNet_ens": {"successes": 1}}) is None

@@ -5,8 +5,9 @@
 * :mod:`~ntq_jax.experiment.pipeline`: data -> training -> evaluation -> report, resumable;
 * :mod:`~ntq_jax.experiment.evaluate` (+ :mod:`~ntq_jax.experiment.metrics`): the
   neural planner on test queries, success and cost ratios;
-* :mod:`~ntq_jax.experiment.report` (+ :mod:`~ntq_jax.experiment.formatting`): tables
-  and figures of a run;
+* :mod:`~ntq_jax.experiment.report` (+ :mod:`~ntq_jax.experiment.paired`,
+  :mod:`~ntq_jax.experiment.formatting`): tables and figures of a run, the paired
+  comparisons between its models;
 * :mod:`~ntq_jax.experiment.summaries`, :mod:`~ntq_jax.experiment.reproduction`
   (+ :mod:`~ntq_jax.experiment.paper`, :mod:`~ntq_jax.experiment.verdict_tables`,
   :mod:`~ntq_jax.experiment.seed_tables`): committed per-map summaries and

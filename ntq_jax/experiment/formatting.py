@@ -66,3 +66,12 @@ def kind_name(kind: str) -> str:
 
 def ms(x) -> str:
     return f"{1e3 * x:.2f}" if num(x) else "-"
+
+
+def _tex_model(m: str) -> str:
+    """``$\\mathsf{PNet}_3$``, ``$\\mathsf{PNet}_\\mathsf{best\\mbox{-}of\\mbox{-}4}$``, ..."""
+    idx = m.split("_", 1)[-1]  # PNet_0 .. PNet_3, PNet_ens, PNet_best-of-4, PNet_cascade
+    if not m.startswith("PNet_"):
+        return m
+    idx = idx if idx.isdigit() else "\\mathsf{" + idx.replace("-", "\\mbox{-}") + "}"
+    return f"$\\mathsf{{PNet}}_{idx}$"

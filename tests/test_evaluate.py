@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from ntq_jax import Env, artifacts, make_env
-from ntq_jax.experiment import config
+from ntq_jax.experiment import config, references
 from ntq_jax.experiment import evaluate as E
 from ntq_jax.experiment import metrics as M
 from ntq_jax.experiment import report as R
@@ -84,14 +84,14 @@ def cfg():
 
 def test_test_queries_are_fresh_cached_and_nontrivial(tmp_path, cfg):
     env = make_env("point/1")
-    q = E.test_queries(env, cfg, "point_1", tmp_path)
+    q = references.test_queries(env, cfg, "point_1", tmp_path)
     assert q["uniform"].shape == q["nontrivial"].shape == (40, 2, 2)
     assert np.all(np.asarray(env.is_valid(q["uniform"].reshape(-1, 2), padding=0.0)))
     free = np.asarray(env.steer_to(q["nontrivial"][:, 0], q["nontrivial"][:, 1], padding=0.0))
     assert not free.any()  # non-trivial on the evaluation geometry
-    again = E.test_queries(env, cfg, "point_1", tmp_path)
+    again = references.test_queries(env, cfg, "point_1", tmp_path)
     np.testing.assert_array_equal(q["nontrivial"], again["nontrivial"])
-    other = E.test_queries(
+    other = references.test_queries(
         env, config.load(None, ["eval.k_test=40", "seed=1"]), "point_1", tmp_path / "b"
     )
     assert not np.allclose(other["uniform"], q["uniform"])
@@ -102,15 +102,15 @@ def test_test_queries_are_fresh_cached_and_nontrivial(tmp_path, cfg):
 
 def test_reference_is_cached_and_has_the_optimum(tmp_path, cfg):
     env = make_env("point/1")
-    q = E.test_queries(env, cfg, "point_1", tmp_path)
+    q = references.test_queries(env, cfg, "point_1", tmp_path)
     fake = FakeReference()
-    ref = E.reference_plans(env, cfg, "point/1", "point_1", q, tmp_path, fake)
+    ref = references.reference_plans(env, cfg, "point/1", "point_1", q, tmp_path, fake)
     assert fake.calls == 2
-    again = E.reference_plans(env, cfg, "point/1", "point_1", q, tmp_path, fake)
+    again = references.reference_plans(env, cfg, "point/1", "point_1", q, tmp_path, fake)
     assert fake.calls == 2 and str(again["planner"]) == "fake"
     changed = {k: v.copy() for k, v in q.items()}
     changed["nontrivial"][-1, 1, 0] += 1e-3  # only the last query's goal: a new reference
-    E.reference_plans(env, cfg, "point/1", "point_1", changed, tmp_path, fake)
+    references.reference_plans(env, cfg, "point/1", "point_1", changed, tmp_path, fake)
     assert fake.calls == 4
     # the visibility-graph optimum: never longer than the straight line on trivial queries,
     # strictly longer on the non-trivial ones
@@ -295,7 +295,7 @@ def test_in_band_partitions_the_test_queries(tmp_path, cfg):
     """point/1's test queries are sampled at padding 0; in band = both endpoints valid at 0.8."""
     env = make_env("point/1")
     assert env.padding > 0
-    q = E.test_queries(env, cfg, "point_1", tmp_path)
+    q = references.test_queries(env, cfg, "point_1", tmp_path)
     for kind in QUERY_KINDS:
         band = M.in_band(env, q[kind])
         assert band.shape == (len(q[kind]),) and band.dtype == bool

@@ -267,7 +267,7 @@ def test_local_run_interrupted_then_resumed_with_ray(ray_session, local_run, tmp
 def test_reference_roadmap_chunks_match_local(ray_session, tmp_path):
     """The evaluation's reference, roadmap on point/2: chunk tasks (first one alone, which
     builds the roadmap) give the single local call's paths and costs."""
-    from ntq_jax.experiment.evaluate import reference_plans, test_queries
+    from ntq_jax.experiment.references import reference_plans, test_queries
 
     cfg = C.load(
         None,

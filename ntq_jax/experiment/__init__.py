@@ -3,8 +3,9 @@
 * :mod:`~ntq_jax.experiment.config` (+ :mod:`~ntq_jax.experiment.sections`): typed,
   frozen YAML configs with overrides;
 * :mod:`~ntq_jax.experiment.pipeline`: data -> training -> evaluation -> report, resumable;
-* :mod:`~ntq_jax.experiment.evaluate` (+ :mod:`~ntq_jax.experiment.metrics`): the
-  neural planner on test queries, success and cost ratios;
+* :mod:`~ntq_jax.experiment.evaluate` (+ :mod:`~ntq_jax.experiment.references`,
+  :mod:`~ntq_jax.experiment.metrics`): the neural planner on test queries, against
+  their reference plans, success and cost ratios;
 * :mod:`~ntq_jax.experiment.report` (+ :mod:`~ntq_jax.experiment.paired`,
   :mod:`~ntq_jax.experiment.formatting`): tables and figures of a run, the paired
   comparisons between its models;

@@ -45,7 +45,8 @@ from ntq_jax.data.format import ARRAY_SPECS, recorded_checksums
 from ntq_jax.data.limits import check_roadmap, check_spacing
 from ntq_jax.envs import EnvError, env_slug, resolve_envs
 from ntq_jax.experiment import config as C
-from ntq_jax.experiment.evaluate import evaluate_env, reference_plans, reuse_roadmaps, test_queries
+from ntq_jax.experiment.evaluate import evaluate_env
+from ntq_jax.experiment.references import reference_plans, reuse_roadmaps, test_queries
 from ntq_jax.experiment.report import write_report
 from ntq_jax.planners.jobs import planner_options
 from ntq_jax.planners.options import unsupported_robot

@@ -13,7 +13,7 @@ For every problem of the scene (:func:`ntq_jax.scenes.mbm.load_scene`, one
 * every PNet plans its start and goal with the evaluation's options
   (:func:`ntq_jax.experiment.config.neural_options`, steerTo on; success is a path
   proven free by ``eval.motion_check``), all members in one batch
-  (:func:`ntq_jax.neural_planner.plan_members`) with a key of the problem's number;
+  (:func:`ntq_jax.neural.plan_members`) with a key of the problem's number;
   ``PNet_best-of-<M>`` keeps each problem's cheapest success of the members;
 * each peer of :data:`PEERS` that is installed plans it: OMPL's RRT-Connect with
   simplification (``"rrtconnect"``, in this process on the package's discretised checks)
@@ -40,8 +40,9 @@ import jax
 import numpy as np
 
 from ntq_jax import artifacts
-from ntq_jax import neural_planner as NP
+from ntq_jax import neural as NP
 from ntq_jax.experiment import config as C
+from ntq_jax.neural.options import ALGORITHM_VERSION
 from ntq_jax.planners import plan
 from ntq_jax.planners.verify import check_paths, valid_queries
 from ntq_jax.stats import wilson_interval
@@ -182,7 +183,7 @@ def evaluate_problems(
         numbers,
         PROBLEMS_VERSION,
         ran,
-        NP.ALGORITHM_VERSION,
+        ALGORITHM_VERSION,
     )
 
     def compute() -> dict:

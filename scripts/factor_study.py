@@ -43,7 +43,8 @@ task's default data paths with its budgets are ``scripts/reproduce.py``'s runs
 (``--paper-runs``): either script resumes the other's. The paper's six other maps
 (:data:`PAPER_ONLY`) get their default cell and its training seeds 1 and 2, so one queue
 of ``--next`` workers also re-runs Tables I-IV on all eleven maps, each with three
-training seeds.
+training seeds, and five on the maps where three left the verdict open
+(:data:`MORE_SEEDS`).
 """
 
 from __future__ import annotations
@@ -68,6 +69,11 @@ MAPS = {
 #: The paper's other maps: only their default cell (the task's reproduction of the map,
 #: Tables I-IV), queued after the factor maps' cells and before the cells beyond the paper
 PAPER_ONLY = ("rigid/1", "rigid/3", "nlink/6", "nlink/2", "point/1", "point/2")
+#: The maps whose PNet_3 - PNet_0 interval (non-trivial queries, three training seeds,
+#: the seed-aware test of results/paper/REPRODUCTION.md) still contained zero: they get
+#: training seeds 3 and 4 as well (five in all), the last cells of the queue.
+MORE_SEEDS = ("point/1", "point/2", "point/3", "rigid/0", "rigid/1", "rigid/2", "rigid/3")
+EXTRA_SEEDS = (3, 4)
 #: evaluation variants on the same trained PNets (a cell's ``budget``): MPNet's budgets, and
 #: the paper's variant without steerTo (Table III): its goal test ||pi_end - x_g||_2 <= delta
 #: on the raw state vector, and "only the lines 8 and 9" (the path's segments not checked)
@@ -192,8 +198,9 @@ def cells(seeds: bool = True) -> list[Cell]:
     the default cell of each of the paper's other maps (:data:`PAPER_ONLY`) and, with
     ``seeds``, their training seeds 1 and 2; then the pruning beyond the paper (``+keep_last``)
     on the factor maps; then the point maps'
-    :data:`COSTLY` data modes; last their density cells at the config's epochs
-    (:data:`FULL_EPOCHS`)."""
+    :data:`COSTLY` data modes; then their density cells at the config's epochs
+    (:data:`FULL_EPOCHS`); last, with ``seeds``, training seeds 3 and 4 of
+    :data:`MORE_SEEDS`."""
     out, costly = [], []
     for m in MAPS:
         modes = ("density", "shortcut", "raw") + (("bitstar",) if m == "rigid/0" else ())
@@ -219,7 +226,10 @@ def cells(seeds: bool = True) -> list[Cell]:
     out += [Cell(m, default_data(m) + KEEP_LAST, "ours") for m in MAPS]
     if seeds:  # after every cell already committed, so --next runs them next
         out += [Cell(m, default_data(m), "ours", k) for k in (1, 2) for m in PAPER_ONLY]
-    return out + costly + [Cell(m, "density" + FULL_EPOCHS, "ours") for m in DENSITY]
+    out += costly + [Cell(m, "density" + FULL_EPOCHS, "ours") for m in DENSITY]
+    if seeds:  # five seeds where three left the verdict open, after everything else
+        out += [Cell(m, default_data(m), "ours", k) for k in EXTRA_SEEDS for m in MORE_SEEDS]
+    return out
 
 
 def record_rows(record: Path, pool: str) -> int:

@@ -130,3 +130,9 @@ def test_problems_rows_and_the_dispatch_of_reproduction(tmp_path):
     assert R.check(tmp_path) is None
     path.write_text(text + "edited\n")
     assert "out of date" in R.check(tmp_path)
+
+
+def test_the_committed_page_is_current():
+    """results/panda/REPRODUCTION.md is what the committed summaries give."""
+    root = Path(__file__).resolve().parent.parent / "results" / "panda"
+    assert R.check(root) is None

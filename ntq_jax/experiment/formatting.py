@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 import numbers
+from pathlib import Path
 
 __all__ = [
     "num",
@@ -75,3 +76,10 @@ def _tex_model(m: str) -> str:
         return m
     idx = idx if idx.isdigit() else "\\mathsf{" + idx.replace("-", "\\mbox{-}") + "}"
     return f"$\\mathsf{{PNet}}_{idx}$"
+
+
+def root_label(root) -> str:
+    """``root`` as the repository spells it (from its ``results`` folder on), whatever the
+    working directory."""
+    parts = Path(root).resolve().parts
+    return "/".join(parts[parts.index("results") :]) if "results" in parts else Path(root).name

@@ -33,7 +33,15 @@ import json
 from pathlib import Path
 
 from ntq_jax import artifacts
-from ntq_jax.experiment.formatting import fixed, interval, model_key, num, p_value, signed
+from ntq_jax.experiment.formatting import (
+    fixed,
+    interval,
+    model_key,
+    num,
+    p_value,
+    root_label,
+    signed,
+)
 from ntq_jax.experiment.quantities import Seeds, q_diff
 from ntq_jax.experiment.summaries import load_summaries, main_runs
 from ntq_jax.experiment.verdicts import ALPHA, verdict
@@ -229,7 +237,7 @@ def render(root) -> str:
         "The paper's experiment (non-trivial query sampling, D0-D3, four PNets, the neural "
         "planner) on the Franka Panda in MotionBenchMaker's 3-D scenes, one step beyond the "
         "paper's planar 6-link arm. Made from the summaries in this folder by "
-        f"`python scripts/reproduce.py --report-only --results {root.as_posix()}` "
+        f"`python scripts/reproduce.py --report-only --results {root_label(root)}` "
         "(`ntq_jax.experiment.panda_page`); the configuration and the reasons for every "
         "choice the paper leaves open are in `configs/panda.yaml`.",
         "",

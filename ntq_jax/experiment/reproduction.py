@@ -108,6 +108,7 @@ from ntq_jax.experiment.formatting import (
     p_value,
     signed,
 )
+from ntq_jax.experiment.formatting import root_label as _root_label
 from ntq_jax.experiment.paper import KINDS, MAPS, MEMBERS, PAPER, PAPER_TABLES
 from ntq_jax.experiment.seed_tables import seed_variance, seed_variance_diffs
 from ntq_jax.experiment.summaries import (
@@ -132,13 +133,6 @@ __all__ = [
 ]
 
 DOC_NAME = "REPRODUCTION.md"
-
-
-def _root_label(root) -> str:
-    """``root`` as the repository spells it (from its ``results`` folder on), whatever the
-    working directory."""
-    parts = Path(root).resolve().parts
-    return "/".join(parts[parts.index("results") :]) if "results" in parts else Path(root).name
 
 
 def _header(summaries, label: str = "results/paper") -> list[str]:

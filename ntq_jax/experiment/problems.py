@@ -121,8 +121,10 @@ def _budget(name: str, cfg) -> dict:
 def _peer(name: str, envs, cfg) -> dict:
     """``(P,)`` outcomes of peer ``name`` (planned with its discretised check)."""
     p = len(envs)
-    solved, certified = np.zeros(p, bool), np.zeros(p, bool)
-    costs, solve_s = np.full(p, np.inf), np.full(p, np.nan)
+    solved = np.zeros(p, bool)
+    certified = np.zeros(p, bool)
+    costs = np.full(p, np.inf)
+    solve_s = np.full(p, np.nan)
     for i, env in enumerate(envs):
         q = np.asarray(env.query, np.float32)[None]
         t0 = time.perf_counter()

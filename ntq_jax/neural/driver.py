@@ -325,7 +325,9 @@ def plan_cascade(
     costs = np.full(k, np.inf)
     cause = np.full(k, PlanCause.INVALID_QUERY, np.int8)
     rank = np.full(k, len(CAUSE_RANK))
-    calls, replans, member = np.zeros(k, np.int32), np.zeros(k, np.int32), np.zeros(k, np.int8)
+    calls = np.zeros(k, np.int32)
+    replans = np.zeros(k, np.int32)
+    member = np.zeros(k, np.int8)
     seconds = compile_seconds = 0.0
     left = np.arange(k)
     for j, m in enumerate(order):

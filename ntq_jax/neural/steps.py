@@ -195,7 +195,8 @@ def _forward(robot, world, pnet, key, starts, goals, active, opts, length):
         last = active & ~done & near(end)
         reached = reached | last
         if opts.repairs:
-            p, n = p.at[rows, jnp.where(last, n, length)].set(goals, mode="drop"), n + last
+            p = p.at[rows, jnp.where(last, n, length)].set(goals, mode="drop")
+            n = n + last
     return p, n, reached, calls
 
 

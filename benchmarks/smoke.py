@@ -4,6 +4,10 @@
     python benchmarks/smoke.py          # exit status 1 when a ratio misses its goal by > 20 %
     python benchmarks/smoke.py --json smoke.json
 
+Started by a Python without the package (no ``jax`` or ``ntq_jax``), it runs itself again
+under the repository's ``.venv`` (the environment ``.ci/run`` makes) when there is one,
+else it ends with one ``error:`` line.
+
 Runs when a development session stops, beside the other checks, so it must stay
 under 30 s of wall time on a 2-core machine, imports and compilation included
 (about 31 CPU seconds, two thirds of them compilation). Every figure is measured
@@ -57,11 +61,31 @@ import threading
 import traceback
 from importlib.util import find_spec
 
-if find_spec("jax") is None or find_spec("ntq_jax") is None:  # an expected error: one line
+#: The virtual environment ``.ci/run`` makes in the repository (``python -m venv .venv``).
+REPO_VENV = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), ".venv")
+
+
+def _venv_python() -> str | None:
+    """The repository's ``.venv`` Python when this interpreter is not it (else None)."""
+    for rel in ("bin/python", "Scripts/python.exe"):
+        path = os.path.join(REPO_VENV, rel)
+        if os.path.isfile(path) and os.path.abspath(sys.prefix) != os.path.abspath(REPO_VENV):
+            return path
+    return None
+
+
+if find_spec("jax") is None or find_spec("ntq_jax") is None:
+    # run under the repository's virtual environment when there is one (once: the variable
+    # stops a loop); otherwise an expected error, one line
+    venv_python = None if os.environ.get("NTQ_SMOKE_REEXEC") else _venv_python()
+    if venv_python is not None:
+        os.environ["NTQ_SMOKE_REEXEC"] = "1"
+        os.execv(venv_python, [venv_python, os.path.abspath(__file__), *sys.argv[1:]])
     sys.exit(
-        f"error: {sys.executable} has no {'jax' if find_spec('jax') is None else 'ntq_jax'}: "
-        "run the check with the package's Python (pip install -e . first, or activate its "
-        "virtual environment)"
+        f"error: {sys.executable} has no {'jax' if find_spec('jax') is None else 'ntq_jax'} "
+        f"and {REPO_VENV} holds no environment to run in: run the check with the package's "
+        "Python (pip install -e . first, or activate its virtual environment; bash .ci/run "
+        "makes .venv)"
     )
 
 import bench_data

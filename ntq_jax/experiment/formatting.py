@@ -83,3 +83,16 @@ def root_label(root) -> str:
     working directory."""
     parts = Path(root).resolve().parts
     return "/".join(parts[parts.index("results") :]) if "results" in parts else Path(root).name
+
+
+def stale_page(path: Path, rendered: str, root) -> str | None:
+    """None if the page at ``path`` is ``rendered``, else why not (one line naming the
+    command that regenerates the page of results root ``root``)."""
+    current = path.read_text(encoding="utf-8") if path.exists() else None
+    if current == rendered:
+        return None
+    what = "is missing" if current is None else "is out of date"
+    return (
+        f"{path} {what}; regenerate it with python scripts/reproduce.py --report-only "
+        f"--results {root}"
+    )

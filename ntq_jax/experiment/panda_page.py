@@ -41,6 +41,7 @@ from ntq_jax.experiment.formatting import (
     p_value,
     root_label,
     signed,
+    stale_page,
 )
 from ntq_jax.experiment.quantities import Seeds, q_diff
 from ntq_jax.experiment.summaries import load_summaries, main_runs
@@ -260,9 +261,4 @@ def write(root) -> Path:
 
 def check(root) -> str | None:
     """None if ``<root>/REPRODUCTION.md`` is what :func:`render` gives, else why not."""
-    path = Path(root) / DOC_NAME
-    current = path.read_text(encoding="utf-8") if path.exists() else None
-    if current == render(root):
-        return None
-    what = "is missing" if current is None else "is out of date"
-    return f"{path} {what}; regenerate it with python scripts/reproduce.py --report-only --results {root}"
+    return stale_page(Path(root) / DOC_NAME, render(root), root)

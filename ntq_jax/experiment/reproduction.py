@@ -107,6 +107,7 @@ from ntq_jax.experiment.formatting import (
     num,
     p_value,
     signed,
+    stale_page,
 )
 from ntq_jax.experiment.formatting import root_label as _root_label
 from ntq_jax.experiment.paper import KINDS, MAPS, MEMBERS, PAPER, PAPER_TABLES
@@ -453,9 +454,4 @@ def check(root) -> str | None:
 
     if panda_page.is_panda_root(root):
         return panda_page.check(root)
-    path = Path(root) / DOC_NAME
-    current = path.read_text(encoding="utf-8") if path.exists() else None
-    if current == render(root):
-        return None
-    what = "is missing" if current is None else "is out of date"
-    return f"{path} {what}; regenerate it with python scripts/reproduce.py --report-only --results {root}"
+    return stale_page(Path(root) / DOC_NAME, render(root), root)

@@ -121,6 +121,7 @@ def _problems(cfg, name: str, env, run: Path, out: Path) -> None:
     if fp is None:
         print(f"[{name}] problems: no PNets in {model_dir}; skipped", flush=True)
         return
+    from ntq_jax.experiment.evaluate import model_name
     from ntq_jax.models import member_pnets
     from ntq_jax.training import load_ensemble
 
@@ -129,7 +130,7 @@ def _problems(cfg, name: str, env, run: Path, out: Path) -> None:
     got = problems.evaluate_problems(
         name, member_pnets(ens), cfg, run / "eval" / slug, model_fingerprint=fp
     )
-    names = [f"PNet_{m}" for m in range(ens.num_members)]
+    names = [model_name(m) for m in range(ens.num_members)]
     summary = problems.summarize(got, names, cfg.planner.eval_time_budget)
     summary.update(models_fingerprint=fp, seconds=round(time.perf_counter() - t0, 1))
     artifacts.write_json(target, summary)

@@ -17,7 +17,9 @@ stream (the first ``k`` queries never change).
 * Kinds: ``UNIFORM = 0``, ``NON_TRIVIAL = 1``, and ``NT_EXHAUSTED = 2`` for a
   query the non-trivial sampler returned after ``n_max`` trivial attempts.
 * gamma_nt: fused, streaming estimator (sampling, validity, steer_to and
-  counting in one compiled chunk) with a Wilson 95% interval.
+  counting in one compiled chunk) with a Wilson 95% interval; a robot whose checks
+  are costly to compile (``shared_check_programs``, the 3-D arm) runs each chunk
+  through its shared batched checks instead, with the same lanes.
 """
 
 from __future__ import annotations
@@ -304,6 +306,16 @@ def _chunk_uniforms(seeds: Array, lane0: Array, size: int, k: int) -> list[Array
     return [prng.uniform(seeds, lane * jnp.uint32(k) + jnp.uint32(j)) for j in range(k)]
 
 
+def _pair_from_uniforms(robot, world: World, u) -> tuple[Array, Array]:
+    """Coordinate-major ``(d, size)`` starts and goals from ``2 d`` rows of uniforms (rows
+    ``0..d-1`` the start, ``d..2d-1`` the goal), each row scaled on its own to the
+    robot's configuration box."""
+    d = robot.dim
+    lo, hi = robot.config_bounds(world)
+    rows = [lo[j % d] + u[j] * (hi[j % d] - lo[j % d]) for j in range(2 * d)]
+    return jnp.stack(rows[:d]), jnp.stack(rows[d:])
+
+
 def _outcomes_from_uniforms(robot, world: World, u, padding: float):
     """Per-lane (both endpoints valid, blocked) of the candidate pairs drawn from uniforms.
 
@@ -313,10 +325,7 @@ def _outcomes_from_uniforms(robot, world: World, u, padding: float):
     its own and the states are assembled coordinate-major, so XLA fuses the
     generator, the validity and ``steer_to`` tests and the counting into one loop.
     """
-    d = robot.dim
-    lo, hi = robot.config_bounds(world)
-    rows = [lo[j % d] + u[j] * (hi[j % d] - lo[j % d]) for j in range(2 * d)]
-    a, b = jnp.stack(rows[:d]), jnp.stack(rows[d:])
+    a, b = _pair_from_uniforms(robot, world, u)
     both = is_valid_cm(robot, world, a, padding) & is_valid_cm(robot, world, b, padding)
     blocked = both & ~steer_to_cm(robot, world, a, b, padding, mask=both)
     return both, blocked
@@ -361,13 +370,52 @@ _gamma_jit = functools.partial(
 
 
 @_gamma_jit
-def _gamma_chunk_counts(robot, world, seeds, padding: float, size: int):
+def _fused_chunk_counts(robot, world, seeds, padding: float, size: int):
     return count_rows(*_lane_outcomes(robot, world, seeds, jnp.uint32(0), size, padding))
 
 
 @_gamma_jit
-def _gamma_chunk_lanes(robot, world, seeds, lane0, padding: float, size: int):
+def _fused_chunk_lanes(robot, world, seeds, lane0, padding: float, size: int):
     return _lane_outcomes(robot, world, seeds, lane0, size, padding)
+
+
+@functools.partial(jax.jit, static_argnames=("robot", "size"))
+def _chunk_pairs(robot, world, seeds, lane0, size: int) -> tuple[Array, Array]:
+    """Row-major ``(size, d)`` starts and goals of a chunk's lanes (the fused chunk's)."""
+    a, b = _pair_from_uniforms(robot, world, _chunk_uniforms(seeds, lane0, size, 2 * robot.dim))
+    return a.T, b.T
+
+
+def _shared_chunk_lanes(robot, world, seeds, lane0, padding: float, size: int):
+    """The fused chunk's lanes through the robot's shared batched programs: the pairs
+    drawn by one small program, then :func:`~ntq_jax.robots.batch.valid_states` on
+    both ends and :func:`~ntq_jax.robots.batch.steer_to_pairs` on the valid pairs only
+    (host arrays). The same uniforms and checks, so the same lanes; no program of its
+    own for the checks, whose compilation costs seconds on a 3-D arm."""
+    a, b = (np.asarray(x) for x in _chunk_pairs(robot, world, seeds, lane0, size))
+    ok = valid_states(robot, world, np.concatenate([a, b]), padding)
+    both = ok[:size] & ok[size:]
+    idx = np.flatnonzero(both)
+    blocked = np.zeros(size, bool)
+    blocked[idx] = ~steer_to_pairs(robot, world, a[idx], b[idx], padding)
+    return both, blocked
+
+
+def _gamma_chunk_lanes(robot, world, seeds, lane0, padding: float, size: int):
+    """Per-lane ``(both ends valid, blocked)`` of ``size`` lanes from ``lane0``: one fused
+    program, or the shared programs for a robot whose ``shared_check_programs`` is True."""
+    if getattr(robot, "shared_check_programs", False):
+        return _shared_chunk_lanes(robot, world, seeds, lane0, padding, size)
+    return _fused_chunk_lanes(robot, world, seeds, lane0, padding, size)
+
+
+def _gamma_chunk_counts(robot, world, seeds, padding: float, size: int):
+    """:func:`count_rows` of a whole chunk's lanes (as :func:`_gamma_chunk_lanes`)."""
+    if getattr(robot, "shared_check_programs", False):
+        both, blocked = _shared_chunk_lanes(robot, world, seeds, jnp.uint32(0), padding, size)
+        rows = math.gcd(size, COUNT_ROWS)
+        return (both.reshape(rows, -1).sum(1), blocked.reshape(rows, -1).sum(1))
+    return _fused_chunk_counts(robot, world, seeds, padding, size)
 
 
 def _chunk_prefix(
@@ -453,7 +501,10 @@ def gamma_nt(
 
     Each chunk of ``chunk`` candidate pairs is generated, checked and counted in
     one compiled call (its uniforms come from :mod:`ntq_jax.prng`, seeded per
-    chunk from ``key``), so memory does not grow with ``n``. The last chunk
+    chunk from ``key``), so memory does not grow with ``n``; a robot with
+    ``shared_check_programs`` (the 3-D arm) draws the chunk in one small program
+    and checks it with its shared batched checks: the same lanes, no costly program
+    of its own. The last chunk
     counts only the valid queries needed to reach exactly ``n`` (its lanes up to
     the ``n``-th valid query). The next chunk is queued while one is counted, so
     dispatch overlaps compute, except when the chunk being counted is expected

@@ -20,9 +20,9 @@ around the robot and rearrange its small objects, so their gamma_nt differ (prob
 1-10 of bookshelf_tall: 0.08 to 0.25; see results/panda_gamma/README.md). Its motions are checked
 at the arm's resolution (1/32 rad: ~170 states on an
 average free 7-D motion), so it runs at thousands of queries per second, not millions,
-after about a minute of compilation (two programs: whole chunks, and the last chunk's
-prefix; the persistent compilation cache keeps them for the next run unless
-``--no-compile-cache``).
+after the arm's shared checks are compiled (``is_valid`` and the discretised
+``steer_to``, the programs data generation and planning use: seconds each; the
+persistent compilation cache keeps them for the next run unless ``--no-compile-cache``).
 
 ``--skip-existing`` makes a series of runs resumable: when ``--json`` already holds
 a result of the same environment, queries, padding, seed and chunk, it is printed

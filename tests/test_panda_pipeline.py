@@ -2,9 +2,13 @@
 roadmap planner, four PNets for 7-D states, the neural planner's evaluation, the report.
 
 configs/panda_small.yaml with tiny overrides on MotionBenchMaker's box scene (cuboids
-only: the cheapest programs to compile), the discretised check at evaluation and no
-replanning (fewer programs to compile; the certified check of the neural planner's
-check stage is tested on its own below, on a planar arm). Asserts what the run made:
+only: the cheapest programs to compile). Compiling the arm's checks is most of the
+run's time (seconds a program), so the overrides keep their programs few: the
+discretised check for the data paths and at evaluation (the certified data check is
+tested in test_data_paths, the certified check of the neural planner's check stage
+below, on a planar arm), no replanning, and 220 milestones, whose edges are checked in
+the chunk the non-trivial sampler's checks already compiled
+(``planners.verify.ARM_CHUNKS``). Asserts what the run made:
 every dataset's queries and paths are 7-D, each solved path runs from its query's start
 to its goal with waypoints at most ``planner.data_paths`` apart (a direct connection
 stays its two ends) and every segment free by the environment's check; D0..D3 hold K_train
@@ -32,7 +36,8 @@ TINY = [
     f"envs=[{ENV}]",
     f"data.k_train={K}",
     "data.gamma_queries=500",
-    "planner.milestones=150",
+    "planner.milestones=220",
+    "planner.data_check=discretized",
     "planner.grow_rounds=0",
     "model.hidden=[16,16]",
     "train.epochs=1",

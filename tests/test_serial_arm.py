@@ -33,6 +33,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from ntq_jax import prng
 from ntq_jax.geometry import World3D
 from ntq_jax.robots import SerialArm
 from ntq_jax.robots.urdf import read_arm
@@ -543,3 +544,37 @@ def test_interpolated_states_stay_within_the_joint_limits(panda):
     assert ((states >= lo) & (states <= hi)).all()
     np.testing.assert_allclose(states[:, -1], b, atol=1e-6)
     np.testing.assert_array_equal(states[:, 0], a)
+
+
+def test_gamma_through_shared_programs_equals_the_fused_chunk(tiny, tiny_world):
+    """gamma_nt of an arm runs its chunks through the shared batched checks
+    (``shared_check_programs``): lane for lane the fused chunk's outcomes, so the
+    estimate is the one counted off the fused lanes up to the n-th valid query, whether
+    it is read off chunk 0's rows (small n) or counts whole chunks."""
+    from ntq_jax import queries
+
+    key, size = jax.random.key(3), 2048
+    lanes = [
+        [
+            np.asarray(x)
+            for x in queries._fused_chunk_lanes(
+                tiny, tiny_world, prng.stream_seeds(key, i), jnp.uint32(0), 0.0, size
+            )
+        ]
+        for i in range(3)
+    ]
+    both, blocked = (np.concatenate(x) for x in zip(*lanes))
+    assert 0 < blocked.sum() < both.sum() < len(both)  # every outcome occurs
+    shared = queries._gamma_chunk_lanes(
+        tiny, tiny_world, prng.stream_seeds(key, 1), jnp.uint32(0), 0.0, size
+    )
+    np.testing.assert_array_equal(shared[0], lanes[1][0])
+    np.testing.assert_array_equal(shared[1], lanes[1][1])
+    for n in (10, int(both[: 2 * size].sum()) + 5):  # chunk 0's first rows; three chunks
+        est = queries.gamma_nt(tiny, tiny_world, key, n, 0.0, chunk=size)
+        last = int(np.flatnonzero(both)[n - 1])
+        assert (est.queries, est.non_trivial, est.candidates) == (
+            n,
+            int(blocked[: last + 1].sum()),
+            last + 1,
+        ), n

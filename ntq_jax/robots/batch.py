@@ -243,8 +243,9 @@ def steer_to_pairs(
         lambda x, y, m: _steer_masked(robot, world, x, y, m, padding, check),
         [a, b],
         _fixed(chunk, [a, b]),
+        host=True,
     )
-    return np.asarray(out).astype(bool)
+    return out.astype(bool)
 
 
 def valid_states(
@@ -255,9 +256,12 @@ def valid_states(
     if states.shape[0] == 0:
         return np.zeros(0, bool)
     out = run_rows(
-        lambda x, m: is_valid_batch(robot, world, x, padding), [states], _fixed(chunk, [states])
+        lambda x, m: is_valid_batch(robot, world, x, padding),
+        [states],
+        _fixed(chunk, [states]),
+        host=True,
     )
-    return np.asarray(out).astype(bool)
+    return out.astype(bool)
 
 
 def distances(robot, a, b, chunk: int = CHECK_CHUNK) -> np.ndarray:
@@ -265,5 +269,6 @@ def distances(robot, a, b, chunk: int = CHECK_CHUNK) -> np.ndarray:
     a, b = _float_pairs(a, b, robot.dim)
     if a.shape[0] == 0:
         return np.zeros(0, np.float32)
-    out = run_rows(lambda x, y, m: distance_batch(robot, x, y), [a, b], _fixed(chunk, [a, b]))
-    return np.asarray(out)
+    return run_rows(
+        lambda x, y, m: distance_batch(robot, x, y), [a, b], _fixed(chunk, [a, b]), host=True
+    )

@@ -231,7 +231,8 @@ def run_rows(
     arrays: Sequence[np.ndarray],
     plan: RowPlan,
     whole: Sequence[Array] | None = None,
-) -> Array:
+    host: bool = False,
+) -> Array | np.ndarray:
     """``kernel`` over the rows of ``arrays`` (host NumPy, same length) as ``plan`` splits them.
 
     ``kernel(*rows, mask)`` gets ``m``-row arrays (JAX or NumPy) and an ``(m,)``
@@ -243,7 +244,9 @@ def run_rows(
 
     Returns the ``(n, ...)`` answers as a JAX array, without waiting for them:
     the pieces read ``arrays`` in place, so a caller that does not own them must
-    wait (``block_until_ready``) before they may change.
+    wait (``block_until_ready``) before they may change. ``host=True``: as a NumPy
+    array, waited for, the pieces joined and the edge's padding cut on the host (no
+    compiled program per batch length for that).
     """
     n, m = plan.n, plan.bucket
     if (
@@ -260,6 +263,8 @@ def run_rows(
     ends = [plan.head] + [lo + size for lo, size in plan.pieces]
     skips = tuple(max(0, end - lo) for end, (lo, _) in zip(ends, plan.pieces))
     if not m:
+        if host:
+            return np.concatenate([np.asarray(o)[k:] for o, k in zip(outs, skips)])
         return outs[0] if len(outs) == 1 else _join(None, tuple(outs), 0, 0, skips)
     rows = plan.edge_rows
     edge_in = []
@@ -269,6 +274,12 @@ def run_rows(
         e[plan.head : rows] = x[plan.tail :]
         edge_in.append(e)
     edge = kernel(*edge_in, _first_rows(rows, m))
+    if host:
+        edge, head, tail = np.asarray(edge), plan.head, n - plan.tail
+        if not outs:
+            return edge[:rows]
+        body = [np.asarray(o)[k:] for o, k in zip(outs, skips)]
+        return np.concatenate([edge[:head], *body, edge[head : head + tail]])
     if not outs:
         return edge if rows == m else _first(edge, rows)
     return _join(edge, tuple(outs), plan.head, n - plan.tail, skips)

@@ -111,6 +111,11 @@ class SerialArm(DiscretizedSteering, CertifiedSteering):
     source: tuple = ()
     kind: str = dataclasses.field(default="serial_arm", init=False)
     row_piece_max: ClassVar[int] = ROW_PIECE_MAX
+    #: Its checks cost seconds each to compile (the fused kernels of obstacles,
+    #: self-collision and the motion checks): stages that would fuse their own copy of
+    #: them (``queries.gamma_nt``'s chunks) run the shared batched programs instead, with
+    #: the same answers (:mod:`ntq_jax.queries`).
+    shared_check_programs: ClassVar[bool] = True
 
     def __post_init__(self):
         n, s = len(self.joint_names), len(self.sphere_radii)

@@ -28,6 +28,21 @@ persistent compilation cache keeps them for the next run unless ``--no-compile-c
 a result of the same environment, queries, padding, seed and chunk, it is printed
 and nothing is measured.
 
+A measurement too long for one sitting (10^8 queries of a Panda scene: hours of a core)
+runs as units with the same padding and chunk, each its own ``--json`` (resumable with
+``--skip-existing``): one environment with different seeds (independent uniform
+samples of it), or different environments, e.g. the 100 problems of a scene (each
+problem places the scene differently; the mean over their worlds is the scene's
+gamma_nt). ``--pool`` adds their counts up into one estimate over all their queries,
+with its Wilson interval:
+
+    for n in $(seq 1 100); do
+      python scripts/measure_gamma.py --env panda/cage/$n --queries 1e6 \
+          --json results/panda_gamma/series/cage/problem_$n.json --skip-existing --no-progress
+    done
+    python scripts/measure_gamma.py --pool results/panda_gamma/series/cage/problem_*.json \
+        --json results/panda_gamma/series/cage.json
+
 After the first chunks the estimated time of the streaming is printed; a run that would take
 longer than ``--max-hours`` (default 24) stops there with an error. Ctrl-C
 prints the estimate over the queries counted so far (with its interval) and
@@ -271,6 +286,16 @@ def _parser() -> argparse.ArgumentParser:
         help="if --json already holds this measurement (same env, queries, padding, "
         "seed, chunk), print it and measure nothing",
     )
+    ap.add_argument(
+        "--pool",
+        type=Path,
+        nargs="+",
+        default=None,
+        metavar="JSON",
+        help="measure nothing: add up the counts of these --json results (the same "
+        "padding and chunk; one env with different seeds, or different envs) into one "
+        "estimate, printed and written to --json",
+    )
     ap.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     ap.add_argument(
         "--no-compile-cache",
@@ -281,8 +306,82 @@ def _parser() -> argparse.ArgumentParser:
     return ap
 
 
+#: What the units of a pooled measurement must share (``--pool``).
+POOL_KEYS = ("padding", "chunk", "resolution", "check")
+
+
+def _pool(paths: list[Path]) -> dict:
+    """One estimate over the queries of the unit results in ``paths`` (see ``--pool``)."""
+    from ntq_jax.stats import wilson_interval
+
+    units = []
+    for path in paths:
+        try:
+            d = json.loads(path.read_text())
+        except (OSError, ValueError) as e:
+            raise ScriptError(f"--pool: cannot read {path}: {e}") from None
+        if not isinstance(d, dict) or not {"queries", "non_trivial", "seed", *POOL_KEYS} <= set(d):
+            raise ScriptError(f"--pool: {path} is not a result of measure_gamma.py --json")
+        units.append(d)
+    for key in POOL_KEYS:
+        values = {json.dumps(u[key]) for u in units}
+        if len(values) > 1:
+            raise ScriptError(
+                f"--pool: the units differ in {key} ({', '.join(sorted(values))}): pool "
+                "measurements of one geometry"
+            )
+    seeds = [u["seed"] for u in units]
+    envs = [u["env"] for u in units]
+    if len(set(zip(envs, seeds))) < len(units):
+        raise ScriptError(
+            "--pool: two units have the same env and seed (the same queries): give each "
+            "unit of one env its own --seed"
+        )
+    queries = sum(u["queries"] for u in units)
+    blocked = sum(u["non_trivial"] for u in units)
+    lo, hi = wilson_interval(blocked, queries)
+    out = {"env": envs[0] if len(set(envs)) == 1 else sorted(set(envs), key=envs.index)}
+    out.update({key: units[0][key] for key in POOL_KEYS})
+    out.update(
+        queries=queries,
+        non_trivial=blocked,
+        gamma=blocked / queries,
+        ci95=[lo, hi],
+        candidates=sum(u.get("candidates", 0) for u in units),
+        units=len(units),
+        seeds=sorted(seeds),
+        cpu_seconds=sum(u.get("cpu_seconds") or 0.0 for u in units),
+        seconds=sum(u.get("seconds") or 0.0 for u in units),
+    )
+    out["queries_per_second"] = queries / out["seconds"] if out["seconds"] else 0.0
+    if "version" in units[0]:
+        out["version"] = units[0]["version"]
+    if len(set(envs)) > 1:
+        out["world"] = (
+            "the worlds of these environments, the same number of queries from each when "
+            "their units are alike: gamma_nt is then their mean (the interval is "
+            "conservative for that mean of fixed worlds)"
+        )
+    elif "world" in units[0]:
+        out["world"] = units[0]["world"]
+    return out
+
+
 def _run(argv) -> int:
     args = _parser().parse_args(argv)
+    if args.pool is not None:
+        if args.json is None:
+            raise ScriptError("--pool needs --json (the file the pooled estimate is written to)")
+        check_writable(args.json, "--json")
+        from ntq_jax import artifacts
+
+        pooled = _pool(args.pool)
+        _report_json(pooled)
+        print(
+            f"pooled from {pooled['units']} units (seeds {pooled['seeds'][0]}..{pooled['seeds'][-1]})"
+        )
+        artifacts.write_json(args.json, pooled)
+        return 0
     if args.skip_existing and args.json is None:
         raise ScriptError("--skip-existing needs --json (the file a finished run wrote)")
     if args.json is not None:

@@ -231,6 +231,31 @@ def test_measure_gamma_script_json(tmp_path, script):
     assert res["non_trivial"] == round(res["gamma"] * res["queries"])
     assert "gamma_nt =" in r.stdout
 
+    # --pool: units of one geometry with different seeds add up into one estimate
+    other = dict(res, seed=4, queries=100_000, non_trivial=res["non_trivial"] // 3)
+    (tmp_path / "g4.json").write_text(json.dumps(other))
+    r = script("measure_gamma", "--pool", out, tmp_path / "g4.json", "--json", tmp_path / "p.json")
+    assert r.returncode == 0, r.stderr
+    pooled = json.loads((tmp_path / "p.json").read_text())
+    blocked = res["non_trivial"] + other["non_trivial"]
+    assert pooled["queries"] == 300_000 and pooled["non_trivial"] == blocked
+    assert pooled["gamma"] == blocked / 300_000 and pooled["seeds"] == [3, 4]
+    assert pooled["ci95"][0] < pooled["gamma"] < pooled["ci95"][1] and pooled["units"] == 2
+    assert pooled["env"] == "point/0"
+    (tmp_path / "g1.json").write_text(json.dumps(dict(res, env="point/1")))  # another world
+    r = script("measure_gamma", "--pool", out, tmp_path / "g1.json", "--json", tmp_path / "p.json")
+    assert r.returncode == 0 and json.loads((tmp_path / "p.json").read_text())["env"] == [
+        "point/0",
+        "point/1",
+    ]
+    for bad, why in [
+        (dict(other, seed=3), "same env and seed"),
+        (dict(other, padding=0.5), "padding"),
+    ]:
+        (tmp_path / "bad.json").write_text(json.dumps(bad))
+        r = script("measure_gamma", "--pool", out, tmp_path / "bad.json", "--json", tmp_path / "x")
+        assert r.returncode == 2 and why in r.stderr and r.stderr.count("\n") == 1, r.stderr
+
 
 # ---------------------------------------------------------------------------
 # Any input, any size: pieces read in place and an edge (see ntq_jax.robots.rows)

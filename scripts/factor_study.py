@@ -15,8 +15,9 @@ Factors, on point/0, point/3, rigid/0, rigid/2 and nlink/4 at the paper's sizes
 * data paths (``planner.data_paths``): ``shortcut`` (a few corners: the point
   robot's default), ``density`` (the shortcut resampled to BIT*'s states per
   path: the rigid body's and the arms' default),
-  ``raw`` (the planner's own waypoints) and, on rigid/0, ``bitstar`` (the
-  committed BIT* record at the paper's 3 s, ``results/data_paths/bitstar/rigid_0``);
+  ``raw`` (the planner's own waypoints) and, on rigid/0 and nlink/4, ``bitstar``
+  (the committed BIT* records at the paper's budgets, 3 s and 4 s,
+  ``results/data_paths/bitstar/<map>``; nlink/4's with training seeds 1 and 2);
 * neural planner budgets: ``ours`` (the config's) and ``mpnet`` (MPNet's: 80
   coarse steps, 10 replanning rounds, 50 steps per reconnection), evaluated on
   the same trained PNets of the default data paths;
@@ -93,7 +94,12 @@ EVAL_VARIANTS = {
     "nosteer_replan": ["eval.delta_norm=l2", "eval.nosteer_check=replan"],
 }
 MPNET_BUDGETS = EVAL_VARIANTS["mpnet"]
-BITSTAR_RECORD = "results/data_paths/bitstar/rigid_0"
+#: The committed BIT* records (``scripts/record_paths.py``, the paper's budget and pool
+#: sizes) the ``bitstar`` cells train on, per map.
+BITSTAR_RECORDS = {
+    "rigid/0": "results/data_paths/bitstar/rigid_0",
+    "nlink/4": "results/data_paths/bitstar/nlink_4",
+}
 #: BIT*-like spacings where the task config's default is not a spacing (see README.md)
 #: (the point robot: BIT* at 2 s on 200 non-trivial point/0 queries, mean segment 0.34,
 #: results/data_paths/density_point_0.json; its default stays the shortcut)
@@ -145,7 +151,7 @@ def data_overrides(cell: Cell, cfg) -> list[str]:
     if cell.data == "bitstar":
         return [
             f"planner.per_env=[{{env: {cell.map}, name: roadmap, data_paths: raw}}]",
-            f"data.per_env=[{{env: {cell.map}, paths_from: {BITSTAR_RECORD}}}]",
+            f"data.per_env=[{{env: {cell.map}, paths_from: {BITSTAR_RECORDS[cell.map]}}}]",
         ]
     if cell.data in ("shortcut", "raw"):
         return [f"planner.data_paths={cell.data}"] + _per_env_data_paths(cfg, cell.map, cell.data)
@@ -203,7 +209,7 @@ def cells(seeds: bool = True) -> list[Cell]:
     :data:`MORE_SEEDS`."""
     out, costly = [], []
     for m in MAPS:
-        modes = ("density", "shortcut", "raw") + (("bitstar",) if m == "rigid/0" else ())
+        modes = ("density", "shortcut", "raw") + (("bitstar",) if m in BITSTAR_RECORDS else ())
         for data in modes:
             last = task_of(m) == "point" and data in COSTLY
             (costly if last else out).append(Cell(m, data, "ours"))
@@ -227,6 +233,8 @@ def cells(seeds: bool = True) -> list[Cell]:
     if seeds:  # after every cell already committed, so --next runs them next
         out += [Cell(m, default_data(m), "ours", k) for k in (1, 2) for m in PAPER_ONLY]
     out += costly + [Cell(m, "density" + FULL_EPOCHS, "ours") for m in DENSITY]
+    if seeds:  # BIT*'s own data on an arm, like its default cell: three training seeds
+        out += [Cell("nlink/4", "bitstar", "ours", k) for k in (1, 2)]
     if seeds:  # five seeds where three left the verdict open, after everything else
         out += [Cell(m, default_data(m), "ours", k) for k in EXTRA_SEEDS for m in MORE_SEEDS]
     return out
@@ -254,7 +262,7 @@ def ready(cell: Cell) -> str | None:
     if cell.data.startswith("density") and task_of(cell.map) == "point" and cell.map not in DENSITY:
         return "no BIT*-like spacing measured for the point robot yet (DENSITY)"
     if cell.data == "bitstar":
-        rec = Path(BITSTAR_RECORD)
+        rec = Path(BITSTAR_RECORDS[cell.map])
         try:
             pools = json.loads((rec / "record.json").read_text())["pools"]
         except (OSError, ValueError, KeyError):
@@ -264,8 +272,8 @@ def ready(cell: Cell) -> str | None:
             return (
                 f"the BIT* record covers U {have['U']}/{pools['U']}, N {have['N']}/"
                 f"{pools['N']} (resume: python scripts/record_paths.py --config "
-                "configs/rigid.yaml --env rigid/0 --planner bitstar --workers 1 "
-                f"--out {rec})"
+                f"configs/{task_of(cell.map)}.yaml --env {cell.map} --planner bitstar "
+                f"--pools N,U --workers 1 --out {rec})"
             )
     return None
 

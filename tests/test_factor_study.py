@@ -19,13 +19,17 @@ def test_every_cell_has_a_config_that_varies_one_factor(monkeypatch):
     cells = fs.cells()
     assert len({c.key for c in cells}) == len(cells)
     # the point maps' dense data modes are queued late, then their 100-epoch checks, then
-    # training seeds 3 and 4 of the maps whose three seeds left the verdict open
+    # nlink/4's BIT* data with training seeds 1 and 2, then training seeds 3 and 4 of the
+    # maps whose three seeds left the verdict open
     tail = [c for c in cells if fs.task_of(c.map) == "point" and c.data in fs.COSTLY]
     checks = [fs.Cell(m, "density" + fs.FULL_EPOCHS, "ours") for m in ("point/0", "point/3")]
+    bitstar = [fs.Cell("nlink/4", "bitstar", "ours", k) for k in (1, 2)]
+    assert fs.Cell("nlink/4", "bitstar", "ours") in cells
     more = [c for c in cells if c.train_seed in fs.EXTRA_SEEDS]
     assert {(c.map, c.train_seed) for c in more} == {(m, k) for m in fs.MORE_SEEDS for k in (3, 4)}
     assert all(c.data == fs.default_data(c.map) and c.budget == "ours" for c in more)
-    assert tail and cells[-len(tail) - 2 - len(more) :] == tail + checks + more
+    got = cells[-len(tail) - 4 - len(more) :]
+    assert tail and got == tail + checks + bitstar + more
     from ntq_jax.experiment.paper import MAPS as PAPER_MAPS
 
     # every map of Tables I-IV is re-run by the queue (its default cell)
@@ -56,8 +60,10 @@ def test_every_cell_has_a_config_that_varies_one_factor(monkeypatch):
             assert isinstance(got, float) and got > 0, (c.key, got)
         else:  # bitstar: the roadmap's raw paths stand in, replaced by the committed record
             assert mode == "bitstar" and got == "raw" and cfg.data.per_env, (c.key, got)
-        if c.train_seed:
-            assert cfg.train.seed == c.train_seed and cfg.data == base.data
+        if c.train_seed:  # the same data as the cell's seed 0
+            same, _ = fs.cell_config(fs.Cell(c.map, c.data, "ours"))
+            assert cfg.train.seed == c.train_seed and cfg.data == same.data
+            assert cfg.planner == same.planner
         # the point maps' dense cells train fewer epochs (more optimizer steps than the
         # default's 100 epochs); every other cell trains the task config's epochs
         costly = (

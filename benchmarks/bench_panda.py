@@ -23,9 +23,26 @@ machine) and the ratios against VAMP's stated figures (quoted, not measured: VAM
 cannot be built here), and the certified program's compile CPU seconds. Written to
 ``--out``/``speed_<scene>.json`` (resumable as above) and ``speed_summary.json``.
 
+``vamp``: per scene, VAMP's own C++ checks beside the package's on the same inputs:
+the discretised motion check at 1/32 rad (VAMP's ``validate_motion<Panda, rake, 32>``,
+the check its planners run; its Python ``validate_motion`` checks at resolution 1, one
+rake of states per radian, so it is not used) on the ``pair`` and ``short`` motions of
+``speed``, and validity of ``--states`` uniform states (VAMP's ``fkcc`` on blocks of
+``rake`` states, against ``Env.is_valid``); VAMP's side runs in
+``benchmarks/vamp_harness.cpp`` (built here with ``g++ -O3 -march=native`` from the
+folders given by ``--vamp-include``: the vamp-planner sdist's ``src/impl``, Eigen 3.4's
+``include/eigen3`` and pdqsort), with no Python in its timed loops; the package's in
+this process; medians of ``--reps`` passes (VAMP: wall seconds of its single-threaded
+loops; ours: CPU seconds), the answers' agreement (the two checks test different
+states along a motion, so near-contact motions may differ) and how many of each
+side's free motions the certified check proves. -> ``--out``/``vamp_<scene>.json``,
+``vamp_summary.json``.
+
     taskset -c 0 python benchmarks/bench_panda.py check
     taskset -c 0 python benchmarks/bench_panda.py speed --reps 5
     taskset -c 0 python benchmarks/bench_panda.py speed --scene cage --force
+    taskset -c 0 python benchmarks/bench_panda.py vamp --reps 5 --states 65536 \
+        --vamp-include <sdist>/src/impl --vamp-include <eigen3> --vamp-include <pdqsort>
 """
 
 from __future__ import annotations
@@ -335,9 +352,193 @@ def run_speed(args) -> int:
     return 0
 
 
+def _cpu_median(fn, reps: int) -> float:
+    """Median process-CPU seconds of ``fn()`` over ``reps`` runs (after one warm-up)."""
+    import jax
+
+    jax.block_until_ready(fn())
+    out = []
+    for _ in range(reps):
+        c0 = time.process_time()
+        jax.block_until_ready(fn())
+        out.append(time.process_time() - c0)
+    return float(np.median(out))
+
+
+HARNESS = Path(__file__).with_name("vamp_harness.cpp")
+
+
+def build_harness(args) -> Path:
+    """``benchmarks/vamp_harness.cpp`` compiled against VAMP's headers (``--vamp-include``:
+    the vamp-planner sdist's ``src/impl``, Eigen 3.4's ``include/eigen3``, pdqsort), once
+    per source change and flags, into the system's temporary folder."""
+    import hashlib
+    import subprocess
+    import tempfile
+
+    if not args.vamp_include:
+        raise SystemExit(
+            "error: the vamp command needs VAMP's C++ headers: --vamp-include <sdist>/src/impl "
+            "--vamp-include <eigen3> --vamp-include <pdqsort> (see the module docstring)"
+        )
+    flags = ["-O3", "-march=native", "-std=c++17", "-DNDEBUG"]
+    flags += [f"-I{d}" for d in args.vamp_include]
+    tag = hashlib.sha256((HARNESS.read_text() + " ".join(flags)).encode()).hexdigest()[:12]
+    exe = Path(tempfile.gettempdir()) / f"ntq_jax_vamp_harness_{tag}"
+    if not exe.exists():
+        cmd = ["g++", *flags, str(HARNESS), "-o", str(exe)]
+        done = subprocess.run(cmd, capture_output=True, text=True)
+        if done.returncode:
+            raise SystemExit(f"error: building the harness failed: {done.stderr.strip()[-400:]}")
+    return exe
+
+
+def _vamp_input(env, a: np.ndarray, b: np.ndarray, q: np.ndarray) -> bytes:
+    """The harness's input: the world in VAMP's shapes, the motions and the states."""
+    from ntq_jax.planners import vamp_bridge
+
+    w = env.world
+    spheres = np.asarray(w.spheres, np.float32).reshape(-1, 4)
+    cuboids = np.array(
+        [
+            [*c[:3], *vamp_bridge.cuboid_euler_xyz(c[6:15]), *c[3:6]]
+            for c in np.asarray(w.cuboids, np.float64)
+        ],
+        np.float32,
+    ).reshape(-1, 9)
+    caps = []
+    for c in np.asarray(w.capsules, np.float64):
+        centre, euler, length = vamp_bridge.capsule_center_form(c[:3], c[3:6])
+        caps.append([*centre, *euler, c[6], length])
+    capsules = np.array(caps, np.float32).reshape(-1, 8)
+    head = np.array([len(spheres), len(cuboids), len(capsules), len(a), len(q)], np.int32)
+    parts = [head, spheres, cuboids, capsules, a, b, q]
+    return b"".join(
+        np.ascontiguousarray(x).astype(x.dtype.newbyteorder("<")).tobytes() for x in parts
+    )
+
+
+def _run_harness(exe: Path, data: bytes, n_motions: int, n_states: int, reps: int):
+    """``(free (M,), valid (N,), seconds per pass over the motions, over the states)``."""
+    import subprocess
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as tmp:
+        src, dst = Path(tmp) / "in.bin", Path(tmp) / "out.bin"
+        src.write_bytes(data)
+        done = subprocess.run([str(exe), str(src), str(dst), str(reps)], capture_output=True)
+        if done.returncode:
+            raise SystemExit(f"error: the harness failed: {done.stderr.decode().strip()}")
+        raw = dst.read_bytes()
+    free = np.frombuffer(raw[:n_motions], np.uint8).astype(bool)
+    valid = np.frombuffer(raw[n_motions : n_motions + n_states], np.uint8).astype(bool)
+    t_motion, t_state = np.frombuffer(raw[n_motions + n_states :], "<f8")
+    return free, valid, float(t_motion), float(t_state)
+
+
+def vamp_scene(scene: str, args) -> dict:
+    """VAMP beside the package on one scene's motions and states (see the docstring)."""
+    import jax.numpy as jnp
+
+    import ntq_jax as nj
+
+    exe = build_harness(args)
+    env = nj.make_env(f"panda/{scene}/1")
+    rng = np.random.default_rng(args.seed)
+    q = np.ascontiguousarray(ref._uniform(env, rng, args.states), np.float32)
+    jq = jnp.asarray(q)
+    out = {"motions": {}}
+    t_ours_states = _cpu_median(lambda: env.is_valid(jq), args.reps)
+    valid_ours = np.asarray(env.is_valid(jq))
+    for kind, (a, b) in speed_motions(env, args.seed + 1, args.speed_motions).items():
+        a, b = np.ascontiguousarray(a, np.float32), np.ascontiguousarray(b, np.float32)
+        ja, jb = jnp.asarray(a), jnp.asarray(b)
+        free, valid, t_vamp, t_vamp_states = _run_harness(
+            exe, _vamp_input(env, a, b, q), len(a), len(q), args.reps
+        )
+        ours = np.asarray(env.steer_to(ja, jb))
+        cert = np.asarray(env.steer_to(ja, jb, check="certified"))
+        t_ours = _cpu_median(lambda ja=ja, jb=jb: env.steer_to(ja, jb), args.reps)
+        out["motions"][kind] = {
+            "n": len(a),
+            "vamp_free": int(free.sum()),
+            "ours_free": int(ours.sum()),
+            "agree": int((free == ours).sum()),
+            "vamp_free_certified": int((free & cert).sum()),
+            "ours_free_certified": int((ours & cert).sum()),
+            "vamp_us_per_motion": round(t_vamp / len(a) * 1e6, 3),
+            "ours_us_per_motion": round(t_ours / len(a) * 1e6, 3),
+            "ours_over_vamp": round(t_ours / t_vamp, 2),
+        }
+    out["is_valid"] = {
+        "n": len(q),
+        "agree": int((valid == valid_ours).sum()),
+        "vamp_ns_per_state": round(t_vamp_states / len(q) * 1e9, 2),
+        "ours_ns_per_state": round(t_ours_states / len(q) * 1e9, 2),
+        "ours_over_vamp": round(t_ours_states / t_vamp_states, 2),
+    }
+    return out
+
+
+def _vamp_line(scene: str, r: dict) -> str:
+    m, v = r["motions"], r["is_valid"]
+    parts = [
+        f"{k} {x['ours_us_per_motion']:.1f} vs {x['vamp_us_per_motion']:.1f} us/motion "
+        f"({x['ours_over_vamp']:.1f}x), agree {x['agree']}/{x['n']}, VAMP-free certified "
+        f"{x['vamp_free_certified']}/{x['vamp_free']}"
+        for k, x in m.items()
+    ]
+    return (
+        f"{scene:17s} " + " | ".join(parts) + f" | is_valid {v['ours_ns_per_state']:.0f} vs "
+        f"{v['vamp_ns_per_state']:.1f} ns/state ({v['ours_over_vamp']:.0f}x), agree "
+        f"{v['agree']}/{v['n']}"
+    )
+
+
+def run_vamp(args) -> int:
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    key = {
+        "speed_motions": args.speed_motions,
+        "states": args.states,
+        "reps": args.reps,
+        "seed": args.seed,
+        "harness": HARNESS.name,
+    }
+    rows = {}
+    for scene in args.scene or SCENES:
+        path = out / f"vamp_{scene}.json"
+        rec = _fresh(path, key, args.force)
+        if rec is None:
+            rec = {
+                "key": key,
+                "scene": scene,
+                **vamp_scene(scene, args),
+                "machine": machine(),
+                "loadavg": loadavg(),
+            }
+            _write(path, rec)
+        rows[scene] = rec
+        print(_vamp_line(scene, rec), flush=True)
+    if not args.scene:
+        ratios = {
+            k: [rows[s]["motions"][k]["ours_over_vamp"] for s in rows] for k in ("pair", "short")
+        }
+        ratios["is_valid"] = [rows[s]["is_valid"]["ours_over_vamp"] for s in rows]
+        _write(
+            out / "vamp_summary.json",
+            {
+                "key": key,
+                "ours_over_vamp_median": {k: float(np.median(v)) for k, v in ratios.items()},
+                "per_scene": {s: r["motions"] for s, r in rows.items()},
+            },
+        )
+    return 0
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("command", choices=("check", "speed"))
+    p.add_argument("command", choices=("check", "speed", "vamp"))
     p.add_argument("--scene", action="append", choices=SCENES, help="repeatable; default all")
     p.add_argument("--configs", type=int, default=100_000)
     p.add_argument("--motions", type=int, default=10_000)
@@ -347,8 +548,14 @@ def main(argv=None) -> int:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", default=str(ROOT / "results" / "panda_checks"))
     p.add_argument("--force", action="store_true")
+    p.add_argument(
+        "--vamp-include",
+        action="append",
+        default=[],
+        help="vamp: a C++ include folder of VAMP's harness (repeatable; see the docstring)",
+    )
     args = p.parse_args(argv)
-    return run_check(args) if args.command == "check" else run_speed(args)
+    return {"check": run_check, "speed": run_speed, "vamp": run_vamp}[args.command](args)
 
 
 if __name__ == "__main__":

@@ -123,6 +123,21 @@ def test_cuboid_euler_xyz_rebuilds_the_rotation():
         np.testing.assert_allclose(rot("z", ez) @ rot("y", ey) @ rot("x", ex), r, atol=1e-9)
 
 
+def test_capsule_center_form_puts_the_ends_back():
+    """VAMP's Cylinder(center, euler_xyz, r, length) has its ends at center +- length / 2
+    R e_z, R = Rz Ry Rx: the form computed for a segment gives back its two ends."""
+    rng = np.random.default_rng(1)
+    ends = list(rng.normal(size=(20, 2, 3))) + [np.array([[0, 0, 0], [0, 0.0, -1]])]
+    ends += [np.array([[0, 0, 0], [0, 1.0, 0]]), np.array([[1, 2, 3], [1, 2, 3.5]])]
+    for a, b in ends:
+        center, (rx, ry, rz), length = vamp_bridge.capsule_center_form(a, b)
+        cx, sx, cy, sy = np.cos(rx), np.sin(rx), np.cos(ry), np.sin(ry)
+        axis = np.array([cx * sy, -sx, cx * cy])  # Rz(0) Ry(ry) Rx(rx) e_z
+        assert rz == 0.0
+        np.testing.assert_allclose(np.asarray(center) - length / 2 * axis, a, atol=1e-12)
+        np.testing.assert_allclose(np.asarray(center) + length / 2 * axis, b, atol=1e-12)
+
+
 @pytest.mark.skipif(
     importlib.util.find_spec("vamp") is None,
     reason="vamp is not installed (its build fetches sources from GitHub)",
@@ -138,3 +153,23 @@ def test_vamp_missing_is_one_import_error_naming_the_build(box):
         pytest.skip("vamp is installed")
     with pytest.raises(ImportError, match="pip install vamp-planner"):
         nj.plan(box, box.query[None], "vamp")
+
+
+@pytest.mark.skipif(
+    importlib.util.find_spec("vamp") is None,
+    reason="vamp is not installed (its build fetches sources from GitHub)",
+)
+def test_vamp_environment_has_the_worlds_geometry():
+    """VAMP's validity of states in the world vamp_environment builds (cuboids and capsules:
+    table_pick) is the package's: the same spheres, the same obstacles."""
+    import vamp
+
+    env = nj.make_env("panda/table_pick/1")
+    assert env.world.capsules.shape[0] > 0 and env.world.cuboids.shape[0] > 0
+    venv = vamp_bridge.vamp_environment(env.world, vamp)
+    lo, hi = (np.asarray(x) for x in env.robot.config_bounds())
+    q = np.random.default_rng(2).uniform(lo, hi, (2000, 7)).astype(np.float32)
+    ours = np.asarray(env.is_valid(q))
+    theirs = np.array([vamp.panda.validate(x, venv) for x in q])
+    assert 0.1 < ours.mean() < 0.9
+    np.testing.assert_array_equal(theirs, ours)

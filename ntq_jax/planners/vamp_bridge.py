@@ -15,7 +15,8 @@ so a path it returns is SOLVED only if the package's check agrees.
 The world maps one to one: spheres ``vamp.Sphere(centre, r)``; cuboids
 ``vamp.Cuboid(centre, euler_xyz, half_extents)`` with the rotation's XYZ Euler angles
 (:func:`cuboid_euler_xyz`, VAMP's ``Rz Ry Rx`` convention); capsules
-``vamp.Cylinder(a, b, r)`` added with ``add_capsule`` (VAMP's own MotionBenchMaker
+``vamp.Cylinder(centre, euler_xyz, r, length)`` (:func:`capsule_center_form`) added
+with ``add_capsule`` (VAMP's own MotionBenchMaker
 loader reads the scene ``box``'s cylinders as cuboids; the package's loader does the
 same, so those arrive here as cuboids already).
 
@@ -25,11 +26,11 @@ Building VAMP (it is not in CI: its build fetches sources from GitHub)
 CMake >= 3.16, a C++17 compiler; the Python ABI ``cp312`` stable wheel tag, Python
 >= 3.8). The build needs:
 
-* Eigen 3 (``find_package(Eigen3)``): ``sudo apt install libeigen3-dev`` (Debian,
+* Eigen 3.4 (``find_package(Eigen3)``): ``sudo apt install libeigen3-dev`` (Debian,
   Ubuntu), ``brew install eigen`` or ``conda install -c conda-forge eigen``;
 * access to GitHub during the build: CMake downloads CPM.cmake
-  (``github.com/cpm-cmake/CPM.cmake``) and CPM fetches nigh, pdqsort and (x86-64)
-  SIMDxorshift from GitHub;
+  (``github.com/cpm-cmake/CPM.cmake``) and CPM fetches nanobind, nigh, pdqsort and
+  (x86-64) SIMDxorshift from GitHub;
 * x86-64 with AVX2 (it compiles with ``-march=native -mavx2``) or ARM64 with NEON, so
   build on the machine that runs it (the wheel is not portable across CPUs).
 
@@ -40,9 +41,27 @@ On a developer machine::
     python -c "import vamp; print(vamp.robots)"
     taskset -c 0 python benchmarks/bench_panda_plan.py vamp
 
-Tried on the shared CI-like machine (2025, vamp-planner 0.6.4): the build stops at
-configuration: the CPM.cmake download from GitHub fails (no access) and Eigen 3 is
-not installed; so the tests of this module are skipped when ``vamp`` is missing.
+Without GitHub at build time (done on the 2-core benchmark machine, vamp-planner
+0.6.4): the sdist from the package registry, and local copies of the sources CPM
+would fetch (CPM.cmake v0.40.1, nanobind at the sdist's pinned commit with its
+``ext/robin_map``, nigh, pdqsort, SIMDxorshift) and of Eigen 3.4 (installed with
+CMake into a prefix). In the unpacked sdist, ``cmake/FetchInitCPM.cmake`` becomes
+``set(CPM_USE_LOCAL_PACKAGES ON)`` plus ``include(<copy>/CPM.cmake)`` (the download
+removed), ``pyproject.toml``'s ``VAMP_ROBOT_MODULES`` / ``VAMP_ROBOT_STRUCTS`` may be
+cut to ``sphere;panda`` / ``Sphere;Panda`` (a shorter build), and::
+
+    export CMAKE_ARGS="-DEigen3_DIR=<prefix>/share/eigen3/cmake \
+      -DCPM_nanobind_SOURCE=<nanobind> -DCPM_nigh_SOURCE=<nigh> \
+      -DCPM_pdqsort_SOURCE=<pdqsort> -DCPM_SIMDxorshift_SOURCE=<SIMDxorshift>"
+    pip install scikit-build-core nanobind && pip install <sdist folder> --no-build-isolation
+
+(about 3 minutes here). Two things found in 0.6.4's Python bindings: the
+``Cylinder(endpoint, endpoint, radius)`` constructor assigns to unconstructed memory and
+crashes the process, so :func:`vamp_environment` builds capsules from the centre form
+(:func:`capsule_center_form`); and ``vamp.<robot>.validate_motion`` checks at
+resolution 1 (one rake of states per radian), not the robot's 32 that VAMP's planners
+use, so it is not VAMP's motion check (``benchmarks/bench_panda.py vamp`` times that
+one in C++, ``benchmarks/vamp_harness.cpp``).
 """
 
 from __future__ import annotations
@@ -56,7 +75,14 @@ from ntq_jax.planners.options import bool_option, motion_check_option
 from ntq_jax.planners.verify import finalize, valid_queries
 from ntq_jax.types import PlanResult, PlanStatus
 
-__all__ = ["plan_vamp", "require_vamp", "vamp_environment", "cuboid_euler_xyz", "BUILD_HINT"]
+__all__ = [
+    "plan_vamp",
+    "require_vamp",
+    "vamp_environment",
+    "cuboid_euler_xyz",
+    "capsule_center_form",
+    "BUILD_HINT",
+]
 
 BUILD_HINT = (
     "VAMP is not importable: build it with `pip install vamp-planner` (needs Eigen 3, "
@@ -93,6 +119,23 @@ def cuboid_euler_xyz(rotation) -> tuple[float, float, float]:
     return rx, ry, rz
 
 
+def capsule_center_form(a, b) -> tuple[list[float], list[float], float]:
+    """``(center, euler_xyz, length)`` of the segment ``a -> b`` for VAMP's
+    ``Cylinder(center, euler_xyz, radius, length)``, whose ends are ``center +-
+    length / 2 * R e_z`` with ``R = Rz Ry Rx`` (``euler_xyz`` = ``(rx, ry, 0)`` here:
+    ``R e_z = (cos rx sin ry, -sin rx, cos rx cos ry)``, the segment's direction).
+
+    The capsules go in by this form because VAMP 0.6.4's constructor from two ends
+    assigns to unconstructed memory and crashes the process."""
+    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
+    d = b - a
+    length = float(np.linalg.norm(d))
+    u = d / length if length > 0 else np.array([0.0, 0.0, 1.0])
+    rx = -math.asin(max(-1.0, min(1.0, float(u[1]))))
+    ry = math.atan2(float(u[0]), float(u[2]))
+    return ((a + b) / 2).tolist(), [rx, ry, 0.0], length
+
+
 def vamp_environment(world, vamp=None):
     """A ``vamp.Environment`` holding the obstacles of a :class:`~ntq_jax.geometry.World3D`."""
     vamp = vamp or require_vamp()
@@ -104,7 +147,8 @@ def vamp_environment(world, vamp=None):
             vamp.Cuboid(row[:3].tolist(), list(cuboid_euler_xyz(row[6:15])), row[3:6].tolist())
         )
     for row in np.asarray(world.capsules, np.float64):
-        venv.add_capsule(vamp.Cylinder(row[:3].tolist(), row[3:6].tolist(), float(row[6])))
+        center, euler, length = capsule_center_form(row[:3], row[3:6])
+        venv.add_capsule(vamp.Cylinder(center, euler, float(row[6]), length))
     return venv
 
 

@@ -307,32 +307,47 @@ def _speed_line(scene: str, r: dict) -> str:
     )
 
 
-def run_speed(args) -> int:
+def _scenes(args, stem: str, key: dict, measure, line, extra: dict | None = None) -> dict:
+    """Per scene (``--scene``, default all): ``<out>/<stem>_<scene>.json`` holding
+    ``measure(scene, args)``, the machine and its load (kept, not measured again, when it
+    holds the same ``key``: resumable), printed with ``line``; the records by scene."""
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    key = {
-        "states": args.states,
-        "speed_motions": args.speed_motions,
-        "reps": args.reps,
-        "seed": args.seed,
-    }
     rows = {}
     for scene in args.scene or SCENES:
-        path = out / f"speed_{scene}.json"
+        path = out / f"{stem}_{scene}.json"
         rec = _fresh(path, key, args.force)
         if rec is None:
             rec = {
                 "key": key,
                 "scene": scene,
-                **time_scene(scene, args),
+                **measure(scene, args),
                 "machine": machine(),
                 "loadavg": loadavg(),
-                "vamp_ns_per_state_quoted": VAMP_NS_PER_STATE,
-                "goals": GOALS,
+                **(extra or {}),
             }
             _write(path, rec)
         rows[scene] = rec
-        print(_speed_line(scene, rec), flush=True)
+        print(line(scene, rec), flush=True)
+    return rows
+
+
+def _key(args, **more) -> dict:
+    """What a per-scene record of ``speed`` / ``vamp`` was measured with (see :func:`_fresh`)."""
+    return {
+        "states": args.states,
+        "speed_motions": args.speed_motions,
+        "reps": args.reps,
+        "seed": args.seed,
+        **more,
+    }
+
+
+def run_speed(args) -> int:
+    out = Path(args.out)
+    key = _key(args)
+    extra = {"vamp_ns_per_state_quoted": VAMP_NS_PER_STATE, "goals": GOALS}
+    rows = _scenes(args, "speed", key, time_scene, _speed_line, extra)
     if not args.scene:
         _write(
             out / "speed_summary.json",
@@ -497,29 +512,8 @@ def _vamp_line(scene: str, r: dict) -> str:
 
 def run_vamp(args) -> int:
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    key = {
-        "speed_motions": args.speed_motions,
-        "states": args.states,
-        "reps": args.reps,
-        "seed": args.seed,
-        "harness": HARNESS.name,
-    }
-    rows = {}
-    for scene in args.scene or SCENES:
-        path = out / f"vamp_{scene}.json"
-        rec = _fresh(path, key, args.force)
-        if rec is None:
-            rec = {
-                "key": key,
-                "scene": scene,
-                **vamp_scene(scene, args),
-                "machine": machine(),
-                "loadavg": loadavg(),
-            }
-            _write(path, rec)
-        rows[scene] = rec
-        print(_vamp_line(scene, rec), flush=True)
+    key = _key(args, harness=HARNESS.name)
+    rows = _scenes(args, "vamp", key, vamp_scene, _vamp_line)
     if not args.scene:
         ratios = {
             k: [rows[s]["motions"][k]["ours_over_vamp"] for s in rows] for k in ("pair", "short")

@@ -8,7 +8,7 @@ For each environment, in ONE process with interleaved repeats (medians quoted):
   as coordinate-major device arrays, its blocked lanes counted in the same call;
   rate = pairs / second. ``check_box``: the same on pairs drawn uniformly from the
   configuration box (valid or not; what ``bench_steer.py`` times);
-* ``gamma``: ``queries.gamma_nt`` over ``n`` uniform valid queries at the default
+* ``gamma``: ``gamma.gamma_nt`` over ``n`` uniform valid queries at the default
   chunk; rate = valid queries / second (sampling, validity, the check and the
   counting all included);
 * ``ratio`` = gamma rate / check rate (the issue's goal: >= 0.5 on point/3).
@@ -34,6 +34,7 @@ import numpy as np
 from common import interleaved, loadavg, machine
 
 import ntq_jax as nj
+from ntq_jax import gamma as G
 from ntq_jax import prng
 from ntq_jax import queries as Q
 from ntq_jax.geometry import KERNEL_COMPILER_OPTIONS
@@ -53,18 +54,18 @@ def _count_blocked(robot, world, a_cm, b_cm, padding: float):
 @functools.partial(_jit, static_argnames=("robot", "padding", "size", "stage"))
 def _stage(robot, world, seeds, padding: float, size: int, stage: str):
     """One gamma chunk cut after ``stage``: "uniforms", "valid" or "full" (the package's chunk)."""
-    u = Q._chunk_uniforms(seeds, jnp.uint32(0), size, 2 * robot.dim)
+    u = G._chunk_uniforms(seeds, jnp.uint32(0), size, 2 * robot.dim)
     if stage == "uniforms":
         s = functools.reduce(jnp.add, u)
-        return Q.count_outcomes(s > 1.0, s > 2.0)
+        return G.count_outcomes(s > 1.0, s > 2.0)
     if stage == "full":
-        return Q.count_outcomes(*Q._outcomes_from_uniforms(robot, world, u, padding))
+        return G.count_outcomes(*G._outcomes_from_uniforms(robot, world, u, padding))
     d = robot.dim
     lo, hi = robot.config_bounds(world)
     rows = [lo[j % d] + u[j] * (hi[j % d] - lo[j % d]) for j in range(2 * d)]
     va = is_valid_cm(robot, world, jnp.stack(rows[:d]), padding)
     vb = is_valid_cm(robot, world, jnp.stack(rows[d:]), padding)
-    return Q.count_outcomes(va & vb, va)
+    return G.count_outcomes(va & vb, va)
 
 
 def _pairs_cm(robot, world, key, m: int, padding: float):
@@ -90,7 +91,7 @@ def bench_env(
     last = {}
 
     def gamma():
-        last["est"] = Q.gamma_nt(robot, world, jax.random.key(next(keys)), n, padding)
+        last["est"] = G.gamma_nt(robot, world, jax.random.key(next(keys)), n, padding)
         return ()
 
     med = interleaved(
@@ -125,7 +126,7 @@ def bench_stages(name: str, padding: float, reps: int, seed: int = 0) -> dict:
     """Milliseconds of one default-size gamma chunk cut after each stage, and the bare check."""
     env = nj.make_env(name)
     robot, world = env.robot, env.world
-    size = Q.default_chunk(robot)
+    size = G.default_chunk(robot)
     seeds = prng.stream_seeds(jax.random.key(seed), 0)
     valid = int(_stage(robot, world, seeds, padding, size, "full")[0])
     a_cm, b_cm = _pairs_cm(robot, world, jax.random.key(seed + 1000), valid, padding)

@@ -46,7 +46,7 @@ from common import interleaved
 
 import ntq_jax as nj
 from ntq_jax import artifacts
-from ntq_jax import queries as Q
+from ntq_jax import gamma as G
 from ntq_jax.geometry import KERNEL_COMPILER_OPTIONS
 from ntq_jax.robots.batch import steer_to_cm
 
@@ -306,7 +306,7 @@ def bench_numpy_steer(name: str, n: int, reps: int) -> list[dict]:
 def _threefry_chunk(robot, world, key, padding: float, size: int):
     """The package's fused gamma chunk, fed by ``jax.random`` (threefry) uniforms instead."""
     u = jax.random.uniform(key, (2 * robot.dim, size), jnp.float32)
-    return Q.count_outcomes(*Q._outcomes_from_uniforms(robot, world, u, padding))
+    return G.count_outcomes(*G._outcomes_from_uniforms(robot, world, u, padding))
 
 
 def threefry_gamma(env, key, candidates: int, chunk: int):
@@ -334,7 +334,7 @@ def threefry_gamma(env, key, candidates: int, chunk: int):
 
 
 def bench_gamma(env, n: int, reps: int) -> list[dict]:
-    chunk = Q.default_chunk(env.robot)
+    chunk = G.default_chunk(env.robot)
     env.gamma_nt(jax.random.key(99), 10_000, padding=0.0)  # compile both chunk kernels
     threefry_gamma(env, jax.random.key(99), chunk, chunk)
     ours, base, cpu = [], [], [0.0, 0.0]

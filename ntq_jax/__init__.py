@@ -24,6 +24,7 @@ from ntq_jax.version import __version__
 
 if TYPE_CHECKING:  # the names below, for type checkers and the API docs
     from ntq_jax.envs import Env, EnvError, make_env
+    from ntq_jax.gamma import GammaEstimate
     from ntq_jax.geometry import World
     from ntq_jax.neural import (
         NeuralPlanResult,
@@ -34,7 +35,7 @@ if TYPE_CHECKING:  # the names below, for type checkers and the API docs
     )
     from ntq_jax.planners import PlanResult, plan, register_planner
     from ntq_jax.presets import PAPER_GAMMA, PRESETS
-    from ntq_jax.queries import NON_TRIVIAL, NT_EXHAUSTED, UNIFORM, FreeSpaceTooSmall, GammaEstimate
+    from ntq_jax.queries import NON_TRIVIAL, NT_EXHAUSTED, UNIFORM, FreeSpaceTooSmall
     from ntq_jax.types import PlanCause, PlanStatus
 
 #: Where each public name lives. They load on first use (PEP 562), so a process that
@@ -54,7 +55,7 @@ _EXPORTS = {
     "NeuralPlanResult": "ntq_jax.neural",
     "PRESETS": "ntq_jax.presets",
     "PAPER_GAMMA": "ntq_jax.presets",
-    "GammaEstimate": "ntq_jax.queries",
+    "GammaEstimate": "ntq_jax.gamma",
     "FreeSpaceTooSmall": "ntq_jax.queries",
     "UNIFORM": "ntq_jax.queries",
     "NON_TRIVIAL": "ntq_jax.queries",

@@ -65,7 +65,7 @@ from ntq_jax.experiment.cli import UsageError, check_writable, run_cli, seed_arg
 
 MAX_QUERIES = 10**15  # ~80 days at the fastest measured rate (1.5e8 queries/s, point robot)
 INTERRUPTED = 130  # the shell's exit code for a process ended by SIGINT
-#: The default chunk of a 3-D arm (``ntq_jax.queries.default_chunk`` is 2**15): at a few
+#: The default chunk of a 3-D arm (``ntq_jax.gamma.default_chunk`` is 2**15): at a few
 #: thousand queries per second, 4096 candidates take about a second, so the bar moves
 #: steadily, at the rate of 2**15 (panda/box/1 on one core: 2,860 vs 2,430 queries/s).
 ARM3D_CHUNK = 4096
@@ -93,7 +93,7 @@ def _queries(text: str) -> int:
 
 
 def _chunk(text: str) -> int:
-    from ntq_jax.queries import MAX_CHUNK
+    from ntq_jax.gamma import MAX_CHUNK
 
     return _count(text, MAX_CHUNK)
 
@@ -133,7 +133,7 @@ class _Eta:
 
     The rate is measured from the end of the first chunk (which includes the
     compilation) on; if the estimate exceeds ``max_hours`` it raises ScriptError,
-    which stops :func:`ntq_jax.queries.gamma_nt` before any more work. The estimate
+    which stops :func:`ntq_jax.gamma.gamma_nt` before any more work. The estimate
     is of the streaming only: the last chunk's prefix is counted by a second program,
     compiled at the end (about a minute for a 3-D arm the first time).
     """
@@ -392,8 +392,8 @@ def _run(argv) -> int:
 
     import ntq_jax as nj
     from ntq_jax import artifacts
+    from ntq_jax.gamma import default_chunk
     from ntq_jax.geometry import World3D
-    from ntq_jax.queries import default_chunk
 
     if not args.no_compile_cache:
         artifacts.enable_compile_cache()

@@ -297,7 +297,7 @@ def test_api_bitstar_from_script_without_main_guard(tmp_path):
 
 def test_gamma_interrupted_carries_the_partial_estimate(point_env):
     """gamma_nt's KeyboardInterrupt is a GammaInterrupted with the chunks counted so far."""
-    from ntq_jax.queries import GammaInterrupted
+    from ntq_jax.gamma import GammaInterrupted
 
     calls = []
 

@@ -623,12 +623,12 @@ def test_large_maps_are_drawn_as_one_image_matching_the_boxes(monkeypatch):
 def test_gamma_chunk_of_a_large_map_keeps_memory_small():
     """gamma_nt's default chunk on an indexed map is INDEXED_POINT_CHUNK (its work queue
     keeps ~0.5 kB per pair: 2**22 pairs took 2.7 GB on a 73k-box map); presets keep 2**22."""
-    from ntq_jax import queries as Q
+    from ntq_jax import gamma as G
 
     env = nj.make_env("point/0")
-    assert env.world.index is None and Q.default_chunk(env.robot, env.world) == 1 << 22
-    assert Q.default_chunk(nj.make_env("rigid/0").robot) == 1 << 15
+    assert env.world.index is None and G.default_chunk(env.robot, env.world) == 1 << 22
+    assert G.default_chunk(nj.make_env("rigid/0").robot) == 1 << 15
     world = _shared_world()
     big = Env("many", env.robot, world, 0.0)
     assert big.world.index is not None
-    assert Q.default_chunk(big.robot, big.world) == Q.INDEXED_POINT_CHUNK == 1 << 18
+    assert G.default_chunk(big.robot, big.world) == G.INDEXED_POINT_CHUNK == 1 << 18

@@ -21,6 +21,7 @@ from hypothesis import strategies as st
 from scipy import stats
 
 import ntq_jax as nj
+from ntq_jax import gamma as G
 from ntq_jax import prng
 from ntq_jax import queries as Q
 from ntq_jax.geometry import World
@@ -518,7 +519,7 @@ def test_gamma_nt_small_n_read_lane_by_lane_equals_whole_chunks(monkeypatch):
     chunk = 4096  # rows of 64 lanes: the lane-by-lane path takes n <= 256
     ns = [1, 2, 63, 64, 65, 200, 256, 257, 1000]
     small = [ENV.gamma_nt(key, n, chunk=chunk) for n in ns]
-    monkeypatch.setattr(Q, "SMALL_ROWS", 0)  # whole chunks only
+    monkeypatch.setattr(G, "SMALL_ROWS", 0)  # whole chunks only
     whole = [ENV.gamma_nt(key, n, chunk=chunk) for n in ns]
     for n, a, b in zip(ns, small, whole):
         assert (a.queries, a.non_trivial, a.candidates) == (
@@ -527,13 +528,13 @@ def test_gamma_nt_small_n_read_lane_by_lane_equals_whole_chunks(monkeypatch):
             b.candidates,
         ), n
     # rows too few for n: the lane-by-lane attempt gives up and whole chunks count it
-    monkeypatch.setattr(Q, "SMALL_ROWS", 8)
-    assert Q._small_estimate(ROBOT, WORLD, prng.stream_seeds(key, 0), PAD, chunk, 10**6) is None
+    monkeypatch.setattr(G, "SMALL_ROWS", 8)
+    assert G._small_estimate(ROBOT, WORLD, prng.stream_seeds(key, 0), PAD, chunk, 10**6) is None
     # (no padding: the lane program test_free_space_too_small_is_raised runs on its one-box
     # map; the 0.4-wide free border holds ~12 valid pairs among those 512 lanes, not 250)
     nearly_empty = World.create(BOUNDS, np.array([[5.0, 5.0, 4.6, 4.6]]), np.zeros((0, 3)))
     assert (
-        Q._small_estimate(ROBOT, nearly_empty, prng.stream_seeds(key, 0), 0.0, chunk, 250) is None
+        G._small_estimate(ROBOT, nearly_empty, prng.stream_seeds(key, 0), 0.0, chunk, 250) is None
     )
 
 
@@ -580,7 +581,7 @@ def test_free_space_too_small_is_raised():
     with pytest.raises(nj.FreeSpaceTooSmall):
         Q.sample_nontrivial_queries(ROBOT, world, key, 5, 0.0)
     with pytest.raises(nj.FreeSpaceTooSmall):
-        Q.gamma_nt(ROBOT, world, key, 10, 0.0, chunk=4096)
+        G.gamma_nt(ROBOT, world, key, 10, 0.0, chunk=4096)
     assert issubclass(nj.FreeSpaceTooSmall, ValueError)
     # free space that the padding closes: fine without padding, an error with it
     world = World.create(BOUNDS, [[5.0, 5.0, 4.9, 4.9]])
@@ -648,11 +649,11 @@ def test_samplers_and_gamma_compile_once():
     robot = TracedPoint()
     key = jax.random.PRNGKey(0)
     Q.sample_queries(robot, _world(0), key, 300, 0.5, 0.3, n_max=3)
-    Q.gamma_nt(robot, _world(0), key, 5000, 0.3, chunk=4096)
+    G.gamma_nt(robot, _world(0), key, 5000, 0.3, chunk=4096)
     before = TRACES.copy()
     # other sizes than the first call's, ones other tests here sample (the mixture's
     # jax.random.uniform draw, not a robot kernel, compiles per n: those programs are shared)
     for i, n in zip(range(1, 4), (120, N_STAT, 9000)):
         Q.sample_queries(robot, _world(i), jax.random.PRNGKey(i), n, 0.5, 0.3, n_max=3)
-        Q.gamma_nt(robot, _world(i), jax.random.PRNGKey(i), 5000 * i, 0.3, chunk=4096)
+        G.gamma_nt(robot, _world(i), jax.random.PRNGKey(i), 5000 * i, 0.3, chunk=4096)
     assert TRACES == before

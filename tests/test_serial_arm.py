@@ -551,13 +551,13 @@ def test_gamma_through_shared_programs_equals_the_fused_chunk(tiny, tiny_world):
     (``shared_check_programs``): lane for lane the fused chunk's outcomes, so the
     estimate is the one counted off the fused lanes up to the n-th valid query, whether
     it is read off chunk 0's rows (small n) or counts whole chunks."""
-    from ntq_jax import queries
+    from ntq_jax import gamma
 
     key, size = jax.random.key(3), 2048
     lanes = [
         [
             np.asarray(x)
-            for x in queries._fused_chunk_lanes(
+            for x in gamma._fused_chunk_lanes(
                 tiny, tiny_world, prng.stream_seeds(key, i), jnp.uint32(0), 0.0, size
             )
         ]
@@ -565,13 +565,13 @@ def test_gamma_through_shared_programs_equals_the_fused_chunk(tiny, tiny_world):
     ]
     both, blocked = (np.concatenate(x) for x in zip(*lanes))
     assert 0 < blocked.sum() < both.sum() < len(both)  # every outcome occurs
-    shared = queries._gamma_chunk_lanes(
+    shared = gamma._gamma_chunk_lanes(
         tiny, tiny_world, prng.stream_seeds(key, 1), jnp.uint32(0), 0.0, size
     )
     np.testing.assert_array_equal(shared[0], lanes[1][0])
     np.testing.assert_array_equal(shared[1], lanes[1][1])
     for n in (10, int(both[: 2 * size].sum()) + 5):  # chunk 0's first rows; three chunks
-        est = queries.gamma_nt(tiny, tiny_world, key, n, 0.0, chunk=size)
+        est = gamma.gamma_nt(tiny, tiny_world, key, n, 0.0, chunk=size)
         last = int(np.flatnonzero(both)[n - 1])
         assert (est.queries, est.non_trivial, est.candidates) == (
             n,

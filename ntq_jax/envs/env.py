@@ -48,6 +48,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ntq_jax import artifacts, broadphase, geometry, grid_maps, validation
+from ntq_jax import gamma as G
 from ntq_jax import queries as Q
 from ntq_jax.batching import bucket_size
 from ntq_jax.geometry import World, World3D
@@ -304,9 +305,9 @@ class Env:
         padding: float | None = None,
         chunk: int | None = None,
         progress=None,
-    ) -> Q.GammaEstimate:
+    ) -> G.GammaEstimate:
         """gamma_nt over ``n`` uniform queries, with its Wilson 95% interval."""
-        return Q.gamma_nt(
+        return G.gamma_nt(
             self.robot, self.world, key, n, self.resolve_padding(padding), chunk, progress
         )
 

@@ -14,7 +14,7 @@ than ``jax.vmap(steer_to)``).
 Optional class attributes: ``row_piece_max`` (the largest in-place piece of a host
 batch, :mod:`ntq_jax.robots.rows`) and ``shared_check_programs`` (True when the checks
 cost seconds to compile: stages run the shared batched checks instead of fusing copies
-of their own, e.g. :func:`ntq_jax.queries.gamma_nt`'s chunks).
+of their own, e.g. :func:`ntq_jax.gamma.gamma_nt`'s chunks).
 """
 
 from __future__ import annotations

@@ -113,8 +113,8 @@ class SerialArm(DiscretizedSteering, CertifiedSteering):
     row_piece_max: ClassVar[int] = ROW_PIECE_MAX
     #: Its checks cost seconds each to compile (the fused kernels of obstacles,
     #: self-collision and the motion checks): stages that would fuse their own copy of
-    #: them (``queries.gamma_nt``'s chunks) run the shared batched programs instead, with
-    #: the same answers (:mod:`ntq_jax.queries`).
+    #: them (``gamma.gamma_nt``'s chunks) run the shared batched programs instead, with
+    #: the same answers (:mod:`ntq_jax.gamma`).
     shared_check_programs: ClassVar[bool] = True
 
     def __post_init__(self):

@@ -209,16 +209,27 @@ def _pad(xs: tuple[Array, ...], size: int) -> tuple[Array, ...]:
     return tuple(jnp.pad(x, ((0, size - x.shape[0]),) + ((0, 0),) * (x.ndim - 1)) for x in xs)
 
 
-@functools.partial(jax.jit, static_argnames=("head", "tail", "skips"))
-def _join(
-    edge: Array | None, pieces: tuple[Array, ...], head: int, tail: int, skips: tuple[int, ...]
-) -> Array:
+def _joined(concatenate, edge, pieces, head: int, tail: int, skips: tuple[int, ...]):
     """The answers in row order: the edge's head rows, the pieces (each without its first
     ``skips`` rows, shared with the previous piece), the edge's tail rows."""
     body = [p[k:] for p, k in zip(pieces, skips)]
     if edge is None:
-        return jnp.concatenate(body)
-    return jnp.concatenate([edge[:head], *body, edge[head : head + tail]])
+        return concatenate(body)
+    return concatenate([edge[:head], *body, edge[head : head + tail]])
+
+
+@functools.partial(jax.jit, static_argnames=("head", "tail", "skips"))
+def _join(
+    edge: Array | None, pieces: tuple[Array, ...], head: int, tail: int, skips: tuple[int, ...]
+) -> Array:
+    """:func:`_joined` on the device, one compiled program per layout."""
+    return _joined(jnp.concatenate, edge, pieces, head, tail, skips)
+
+
+def _join_host(edge, pieces, head: int, tail: int, skips: tuple[int, ...]) -> np.ndarray:
+    """:func:`_joined` on the host: the answers waited for, nothing compiled."""
+    edge = None if edge is None else np.asarray(edge)
+    return _joined(np.concatenate, edge, [np.asarray(p) for p in pieces], head, tail, skips)
 
 
 @functools.partial(jax.jit, static_argnames=("n",))
@@ -255,17 +266,20 @@ def run_rows(
         and (plan.pieces == ((0, n),) or (not plan.pieces and m))
     ):
         if not m or m == n:  # one piece, or an edge of exactly a bucket: the whole batch
-            return kernel(*whole, _all_rows(n))
-        return _first(kernel(*_pad(tuple(whole), m), _first_rows(n, m)), n)
+            out = kernel(*whole, _all_rows(n))
+            return np.asarray(out) if host else out
+        out = kernel(*_pad(tuple(whole), m), _first_rows(n, m))
+        return np.asarray(out)[:n] if host else _first(out, n)
+    join = _join_host if host else _join
     outs = [
         kernel(*[x[lo : lo + size] for x in arrays], _all_rows(size)) for lo, size in plan.pieces
     ]
     ends = [plan.head] + [lo + size for lo, size in plan.pieces]
     skips = tuple(max(0, end - lo) for end, (lo, _) in zip(ends, plan.pieces))
     if not m:
-        if host:
-            return np.concatenate([np.asarray(o)[k:] for o, k in zip(outs, skips)])
-        return outs[0] if len(outs) == 1 else _join(None, tuple(outs), 0, 0, skips)
+        if len(outs) == 1 and not host:
+            return outs[0]
+        return join(None, tuple(outs), 0, 0, skips)
     rows = plan.edge_rows
     edge_in = []
     for x in arrays:
@@ -274,12 +288,8 @@ def run_rows(
         e[plan.head : rows] = x[plan.tail :]
         edge_in.append(e)
     edge = kernel(*edge_in, _first_rows(rows, m))
-    if host:
-        edge, head, tail = np.asarray(edge), plan.head, n - plan.tail
-        if not outs:
-            return edge[:rows]
-        body = [np.asarray(o)[k:] for o, k in zip(outs, skips)]
-        return np.concatenate([edge[:head], *body, edge[head : head + tail]])
     if not outs:
+        if host:
+            return np.asarray(edge)[:rows]
         return edge if rows == m else _first(edge, rows)
-    return _join(edge, tuple(outs), plan.head, n - plan.tail, skips)
+    return join(edge, tuple(outs), plan.head, n - plan.tail, skips)

@@ -357,20 +357,8 @@ def gamma_nt(
         if progress is not None:
             progress(counts[0])
     except KeyboardInterrupt:
-        queries, blocked, cands = counts
-        partial = (
-            GammaEstimate(
-                blocked / queries,
-                wilson_interval(blocked, queries),
-                queries,
-                blocked,
-                cands,
-                time.perf_counter() - t0,
-            )
-            if queries
-            else None
-        )
-        raise GammaInterrupted(partial) from None
+        # the estimate over the whole chunks counted before the interrupt, if any
+        raise GammaInterrupted(_estimate(counts, t0) if counts[0] else None) from None
     return _estimate(counts, t0)
 
 

@@ -478,6 +478,70 @@ def test_batched_equals_one_by_one_and_noise_is_keyed():
     assert a.paths.shape != c.paths.shape or not np.array_equal(a.paths, c.paths, equal_nan=True)
 
 
+def test_host_stages_plan_as_the_fused_stages(monkeypatch):
+    """A robot whose checks are costly to compile (``shared_check_programs``, the 3-D arm)
+    runs the planner's checks on the host through the shared batched programs
+    (:mod:`ntq_jax.neural.host_stages`: the ends' validity, contraction, feasibility, the
+    path states' validity before replanning). The point robot given that flag plans every
+    query as with its fused stages, array for array: with steerTo (blocked coarse paths
+    contracted, repaired by replanning; an invalid start; a noisy PNet), without it
+    (the waypoints' validity checked), and with replanning without steerTo."""
+    s, g = (2.0, 5.0), (8.0, 5.0)
+    cases = [
+        (
+            "wall",
+            BROKEN,
+            [[s, g], [[1, 1], [9, 6]]],
+            OPTS,
+            dict(jump=((s, g, (7.0, 5.0)), NO_JUMP)),
+        ),
+        (
+            "deadend",
+            SEEKER,
+            [[[5, 4], [5, 9]], [[4, 3], [6, 8]], [[5, 6.2], [1, 1]]],
+            OPTS,
+            dict(sigma=0.5),
+        ),
+        (
+            "twowalls",
+            SEEKER,
+            [[[2.5, 5], [8.5, 5]], [[1, 1], [9, 9]]],
+            PlannerOptions(n_plan=12, steer=False, delta=1.0, nosteer_check="states"),
+            {},
+        ),
+        (
+            "wall",
+            SEEKER,
+            [[[2, 5], [8, 5]], [[1, 2], [9, 2]]],
+            PlannerOptions(
+                n_plan=12,
+                steer=False,
+                delta=1.0,
+                nosteer_check="replan",
+                replan_rounds=2,
+                replan_steps=8,
+            ),
+            dict(sigma=0.3),
+        ),
+    ]
+    robot_type = type(ENV_ROBOT)
+    causes = set()
+    for name, mode, queries, opts, kw in cases:
+        got = {}
+        for shared in (False, True):
+            monkeypatch.setattr(robot_type, "shared_check_programs", shared, raising=False)
+            q = np.asarray(queries, np.float32)
+            got[shared] = plan_batch(
+                make(name), pnet(name, mode, **kw), q, jax.random.key(1), opts, rows=BATCH
+            )
+        for field in ("paths", "lengths", "success", "costs", "cause", "pnet_calls", "replans"):
+            a, b = getattr(got[True], field), getattr(got[False], field)
+            np.testing.assert_array_equal(a, b, f"{name}: {field}")
+        causes |= set(got[True].cause.tolist())
+        assert got[True].replans.any() or not got[True].success.all(), name
+    assert {PlanCause.SUCCESS, PlanCause.INVALID_QUERY, PlanCause.INFEASIBLE} <= causes
+
+
 def test_lazy_states_contraction():
     env = make("wall")
     p = np.full((2, 8, 2), np.nan, np.float32)
@@ -603,12 +667,14 @@ class _Reads:
 def test_each_stage_reads_only_the_options_in_its_compile_key(monkeypatch):
     """Every stage, traced with options that record their reads, reads only the fields of
     ``STAGE_FIELDS`` (the rest are left out of its compile key), on every path through the
-    planner: steerTo, each nosteer_check, bidirectional, the l2 goal test, no contraction."""
+    planner: steerTo, each nosteer_check, bidirectional, the l2 goal test, no contraction;
+    ``coarse_plan`` (the coarse stage without the ends' validity) traced beside ``coarse``."""
     from ntq_jax.neural import steps
     from ntq_jax.neural.options import STAGE_FIELDS
 
     cores = {
         "coarse": steps.coarse_core,
+        "coarse_plan": steps.coarse_plan_core,
         "valid": steps.valid_core,
         "connect": steps.connect_core,
         "check": steps.check_core,
@@ -616,10 +682,15 @@ def test_each_stage_reads_only_the_options_in_its_compile_key(monkeypatch):
     for_stage, compiled = PlannerOptions.for_stage, steps._compiled
     reads = {name: set() for name in cores}
 
+    def trace(name, robot, proxy, args):
+        jax.make_jaxpr(functools.partial(cores[name], robot, proxy))(*args)
+        reads[name] |= proxy.read
+
     def spy(name, args):
         proxy = args[1]
-        jax.make_jaxpr(functools.partial(cores[name], args[0], proxy))(*args[2:])
-        reads[name] |= proxy.read
+        trace(name, args[0], proxy, args[2:])
+        if name == "coarse":  # the coarse plan a robot with shared check programs compiles
+            trace("coarse_plan", args[0], _Reads(proxy.opts), args[2:])
         return compiled(name, (args[0], for_stage(proxy.opts, name)) + args[2:])
 
     monkeypatch.setattr(PlannerOptions, "for_stage", lambda self, stage: _Reads(self))

@@ -8,7 +8,8 @@ discretised check for the data paths and at evaluation (the certified data check
 tested in test_data_paths, the certified check of the neural planner's check stage
 below, on a planar arm), no replanning, and 220 milestones, whose edges are checked in
 the chunk the non-trivial sampler's checks already compiled
-(``planners.verify.ARM_CHUNKS``). Asserts what the run made:
+(``planners.verify.ARM_CHUNKS``); the neural planner's checks run on those programs too
+(``ntq_jax.neural.host_stages``), so it compiles only its coarse plan. Asserts what the run made:
 every dataset's queries and paths are 7-D, each solved path runs from its query's start
 to its goal with waypoints at most ``planner.data_paths`` apart (a direct connection
 stays its two ends) and every segment free by the environment's check; D0..D3 hold K_train

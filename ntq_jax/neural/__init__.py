@@ -7,6 +7,8 @@
 * :mod:`~ntq_jax.neural.repair`: neural replanning on the host (repair windows, splices)
   and the per-query state of a batch;
 * :mod:`~ntq_jax.neural.steps`: the jitted steps and their bounded cache of compiled programs;
+* :mod:`~ntq_jax.neural.host_stages`: the checks on the host, through the shared batched
+  programs, for robots whose checks are costly to compile (the 3-D arm);
 * :mod:`~ntq_jax.neural.proposals`: the ensemble planner's proposals (:class:`EnsemblePNet`,
   :func:`choose`);
 * :mod:`~ntq_jax.neural.motions`: the motion checks inside the jitted steps.

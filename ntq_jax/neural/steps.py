@@ -26,6 +26,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ntq_jax.neural import host_stages
 from ntq_jax.neural.motions import segments as _segments
 from ntq_jax.neural.motions import steer as _steer
 from ntq_jax.neural.proposals import fold_in, proposals_per_call, propose
@@ -231,15 +232,24 @@ def _contract_and_check(robot, world, opts, p, n, mask, do_contract: bool):
 def coarse_core(robot, opts, world, pnet, key, starts, goals, active):
     """Coarse plan of a batch (one jitted call): ``(p, n, valid, reached, calls)``.
 
-    Its contraction and feasibility check are :func:`check_core`'s, a separate
-    stage of a fixed shape (:data:`CHECK_ROWS` paths) compiled once per process.
+    ``valid``: the ``active`` rows whose start and goal are valid at ``opts.eval_padding``;
+    only they are planned (:func:`coarse_plan_core`). Its contraction and feasibility
+    check are :func:`check_core`'s, a separate stage of a fixed shape
+    (:data:`CHECK_ROWS` paths) compiled once per process.
     """
-    length = opts.max_len
     valid = (
         active
         & is_valid_cm(robot, world, starts.T, opts.eval_padding)
         & is_valid_cm(robot, world, goals.T, opts.eval_padding)
     )
+    return coarse_plan_core(robot, opts, world, pnet, key, starts, goals, valid)
+
+
+def coarse_plan_core(robot, opts, world, pnet, key, starts, goals, valid):
+    """:func:`coarse_core` with the rows to plan given (``valid``: their ends already
+    checked, e.g. on the host by :mod:`ntq_jax.neural.host_stages`), so the program holds
+    no validity check of its own: ``(p, n, valid, reached, calls)``."""
+    length = opts.max_len
     if opts.bidirectional:
         pa, na, pb, nb, reached, calls = _connect(
             robot, world, pnet, key, starts, goals, valid, opts.n_plan, opts.plan_padding
@@ -297,6 +307,7 @@ def cost_core(robot, p, n):
 
 _JITS = {
     "coarse": jax.jit(coarse_core, static_argnames=("robot", "opts")),
+    "coarse_plan": jax.jit(coarse_plan_core, static_argnames=("robot", "opts")),
     "valid": jax.jit(valid_core, static_argnames=("robot", "opts")),
     "connect": jax.jit(connect_core, static_argnames=("robot", "opts")),
     "check": jax.jit(check_core, static_argnames=("robot", "opts")),
@@ -336,14 +347,36 @@ class Stages:
     ``"connect"``, ``"check"``; see the ``*_core`` functions) on ``args`` (what
     follows ``robot, opts, world``) and returns host arrays; ``run`` and
     ``compile`` accumulate the seconds spent running and compiling.
+
+    For a robot whose ``shared_check_programs`` is True the checks run on the host
+    through the shared batched programs (:mod:`ntq_jax.neural.host_stages`: the
+    ``"valid"`` and ``"check"`` stages, and the validity of the ends before the coarse
+    plan, :func:`coarse_plan_core`), with the same answers; their time counts as run time.
     """
 
     def __init__(self, robot, opts, world, pnet):
         self.robot, self.opts, self.world, self.pnet = robot, opts, world, pnet
         self.run = 0.0
         self.compile = 0.0
+        self.on_host = bool(getattr(robot, "shared_check_programs", False))
 
     def __call__(self, name: str, *args) -> list[np.ndarray]:
+        if not self.on_host or name == "connect":
+            return self._jitted(name, args)
+        opts = self.opts.for_stage(name)
+        t0 = time.perf_counter()
+        if name == "coarse":
+            pnet, key, starts, goals, active = args
+            valid = host_stages.ends_valid(self.robot, opts, self.world, starts, goals, active)
+            self.run += time.perf_counter() - t0
+            return self._jitted("coarse_plan", (pnet, key, starts, goals, jnp.asarray(valid)))
+        host = {"valid": host_stages.valid_host, "check": host_stages.check_host}[name]
+        out = host(self.robot, opts, self.world, *args)
+        self.run += time.perf_counter() - t0
+        return out
+
+    def _jitted(self, name: str, args: tuple) -> list[np.ndarray]:
+        """Stage ``name``'s compiled program on ``args``, timed."""
         args = (self.robot, self.opts.for_stage(name), self.world) + args
         t0 = time.perf_counter()
         fn = _compiled(name, args)

@@ -14,7 +14,14 @@ import numpy as np
 from ntq_jax.robots.batch import distances, steer_to_pairs, valid_states
 from ntq_jax.types import PlanResult, PlanStatus
 
-__all__ = ["valid_queries", "check_paths", "finalize", "motions_free", "ARM_CHUNKS"]
+__all__ = [
+    "valid_queries",
+    "states_valid",
+    "check_paths",
+    "finalize",
+    "motions_free",
+    "ARM_CHUNKS",
+]
 
 #: The compiled batch sizes of a 3-D serial arm's motion checks in :func:`motions_free`,
 #: smallest first: a batch runs in chunks of the first size that holds it (else of the
@@ -38,14 +45,22 @@ def motions_free(robot, world, a, b, padding: float, check: str = "discretized")
     return steer_to_pairs(robot, world, a, b, padding, check=check, chunk=chunk)
 
 
+def states_valid(robot, world, states, padding: float) -> np.ndarray:
+    """``(N,)`` bool, the states ``(N, d)`` valid: :func:`ntq_jax.robots.batch.valid_states`
+    (its answers), for a serial arm a batch of at most ``ARM_CHUNKS["discretized"][0]``
+    states in a chunk of that size (one state's check then costs what a motion's smallest
+    chunk does, not a whole default chunk's), otherwise in its default chunks."""
+    small = ARM_CHUNKS["discretized"][0]
+    if getattr(robot, "kind", None) == "serial_arm" and int(np.shape(states)[0]) <= small:
+        return valid_states(robot, world, states, padding, chunk=small)
+    return valid_states(robot, world, states, padding)
+
+
 def valid_queries(env, q: np.ndarray, padding: float) -> np.ndarray:
     """``(K,)`` bool: start and goal finite and valid at ``padding``."""
     k, d = q.shape[0], q.shape[2]
     flat = q.reshape(2 * k, d)
-    if env.robot.kind == "serial_arm" and 2 * k <= ARM_CHUNKS["discretized"][0]:
-        ok = valid_states(env.robot, env.world, flat, padding, chunk=ARM_CHUNKS["discretized"][0])
-    else:
-        ok = valid_states(env.robot, env.world, flat, padding)
+    ok = states_valid(env.robot, env.world, flat, padding)
     return ok.reshape(k, 2).all(axis=1) & np.isfinite(flat).all(axis=1).reshape(k, 2).all(axis=1)
 
 

@@ -23,32 +23,24 @@ ALGORITHM_VERSION = 4  # bump when planning results change (saved evaluations ar
 NOSTEER_CHECKS = (True, False, "states", "replan")
 
 
+#: The fields the coarse plan reads once the ends' validity is given (``"coarse_plan"``).
+_COARSE_PLAN_FIELDS = (
+    "n_plan",
+    "steer",
+    "delta",
+    "delta_norm",
+    "nosteer_check",
+    "replan_rounds",
+    "replan_steps",
+    "bidirectional",
+    "plan_padding",
+)
+
 #: The :class:`PlannerOptions` fields each compiled stage of the neural planner reads
 #: (:mod:`ntq_jax.neural.steps`; a test traces each stage and checks it reads no other).
 STAGE_FIELDS = {
-    "coarse": (
-        "n_plan",
-        "steer",
-        "delta",
-        "delta_norm",
-        "nosteer_check",
-        "replan_rounds",
-        "replan_steps",
-        "bidirectional",
-        "plan_padding",
-        "eval_padding",
-    ),
-    "coarse_plan": (
-        "n_plan",
-        "steer",
-        "delta",
-        "delta_norm",
-        "nosteer_check",
-        "replan_rounds",
-        "replan_steps",
-        "bidirectional",
-        "plan_padding",
-    ),
+    "coarse": _COARSE_PLAN_FIELDS + ("eval_padding",),
+    "coarse_plan": _COARSE_PLAN_FIELDS,
     "valid": ("eval_padding",),
     "connect": ("replan_steps", "plan_padding"),
     "check": ("steer", "nosteer_check", "contract", "plan_padding", "eval_padding", "eval_check"),

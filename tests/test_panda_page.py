@@ -126,7 +126,13 @@ def test_problems_rows_and_the_dispatch_of_reproduction(tmp_path):
     assert text.startswith("# Beyond the paper: a 7-DoF arm")
     row = _line(text, "| panda/cage/1 | 0 | 99 |")
     assert row[3:8] == ["0.404", "0.414", "0.424", "0.434", "0.606"]
-    assert row[9:] == ["1.000", "0.707", "0.0400"]
+    assert row[8:12] == ["50.00", "1.000", "0.707", "40.00"]  # times in ms
+    assert row[12:] == ["not built", "", ""]  # VAMP: no entry in this problems.json
+    got = json.loads((d / "problems.json").read_text())
+    got["peers"]["vamp"] = {"solved": rate(98), "certified": rate(30), "median_solve_seconds": 5e-4}
+    (d / "problems.json").write_text(json.dumps(got))
+    row = _line(R.write(tmp_path).read_text(), "| panda/cage/1 | 0 | 99 |")
+    assert row[9:] == ["1.000", "0.707", "40.00", "0.990", "0.303", "0.50"]
     assert R.check(tmp_path) is None
     path.write_text(text + "edited\n")
     assert "out of date" in R.check(tmp_path)

@@ -55,6 +55,8 @@ DOC_NAME = "REPRODUCTION.md"
 TASK = "panda"
 MEMBERS = ("PNet_0", "PNet_1", "PNet_2", "PNet_3")
 KINDS = ("uniform", "nontrivial")
+#: The peers of the problems table, in column order, and what a cell says without them.
+PEER_COLUMNS = (("rrtconnect", "not installed"), ("vamp", "not built"))
 _KIND = {"uniform": "uniform", "nontrivial": "non-trivial"}
 
 
@@ -162,6 +164,11 @@ def _section_tables(summaries) -> list[str]:
     return out
 
 
+def _ms(seconds) -> str:
+    """Seconds as milliseconds with two decimals (VAMP's solve times are a fraction of one)."""
+    return fixed(seconds * 1e3 if num(seconds) else seconds, 2)
+
+
 def _problems(root: Path, summary: dict) -> dict | None:
     path = root / Path(summary["_path"]).parent / "problems.json"
     return json.loads(path.read_text(encoding="utf-8")) if path.is_file() else None
@@ -174,12 +181,15 @@ def _section_problems(root: Path, summaries) -> list[str]:
         "the scene place its obstacles at other poses with their own start and goal. Solved "
         "= a path proven free in the problem's own world (the PNets, best-of-4: each "
         "problem's cheapest success of the four); the peers plan on the discretised check "
-        "(their own kind) at `planner.eval_time_budget` seconds, and `certified` counts "
-        "their paths that also pass the certified check. Fractions of the valid problems.",
+        "(their own kind): OMPL's RRT-Connect with simplification at "
+        "`planner.eval_time_budget` seconds, VAMP's RRT-Connect with simplification (where "
+        "VAMP is built) to its own iteration limit; `certified` counts their paths that also "
+        "pass the certified check; `ms` are median milliseconds per problem (the PNets': "
+        "all four planning it in one batch). Fractions of the valid problems.",
         "",
-        "| map | seed | valid | PNet_0 | PNet_1 | PNet_2 | PNet_3 | best-of-4 | PNet s / problem "
-        "| RRT-Connect | certified | RRT-Connect s (median) |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| map | seed | valid | PNet_0 | PNet_1 | PNet_2 | PNet_3 | best-of-4 | PNets ms "
+        "| RRT-Connect | certified | RRT-Connect ms | VAMP | certified | VAMP ms |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     rows = 0
     for s in summaries:
@@ -190,22 +200,24 @@ def _section_problems(root: Path, summaries) -> list[str]:
         ms = got["models"]
         cells = [fixed(ms[m]["ratio"]) if m in ms else "" for m in MEMBERS]
         best = next((v for k, v in ms.items() if k.startswith("PNet_best-of")), None)
-        peer = got["peers"].get("rrtconnect")
-        pc = (
-            [fixed(peer["solved"]["ratio"]), fixed(peer["certified"]["ratio"])]
-            + [fixed(peer["median_solve_seconds"], 4)]
-            if peer
-            else ["not installed", "", ""]
-        )
+        pc = []
+        for name, missing in PEER_COLUMNS:
+            peer = got["peers"].get(name)
+            pc += (
+                [fixed(peer["solved"]["ratio"]), fixed(peer["certified"]["ratio"])]
+                + [_ms(peer["median_solve_seconds"])]
+                if peer
+                else [missing, "", ""]
+            )
         out.append(
             f"| {s['env']} | {s.get('train_seed') or 0} | {got['valid']} | "
             + " | ".join(cells)
-            + f" | {fixed(best['ratio']) if best else ''} | {fixed(got['neural_median_seconds'], 4)} | "
+            + f" | {fixed(best['ratio']) if best else ''} | {_ms(got['neural_median_seconds'])} | "
             + " | ".join(pc)
             + " |"
         )
     if not rows:
-        out.append("| (no problems.json yet) | | | | | | | | | | | |")
+        out.append("| (no problems.json yet) |" + " |" * 14)
     return out + [""]
 
 

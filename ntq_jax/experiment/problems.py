@@ -195,7 +195,9 @@ def evaluate_problems(
         log(f"[{env_name}] {scene}: {len(envs)} problems ({int(valid.sum())} valid), PNets")
         out = {f"neural_{k}": v for k, v in _neural(envs, pnets, cfg, log).items()}
         for name in ran:
-            log(f"[{env_name}] {scene}: {name} at {cfg.planner.eval_time_budget} s per problem")
+            limit = _budget(name, cfg).get("time_budget")
+            per = f"at {limit} s per problem" if limit else "to its own iteration limit"
+            log(f"[{env_name}] {scene}: {name} {per}")
             out.update({f"{name}_{k}": v for k, v in _peer(name, envs, cfg).items()})
         return dict(out, valid=valid, numbers=np.array(numbers), queries=q, peers=np.array(ran))
 

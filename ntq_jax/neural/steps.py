@@ -352,6 +352,8 @@ class Stages:
     through the shared batched programs (:mod:`ntq_jax.neural.host_stages`: the
     ``"valid"`` and ``"check"`` stages, and the validity of the ends before the coarse
     plan, :func:`coarse_plan_core`), with the same answers; their time counts as run time.
+    ``on_host`` says whether they do (set it False to run the fused stages instead, e.g.
+    to compare the two).
     """
 
     def __init__(self, robot, opts, world, pnet):

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ntq_jax.neural.motions import feasible_rows
 from ntq_jax.planners.smoothing import shortcut_paths
 from ntq_jax.planners.verify import motions_free, states_valid
 
@@ -77,8 +78,8 @@ def check_host(robot, opts, world, p, n, todo) -> list[np.ndarray]:
 
     Returns ``[p, n, feasible, blocked]`` as the fused stage does: ``blocked (N, L-1)``
     the existing segments of the rows ``todo`` in collision at ``opts.eval_padding`` by
-    ``opts.eval_check``; ``feasible`` as in
-    :func:`ntq_jax.neural.steps._contract_and_check`.
+    ``opts.eval_check``; ``feasible`` by the stage's rule,
+    :func:`ntq_jax.neural.motions.feasible_rows`.
     """
     p = np.array(p, np.float32)
     n = np.array(n)
@@ -93,10 +94,5 @@ def check_host(robot, opts, world, p, n, todo) -> list[np.ndarray]:
             robot, world, p[r, c], p[r, c + 1], opts.eval_padding, opts.eval_check
         )
     blocked = seg & ~free
-    feasible = todo & (n >= 1)
-    if opts.steer or opts.nosteer_check not in (False, "states"):
-        feasible = feasible & ~blocked.any(axis=1)
-    elif opts.nosteer_check == "states":  # the waypoints only
-        (ok,) = valid_host(robot, opts, world, p, n)
-        feasible = feasible & np.all(ok | (np.arange(p.shape[1])[None, :] >= n[:, None]), axis=1)
-    return [p, n, feasible, blocked]
+    states_ok = lambda: valid_host(robot, opts, world, p, n)[0]  # noqa: E731
+    return [p, n, feasible_rows(opts, todo, n, blocked, states_ok, np), blocked]

@@ -1,7 +1,8 @@
 """The neural planner's motion checks inside its jitted steps (:mod:`ntq_jax.neural.steps`).
 
 :func:`steer` is the planner's steerTo on row-major pairs; :func:`segments` checks
-every segment of a batch of NaN-padded paths. A path buffer has room for the
+every segment of a batch of NaN-padded paths; :func:`feasible_rows` is the check stage's
+feasibility rule from those verdicts (also run on the host, :mod:`ntq_jax.neural.host_stages`). A path buffer has room for the
 coarse plan and every replanning round (``PlannerOptions.max_len`` states), so
 after contraction most of its segments are padding: with the certified check,
 whose fixed cost per checked motion (the clearances of both ends, every part
@@ -98,3 +99,21 @@ def segments(
     else:
         free = steer(robot, world, a, b, padding, seg.reshape(-1), check)
     return free.reshape(num, length - 1), seg
+
+
+def feasible_rows(opts, mask, n, blocked, states_ok, xp=jnp):
+    """The feasibility rule of the check stage, from its segment verdicts: ``(N,)`` bool.
+
+    ``mask`` rows with a state (``n >= 1``) and, with steerTo (or ``opts.nosteer_check``
+    True / ``"replan"``), no ``blocked (N, L-1)`` segment; with ``"states"``, every state
+    valid (``states_ok()``, called only then, gives ``(N, L)``); with False (the paper's
+    variant) unchecked. ``xp``: ``jax.numpy`` inside the jitted stage, ``numpy`` on the
+    host (:mod:`ntq_jax.neural.host_stages`); the same rule either way.
+    """
+    feasible = mask & (n >= 1)
+    if opts.steer or opts.nosteer_check not in (False, "states"):
+        return feasible & ~xp.any(blocked, axis=1)
+    if opts.nosteer_check == "states":  # the waypoints only
+        ok = states_ok()
+        return feasible & xp.all(ok | (xp.arange(ok.shape[1])[None, :] >= n[:, None]), axis=1)
+    return feasible  # the paper's variant, unchecked

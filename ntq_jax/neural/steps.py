@@ -27,6 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ntq_jax.neural import host_stages
+from ntq_jax.neural.motions import feasible_rows
 from ntq_jax.neural.motions import segments as _segments
 from ntq_jax.neural.motions import steer as _steer
 from ntq_jax.neural.proposals import fold_in, proposals_per_call, propose
@@ -215,13 +216,10 @@ def _contract_and_check(robot, world, opts, p, n, mask, do_contract: bool):
         p, n = contract(robot, world, p, n, opts.plan_padding, mask)
     free, seg = _segments(robot, world, p, n, opts.eval_padding, mask, opts.eval_check)
     blocked = seg & ~free
-    feasible = mask & (n >= 1)
-    if opts.steer or opts.nosteer_check not in (False, "states"):
-        feasible = feasible & ~jnp.any(blocked, axis=1)
-    elif opts.nosteer_check == "states":  # the waypoints only
-        (ok,) = valid_core(robot, opts, world, p, n)
-        feasible = feasible & jnp.all(ok | (jnp.arange(p.shape[1])[None, :] >= n[:, None]), axis=1)
-    return p, n, feasible, blocked  # nosteer_check False: the paper's variant, unchecked
+    feasible = feasible_rows(
+        opts, mask, n, blocked, lambda: valid_core(robot, opts, world, p, n)[0]
+    )
+    return p, n, feasible, blocked
 
 
 # ---------------------------------------------------------------------------

@@ -2,8 +2,8 @@
 
 :func:`steer` is the planner's steerTo on row-major pairs; :func:`segments` checks
 every segment of a batch of NaN-padded paths; :func:`feasible_rows` is the check stage's
-feasibility rule from those verdicts (also run on the host, :mod:`ntq_jax.neural.host_stages`). A path buffer has room for the
-coarse plan and every replanning round (``PlannerOptions.max_len`` states), so
+feasibility rule from those verdicts (also run on the host,
+:mod:`ntq_jax.neural.host_stages`). A path buffer has room for the coarse plan and every replanning round (``PlannerOptions.max_len`` states), so
 after contraction most of its segments are padding: with the certified check,
 whose fixed cost per checked motion (the clearances of both ends, every part
 of the robot) is paid for masked motions too, :func:`segments` first gathers

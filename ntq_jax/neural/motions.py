@@ -1,20 +1,19 @@
 """The neural planner's motion checks inside its jitted steps (:mod:`ntq_jax.neural.steps`).
 
-:func:`steer` is the planner's steerTo on row-major pairs; :func:`segments` checks
-every segment of a batch of NaN-padded paths; :func:`feasible_rows` is the check stage's
+:func:`steer` is the planner's steerTo on row-major pairs; :func:`segments` checks every
+segment of a batch of NaN-padded paths; :func:`feasible_rows` is the check stage's
 feasibility rule from those verdicts (also run on the host,
-:mod:`ntq_jax.neural.host_stages`). A path buffer has room for the coarse plan and every replanning round (``PlannerOptions.max_len`` states), so
-after contraction most of its segments are padding: with the certified check,
-whose fixed cost per checked motion (the clearances of both ends, every part
-of the robot) is paid for masked motions too, :func:`segments` first gathers
-the existing segments and checks them in chunks of :data:`SEGMENT_CHUNK`, as
-many chunks as there are segments (a ``while_loop``). Each motion's answer is
-its own (the check's lanes only schedule motions), so the result is the same
-as checking the whole buffer. On the Panda (749 parts; panda/table_pick/1, 10
-non-trivial queries, a PNet trained at tiny size, taskset -c 1 on a loaded core) a
-call of the check stage (256 path buffers of 152 states) fell from 5.5 to 0.1-0.2 s
-wall, and the whole compiled plan of the 10 queries from 5.9 to 0.2 CPU seconds.
-"""
+:mod:`ntq_jax.neural.host_stages`). A path buffer has room for the coarse plan and every
+replanning round (``PlannerOptions.max_len`` states), so after contraction most of its
+segments are padding: with the certified check, whose fixed cost per checked motion (the
+clearances of both ends, every part of the robot) is paid for masked motions too,
+:func:`segments` first gathers the existing segments and checks them in chunks of
+:data:`SEGMENT_CHUNK`, as many chunks as there are segments (a ``while_loop``). Each
+motion's answer is its own (the check's lanes only schedule motions), so the result is
+the same as checking the whole buffer. On the Panda (749 parts; panda/table_pick/1, 10
+non-trivial queries, a PNet trained at tiny size, taskset -c 1 on a loaded core) a call
+of the check stage (256 path buffers of 152 states) fell from 5.5 to 0.1-0.2 s wall, and
+the whole compiled plan of the 10 queries from 5.9 to 0.2 CPU seconds. """
 
 from __future__ import annotations
 

@@ -13,7 +13,8 @@ motion's answer is its own (the check's lanes only schedule motions), so the res
 the same as checking the whole buffer. On the Panda (749 parts; panda/table_pick/1, 10
 non-trivial queries, a PNet trained at tiny size, taskset -c 1 on a loaded core) a call
 of the check stage (256 path buffers of 152 states) fell from 5.5 to 0.1-0.2 s wall, and
-the whole compiled plan of the 10 queries from 5.9 to 0.2 CPU seconds. """
+the whole compiled plan of the 10 queries from 5.9 to 0.2 CPU seconds.
+"""
 
 from __future__ import annotations
 

@@ -34,7 +34,9 @@ from here too (every name of ``__all__``):
   (:func:`seed_estimate`, :class:`SeedEstimate`, :func:`pooled_spread`,
   :func:`combine`, :func:`proportion_variance`, :func:`paired_difference_variance`):
   :mod:`ntq_jax.seed_effects`;
-* multiplicity (:func:`holm`, :func:`benjamini_hochberg`): :mod:`ntq_jax.multiplicity`.
+* multiplicity (:func:`holm`, :func:`benjamini_hochberg`): :mod:`ntq_jax.multiplicity`;
+* the mean of a ratio over a family of worlds measured in part (:func:`world_mean`,
+  :class:`WorldMean`; a scene's gamma_nt over its problems): :mod:`ntq_jax.world_mean`.
 
 Only NumPy and SciPy (``scipy.stats``, imported on first use); no JAX.
 """
@@ -56,6 +58,7 @@ from ntq_jax.seed_effects import (
     proportion_variance,
     seed_estimate,
 )
+from ntq_jax.world_mean import WorldMean, world_mean
 
 __all__ = [
     "wilson_interval",
@@ -77,6 +80,8 @@ __all__ = [
     "pooled_spread",
     "combine",
     "stratified_kendall",
+    "WorldMean",
+    "world_mean",
 ]
 
 N_BOOT = 10_000  #: bootstrap resamples of the cost difference

@@ -34,14 +34,17 @@ runs as units with the same padding and chunk, each its own ``--json`` (resumabl
 samples of it), or different environments, e.g. the 100 problems of a scene (each
 problem places the scene differently; the mean over their worlds is the scene's
 gamma_nt). ``--pool`` adds their counts up into one estimate over all their queries,
-with its Wilson interval:
+with its Wilson interval; over several envs it also gives their family's mean
+(``worlds`` in the JSON: the mean over the envs measured, with an interval that adds
+the spread between worlds, ``ntq_jax.world_mean``) for a family of ``--population``
+worlds (100 for a Panda scene's problems; default unbounded):
 
     for n in $(seq 1 100); do
       python scripts/measure_gamma.py --env panda/cage/$n --queries 1e6 \
           --json results/panda_gamma/series/cage/problem_$n.json --skip-existing --no-progress
     done
     python scripts/measure_gamma.py --pool results/panda_gamma/series/cage/problem_*.json \
-        --json results/panda_gamma/series/cage.json
+        --population 100 --json results/panda_gamma/series/cage.json
 
 After the first chunks the estimated time of the streaming is printed; a run that would take
 longer than ``--max-hours`` (default 24) stops there with an error. Ctrl-C
@@ -223,6 +226,19 @@ def _report_json(d: dict) -> None:
     print(f"{d['seconds']:.2f} s  {d['queries_per_second']:,.0f} queries/s (when measured)")
 
 
+def _report_worlds(w: dict) -> None:
+    of = "an unbounded family" if w["population"] is None else f"{w['population']}"
+    ci = (
+        "no interval (one world)"
+        if w["ci95"] is None
+        else (f"95% CI [{w['ci95'][0]:.6f}, {w['ci95'][1]:.6f}]")
+    )
+    print(
+        f"mean over {w['measured']} of {of} worlds = {w['mean']:.6f}  {ci}  "
+        f"(spread between worlds {w['spread']:.4f})"
+    )
+
+
 def _report(env, padding: float, est, file=None) -> None:
     lo, hi = est.ci95
     print(
@@ -296,6 +312,15 @@ def _parser() -> argparse.ArgumentParser:
         "padding and chunk; one env with different seeds, or different envs) into one "
         "estimate, printed and written to --json",
     )
+    ap.add_argument(
+        "--population",
+        type=_count,
+        default=None,
+        metavar="N",
+        help="with --pool: how many worlds the family the pooled envs are drawn from "
+        "has (e.g. 100, a Panda scene's problems), for the interval of the family's mean; "
+        "default: an unbounded family (a wider interval)",
+    )
     ap.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     ap.add_argument(
         "--no-compile-cache",
@@ -310,9 +335,14 @@ def _parser() -> argparse.ArgumentParser:
 POOL_KEYS = ("padding", "chunk", "resolution", "check")
 
 
-def _pool(paths: list[Path]) -> dict:
-    """One estimate over the queries of the unit results in ``paths`` (see ``--pool``)."""
-    from ntq_jax.stats import wilson_interval
+def _pool(paths: list[Path], population: int | None = None) -> dict:
+    """One estimate over the queries of the unit results in ``paths`` (see ``--pool``).
+
+    With several envs, ``worlds`` adds the mean over their worlds (each env's units
+    summed into one world) with the interval of a family of ``population`` worlds
+    (:func:`ntq_jax.world_mean.world_mean`; None: an unbounded family).
+    """
+    from ntq_jax.stats import wilson_interval, world_mean
 
     units = []
     for path in paths:
@@ -360,10 +390,31 @@ def _pool(paths: list[Path]) -> dict:
         out["world"] = (
             "the worlds of these environments, the same number of queries from each when "
             "their units are alike: gamma_nt is then their mean (the interval is "
-            "conservative for that mean of fixed worlds)"
+            "conservative for that mean of fixed worlds; see worlds for the family's)"
         )
     elif "world" in units[0]:
         out["world"] = units[0]["world"]
+    if len(set(envs)) > 1 or population is not None:
+        names = sorted(set(envs), key=envs.index)
+        if population is not None and population < len(names):
+            raise ScriptError(
+                f"--population {population} is smaller than the {len(names)} envs pooled"
+            )
+        hits = [sum(u["non_trivial"] for u in units if u["env"] == e) for e in names]
+        counts = [sum(u["queries"] for u in units if u["env"] == e) for e in names]
+        wm = world_mean(hits, counts, population=population)
+        out["worlds"] = {
+            "measured": wm.worlds,
+            "population": wm.population,
+            "mean": wm.mean,
+            "spread": wm.spread,
+            "ci95": None if wm.ci95 is None else list(wm.ci95),
+            "df": wm.df if math.isfinite(wm.df) else None,
+            "about": "the mean of gamma_nt over a family of worlds of which these were "
+            "measured; its interval adds the spread between worlds (shrinking to the "
+            "queries' alone as every world of the population is measured), "
+            "ntq_jax.world_mean",
+        }
     return out
 
 
@@ -375,13 +426,17 @@ def _run(argv) -> int:
         check_writable(args.json, "--json")
         from ntq_jax import artifacts
 
-        pooled = _pool(args.pool)
+        pooled = _pool(args.pool, args.population)
         _report_json(pooled)
         print(
             f"pooled from {pooled['units']} units (seeds {pooled['seeds'][0]}..{pooled['seeds'][-1]})"
         )
+        if "worlds" in pooled:
+            _report_worlds(pooled["worlds"])
         artifacts.write_json(args.json, pooled)
         return 0
+    if args.population is not None:
+        raise ScriptError("--population needs --pool (it describes the pooled envs' family)")
     if args.skip_existing and args.json is None:
         raise ScriptError("--skip-existing needs --json (the file a finished run wrote)")
     if args.json is not None:

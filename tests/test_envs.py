@@ -242,12 +242,25 @@ def test_measure_gamma_script_json(tmp_path, script):
     assert pooled["gamma"] == blocked / 300_000 and pooled["seeds"] == [3, 4]
     assert pooled["ci95"][0] < pooled["gamma"] < pooled["ci95"][1] and pooled["units"] == 2
     assert pooled["env"] == "point/0"
-    (tmp_path / "g1.json").write_text(json.dumps(dict(res, env="point/1")))  # another world
-    r = script("measure_gamma", "--pool", out, tmp_path / "g1.json", "--json", tmp_path / "p.json")
-    assert r.returncode == 0 and json.loads((tmp_path / "p.json").read_text())["env"] == [
-        "point/0",
-        "point/1",
-    ]
+    # another world, with half the non-trivial queries
+    half = dict(res, env="point/1", non_trivial=res["non_trivial"] // 2)
+    (tmp_path / "g1.json").write_text(json.dumps(half))
+    argv = ["--pool", out, tmp_path / "g1.json", "--json", tmp_path / "p.json"]
+    r = script("measure_gamma", *argv)
+    pooled = json.loads((tmp_path / "p.json").read_text())
+    assert r.returncode == 0 and pooled["env"] == ["point/0", "point/1"]
+    # the family's mean (ntq_jax.world_mean): an unbounded family (t on the spread of the
+    # two worlds, 1 df), then a family of 2 worlds, both measured (the queries alone)
+    free = pooled["worlds"]
+    assert free["measured"] == 2 and free["population"] is None and free["df"] == 1
+    r = script("measure_gamma", *argv, "--population", "2")
+    whole = json.loads((tmp_path / "p.json").read_text())["worlds"]
+    mean = (res["gamma"] + half["non_trivial"] / 200_000) / 2
+    assert r.returncode == 0 and whole["mean"] == pytest.approx(mean) and whole["df"] is None
+    assert whole["ci95"][0] < mean < whole["ci95"][1] < mean + 0.01 < free["ci95"][1]
+    assert "mean over 2 of 2 worlds" in r.stdout
+    r = script("measure_gamma", *argv, "--population", "1")
+    assert r.returncode == 2 and "smaller than the 2 envs" in r.stderr, r.stderr
     for bad, why in [
         (dict(other, seed=3), "same env and seed"),
         (dict(other, padding=0.5), "padding"),

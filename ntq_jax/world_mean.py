@@ -17,11 +17,20 @@ spread between worlds, vanishes once every world is measured (``n = N``): the va
 then that of the measured worlds, known up to their queries (the second term). With
 ``N`` unknown (None: an unbounded family) only the first term remains (``s^2`` holds
 the query noise too). The interval is Student's t on ``v`` with Satterthwaite's degrees
-of freedom (the query term known), the normal one when only the query term remains.
+of freedom (the query term known), the normal one when only the query term remains,
+clipped to ``[0, 1]`` (a mean of ratios).
 
 The interval treats the measured worlds as a random sample of the family; worlds that
 were generated independently of each other (MotionBenchMaker's problems) may be taken
-in any order. Only NumPy and SciPy (``scipy.stats``, imported on first use); no JAX.
+in any order. The query term assumes independent queries in every world. Worlds
+measured on one query stream (the same seed: the same configurations, checked in each
+world) have correlated query errors, which do not average out over the worlds and do
+not show in ``s^2``. ``shared_queries=True`` then takes the query term at its bound
+under perfect correlation, ``(sum_i sqrt(v_i) / n)^2``, whatever ``n / N`` (``s^2``
+holds at most the part of the query noise that is not shared, so the sum stays
+conservative).
+
+Only NumPy and SciPy (``scipy.stats``, imported on first use); no JAX.
 """
 
 from __future__ import annotations
@@ -39,7 +48,8 @@ class WorldMean(NamedTuple):
 
     Attributes:
         mean: the mean of the measured worlds' ratios, the estimate of the family's mean.
-        ci95: its interval ``(lo, hi)`` at the confidence asked (95 % by default), or
+        ci95: its interval ``(lo, hi)`` at the confidence asked (95 % by default, within
+            ``[0, 1]``), or
             None when it cannot be estimated (one world measured of several).
         worlds: how many worlds were measured (``n``).
         population: how many worlds the family has (``N``), or None (unbounded).
@@ -55,7 +65,13 @@ class WorldMean(NamedTuple):
     df: float
 
 
-def world_mean(hits, queries, population: int | None = None, confidence: float = 0.95):
+def world_mean(
+    hits,
+    queries,
+    population: int | None = None,
+    confidence: float = 0.95,
+    shared_queries: bool = False,
+):
     """The mean over a family of worlds of a ratio measured on ``n`` of them.
 
     Args:
@@ -64,6 +80,8 @@ def world_mean(hits, queries, population: int | None = None, confidence: float =
         population: the number of worlds in the family (>= n), or None for an unbounded
             family (the conservative choice: no finite-population correction).
         confidence: the interval's level, in (0, 1).
+        shared_queries: the worlds were measured on one query stream (correlated query
+            errors): the query term is bounded by perfect correlation (module docstring).
 
     Returns:
         A :class:`WorldMean`; see the module docstring for the variance and interval.
@@ -87,7 +105,11 @@ def world_mean(hits, queries, population: int | None = None, confidence: float =
     f = 0.0 if population is None else n / int(population)
     spread = float(p.std(ddof=1)) if n >= 2 else float("nan")
     between = (1 - f) * spread**2 / n if n >= 2 else 0.0
-    within = f * float(np.sum(p * (1 - p) / (m - 1))) / n**2
+    v_query = p * (1 - p) / (m - 1)
+    if shared_queries:  # perfectly correlated query errors: the variance of their mean
+        within = float(np.mean(np.sqrt(v_query))) ** 2
+    else:
+        within = f * float(np.sum(v_query)) / n**2
     out = dict(mean=float(p.mean()), worlds=n, population=population, spread=spread)
     if n < 2 and f < 1:  # one world of several: no spread between worlds to go on
         return WorldMean(ci95=None, df=float("nan"), **out)
@@ -97,4 +119,5 @@ def world_mean(hits, queries, population: int | None = None, confidence: float =
 
     q = 0.5 + confidence / 2
     h = float(_st.norm.ppf(q) if math.isinf(df) else _st.t.ppf(q, df)) * math.sqrt(v)
-    return WorldMean(ci95=(out["mean"] - h, out["mean"] + h), df=df, **out)
+    lo, hi = max(out["mean"] - h, 0.0), min(out["mean"] + h, 1.0)  # a mean of ratios
+    return WorldMean(ci95=(lo, hi), df=df, **out)

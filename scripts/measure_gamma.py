@@ -17,9 +17,9 @@ gamma_nt; ``--padding`` measures another geometry (e.g. the data-generation one)
 A 3-D scene (``panda/<scene>/<number>``, a 3-D JSON) is measured over the world of
 that one problem: MotionBenchMaker's problems of a scene place it at different poses
 around the robot and rearrange its small objects, so their gamma_nt differ (problems
-1-10 of bookshelf_tall: 0.08 to 0.25; see results/panda_gamma/README.md). Its motions are checked
-at the arm's resolution (1/32 rad: ~170 states on an
-average free 7-D motion), so it runs at thousands of queries per second, not millions,
+1-10 of bookshelf_tall: 0.08 to 0.25; see results/panda_gamma/README.md). Its motions
+are checked at the arm's resolution (1/32 rad: ~170 states on an average free 7-D
+motion), so it runs at thousands of queries per second, not millions,
 after the arm's shared checks are compiled (``is_valid`` and the discretised
 ``steer_to``, the programs data generation and planning use: seconds each; the
 persistent compilation cache keeps them for the next run unless ``--no-compile-cache``).
@@ -28,21 +28,28 @@ persistent compilation cache keeps them for the next run unless ``--no-compile-c
 a result of the same environment, queries, padding, seed and chunk, it is printed
 and nothing is measured.
 
-A measurement too long for one sitting (10^8 queries of a Panda scene: hours of a core)
-runs as units with the same padding and chunk, each its own ``--json`` (resumable with
-``--skip-existing``): one environment with different seeds (independent uniform
-samples of it), or different environments, e.g. the 100 problems of a scene (each
-problem places the scene differently; the mean over their worlds is the scene's
-gamma_nt). ``--pool`` adds their counts up into one estimate over all their queries,
-with its Wilson interval; over several envs it also gives their family's mean
-(``worlds`` in the JSON: the mean over the envs measured, with an interval that adds
-the spread between worlds, ``ntq_jax.world_mean``) for a family of ``--population``
-worlds (100 for a Panda scene's problems; default unbounded):
+A Panda scene, ``--env panda/<scene>``, is its 100 problems' worlds (each places the
+scene differently; the mean over them is the scene's gamma_nt). ``--queries`` is split
+into one unit per problem (1e8: 1e6 on each, hours of a core). Each unit is written as
+it finishes, in the folder beside ``--json`` (``series/cage.json`` has its units in
+``series/cage/problem_<n>.json``), and skipped when already there, so the run stops and
+resumes at any unit. Problem ``n`` is measured with seed ``100 s + n - 1`` (``s``:
+``--seed``), so the problems' queries are independent. After each unit ``--json``
+pools the units present: the scene's mean and its interval, which counts the problems
+not yet measured. ``--problems 51-100`` measures some of the units only, e.g. on a
+second core:
 
-    for n in $(seq 1 100); do
-      python scripts/measure_gamma.py --env panda/cage/$n --queries 1e6 \
-          --json results/panda_gamma/series/cage/problem_$n.json --skip-existing --no-progress
-    done
+    python scripts/measure_gamma.py --env panda/cage --queries 1e8 \
+        --json results/panda_gamma/series/cage.json
+
+Any measurement too long for one sitting runs as units with the same padding and chunk,
+each its own ``--json`` (resumable with ``--skip-existing``): one environment with
+different seeds (independent uniform samples of it), or different environments.
+``--pool`` adds their counts up into one estimate over all their queries, with its
+Wilson interval; over several envs it also gives their family's mean (``worlds`` in the
+JSON, ``ntq_jax.world_mean``) for a family of ``--population`` worlds (default: an
+unbounded family, the wider interval). The scene's units above, pooled again:
+
     python scripts/measure_gamma.py --pool results/panda_gamma/series/cage/problem_*.json \
         --population 100 --json results/panda_gamma/series/cage.json
 
@@ -112,6 +119,27 @@ def _padding(text: str) -> float:
     return v
 
 
+def _problems(text: str) -> list[int]:
+    """Problem numbers: ``A-B`` ranges and single numbers, comma-separated, in order."""
+    out: list[int] = []
+    seen: set[int] = set()
+    for part in text.split(","):
+        lo, sep, hi = part.strip().partition("-")
+        try:
+            a, b = int(lo), int(hi) if sep else int(lo)
+        except ValueError:
+            raise argparse.ArgumentTypeError(
+                f"not a list of problem numbers: {text!r} (e.g. 1-50 or 3,7,9)"
+            ) from None
+        if a > b:
+            raise argparse.ArgumentTypeError(f"empty range {part.strip()!r} in {text!r}")
+        if b - a > 10**6:
+            raise argparse.ArgumentTypeError(f"range {part.strip()!r} too long")
+        out.extend(k for k in range(a, b + 1) if k not in seen)
+        seen.update(range(a, b + 1))
+    return out
+
+
 def _hours(text: str) -> float:
     """A number of hours > 0 (``inf`` allowed: no limit)."""
     try:
@@ -138,11 +166,14 @@ class _Eta:
     compilation) on; if the estimate exceeds ``max_hours`` it raises ScriptError,
     which stops :func:`ntq_jax.gamma.gamma_nt` before any more work. The estimate
     is of the streaming only: the last chunk's prefix is counted by a second program,
-    compiled at the end (about a minute for a 3-D arm the first time).
+    compiled at the end (about a minute for a 3-D arm the first time). In a series of
+    units (a scene's problems) the bar counts from ``offset`` (the units measured before)
+    and the estimate also covers ``after`` queries (the units still to come).
     """
 
-    def __init__(self, bar, total: int, max_hours: float):
+    def __init__(self, bar, total: int, max_hours: float, offset: int = 0, after: int = 0):
         self.bar, self.total, self.max_hours = bar, total, max_hours
+        self.offset, self.after = offset, after
         self.start = time.monotonic()
         self.first: tuple[float, int] | None = None
         self.last: tuple[float, int] | None = None
@@ -159,7 +190,7 @@ class _Eta:
         return ahead, (self.last[1] - self.first[1]) / (self.last[0] - self.first[0])
 
     def __call__(self, done: int) -> None:
-        self.bar.update(done - self.bar.n)
+        self.bar.update(self.offset + done - self.bar.n)
         now = time.monotonic()
         if self.first is None:
             self.first = (now, done)
@@ -171,9 +202,10 @@ class _Eta:
             return
         self.reported = True
         rate = (done - d0) / (now - t0)
-        eta = (self.total - done) / rate
+        eta = (self.total - done + self.after) / rate
         msg = (
-            f"{self.total:,} queries at {rate:,.0f} queries/s: about {_duration(eta)} left; "
+            f"{self.total + self.after:,} queries at {rate:,.0f} queries/s: "
+            f"about {_duration(eta)} left; "
             f"memory {_peak_gib():.2f} GiB, flat from here (fixed-size chunks)"
         )
         if eta > self.max_hours * 3600:
@@ -196,25 +228,6 @@ def _peak_gib() -> float:
 
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     return peak / (2**30 if sys.platform == "darwin" else 2**20)
-
-
-def _existing(
-    path: Path, env: str, queries: int, padding: float, seed: int, chunk: int | None
-) -> dict | None:
-    """The result in ``path`` if it is this measurement (else None: measure it)."""
-    try:
-        data = json.loads(path.read_text())
-    except (OSError, ValueError):
-        return None
-    same = (
-        isinstance(data, dict)
-        and data.get("env") == env
-        and data.get("queries") == queries
-        and data.get("padding") == padding
-        and data.get("seed") == seed
-        and data.get("chunk") == chunk
-    )
-    return data if same else None
 
 
 def _report_json(d: dict) -> None:
@@ -321,6 +334,14 @@ def _parser() -> argparse.ArgumentParser:
         "has (e.g. 100, a Panda scene's problems), for the interval of the family's mean; "
         "default: an unbounded family (a wider interval)",
     )
+    ap.add_argument(
+        "--problems",
+        type=_problems,
+        default=None,
+        metavar="LIST",
+        help="with --env panda/<scene>: measure only these problems' units, e.g. 1-50 "
+        "(another process may take 51-100) or 3,7,9; default: all 100",
+    )
     ap.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     ap.add_argument(
         "--no-compile-cache",
@@ -331,18 +352,9 @@ def _parser() -> argparse.ArgumentParser:
     return ap
 
 
-#: What the units of a pooled measurement must share (``--pool``).
-POOL_KEYS = ("padding", "chunk", "resolution", "check")
-
-
-def _pool(paths: list[Path], population: int | None = None) -> dict:
-    """One estimate over the queries of the unit results in ``paths`` (see ``--pool``).
-
-    With several envs, ``worlds`` adds the mean over their worlds (each env's units
-    summed into one world) with the interval of a family of ``population`` worlds
-    (:func:`ntq_jax.world_mean.world_mean`; None: an unbounded family).
-    """
-    from ntq_jax.stats import wilson_interval, world_mean
+def _read_pool(paths: list[Path], population: int | None) -> dict:
+    """``--pool``: the unit records in ``paths`` pooled (:func:`gamma_units.pool`)."""
+    from ntq_jax.experiment import gamma_units
 
     units = []
     for path in paths:
@@ -350,101 +362,47 @@ def _pool(paths: list[Path], population: int | None = None) -> dict:
             d = json.loads(path.read_text())
         except (OSError, ValueError) as e:
             raise ScriptError(f"--pool: cannot read {path}: {e}") from None
-        if not isinstance(d, dict) or not {"queries", "non_trivial", "seed", *POOL_KEYS} <= set(d):
+        keys = {"queries", "non_trivial", "seed", *gamma_units.POOL_KEYS}
+        if not isinstance(d, dict) or not keys <= set(d):
             raise ScriptError(f"--pool: {path} is not a result of measure_gamma.py --json")
         units.append(d)
-    for key in POOL_KEYS:
-        values = {json.dumps(u[key]) for u in units}
-        if len(values) > 1:
-            raise ScriptError(
-                f"--pool: the units differ in {key} ({', '.join(sorted(values))}): pool "
-                "measurements of one geometry"
-            )
-    seeds = [u["seed"] for u in units]
-    envs = [u["env"] for u in units]
-    if len(set(zip(envs, seeds))) < len(units):
-        raise ScriptError(
-            "--pool: two units have the same env and seed (the same queries): give each "
-            "unit of one env its own --seed"
-        )
-    queries = sum(u["queries"] for u in units)
-    blocked = sum(u["non_trivial"] for u in units)
-    lo, hi = wilson_interval(blocked, queries)
-    out = {"env": envs[0] if len(set(envs)) == 1 else sorted(set(envs), key=envs.index)}
-    out.update({key: units[0][key] for key in POOL_KEYS})
-    out.update(
-        queries=queries,
-        non_trivial=blocked,
-        gamma=blocked / queries,
-        ci95=[lo, hi],
-        candidates=sum(u.get("candidates", 0) for u in units),
-        units=len(units),
-        seeds=sorted(seeds),
-        cpu_seconds=sum(u.get("cpu_seconds") or 0.0 for u in units),
-        seconds=sum(u.get("seconds") or 0.0 for u in units),
+    try:
+        return gamma_units.pool(units, population)
+    except UsageError as e:
+        raise ScriptError(f"--pool: {e}") from None
+
+
+def _pool_only(args) -> int:
+    """``--pool``: pool the unit records, print the estimate, write ``--json``."""
+    if args.json is None:
+        raise ScriptError("--pool needs --json (the file the pooled estimate is written to)")
+    check_writable(args.json, "--json")
+    from ntq_jax import artifacts
+
+    pooled = _read_pool(args.pool, args.population)
+    _report_pooled(pooled)
+    artifacts.write_json(args.json, pooled)
+    return 0
+
+
+def _report_pooled(pooled: dict) -> None:
+    _report_json(pooled)
+    print(
+        f"pooled from {pooled['units']} units (seeds {pooled['seeds'][0]}..{pooled['seeds'][-1]})"
     )
-    out["queries_per_second"] = queries / out["seconds"] if out["seconds"] else 0.0
-    if "version" in units[0]:
-        out["version"] = units[0]["version"]
-    if len(set(envs)) > 1:
-        out["world"] = (
-            "the worlds of these environments, the same number of queries from each when "
-            "their units are alike: gamma_nt is then their mean (the interval is "
-            "conservative for that mean of fixed worlds; see worlds for the family's)"
-        )
-    elif "world" in units[0]:
-        out["world"] = units[0]["world"]
-    if len(set(envs)) > 1 or population is not None:
-        names = sorted(set(envs), key=envs.index)
-        if population is not None and population < len(names):
-            raise ScriptError(
-                f"--population {population} is smaller than the {len(names)} envs pooled"
+    if "worlds" in pooled:
+        _report_worlds(pooled["worlds"])
+        if pooled["worlds"]["shared_queries"]:
+            print(
+                "warning: some envs were measured with the same seed (one query stream in "
+                "several worlds): the 95% CI above is too narrow; the mean's interval "
+                "allows for it"
             )
-        hits = [sum(u["non_trivial"] for u in units if u["env"] == e) for e in names]
-        counts = [sum(u["queries"] for u in units if u["env"] == e) for e in names]
-        wm = world_mean(hits, counts, population=population)
-        out["worlds"] = {
-            "measured": wm.worlds,
-            "population": wm.population,
-            "mean": wm.mean,
-            "spread": wm.spread,
-            "ci95": None if wm.ci95 is None else list(wm.ci95),
-            "df": wm.df if math.isfinite(wm.df) else None,
-            "about": "the mean of gamma_nt over a family of worlds of which these were "
-            "measured; its interval adds the spread between worlds (shrinking to the "
-            "queries' alone as every world of the population is measured), "
-            "ntq_jax.world_mean",
-        }
-    return out
 
 
-def _run(argv) -> int:
-    args = _parser().parse_args(argv)
-    if args.pool is not None:
-        if args.json is None:
-            raise ScriptError("--pool needs --json (the file the pooled estimate is written to)")
-        check_writable(args.json, "--json")
-        from ntq_jax import artifacts
-
-        pooled = _pool(args.pool, args.population)
-        _report_json(pooled)
-        print(
-            f"pooled from {pooled['units']} units (seeds {pooled['seeds'][0]}..{pooled['seeds'][-1]})"
-        )
-        if "worlds" in pooled:
-            _report_worlds(pooled["worlds"])
-        artifacts.write_json(args.json, pooled)
-        return 0
-    if args.population is not None:
-        raise ScriptError("--population needs --pool (it describes the pooled envs' family)")
-    if args.skip_existing and args.json is None:
-        raise ScriptError("--skip-existing needs --json (the file a finished run wrote)")
-    if args.json is not None:
-        check_writable(args.json, "--json")
-
-    import jax
-    from tqdm import tqdm
-
+def _setup(args, name: str):
+    """The environment ``name`` and the chunk of ``args`` (default: by robot), with JAX's
+    persistent compilation cache on unless ``--no-compile-cache``."""
     import ntq_jax as nj
     from ntq_jax import artifacts
     from ntq_jax.gamma import default_chunk
@@ -452,101 +410,205 @@ def _run(argv) -> int:
 
     if not args.no_compile_cache:
         artifacts.enable_compile_cache()
-    env = nj.make_env(args.env)
-    three_d = isinstance(env.world, World3D)
-    chunk = (
-        args.chunk
-        if args.chunk is not None
-        else (ARM3D_CHUNK if three_d else default_chunk(env.robot, env.world))
+    env = nj.make_env(name)
+    if args.chunk is not None:
+        return env, args.chunk
+    return env, ARM3D_CHUNK if isinstance(env.world, World3D) else default_chunk(
+        env.robot, env.world
     )
-    if args.skip_existing:
-        done = _existing(args.json, env.name, args.queries, args.padding, args.seed, chunk)
-        if done is not None:
-            print(f"{args.json} already holds this measurement; not measured again")
-            _report_json(done)
-            return 0
-    bar = tqdm(
-        total=args.queries,
+
+
+def _bar(args, total: int, desc: str):
+    from tqdm import tqdm
+
+    return tqdm(
+        total=total,
         unit="q",
         unit_scale=True,
         disable=args.no_progress,
-        desc=f"gamma_nt {env.name}",
+        desc=f"gamma_nt {desc}",
         file=sys.stderr,
     )
-    eta = _Eta(bar, args.queries, args.max_hours)
+
+
+def _measure(
+    env, args, queries: int, chunk: int, eta, seed: int, quiet: bool = False
+) -> dict | None:
+    """gamma_nt of ``env`` over ``queries`` of ``seed``: its unit record, or None when
+    interrupted (the estimate so far printed). ``quiet``: one line, not the full report."""
+    import jax
+
+    import ntq_jax as nj
+    from ntq_jax.experiment import gamma_units
+
     cpu0 = _cpu_seconds()
     try:
         est = env.gamma_nt(
-            jax.random.key(args.seed), args.queries, padding=args.padding, chunk=chunk, progress=eta
+            jax.random.key(seed), queries, padding=args.padding, chunk=chunk, progress=eta
         )
     except KeyboardInterrupt as e:
-        bar.close()
+        eta.bar.close()
         partial = getattr(e, "estimate", None)
         if partial is None:
             print("interrupted before the first chunk was counted: no estimate", file=sys.stderr)
         else:
             print(
-                f"interrupted after {partial.queries:,} of {args.queries:,} queries; the "
-                "estimate so far:"
+                f"interrupted after {partial.queries:,} of {queries:,} queries; the estimate so far:"
             )
             _report(env, args.padding, partial)
-        if args.json is not None:
-            print(f"{args.json} not written (interrupted)", file=sys.stderr)
-        return INTERRUPTED
-    finally:
-        bar.close()
-    _report(env, args.padding, est)
+        return None
     cpu = _cpu_seconds() - cpu0
     ahead, rate = eta.streaming()
-    if rate is not None:
+    if quiet:
+        lo, hi = est.ci95
+        eta.bar.write(
+            f"{env.name}: gamma_nt = {est.gamma:.6f}  95% CI [{lo:.6f}, {hi:.6f}]  "
+            f"{est.seconds:.0f} s, {cpu:.0f} cpu-s",
+            file=sys.stdout,
+        )
+    else:
+        eta.bar.close()
+        _report(env, args.padding, est)
+        if rate is not None:
+            print(
+                f"streaming: {rate:,.0f} queries/s after the first chunk ({ahead:.1f} s to it, "
+                "compilation included)"
+            )
         print(
-            f"streaming: {rate:,.0f} queries/s after the first chunk ({ahead:.1f} s to it, "
-            "compilation included)"
+            f"cpu time {cpu:.1f} s, {est.queries / max(cpu, 1e-9):,.0f} queries per cpu-second "
+            "(compilation included; on a shared core the wall-clock rate is lower)"
         )
-    print(
-        f"cpu time {cpu:.1f} s, {est.queries / max(cpu, 1e-9):,.0f} queries per cpu-second "
-        "(compilation included; on a shared core the wall-clock rate is lower)"
+    cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None
+    return gamma_units.unit_record(
+        env,
+        est,
+        padding=args.padding,
+        seed=seed,
+        chunk=chunk,
+        cpu=cpu,
+        ahead=ahead,
+        rate=rate,
+        version=nj.__version__,
+        cpus=cpus,
     )
-    if args.json:
-        artifacts.write_json(
-            args.json, _result_json(env, args, est, chunk, cpu, ahead, rate, three_d)
+
+
+def _measure_family(args, members: list[str]) -> int:
+    """``--env panda/<scene>``: one unit of ``--queries / len(members)`` per member (the
+    ones of ``--problems``), each written beside ``--json`` as it finishes and skipped
+    when already there; ``--json`` pools the units present after each one."""
+    from ntq_jax import artifacts
+    from ntq_jax.experiment import gamma_units
+
+    if args.json is None:
+        raise ScriptError(
+            f"--env {args.env} needs --json (the scene's pooled estimate; its units, one per "
+            "problem, are written in the folder of the same name beside it)"
         )
+    check_writable(args.json, "--json")
+    n = len(members)
+    if args.queries % n:
+        raise ScriptError(
+            f"--queries of {args.env} must be a multiple of its {n} problems (each problem "
+            f"gets --queries / {n}; e.g. 1e8 is 1e6 on each)"
+        )
+    per = args.queries // n
+    bad = [k for k in args.problems or () if not 1 <= k <= n]
+    if bad:
+        raise ScriptError(f"--problems {bad[0]} is not a problem of {args.env} (1 to {n})")
+    picked = members if args.problems is None else [members[k - 1] for k in args.problems]
+    seeds = {name: gamma_units.member_seed(args.seed, i, n) for i, name in enumerate(members)}
+    env, chunk = _setup(args, picked[0])
+    settings = dict(queries=per, padding=args.padding, chunk=chunk)
+
+    def unit(name):
+        record = gamma_units.read_unit(gamma_units.unit_path(args.json, name))
+        same = gamma_units.same_measurement(record, env=name, seed=seeds[name], **settings)
+        return record if same else None
+
+    def pool_present() -> dict | None:
+        units = [u for u in map(unit, members) if u is not None]
+        if not units:
+            return None
+        pooled = gamma_units.pool(units, population=n)
+        artifacts.write_json(args.json, pooled)
+        return pooled
+
+    todo = [name for name in picked if unit(name) is None]
+    for name in todo:
+        path = gamma_units.unit_path(args.json, name)
+        if path.exists():
+            raise ScriptError(
+                f"{path} holds another measurement (other queries, seed, padding or chunk, "
+                f"or not a unit): give this series its own --json, or remove {path}"
+            )
+    folder = gamma_units.unit_path(args.json, members[0]).parent
+    print(
+        f"{args.env}: {n} problems, {per:,} queries on each (problem k seeded "
+        f"{n} x {args.seed} + k - 1: independent queries); {len(picked) - len(todo)} of "
+        f"the {len(picked)} asked are already in {folder}/, {len(todo)} to measure"
+    )
+    bar = _bar(args, per * len(todo), args.env)
+    try:
+        for i, name in enumerate(todo):
+            env = env if env.name == name else _setup(args, name)[0]
+            eta = _Eta(bar, per, args.max_hours, offset=i * per, after=(len(todo) - i - 1) * per)
+            record = _measure(env, args, per, chunk, eta, seeds[name], quiet=True)
+            if record is None:
+                print(f"{name}'s unit not written (interrupted); the units written are kept")
+                pool_present()
+                return INTERRUPTED
+            artifacts.write_json(gamma_units.unit_path(args.json, name), record)
+            pool_present()
+    finally:
+        bar.close()
+    pooled = pool_present()
+    if pooled is None:
+        raise ScriptError(f"no unit of {args.env} with these settings in {folder}/")
+    _report_pooled(pooled)
     return 0
 
 
-def _result_json(env, args, est, chunk: int, cpu: float, ahead, rate, three_d: bool) -> dict:
-    """What ``--json`` writes: the estimate, its interval, rates and the settings."""
-    import ntq_jax as nj
+def _run(argv) -> int:
+    args = _parser().parse_args(argv)
+    if args.pool is not None:
+        return _pool_only(args)
+    if args.population is not None:
+        raise ScriptError("--population needs --pool (it describes the pooled envs' family)")
+    from ntq_jax.experiment import gamma_units
 
-    lo, hi = est.ci95
-    resolution = getattr(env.robot, "resolution", None)
-    out = {
-        "env": env.name,
-        "padding": args.padding,
-        "seed": args.seed,
-        "queries": est.queries,
-        "non_trivial": est.non_trivial,
-        "gamma": est.gamma,
-        "ci95": [lo, hi],
-        "seconds": est.seconds,
-        "queries_per_second": est.queries_per_second,
-        "candidates": est.candidates,
-        "candidates_per_second": est.candidates_per_second,
-        "cpu_seconds": cpu,
-        "first_chunk_seconds": ahead,
-        "streaming_queries_per_second": rate,
-        "chunk": chunk,
-        "resolution": resolution,
-        "check": "exact" if resolution is None else "discretized",
-        "cpus": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None,
-        "version": nj.__version__,
-    }
-    if three_d:
-        out["world"] = (
-            "the world of this one problem (the problems of a scene place it "
-            "differently, and their gamma_nt differ)"
-        )
-    return out
+    members = gamma_units.family(args.env)
+    if members is not None:
+        return _measure_family(args, members)
+    if args.problems is not None:
+        raise ScriptError("--problems needs a scene (--env panda/<scene>), not one environment")
+    if args.skip_existing and args.json is None:
+        raise ScriptError("--skip-existing needs --json (the file a finished run wrote)")
+    if args.json is not None:
+        check_writable(args.json, "--json")
+    from ntq_jax import artifacts
+
+    env, chunk = _setup(args, args.env)
+    if args.skip_existing:
+        done = gamma_units.read_unit(args.json)
+        settings = dict(queries=args.queries, padding=args.padding, seed=args.seed, chunk=chunk)
+        if gamma_units.same_measurement(done, env=env.name, **settings):
+            print(f"{args.json} already holds this measurement; not measured again")
+            _report_json(done)
+            return 0
+    bar = _bar(args, args.queries, env.name)
+    try:
+        eta = _Eta(bar, args.queries, args.max_hours)
+        record = _measure(env, args, args.queries, chunk, eta, args.seed)
+    finally:
+        bar.close()
+    if record is None:
+        if args.json is not None:
+            print(f"{args.json} not written (interrupted)", file=sys.stderr)
+        return INTERRUPTED
+    if args.json:
+        artifacts.write_json(args.json, record)
+    return 0
 
 
 def main(argv=None) -> int:

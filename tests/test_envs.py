@@ -243,7 +243,7 @@ def test_measure_gamma_script_json(tmp_path, script):
     assert pooled["ci95"][0] < pooled["gamma"] < pooled["ci95"][1] and pooled["units"] == 2
     assert pooled["env"] == "point/0"
     # another world, with half the non-trivial queries
-    half = dict(res, env="point/1", non_trivial=res["non_trivial"] // 2)
+    half = dict(res, env="point/1", seed=5, non_trivial=res["non_trivial"] // 2)
     (tmp_path / "g1.json").write_text(json.dumps(half))
     argv = ["--pool", out, tmp_path / "g1.json", "--json", tmp_path / "p.json"]
     r = script("measure_gamma", *argv)
@@ -440,3 +440,81 @@ def test_varying_batch_sizes_share_compiled_programs():
         for g, r in zip(got, ref):
             assert g.shape == (n,)
             np.testing.assert_array_equal(g, r[:n])
+
+
+def test_measure_gamma_family_of_worlds(tmp_path, script, monkeypatch):
+    """``--env panda/<scene>``: one unit per member, each with its own seed (its queries
+    those of the single run of that env and seed), written beside --json and skipped when
+    there, pooled after each with the family's mean; a unit file of another measurement is
+    never overwritten. Three point maps stand in for a scene's problems (no compilation)."""
+    from ntq_jax.experiment import gamma_units
+
+    members = ["point/0", "point/1", "point/2"]
+    monkeypatch.setattr(gamma_units, "family", lambda name: members if name == "fam" else None)
+    pooled = tmp_path / "series" / "fam.json"
+    base = ["--env", "fam", "--queries", "3e4", "--json", pooled, "--no-progress"]
+    r = script("measure_gamma", *base, "--problems", "1,3")
+    assert r.returncode == 0, r.stderr
+    units = {p.name: json.loads(p.read_text()) for p in (tmp_path / "series" / "fam").iterdir()}
+    assert sorted(units) == ["problem_0.json", "problem_2.json"]
+    assert [units[k]["seed"] for k in sorted(units)] == [0, 2]  # member_seed(0, i, 3) = i
+    single = tmp_path / "single.json"
+    argv = ["--env", "point/2", "--seed", "2", "--queries", "1e4", "--json", single]
+    assert script("measure_gamma", *argv, "--no-progress").returncode == 0
+    assert json.loads(single.read_text())["non_trivial"] == units["problem_2.json"]["non_trivial"]
+    part = json.loads(pooled.read_text())
+    assert part["units"] == 2 and part["worlds"]["population"] == 3
+    assert not part["worlds"]["shared_queries"] and part["worlds"]["df"] is not None
+
+    r = script("measure_gamma", *base)  # resumes: only problem 2 is measured
+    assert r.returncode == 0 and "2 of the 3 asked are already" in r.stdout, r.stdout
+    whole = json.loads(pooled.read_text())
+    assert whole["units"] == 3 and whole["worlds"]["df"] is None  # every world measured
+    w = whole["worlds"]
+    assert w["mean"] == pytest.approx(
+        np.mean(
+            [
+                u["gamma"]
+                for u in map(
+                    json.loads,
+                    (
+                        (tmp_path / "series" / "fam" / f"problem_{i}.json").read_text()
+                        for i in range(3)
+                    ),
+                )
+            ]
+        )
+    )
+    assert w["ci95"][1] - w["ci95"][0] < part["worlds"]["ci95"][1] - part["worlds"]["ci95"][0]
+
+    r = script("measure_gamma", *base, "--seed", "1")  # another series, the same files
+    assert r.returncode == 2 and "holds another measurement" in r.stderr, r.stderr
+    assert json.loads((tmp_path / "series" / "fam" / "problem_0.json").read_text())["seed"] == 0
+
+
+def test_gamma_units_family_seeds_and_shared_streams():
+    """The family a scene name stands for, its members' seeds, and the pool's allowance
+    for worlds measured on one query stream."""
+    from ntq_jax.errors import UsageError
+    from ntq_jax.experiment import gamma_units as G
+
+    cage = G.family("panda/cage")
+    assert len(cage) == 100 and cage[0] == "panda/cage/1" and cage[-1] == "panda/cage/100"
+    assert G.family("panda/cage/1") is None and G.family("point/0") is None
+    with pytest.raises(UsageError, match="unknown Panda scene"):
+        G.family("panda/kitchen")
+    assert G.unit_path("s/cage.json", "panda/cage/7") == Path("s/cage/problem_7.json")
+    assert [G.member_seed(s, i, 100) for s, i in [(0, 0), (0, 99), (1, 0)]] == [0, 99, 100]
+    assert G.member_seed(2**32 // 100 - 1, 99, 100) == 2**32 - 1 - 96
+    with pytest.raises(UsageError, match="seed below 42949672"):
+        G.member_seed(2**32 // 100, 99, 100)
+    unit = dict(padding=0.0, chunk=4096, resolution=1 / 32, check="discretized", queries=1000)
+    units = [dict(unit, env=f"w/{i}", seed=0, non_trivial=300 + 10 * i) for i in range(4)]
+    shared = G.pool(units, population=4)
+    alone = G.pool([dict(u, seed=i) for i, u in enumerate(units)], population=4)
+    assert shared["worlds"]["shared_queries"] and not alone["worlds"]["shared_queries"]
+    assert "too narrow" in shared["world"] and G.shared_streams(units) == [0]
+    width = [p["worlds"]["ci95"][1] - p["worlds"]["ci95"][0] for p in (shared, alone)]
+    assert width[0] > 1.9 * width[1]  # the query term at its bound, not divided by 4
+    with pytest.raises(UsageError, match="smaller than the 4 envs"):
+        G.pool(units, population=3)

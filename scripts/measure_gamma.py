@@ -21,8 +21,9 @@ around the robot and rearrange its small objects, so their gamma_nt differ (prob
 are checked at the arm's resolution (1/32 rad: ~170 states on an average free 7-D
 motion), so it runs at thousands of queries per second, not millions,
 after the arm's shared checks are compiled (``is_valid`` and the discretised
-``steer_to``, the programs data generation and planning use: seconds each; the
-persistent compilation cache keeps them for the next run unless ``--no-compile-cache``).
+``steer_to``, the programs data generation and planning use: about 10 s for both, 12 s
+to the first chunk of panda/cage/1; the persistent compilation cache keeps them for the
+next run, 3 s to the first chunk, unless ``--no-compile-cache``).
 
 ``--skip-existing`` makes a series of runs resumable: when ``--json`` already holds
 a result of the same environment, queries, padding, seed and chunk, it is printed
@@ -166,9 +167,9 @@ class _Eta:
     compilation) on; if the estimate exceeds ``max_hours`` it raises ScriptError,
     which stops :func:`ntq_jax.gamma.gamma_nt` before any more work. The estimate
     is of the streaming only: the last chunk's prefix is counted by a second program,
-    compiled at the end (about a minute for a 3-D arm the first time). In a series of
-    units (a scene's problems) the bar counts from ``offset`` (the units measured before)
-    and the estimate also covers ``after`` queries (the units still to come).
+    compiled at the end (for fused chunks; a 3-D arm's prefix reuses its shared checks).
+    In a series of units (a scene's problems) the bar counts from ``offset`` (the units
+    measured before) and the estimate also covers ``after`` queries (the units to come).
     """
 
     def __init__(self, bar, total: int, max_hours: float, offset: int = 0, after: int = 0):
@@ -347,7 +348,7 @@ def _parser() -> argparse.ArgumentParser:
         "--no-compile-cache",
         action="store_true",
         help="do not use JAX's persistent compilation cache (~/.cache/ntq_jax/jax; "
-        "a 3-D arm's two programs take about a minute to compile)",
+        "a 3-D arm's two shared checks take about 10 s to compile)",
     )
     return ap
 

@@ -1,8 +1,8 @@
 """The neural planner's checks on the host, for robots whose checks are costly to compile.
 
 A robot whose ``shared_check_programs`` is True (the 3-D serial arm: its obstacle,
-self-collision and motion checks cost seconds each to compile) does not get a fused copy
-of them in every stage of :mod:`ntq_jax.neural.steps`. The stages made only of checks run
+self-collision and motion checks cost tens of seconds to compile) does not get a fused
+copy of them in every stage of :mod:`ntq_jax.neural.steps`. The stages made only of checks run
 here instead, on host arrays, through the package's shared batched programs, which data
 generation, path verification and the planners compile anyway:
 
@@ -16,10 +16,11 @@ generation, path verification and the planners compile anyway:
   feasibility check of every segment (:func:`ntq_jax.planners.verify.motions_free`).
 
 They check the same states and motions with the same kernels as the fused stages, so
-they return the same answers (``tests/test_neural_planner.py`` plans with both on the
-point robot given the flag; on the Panda, 256 queries of panda/cage/1 with the certified
-check and three replanning rounds gave the same arrays); only the programs that run
-them differ. Every function takes ``(robot, opts, world, ...)`` as its fused
+they return the same answers; only the programs that run them differ.
+``tests/test_neural_planner.py::test_host_stages_plan_as_the_fused_stages`` holds it on
+the point robot given the flag, and ``benchmarks/bench_neural_stages.py`` compares every
+output array of both on the Panda (panda/table_pick/1, 256 queries, certified check,
+replanning). Every function takes ``(robot, opts, world, ...)`` as its fused
 stage does and returns host NumPy arrays.
 """
 

@@ -29,7 +29,7 @@ CHILD = r"""
 import json, time
 import numpy as np, jax, jax.numpy as jnp
 import ntq_jax as nj
-from bench_steer import numpy_steer
+from numpy_steer import numpy_steer
 env = nj.make_env("point/3")
 n, n_np = {n}, {n_np}
 rng = np.random.default_rng(0)

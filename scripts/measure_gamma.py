@@ -247,10 +247,8 @@ def _report_worlds(w: dict) -> None:
         if w["ci95"] is None
         else (f"95% CI [{w['ci95'][0]:.6f}, {w['ci95'][1]:.6f}]")
     )
-    print(
-        f"mean over {w['measured']} of {of} worlds = {w['mean']:.6f}  {ci}  "
-        f"(spread between worlds {w['spread']:.4f})"
-    )
+    spread = "" if w["spread"] != w["spread"] else f"  (spread between worlds {w['spread']:.4f})"
+    print(f"mean over {w['measured']} of {of} worlds = {w['mean']:.6f}  {ci}{spread}")
 
 
 def _report(env, padding: float, est, file=None) -> None:
@@ -546,8 +544,8 @@ def _measure_family(args, members: list[str]) -> int:
     folder = gamma_units.unit_path(args.json, members[0]).parent
     print(
         f"{args.env}: {n} problems, {per:,} queries on each (problem k seeded "
-        f"{n} x {args.seed} + k - 1: independent queries); {len(picked) - len(todo)} of "
-        f"the {len(picked)} asked are already in {folder}/, {len(todo)} to measure"
+        f"{n} x {args.seed} + k - 1: independent queries); of the {len(picked)} asked, "
+        f"{len(picked) - len(todo)} already in {folder}/, {len(todo)} to measure"
     )
     bar = _bar(args, per * len(todo), args.env)
     try:

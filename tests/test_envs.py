@@ -467,7 +467,7 @@ def test_measure_gamma_family_of_worlds(tmp_path, script, monkeypatch):
     assert not part["worlds"]["shared_queries"] and part["worlds"]["df"] is not None
 
     r = script("measure_gamma", *base)  # resumes: only problem 2 is measured
-    assert r.returncode == 0 and "2 of the 3 asked are already" in r.stdout, r.stdout
+    assert r.returncode == 0 and "of the 3 asked, 2 already in" in r.stdout, r.stdout
     whole = json.loads(pooled.read_text())
     assert whole["units"] == 3 and whole["worlds"]["df"] is None  # every world measured
     w = whole["worlds"]

@@ -22,6 +22,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from ntq_jax.scenes.mbm import SCENES
+
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "results" / "panda_gamma"
 HEADER = "| scene | problems measured |"
@@ -30,13 +32,6 @@ COLUMNS = (
     "95 % interval (their queries) | spread between problems | "
     "the scene's mean, 95 % interval (its 100 problems) |"
 )
-
-
-def _scenes() -> tuple[str, ...]:
-    sys.path.insert(0, str(ROOT))
-    from ntq_jax.scenes.mbm import SCENES
-
-    return SCENES
 
 
 def pool_scene(scene: str) -> dict | None:
@@ -73,7 +68,7 @@ def row(scene: str, d: dict) -> str:
 
 def main() -> int:
     rows, total = [COLUMNS, "|---|---|---|---|---|---|---|"], 0
-    for scene in _scenes():
+    for scene in SCENES:
         pooled = pool_scene(scene)
         if pooled is not None:
             rows.append(row(scene, pooled))

@@ -2,8 +2,9 @@
 """Pool the Panda gamma_nt series and write its table: ``results/panda_gamma/README.md``.
 
 For each MotionBenchMaker scene, the units in ``results/panda_gamma/series/<scene>/``
-are pooled again (``measure_gamma.py --pool <units> --population 100``, so the scene's
-mean counts the problems not yet measured) into ``series/<scene>.json``; then the
+are pooled again (:func:`ntq_jax.experiment.gamma_units.pool`, population 100, as
+``measure_gamma.py --pool <units> --population 100`` does, so the scene's mean counts the
+problems not yet measured) into ``series/<scene>.json``; then the
 README's table (from its header row ``| scene | problems measured |`` to the next blank
 line) and the count of units in BENCHMARKS.md's summary row ("N of the 700 units
 committed") are rewritten from those files. Run it after a batch of units lands:
@@ -18,10 +19,11 @@ from __future__ import annotations
 
 import json
 import re
-import subprocess
 import sys
 from pathlib import Path
 
+from ntq_jax import artifacts
+from ntq_jax.experiment import gamma_units
 from ntq_jax.scenes.mbm import SCENES
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -36,22 +38,13 @@ COLUMNS = (
 
 def pool_scene(scene: str) -> dict | None:
     """``series/<scene>.json`` pooled again from the scene's units (None without units)."""
-    units = sorted((RESULTS / "series" / scene).glob("problem_*.json"))
-    if not units:
+    paths = sorted((RESULTS / "series" / scene).glob("problem_*.json"))
+    if not paths:
         return None
-    out = RESULTS / "series" / f"{scene}.json"
-    cmd = [sys.executable, str(ROOT / "scripts" / "measure_gamma.py"), "--pool", *map(str, units)]
-    subprocess.run(
-        [*cmd, "--population", "100", "--json", str(out)],
-        check=True,
-        stdout=subprocess.DEVNULL,
-        cwd=ROOT,
-    )
-    pooled = json.loads(out.read_text())
-    if pooled["units"] != len(units):
-        raise SystemExit(f"{scene}: pooled {pooled['units']} units of {len(units)} files")
+    pooled = gamma_units.pool([json.loads(p.read_text()) for p in paths], population=100)
     if pooled["worlds"]["shared_queries"]:
         raise SystemExit(f"{scene}: units of several problems share a seed; measure them again")
+    artifacts.write_json(RESULTS / "series" / f"{scene}.json", pooled)
     return pooled
 
 

@@ -25,6 +25,7 @@ problem (:func:`unit_path` names their files beside the pooled one).
 from __future__ import annotations
 
 import json
+import math
 import os
 import re
 from pathlib import Path
@@ -241,7 +242,7 @@ def _worlds(units: list[dict], names: list[str], population: int | None, shared:
         "mean": wm.mean,
         "spread": wm.spread,
         "ci95": None if wm.ci95 is None else list(wm.ci95),
-        "df": wm.df if wm.df != float("inf") and wm.df == wm.df else None,
+        "df": wm.df if math.isfinite(wm.df) else None,
         "shared_queries": shared,
         "about": "the mean of gamma_nt over a family of worlds of which these were "
         "measured; its interval adds the spread between worlds (shrinking to the "

@@ -121,6 +121,7 @@ KERNELS = {
     "capsule": jax.jit(jax.vmap(G.point_capsule_dist)),
 }
 CLEARANCE = jax.jit(G.spheres_clearance)
+CLEAR = jax.jit(G.spheres_clear)
 
 
 # ---------------------------------------------------------------------------
@@ -171,8 +172,13 @@ def test_spheres_clearance_matches_coal(counts, seed, padding):
     sure = want > BAND
     assert np.all(np.abs(got[sure] - want[sure]) <= BAND), (got[sure], want[sure])
     assert np.all(got[want < -BAND] < 0)
+    # the squared-form predicate: clear exactly where the clearance is > 0 (off ties)
+    clear = np.asarray(CLEAR(centers, radii, world, padding))
+    off_tie = np.abs(got) > 1e-5
+    np.testing.assert_array_equal(clear[off_tie], got[off_tie] > 0)
+    assert np.all(clear[want > BAND]) and not np.any(clear[want < -BAND])
     collide = jax.jit(G.spheres_collide)(centers, radii, world, padding)
-    assert bool(collide) == bool(np.any(got <= 0))
+    assert bool(collide) == (not np.all(clear))
 
 
 def test_sphere_clearance_is_the_one_ball_case():
@@ -200,6 +206,18 @@ def test_exact_values_by_hand():
     assert float(G.point_capsule_dist(f32([0, 0.5, 0.5]), cap)) == pytest.approx(0.4)
     assert float(G.point_capsule_dist(f32([0, 0, 1.5]), cap)) == pytest.approx(0.4)
     assert float(G.point_sphere_dist(f32([0, 0, 0]), f32([0, 3, 4, 1]))) == pytest.approx(4.0)
+    # touching is a collision in both forms (exact binary numbers: no rounding)
+    world = World3D.create(
+        BOUNDS, [[0, 2, 0, 0.5]], [[0, 0, 0, 0.5, 0.5, 0.5, 1, 0, 0, 0, 1, 0, 0, 0, 1]]
+    )
+    balls, radii = f32([[0, 0, 0.75], [0, 0, 0.875], [0, 2.75, 0]]), f32([0.25, 0.25, 0.25])
+    assert np.asarray(G.spheres_clear(balls, radii, world)).tolist() == [False, True, False]
+    assert (np.asarray(G.spheres_clearance(balls, radii, world)) > 0).tolist() == [
+        False,
+        True,
+        False,
+    ]
+    assert np.asarray(G.spheres_clear(balls, radii, world, 0.125)).tolist() == [False, False, False]
 
 
 # ---------------------------------------------------------------------------
@@ -214,6 +232,7 @@ def test_no_obstacles_is_finite_and_clear():
     assert np.all(np.isfinite(c)) and float(c[0]) > 1e29
     assert float(G.sphere_clearance(f32([0, 0, 0]), 0.1, world)) == np.float32(1e30)
     assert not bool(G.spheres_collide(f32([[0, 0, 0]]), f32([0.1]), world))
+    assert np.all(np.asarray(G.spheres_clear(f32([[0, 0, 0], [1, 1, 1]]), f32([0.1, 5.0]), world)))
 
 
 def test_non_finite_input_is_not_clear():
@@ -228,6 +247,7 @@ def test_non_finite_input_is_not_clear():
     radii = f32([0.1, 0.1, np.nan, 0.1])
     c = np.asarray(CLEARANCE(centers, radii, world, 0.0))
     assert np.all(c[:3] == -np.inf) and np.isfinite(c[3]) and c[3] > 0
+    assert np.asarray(CLEAR(centers, radii, world, 0.0)).tolist() == [False, False, False, True]
     assert bool(G.spheres_collide(centers[:1], radii[:1], world))
     assert not bool(G.spheres_collide(centers[3:], radii[3:], world))
     assert np.isnan(float(G.point_cuboid_dist(centers[0], world.cuboids[0])))

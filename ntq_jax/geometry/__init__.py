@@ -83,6 +83,7 @@ from ntq_jax.geometry.shapes3d import (
     point_cuboid_dist,
     point_sphere_dist,
     sphere_clearance,
+    spheres_clear,
     spheres_clearance,
     spheres_collide,
 )
@@ -130,6 +131,7 @@ __all__ = [
     "point_cuboid_dist",
     "point_capsule_dist",
     "sphere_clearance",
+    "spheres_clear",
     "spheres_clearance",
     "spheres_collide",
 ]

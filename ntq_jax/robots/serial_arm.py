@@ -11,7 +11,8 @@
   multiply-adds per joint plus one 3x3 affine map per sphere (grouped by frame).
 * Valid (:meth:`SerialArm.is_valid`): ``q`` finite and within the joint limits, every
   collision sphere clear of every obstacle by more than ``padding``
-  (:func:`ntq_jax.geometry.spheres_clearance` ``> 0``), and no self-collision: for
+  (:func:`ntq_jax.geometry.spheres_clear`: ``spheres_clearance > 0`` compared in squared
+  form, without square roots), and no self-collision: for
   every checked sphere pair (links not disabled by the SRDF, not adjacent, not on the
   same rigid body) ``|c_i - c_k| > r_i + r_k``. ``padding`` does NOT apply to
   self-collision: it is the safety margin to the (uncertain) world, while the arm's
@@ -60,7 +61,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ntq_jax import geometry
-from ntq_jax.geometry import World3D, spheres_clearance
+from ntq_jax.geometry import World3D, spheres_clear, spheres_clearance
 from ntq_jax.robots import affine, urdf
 from ntq_jax.robots.base import DiscretizedSteering, discretized_steer_to_batch
 from ntq_jax.robots.certified import CertifiedSteering
@@ -343,9 +344,7 @@ class SerialArm(DiscretizedSteering, CertifiedSteering):
         x, y, z = self._sphere_xyz(q)
         ok = self._q_ok(q)
         radii = jnp.asarray(self.sphere_radii, jnp.float32)
-        ok = ok & jnp.all(
-            spheres_clearance(jnp.stack([x, y, z], axis=1), radii, world, padding) > 0.0
-        )
+        ok = ok & jnp.all(spheres_clear(jnp.stack([x, y, z], axis=1), radii, world, padding))
         return ok & self._self_free(x, y, z)
 
     def _self_free(self, x, y, z) -> Array:
@@ -374,7 +373,7 @@ class SerialArm(DiscretizedSteering, CertifiedSteering):
         """``(S + P,)``: each sphere's obstacle clearance (``spheres_clearance``, minus
         ``padding``), then each checked pair's ``|c_i - c_k| - r_i - r_k`` (in
         :attr:`self_pairs` order); all ``> 0`` iff ``q`` is valid (up to float32 rounding
-        of a pair at an exact tie: ``is_valid`` compares squared distances); all -1 for
+        within about 1e-7 of touching: ``is_valid`` compares squared distances); all -1 for
         non-finite ``q`` or one outside the joint limits."""
         x, y, z = self._sphere_xyz(q)
         radii = jnp.asarray(self.sphere_radii, jnp.float32)

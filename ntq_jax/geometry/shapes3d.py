@@ -77,13 +77,18 @@ def _cuboid_sdf(x, y, z, c):
     return jnp.sqrt(ox * ox + oy * oy + oz * oz) + inside
 
 
-def _capsule_sdf(x, y, z, k):
+def _capsule_offset(x, y, z, k):
+    """The point minus its nearest point on the capsule's segment ``a``-``b``."""
     ex, ey, ez = k[3] - k[0], k[4] - k[1], k[5] - k[2]
     ee = ex * ex + ey * ey + ez * ez
     inv = jnp.where(ee > _MIN_SEGMENT2, 1.0 / jnp.where(ee > _MIN_SEGMENT2, ee, 1.0), 0.0)
     wx, wy, wz = x - k[0], y - k[1], z - k[2]
     t = jnp.clip((wx * ex + wy * ey + wz * ez) * inv, 0.0, 1.0)
-    fx, fy, fz = wx - t * ex, wy - t * ey, wz - t * ez
+    return wx - t * ex, wy - t * ey, wz - t * ez
+
+
+def _capsule_sdf(x, y, z, k):
+    fx, fy, fz = _capsule_offset(x, y, z, k)
     return jnp.sqrt(fx * fx + fy * fy + fz * fz) - k[6]
 
 
@@ -182,12 +187,7 @@ def _cuboid_clear(x, y, z, c, reach):
 
 
 def _capsule_clear(x, y, z, k, reach):
-    ex, ey, ez = k[3] - k[0], k[4] - k[1], k[5] - k[2]
-    ee = ex * ex + ey * ey + ez * ez
-    inv = jnp.where(ee > _MIN_SEGMENT2, 1.0 / jnp.where(ee > _MIN_SEGMENT2, ee, 1.0), 0.0)
-    wx, wy, wz = x - k[0], y - k[1], z - k[2]
-    t = jnp.clip((wx * ex + wy * ey + wz * ez) * inv, 0.0, 1.0)
-    fx, fy, fz = wx - t * ex, wy - t * ey, wz - t * ez
+    fx, fy, fz = _capsule_offset(x, y, z, k)
     r = reach + k[6]
     return fx * fx + fy * fy + fz * fz > r * r
 

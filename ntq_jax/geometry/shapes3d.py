@@ -66,12 +66,18 @@ def _sphere_sdf(x, y, z, s):
     return jnp.sqrt(dx * dx + dy * dy + dz * dz) - s[3]
 
 
-def _cuboid_sdf(x, y, z, c):
+def _cuboid_excess(x, y, z, c):
+    """``|R^T (p - c)| - h``: how far the point lies beyond each pair of faces (box frame)."""
     dx, dy, dz = x - c[0], y - c[1], z - c[2]
     # box coordinates q = R^T (p - c): q_j = sum_i R[i, j] d_i, R[i, j] = c[6 + 3 i + j]
     qx = jnp.abs(c[6] * dx + c[9] * dy + c[12] * dz) - c[3]
     qy = jnp.abs(c[7] * dx + c[10] * dy + c[13] * dz) - c[4]
     qz = jnp.abs(c[8] * dx + c[11] * dy + c[14] * dz) - c[5]
+    return qx, qy, qz
+
+
+def _cuboid_sdf(x, y, z, c):
+    qx, qy, qz = _cuboid_excess(x, y, z, c)
     ox, oy, oz = jnp.maximum(qx, 0.0), jnp.maximum(qy, 0.0), jnp.maximum(qz, 0.0)
     inside = jnp.minimum(jnp.maximum(jnp.maximum(qx, qy), qz), 0.0)
     return jnp.sqrt(ox * ox + oy * oy + oz * oz) + inside
@@ -179,10 +185,8 @@ def _sphere_clear(x, y, z, s, reach):
 
 
 def _cuboid_clear(x, y, z, c, reach):
-    dx, dy, dz = x - c[0], y - c[1], z - c[2]
-    ox = jnp.maximum(jnp.abs(c[6] * dx + c[9] * dy + c[12] * dz) - c[3], 0.0)
-    oy = jnp.maximum(jnp.abs(c[7] * dx + c[10] * dy + c[13] * dz) - c[4], 0.0)
-    oz = jnp.maximum(jnp.abs(c[8] * dx + c[11] * dy + c[14] * dz) - c[5], 0.0)
+    qx, qy, qz = _cuboid_excess(x, y, z, c)
+    ox, oy, oz = jnp.maximum(qx, 0.0), jnp.maximum(qy, 0.0), jnp.maximum(qz, 0.0)
     return ox * ox + oy * oy + oz * oz > reach * reach
 
 

@@ -52,7 +52,7 @@ def row(scene: str, d: dict) -> str:
     lo, hi = d["ci95"]
     w = d["worlds"]
     spread = "-" if w["spread"] != w["spread"] else f"{w['spread']:.3f}"
-    mean = "-" if w["ci95"] is None else "[{:.3f}, {:.3f}]".format(*w["ci95"])
+    mean = "-" if w["ci95"] is None else "[{:.4f}, {:.4f}]".format(*w["ci95"])
     return (
         f"| {scene} | {d['units']} | {d['queries']:,} | {d['gamma']:.4f} | "
         f"[{lo:.4f}, {hi:.4f}] | {spread} | {mean} |"

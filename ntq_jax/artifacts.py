@@ -419,12 +419,12 @@ def compute_or_load(path: str | os.PathLike, fingerprint: str, compute: Callable
     return got
 
 
-def enable_compile_cache() -> None:
+def enable_compile_cache(min_compile_seconds: float | None = None) -> None:
     """Turns on JAX's persistent compilation cache.
 
     The folder is ``$JAX_COMPILATION_CACHE_DIR`` or ``~/.cache/ntq_jax/jax``; only
-    compilations over ``$JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS`` (default 2 s)
-    are stored. A rerun, a resumed run or
+    compilations over ``min_compile_seconds`` (default
+    ``$JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS``, else 2 s) are stored. A rerun, a resumed run or
     ``scripts/plan.py`` then reuse the compiled planners and training steps
     instead of compiling them again. The cache is an optimisation only: if it
     cannot be enabled, nothing changes.
@@ -438,7 +438,11 @@ def enable_compile_cache() -> None:
         jax.config.update("jax_compilation_cache_dir", path)
         jax.config.update(
             "jax_persistent_cache_min_compile_time_secs",
-            float(os.environ.get("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", 2.0)),
+            float(
+                min_compile_seconds
+                if min_compile_seconds is not None
+                else os.environ.get("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", 2.0)
+            ),
         )
     except Exception:  # noqa: BLE001 - the cache is an optimisation only
         pass

@@ -374,7 +374,7 @@ def data_generation() -> tuple[list[dict], dict]:
             secs,
             "s",
             note=f"{s['planned_queries']} planned queries; {stages} s; compilation "
-            "included; beside row 3's compilation",
+            "included; beside row 5's warm-up",
         )
     ], {"timings": s["timings"]}
 

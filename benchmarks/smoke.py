@@ -10,8 +10,8 @@ else it ends with one ``error:`` line.
 
 Runs when a development session stops, beside the other checks, so it must stay
 well under 40 s of wall time on a 2-core machine, imports, tracing and
-compilation included. On a 2.0 GHz AMD EPYC (AVX2) it takes about 49 s the first
-time (74 CPU seconds) and about 33 s once the persistent compilation cache holds
+compilation included. On a 2.0 GHz AMD EPYC (AVX2) it takes 49-51 s the first
+time (74 CPU seconds) and 33-35 s once the persistent compilation cache holds
 its programs (44 CPU seconds, most of the rest being JAX's tracing, which no
 cache keeps). Every figure is measured
 side by side in this one process (baseline and ours interleaved, medians), at
@@ -110,7 +110,7 @@ from ntq_jax import artifacts, data
 TOLERANCE = 0.8  # a ratio fails when it is more than 20 % short of its goal
 # interleaved repeats (medians) per row; --reps N sets them all
 # Rows 2 and 5 measured far from their goals (0.3x against <= 1x, 30-33x against >= 10x),
-# so three repeats do; row 1 measured 26-30x against >= 30x and keeps five.
+# so three repeats do; row 1 measured 26-44x against >= 30x and keeps five.
 REPS = {"steer": 5, "gamma": 3, "certified": 5, "roadmap": 2, "plan": 3}
 
 STEER_PAIRS = 1 << 23  # ~10^7 pairs for Env.steer_to: one compiled piece size (2^20 rows)

@@ -424,9 +424,9 @@ def enable_compile_cache(min_compile_seconds: float | None = None) -> None:
 
     The folder is ``$JAX_COMPILATION_CACHE_DIR`` or ``~/.cache/ntq_jax/jax``; only
     compilations over ``min_compile_seconds`` (default
-    ``$JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS``, else 2 s) are stored. A rerun, a resumed run or
-    ``scripts/plan.py`` then reuse the compiled planners and training steps
-    instead of compiling them again. The cache is an optimisation only: if it
+    ``$JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS``, else 2 s) are stored. A
+    rerun, a resumed run or ``scripts/plan.py`` then reuse the compiled planners
+    and training steps instead of compiling them again. The cache is an optimisation only: if it
     cannot be enabled, nothing changes.
     """
     import jax
